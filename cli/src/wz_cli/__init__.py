@@ -1,0 +1,1 @@
+"""The `wz` operator command."""

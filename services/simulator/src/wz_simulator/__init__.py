@@ -1,0 +1,1 @@
+"""Simulator service: SUMO work-zone traffic with ground truth."""

@@ -1,0 +1,1 @@
+"""Shared library of the work-zone stack: messages, keys, bus, settings, site, time."""

@@ -1,0 +1,272 @@
+"""Every message on the bus, as pydantic v2 models.
+
+Each message carries ``schema_version``, ``site``, ``source_id`` (the sensor id for raw data and
+detections, the service name otherwise) and ``stamp``: the capture time in seconds (simulation
+time in simulation, sensor time in the field). Units are in the field names.
+
+Frames (LiDAR points, camera JPEG bytes) travel as a binary envelope: the metadata model below as
+JSON, then the raw bytes (see :mod:`wz_shared.codec`). Everything else travels as JSON.
+"""
+
+from __future__ import annotations
+
+from enum import StrEnum
+from typing import Annotated, ClassVar, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+SCHEMA_VERSION = 1
+
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+NonNegFloat = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
+PosFloat = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
+Identifier = Annotated[str, Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9_.:-]{0,127}$")]
+# A 2x2 covariance [[sxx, sxy], [sxy, syy]] in the site frame [m^2], flattened row-major.
+Covariance2 = Annotated[list[FiniteFloat], Field(min_length=4, max_length=4)]
+
+
+class Message(BaseModel):
+    """Fields common to every message on the bus."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    #: Short name of the message type, used in logs, recordings and the codec registry.
+    kind: ClassVar[str] = "message"
+
+    schema_version: Literal[1] = SCHEMA_VERSION
+    site: Identifier
+    source_id: Identifier
+    stamp: NonNegFloat
+
+
+# --- raw sensor data ------------------------------------------------------------------------
+
+
+class LidarFrameMeta(Message):
+    """Metadata of a LiDAR frame; the points follow as float32 rows (x, y, z, intensity).
+
+    Points are in the sensor frame [m] (x forward, y left, z up). An organized frame has
+    ``rows * columns == num_points`` (beams x azimuth steps, no-return cells as NaN); an
+    unorganized one has ``rows == 1``. ``stamp`` is the start of the sweep; column ``j`` fired at
+    ``stamp + sweep_duration_s * j / columns``.
+    """
+
+    kind: ClassVar[str] = "lidar_frame"
+    frame_index: Annotated[int, Field(ge=0)]
+    rows: Annotated[int, Field(ge=1, le=4096)]
+    columns: Annotated[int, Field(ge=1, le=1 << 20)]
+    num_points: Annotated[int, Field(ge=0, le=1 << 22)]
+    sweep_duration_s: NonNegFloat = 0.0
+    organized: bool = True
+    #: Optional per-point vehicle ids travel separately (truth labels), never here.
+    fields: tuple[Literal["x"], Literal["y"], Literal["z"], Literal["intensity"]] = (
+        "x",
+        "y",
+        "z",
+        "intensity",
+    )
+
+
+class CameraFrameMeta(Message):
+    """Metadata of a camera frame; JPEG bytes follow."""
+
+    kind: ClassVar[str] = "camera_frame"
+    frame_index: Annotated[int, Field(ge=0)]
+    width_px: Annotated[int, Field(ge=1, le=16384)]
+    height_px: Annotated[int, Field(ge=1, le=16384)]
+    encoding: Literal["jpeg"] = "jpeg"
+
+
+class RadarTarget(BaseModel):
+    """One radar target in the sensor frame."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    range_m: NonNegFloat
+    azimuth_rad: FiniteFloat
+    radial_speed_mps: FiniteFloat  # positive when moving away from the sensor
+    rcs_dbsm: FiniteFloat
+
+
+class RadarScan(Message):
+    kind: ClassVar[str] = "radar_scan"
+    scan_index: Annotated[int, Field(ge=0)]
+    targets: list[RadarTarget]
+
+
+# --- ground truth (simulation only) ---------------------------------------------------------
+
+
+class VehicleClass(StrEnum):
+    CAR = "car"
+    TRUCK = "truck"
+    MOTORCYCLE = "motorcycle"
+    BUS = "bus"
+    UNKNOWN = "unknown"
+
+
+class DriverProfile(StrEnum):
+    """Driving style given to a simulated vehicle; aggressive drivers are labelled for scoring."""
+
+    NORMAL = "normal"
+    AGGRESSIVE = "aggressive"
+
+
+class VehicleTruth(BaseModel):
+    """True state of one vehicle: its geometric centre in the site and road frames."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    vehicle_id: Identifier
+    vehicle_class: VehicleClass
+    x_m: FiniteFloat
+    y_m: FiniteFloat
+    z_m: FiniteFloat = 0.0
+    heading_rad: FiniteFloat  # counter-clockwise from the site x axis (east)
+    speed_mps: NonNegFloat
+    accel_mps2: FiniteFloat
+    length_m: PosFloat
+    width_m: PosFloat
+    height_m: PosFloat
+    lane_index: Annotated[int, Field(ge=-1)]  # -1 when between lanes / on a junction
+    station_m: FiniteFloat
+    offset_m: FiniteFloat
+    driver_profile: DriverProfile
+
+
+class GroundTruth(Message):
+    kind: ClassVar[str] = "ground_truth"
+    step_index: Annotated[int, Field(ge=0)]
+    vehicles: list[VehicleTruth]
+
+
+# --- perception -----------------------------------------------------------------------------
+
+
+class Detection(BaseModel):
+    """One detected object in the site frame, with its measurement covariance."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    x_m: FiniteFloat
+    y_m: FiniteFloat
+    covariance_m2: Covariance2
+    object_class: VehicleClass = VehicleClass.UNKNOWN
+    score: Annotated[float, Field(ge=0.0, le=1.0)] = 1.0
+    length_m: NonNegFloat | None = None
+    width_m: NonNegFloat | None = None
+    height_m: NonNegFloat | None = None
+    heading_rad: FiniteFloat | None = None
+    # Radar (or image-plane tracking) may give speed; None where the sensor cannot.
+    speed_mps: FiniteFloat | None = None
+    local_track_id: Annotated[int, Field(ge=0)] | None = None
+
+
+class DetectionBatch(Message):
+    """All detections of one sensor frame (possibly none)."""
+
+    kind: ClassVar[str] = "detection_batch"
+    frame_index: Annotated[int, Field(ge=0)]
+    detections: list[Detection]
+    latency_s: NonNegFloat = 0.0  # processing time from frame receipt to publication
+
+
+# --- tracking -------------------------------------------------------------------------------
+
+
+class Track(BaseModel):
+    """One fused track: state in the site frame and its road-frame projection."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    track_id: Annotated[int, Field(ge=0)]
+    x_m: FiniteFloat
+    y_m: FiniteFloat
+    vx_mps: FiniteFloat
+    vy_mps: FiniteFloat
+    covariance: Annotated[list[FiniteFloat], Field(min_length=16, max_length=16)]  # 4x4, x y vx vy
+    station_m: FiniteFloat
+    offset_m: FiniteFloat
+    speed_mps: NonNegFloat
+    heading_rad: FiniteFloat
+    lane_index: Annotated[int, Field(ge=-1)]
+    object_class: VehicleClass = VehicleClass.UNKNOWN
+    age_s: NonNegFloat
+    hits: Annotated[int, Field(ge=0)]
+    confirmed: bool
+    sources: list[Identifier]  # sensors that updated this track in the cycle
+
+
+class TrackBatch(Message):
+    kind: ClassVar[str] = "track_batch"
+    cycle_index: Annotated[int, Field(ge=0)]
+    tracks: list[Track]
+
+
+# --- alerts ---------------------------------------------------------------------------------
+
+
+class AlertType(StrEnum):
+    SPEEDING = "speeding"
+    HARD_BRAKING = "hard_braking"
+    LATE_MERGE = "late_merge"
+    SHORT_TTC = "short_ttc"
+    INTRUSION = "intrusion"
+    QUEUE = "queue"
+
+
+class AlertSeverity(StrEnum):
+    INFO = "info"
+    WARNING = "warning"
+    CRITICAL = "critical"
+
+
+class Alert(Message):
+    """One aggressive-approach event; published once when it starts (reliable, never dropped)."""
+
+    kind: ClassVar[str] = "alert"
+    alert_id: Identifier
+    alert_type: AlertType
+    severity: AlertSeverity
+    track_id: Annotated[int, Field(ge=0)] | None = None
+    station_m: FiniteFloat
+    offset_m: FiniteFloat
+    speed_mps: NonNegFloat | None = None
+    measured_value: FiniteFloat  # in the unit of the rule (m/s, m/s^2, s, m, vehicles)
+    threshold_value: FiniteFloat
+    description: Annotated[str, Field(max_length=500)]
+
+
+# --- service health -------------------------------------------------------------------------
+
+
+class ServiceState(StrEnum):
+    STARTING = "starting"
+    RUNNING = "running"
+    DEGRADED = "degraded"
+    STOPPING = "stopping"
+
+
+class ServiceStatus(Message):
+    """Periodic health of a service: message rates, latencies and drops per kind."""
+
+    kind: ClassVar[str] = "service_status"
+    service: Identifier
+    state: ServiceState
+    uptime_s: NonNegFloat
+    pid: Annotated[int, Field(ge=0)]
+    published_hz: dict[str, NonNegFloat] = Field(default_factory=dict)
+    received_hz: dict[str, NonNegFloat] = Field(default_factory=dict)
+    latency_p50_ms: dict[str, NonNegFloat] = Field(default_factory=dict)
+    invalid_counts: dict[str, Annotated[int, Field(ge=0)]] = Field(default_factory=dict)
+    dropped_counts: dict[str, Annotated[int, Field(ge=0)]] = Field(default_factory=dict)
+
+
+#: Every JSON message type, by kind.
+JSON_MESSAGES: dict[str, type[Message]] = {
+    cls.kind: cls
+    for cls in (RadarScan, GroundTruth, DetectionBatch, TrackBatch, Alert, ServiceStatus)
+}
+#: Frame metadata types that travel in the binary envelope, by kind.
+FRAME_MESSAGES: dict[str, type[Message]] = {
+    cls.kind: cls for cls in (LidarFrameMeta, CameraFrameMeta)
+}

@@ -1,0 +1,278 @@
+"""Site description: one YAML file per deployment, validated by pydantic.
+
+A site file describes the road (a centerline polyline in the site frame), its lanes, the
+work-zone areas by station, the speed limits and every sensor mount. The simulator builds its
+SUMO network and sensor models from it; detectors, tracker, alerts and gateway read the same
+file, so simulation and deployment share one description.
+
+Frames of reference
+-------------------
+- Site frame: local ENU metres (x east, y north, z up) anchored at ``origin`` (WGS84).
+- Road frame: station ``s`` [m] along the centerline in the direction of travel, and lateral
+  offset ``d`` [m] from the centerline, positive to the left of the direction of travel.
+
+The centerline is the reference line of the carriageway (for the default site: the line between
+the two lanes). Lanes are given by the offset of their centre from it, so lane 0 (the rightmost,
+as in SUMO) of a two-lane road of 3.66 m lanes sits at ``d = -1.83``.
+"""
+
+from __future__ import annotations
+
+import math
+from enum import StrEnum
+from pathlib import Path
+from typing import Annotated, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+MPH_TO_MPS = 0.44704
+
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+SiteId = Annotated[str, Field(pattern=r"^[a-z0-9][a-z0-9_-]{0,62}$")]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class GeoOrigin(_Strict):
+    """WGS84 anchor of the site frame's origin (x = y = 0, z = 0 at ``altitude_m``)."""
+
+    latitude_deg: Annotated[float, Field(ge=-90.0, le=90.0)]
+    longitude_deg: Annotated[float, Field(ge=-180.0, le=180.0)]
+    altitude_m: FiniteFloat = 0.0
+
+
+class Lane(_Strict):
+    """One lane of the carriageway; ``index`` 0 is the rightmost lane (SUMO's convention)."""
+
+    index: Annotated[int, Field(ge=0)]
+    center_offset_m: FiniteFloat
+    width_m: Annotated[float, Field(gt=2.0, le=6.0)] = 3.66
+
+
+class AreaKind(StrEnum):
+    """Temporary traffic control areas of a work zone (MUTCD Part 6)."""
+
+    ADVANCE_WARNING = "advance_warning"
+    TRANSITION = "transition"  # the merging taper
+    BUFFER = "buffer"
+    ACTIVITY = "activity"
+    TERMINATION = "termination"
+
+
+class WorkZoneArea(_Strict):
+    """A stretch of road ``[start_station_m, end_station_m)`` with one role in the work zone."""
+
+    kind: AreaKind
+    start_station_m: Annotated[float, Field(ge=0.0)]
+    end_station_m: Annotated[float, Field(ge=0.0)]
+
+    @model_validator(mode="after")
+    def _ordered(self) -> WorkZoneArea:
+        if self.end_station_m <= self.start_station_m:
+            raise ValueError(
+                f"work-zone area {self.kind}: end_station_m {self.end_station_m} must be greater "
+                f"than start_station_m {self.start_station_m}"
+            )
+        return self
+
+
+class SpeedLimit(_Strict):
+    """Posted limit from ``start_station_m`` to ``end_station_m``."""
+
+    start_station_m: Annotated[float, Field(ge=0.0)]
+    end_station_m: Annotated[float, Field(gt=0.0)]
+    speed_limit_mph: Annotated[float, Field(gt=0.0, le=90.0)]
+
+    @property
+    def speed_limit_mps(self) -> float:
+        return self.speed_limit_mph * MPH_TO_MPS
+
+
+class Pose(_Strict):
+    """Sensor pose in the site frame: position [m] and yaw/pitch/roll [deg].
+
+    yaw is measured counter-clockwise from the site x axis (east); pitch is positive nose-up
+    (a sensor looking down at the road has negative pitch); rotations apply as Rz(yaw) Ry(pitch)
+    Rx(roll) with the sensor's x axis forward, y left and z up.
+    """
+
+    x_m: FiniteFloat
+    y_m: FiniteFloat
+    z_m: FiniteFloat
+    yaw_deg: FiniteFloat = 0.0
+    pitch_deg: FiniteFloat = 0.0
+    roll_deg: FiniteFloat = 0.0
+
+
+class LidarIntrinsics(_Strict):
+    """A spinning multi-beam LiDAR."""
+
+    kind: Literal["lidar"] = "lidar"
+    beams: Annotated[int, Field(ge=1, le=256)] = 64
+    vertical_min_deg: FiniteFloat = -30.0
+    vertical_max_deg: FiniteFloat = 11.0
+    azimuth_steps: Annotated[int, Field(ge=16, le=8192)] = 2048
+    max_range_m: Annotated[float, Field(gt=0.0)] = 200.0
+    range_noise_std_m: Annotated[float, Field(ge=0.0)] = 0.02
+
+
+class CameraIntrinsics(_Strict):
+    """A pinhole camera given by its horizontal field of view and resolution."""
+
+    kind: Literal["camera"] = "camera"
+    width_px: Annotated[int, Field(ge=16, le=8192)] = 1200
+    height_px: Annotated[int, Field(ge=16, le=8192)] = 1200
+    horizontal_fov_deg: Annotated[float, Field(gt=1.0, lt=179.0)] = 90.0
+
+
+class RadarIntrinsics(_Strict):
+    """An automotive-style radar reporting targets (range, azimuth, radial speed, RCS)."""
+
+    kind: Literal["radar"] = "radar"
+    max_range_m: Annotated[float, Field(gt=0.0)] = 200.0
+    horizontal_fov_deg: Annotated[float, Field(gt=1.0, le=360.0)] = 60.0
+    range_resolution_m: Annotated[float, Field(gt=0.0)] = 1.5
+    azimuth_resolution_deg: Annotated[float, Field(gt=0.0)] = 4.0
+    range_noise_std_m: Annotated[float, Field(ge=0.0)] = 0.25
+    azimuth_noise_std_deg: Annotated[float, Field(ge=0.0)] = 0.5
+    speed_noise_std_mps: Annotated[float, Field(ge=0.0)] = 0.1
+
+
+SensorIntrinsics = Annotated[
+    LidarIntrinsics | CameraIntrinsics | RadarIntrinsics, Field(discriminator="kind")
+]
+
+
+class SensorMount(_Strict):
+    """One sensor on the mast: its id (used in bus keys), pose, intrinsics and rate."""
+
+    sensor_id: Annotated[str, Field(pattern=r"^[a-z0-9][a-z0-9_-]{0,62}$")]
+    pose: Pose
+    intrinsics: SensorIntrinsics
+    rate_hz: Annotated[float, Field(gt=0.0, le=100.0)]
+
+    @property
+    def kind(self) -> str:
+        return self.intrinsics.kind
+
+
+class Site(_Strict):
+    """One deployment: geometry, work zone, limits and sensors."""
+
+    schema_version: Literal[1] = 1
+    site_id: SiteId
+    name: str
+    origin: GeoOrigin
+    centerline_xy_m: Annotated[list[tuple[FiniteFloat, FiniteFloat]], Field(min_length=2)]
+    lanes: Annotated[list[Lane], Field(min_length=1)]
+    closed_lane_index: Annotated[int, Field(ge=0)]
+    work_zone: Annotated[list[WorkZoneArea], Field(min_length=1)]
+    speed_limits: Annotated[list[SpeedLimit], Field(min_length=1)]
+    sensors: list[SensorMount] = Field(default_factory=list)
+
+    @field_validator("centerline_xy_m")
+    @classmethod
+    def _distinct_vertices(
+        cls, points: list[tuple[float, float]]
+    ) -> list[tuple[float, float]]:
+        for i in range(1, len(points)):
+            (x0, y0), (x1, y1) = points[i - 1], points[i]
+            if math.hypot(x1 - x0, y1 - y0) < 1e-3:
+                raise ValueError(f"centerline vertices {i - 1} and {i} coincide")
+        return points
+
+    @model_validator(mode="after")
+    def _consistent(self) -> Site:
+        indices = sorted(lane.index for lane in self.lanes)
+        if indices != list(range(len(self.lanes))):
+            raise ValueError(f"lane indices must be 0..{len(self.lanes) - 1}, got {indices}")
+        offsets = [lane.center_offset_m for lane in sorted(self.lanes, key=lambda lane: lane.index)]
+        if any(b <= a for a, b in zip(offsets, offsets[1:], strict=False)):
+            raise ValueError("lane center offsets must increase with lane index (right to left)")
+        if self.closed_lane_index >= len(self.lanes):
+            raise ValueError(
+                f"closed_lane_index {self.closed_lane_index} is not a lane of this site"
+            )
+        if len(self.lanes) < 2:
+            raise ValueError("a lane-drop work zone needs at least two lanes")
+        ids = [sensor.sensor_id for sensor in self.sensors]
+        if len(ids) != len(set(ids)):
+            raise ValueError(f"sensor ids must be unique, got {ids}")
+        length = self.road_length_m
+        for area in self.work_zone:
+            if area.end_station_m > length + 1e-6:
+                raise ValueError(
+                    f"work-zone area {area.kind} ends at {area.end_station_m} m, beyond the "
+                    f"centerline's length {length:.1f} m"
+                )
+        return self
+
+    # --- derived quantities -------------------------------------------------------------
+
+    @property
+    def road_length_m(self) -> float:
+        """Length of the centerline polyline [m]."""
+        pts = self.centerline_xy_m
+        return sum(
+            math.hypot(x1 - x0, y1 - y0) for (x0, y0), (x1, y1) in zip(pts, pts[1:], strict=False)
+        )
+
+    def lane(self, index: int) -> Lane:
+        for lane in self.lanes:
+            if lane.index == index:
+                return lane
+        raise KeyError(f"no lane {index} at site {self.site_id}")
+
+    def area(self, kind: AreaKind) -> WorkZoneArea:
+        for area in self.work_zone:
+            if area.kind == kind:
+                return area
+        raise KeyError(f"site {self.site_id} has no {kind.value} area")
+
+    def speed_limit_mps_at(self, station_m: float) -> float:
+        """Posted speed limit [m/s] at a station; the last limit extends past its end."""
+        for limit in self.speed_limits:
+            if limit.start_station_m <= station_m < limit.end_station_m:
+                return limit.speed_limit_mps
+        last = max(self.speed_limits, key=lambda limit: limit.end_station_m)
+        first = min(self.speed_limits, key=lambda limit: limit.start_station_m)
+        return (last if station_m >= last.end_station_m else first).speed_limit_mps
+
+    def sensor(self, sensor_id: str) -> SensorMount:
+        for sensor in self.sensors:
+            if sensor.sensor_id == sensor_id:
+                return sensor
+        raise KeyError(f"no sensor {sensor_id!r} at site {self.site_id}")
+
+
+class SiteFileError(ValueError):
+    """A site file could not be read or is not a valid site description."""
+
+
+def load_site(path: str | Path) -> Site:
+    """Read and validate a site YAML file.
+
+    Raises
+    ------
+    SiteFileError
+        With the file name and every validation problem, worded for a field engineer.
+    """
+    path = Path(path)
+    try:
+        raw = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise SiteFileError(f"cannot read site file {path}: {exc}") from exc
+    except yaml.YAMLError as exc:
+        raise SiteFileError(f"site file {path} is not valid YAML: {exc}") from exc
+    if not isinstance(raw, dict):
+        raise SiteFileError(f"site file {path} must hold a mapping at the top level")
+    try:
+        return Site.model_validate(raw)
+    except ValueError as exc:
+        raise SiteFileError(f"site file {path} is not a valid site description:\n{exc}") from exc
+
+
+DEFAULT_SITE_PATH = Path(__file__).resolve().parents[3] / "deploy" / "sites" / "us75-lincoln.yaml"
