@@ -11,11 +11,11 @@ JSON, then the raw bytes (see :mod:`wz_shared.codec`). Everything else travels a
 from __future__ import annotations
 
 from enum import StrEnum
-from typing import Annotated, ClassVar, Literal
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION: Literal[1] = 1
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 NonNegFloat = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
@@ -26,11 +26,12 @@ Covariance2 = Annotated[list[FiniteFloat], Field(min_length=4, max_length=4)]
 
 
 class Message(BaseModel):
-    """Fields common to every message on the bus."""
+    """Fields common to every message on the bus.
+
+    Each concrete message adds a ``kind`` tag (a one-value literal) so a payload names its type.
+    """
 
     model_config = ConfigDict(extra="forbid", frozen=True)
-    #: Short name of the message type, used in logs, recordings and the codec registry.
-    kind: ClassVar[str] = "message"
 
     schema_version: Literal[1] = SCHEMA_VERSION
     site: Identifier
@@ -50,10 +51,10 @@ class LidarFrameMeta(Message):
     ``stamp + sweep_duration_s * j / columns``.
     """
 
-    kind: ClassVar[str] = "lidar_frame"
+    kind: Literal["lidar_frame"] = "lidar_frame"
     frame_index: Annotated[int, Field(ge=0)]
     rows: Annotated[int, Field(ge=1, le=4096)]
-    columns: Annotated[int, Field(ge=1, le=1 << 20)]
+    columns: Annotated[int, Field(ge=0, le=1 << 20)]
     num_points: Annotated[int, Field(ge=0, le=1 << 22)]
     sweep_duration_s: NonNegFloat = 0.0
     organized: bool = True
@@ -69,7 +70,7 @@ class LidarFrameMeta(Message):
 class CameraFrameMeta(Message):
     """Metadata of a camera frame; JPEG bytes follow."""
 
-    kind: ClassVar[str] = "camera_frame"
+    kind: Literal["camera_frame"] = "camera_frame"
     frame_index: Annotated[int, Field(ge=0)]
     width_px: Annotated[int, Field(ge=1, le=16384)]
     height_px: Annotated[int, Field(ge=1, le=16384)]
@@ -88,7 +89,7 @@ class RadarTarget(BaseModel):
 
 
 class RadarScan(Message):
-    kind: ClassVar[str] = "radar_scan"
+    kind: Literal["radar_scan"] = "radar_scan"
     scan_index: Annotated[int, Field(ge=0)]
     targets: list[RadarTarget]
 
@@ -134,7 +135,7 @@ class VehicleTruth(BaseModel):
 
 
 class GroundTruth(Message):
-    kind: ClassVar[str] = "ground_truth"
+    kind: Literal["ground_truth"] = "ground_truth"
     step_index: Annotated[int, Field(ge=0)]
     vehicles: list[VehicleTruth]
 
@@ -164,7 +165,7 @@ class Detection(BaseModel):
 class DetectionBatch(Message):
     """All detections of one sensor frame (possibly none)."""
 
-    kind: ClassVar[str] = "detection_batch"
+    kind: Literal["detection_batch"] = "detection_batch"
     frame_index: Annotated[int, Field(ge=0)]
     detections: list[Detection]
     latency_s: NonNegFloat = 0.0  # processing time from frame receipt to publication
@@ -197,7 +198,7 @@ class Track(BaseModel):
 
 
 class TrackBatch(Message):
-    kind: ClassVar[str] = "track_batch"
+    kind: Literal["track_batch"] = "track_batch"
     cycle_index: Annotated[int, Field(ge=0)]
     tracks: list[Track]
 
@@ -223,7 +224,7 @@ class AlertSeverity(StrEnum):
 class Alert(Message):
     """One aggressive-approach event; published once when it starts (reliable, never dropped)."""
 
-    kind: ClassVar[str] = "alert"
+    kind: Literal["alert"] = "alert"
     alert_id: Identifier
     alert_type: AlertType
     severity: AlertSeverity
@@ -249,7 +250,7 @@ class ServiceState(StrEnum):
 class ServiceStatus(Message):
     """Periodic health of a service: message rates, latencies and drops per kind."""
 
-    kind: ClassVar[str] = "service_status"
+    kind: Literal["service_status"] = "service_status"
     service: Identifier
     state: ServiceState
     uptime_s: NonNegFloat
@@ -261,12 +262,19 @@ class ServiceStatus(Message):
     dropped_counts: dict[str, Annotated[int, Field(ge=0)]] = Field(default_factory=dict)
 
 
+def kind_of(cls: type[Message]) -> str:
+    """The ``kind`` tag of a message type (its short name in logs, recordings and the codec)."""
+    default = cls.model_fields["kind"].default
+    assert isinstance(default, str), f"{cls.__name__} has no kind tag"
+    return default
+
+
 #: Every JSON message type, by kind.
 JSON_MESSAGES: dict[str, type[Message]] = {
-    cls.kind: cls
+    kind_of(cls): cls
     for cls in (RadarScan, GroundTruth, DetectionBatch, TrackBatch, Alert, ServiceStatus)
 }
 #: Frame metadata types that travel in the binary envelope, by kind.
 FRAME_MESSAGES: dict[str, type[Message]] = {
-    cls.kind: cls for cls in (LidarFrameMeta, CameraFrameMeta)
+    kind_of(cls): cls for cls in (LidarFrameMeta, CameraFrameMeta)
 }

@@ -1,0 +1,515 @@
+"""Typed publish / subscribe / query over Eclipse Zenoh 1.x.
+
+One :class:`Bus` per process wraps one Zenoh session. Publishers encode pydantic messages (or
+frame envelopes); subscriptions decode them, either into a queue the service reads
+(:meth:`Bus.subscribe`) or in a callback (:meth:`Bus.on`).
+
+Queues
+------
+- ``"ring"``: latest-wins, for sensor frames. A slow consumer gets the newest ``capacity``
+  samples and the ones it missed are counted as dropped; the producer is never blocked.
+- ``"fifo"``: every sample in order, for detections, tracks and alerts. When the queue is full
+  Zenoh's receive thread waits (back-pressure), so nothing is lost.
+
+Samples are decoded when the service takes them, not on Zenoh's thread, so a ring never spends
+time decoding frames that will be overwritten.
+
+Bad input
+---------
+A payload that fails to decode is counted under ``(key, reason)``, logged once per key and
+reason, and dropped; it never raises into Zenoh's callback thread and never stops the service.
+A callback that raises is logged and counted the same way.
+
+Shutdown
+--------
+A Zenoh subscriber with a Python callback that is still declared when the interpreter exits
+hangs the exit: :meth:`Bus.close` (or leaving the ``with`` block) undeclares everything, then
+closes the session.
+"""
+
+from __future__ import annotations
+
+import collections
+import json
+import logging
+import threading
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from typing import Any, Generic, Literal, TypeVar
+
+import zenoh
+
+from wz_shared import codec
+from wz_shared.keys import Keys
+from wz_shared.messages import Message
+from wz_shared.settings import BusSettings
+
+log = logging.getLogger(__name__)
+
+M = TypeVar("M", bound=Message)
+T = TypeVar("T")
+QueueMode = Literal["ring", "fifo"]
+Decoder = Callable[[bytes], T]
+
+
+def zenoh_config(settings: BusSettings) -> zenoh.Config:
+    """Build a Zenoh config: the optional file first, then the settings on top."""
+    config = (
+        zenoh.Config.from_file(str(settings.config_file))
+        if settings.config_file
+        else (zenoh.Config())
+    )
+    config.insert_json5("mode", json.dumps(settings.mode))
+    config.insert_json5("connect/endpoints", json.dumps(settings.connect_endpoints))
+    config.insert_json5("listen/endpoints", json.dumps(settings.listen_endpoints))
+    config.insert_json5("scouting/multicast/enabled", json.dumps(settings.multicast_scouting))
+    return config
+
+
+# --- counters -------------------------------------------------------------------------------
+
+
+@dataclass
+class BusStats:
+    """Counters of one bus, read by the health reporter. Thread-safe."""
+
+    published: collections.Counter[str] = field(default_factory=collections.Counter)
+    received: collections.Counter[str] = field(default_factory=collections.Counter)
+    invalid: collections.Counter[tuple[str, str]] = field(default_factory=collections.Counter)
+    dropped: collections.Counter[str] = field(default_factory=collections.Counter)
+    _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+    _logged: set[tuple[str, str]] = field(default_factory=set, repr=False)
+
+    def count_published(self, key: str) -> None:
+        with self._lock:
+            self.published[key] += 1
+
+    def count_received(self, key: str) -> None:
+        with self._lock:
+            self.received[key] += 1
+
+    def count_dropped(self, key: str, n: int = 1) -> None:
+        with self._lock:
+            self.dropped[key] += n
+
+    def count_invalid(self, key: str, reason: str, detail: str) -> None:
+        """Count a rejected message; log the first of each (key, reason) only."""
+        with self._lock:
+            self.invalid[(key, reason)] += 1
+            first = (key, reason) not in self._logged
+            self._logged.add((key, reason))
+        if first:
+            log.warning(
+                "dropped invalid message on %s (%s): %s; further ones are only counted",
+                key,
+                reason,
+                detail,
+                extra={"key": key, "reason": reason},
+            )
+
+    def snapshot(self) -> dict[str, dict[str, int]]:
+        with self._lock:
+            return {
+                "published": dict(self.published),
+                "received": dict(self.received),
+                "invalid": {f"{k}|{r}": n for (k, r), n in self.invalid.items()},
+                "dropped": dict(self.dropped),
+            }
+
+
+# --- publishing -----------------------------------------------------------------------------
+
+
+class Publisher(Generic[M]):
+    """Publishes messages of one type on one key."""
+
+    def __init__(self, bus: Bus, key: str, cls: type[M], *, block: bool) -> None:
+        self.key = key
+        self.cls = cls
+        self._stats = bus.stats
+        self._frame = codec.is_frame_type(cls)
+        self._publisher = bus.session.declare_publisher(
+            key,
+            congestion_control=(
+                zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
+            ),
+            reliability=zenoh.Reliability.RELIABLE,
+        )
+
+    def put(self, message: M) -> None:
+        """Publish a JSON message."""
+        if self._frame:
+            raise TypeError(f"{self.cls.__name__} is frame metadata: use put_bytes(envelope)")
+        self.put_bytes(codec.encode(message))
+
+    def put_bytes(self, payload: bytes) -> None:
+        """Publish an already-encoded payload (a frame envelope, or a replayed message)."""
+        self._publisher.put(payload)
+        self._stats.count_published(self.key)
+
+    @property
+    def matched(self) -> bool:
+        """Whether any subscriber for this key is known to the session now."""
+        # zenoh's stub says bool; at run time it is a MatchingStatus with a .matching flag.
+        status: Any = self._publisher.matching_status
+        return bool(status.matching)
+
+    def wait_for_subscribers(self, timeout_s: float) -> bool:
+        """Wait until a subscriber matches (declarations take a moment to propagate)."""
+        deadline = time.monotonic() + timeout_s
+        while not self.matched:
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(0.005)
+        return True
+
+    def undeclare(self) -> None:
+        self._publisher.undeclare()
+
+
+# --- subscribing ----------------------------------------------------------------------------
+
+
+class _SampleQueue:
+    """A ring or a bounded FIFO of raw payloads, fed from Zenoh's thread."""
+
+    def __init__(self, mode: QueueMode, capacity: int, key: str, stats: BusStats) -> None:
+        if capacity < 1:
+            raise ValueError("queue capacity must be at least 1")
+        self.mode = mode
+        self.capacity = capacity
+        self._items: collections.deque[tuple[str, bytes]] = collections.deque()
+        self._cond = threading.Condition()
+        self._closed = False
+        self._key = key
+        self._stats = stats
+
+    def push(self, key: str, payload: bytes) -> None:
+        with self._cond:
+            if self.mode == "ring":
+                if len(self._items) >= self.capacity:
+                    self._items.popleft()
+                    self._stats.count_dropped(self._key)
+            else:
+                # Back-pressure: hold Zenoh's thread until the consumer makes room.
+                while len(self._items) >= self.capacity and not self._closed:
+                    self._cond.wait(0.1)
+                if self._closed:
+                    return
+            self._items.append((key, payload))
+            self._cond.notify_all()
+
+    def pop(self, timeout_s: float | None) -> tuple[str, bytes] | None:
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        with self._cond:
+            while not self._items:
+                if self._closed:
+                    return None
+                remaining = None if deadline is None else deadline - time.monotonic()
+                if remaining is not None and remaining <= 0:
+                    return None
+                self._cond.wait(remaining)
+            item = self._items.popleft()
+            self._cond.notify_all()
+            return item
+
+    def __len__(self) -> int:
+        with self._cond:
+            return len(self._items)
+
+    def close(self) -> None:
+        with self._cond:
+            self._closed = True
+            self._cond.notify_all()
+
+
+@dataclass(frozen=True)
+class Received(Generic[T]):
+    """A decoded sample and the concrete key it arrived on."""
+
+    key: str
+    value: T
+
+
+class Subscription(Generic[T]):
+    """A subscription whose samples the service takes with :meth:`recv`.
+
+    Iterating yields values until the bus closes.
+    """
+
+    def __init__(
+        self,
+        bus: Bus,
+        key: str,
+        decoder: Decoder[T],
+        mode: QueueMode,
+        capacity: int,
+    ) -> None:
+        self.key = key
+        self._decoder = decoder
+        self._stats = bus.stats
+        self._queue = _SampleQueue(mode, capacity, key, bus.stats)
+        self._subscriber = bus.session.declare_subscriber(key, self._on_sample)
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        try:
+            self._stats.count_received(self.key)
+            self._queue.push(str(sample.key_expr), sample.payload.to_bytes())
+        except Exception as exc:  # never raise into Zenoh's thread
+            self._stats.count_invalid(self.key, "receive_error", repr(exc))
+
+    def recv_with_key(self, timeout_s: float | None = None) -> Received[T] | None:
+        """The next valid sample, or None on timeout or when the bus closes.
+
+        Invalid payloads met on the way are counted and skipped.
+        """
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        while True:
+            remaining = None if deadline is None else max(0.0, deadline - time.monotonic())
+            item = self._queue.pop(remaining)
+            if item is None:
+                return None
+            key, payload = item
+            try:
+                return Received(key, self._decoder(payload))
+            except codec.DecodeError as exc:
+                self._stats.count_invalid(self.key, exc.reason, exc.detail)
+
+    def recv(self, timeout_s: float | None = None) -> T | None:
+        received = self.recv_with_key(timeout_s)
+        return None if received is None else received.value
+
+    def drain(self) -> list[T]:
+        """Every valid sample queued now, without waiting."""
+        values: list[T] = []
+        while len(self._queue):
+            value = self.recv(0.0)
+            if value is not None:
+                values.append(value)
+        return values
+
+    def __iter__(self) -> Iterator[T]:
+        while True:
+            value = self.recv(None)
+            if value is None:
+                return
+            yield value
+
+    @property
+    def pending(self) -> int:
+        return len(self._queue)
+
+    def undeclare(self) -> None:
+        self._queue.close()
+        self._subscriber.undeclare()
+
+
+class CallbackSubscription(Generic[T]):
+    """A subscription that decodes and calls ``callback`` on Zenoh's thread.
+
+    Keep the callback short; an exception in it is logged, counted, and the subscription goes on.
+    """
+
+    def __init__(
+        self, bus: Bus, key: str, decoder: Decoder[T], callback: Callable[[str, T], None]
+    ) -> None:
+        self.key = key
+        self._decoder = decoder
+        self._callback = callback
+        self._stats = bus.stats
+        self._subscriber = bus.session.declare_subscriber(key, self._on_sample)
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        self._stats.count_received(self.key)
+        try:
+            value = self._decoder(sample.payload.to_bytes())
+        except codec.DecodeError as exc:
+            self._stats.count_invalid(self.key, exc.reason, exc.detail)
+            return
+        except Exception as exc:  # never raise into Zenoh's thread
+            self._stats.count_invalid(self.key, "decode_error", repr(exc))
+            return
+        try:
+            self._callback(str(sample.key_expr), value)
+        except Exception:
+            self._stats.count_invalid(self.key, "callback_error", "see traceback")
+            log.exception("callback for %s raised; the subscription goes on", self.key)
+
+    def undeclare(self) -> None:
+        self._subscriber.undeclare()
+
+
+def json_decoder(cls: type[M]) -> Decoder[M]:
+    def decode(payload: bytes) -> M:
+        return codec.decode_json(payload, cls)
+
+    return decode
+
+
+def frame_decoder(cls: type[M]) -> Decoder[codec.Frame[M]]:
+    def decode(payload: bytes) -> codec.Frame[M]:
+        return codec.decode_frame(payload, cls)
+
+    return decode
+
+
+def raw_decoder(payload: bytes) -> bytes:
+    return payload
+
+
+# --- the bus --------------------------------------------------------------------------------
+
+
+class Bus:
+    """One Zenoh session of one service at one site.
+
+    Use as a context manager, or call :meth:`close`::
+
+        with Bus.open(BusSettings(), site="us75-lincoln", service="simulator") as bus:
+            truth = bus.publisher(bus.keys.truth, GroundTruth)
+    """
+
+    def __init__(self, session: zenoh.Session, *, site: str, service: str) -> None:
+        self.session = session
+        self.keys = Keys(site)
+        self.site = site
+        self.service = service
+        self.stats = BusStats()
+        self._declared: list[Any] = []
+        self._lock = threading.Lock()
+        self._closed = False
+
+    @classmethod
+    def open(cls, settings: BusSettings, *, site: str, service: str) -> Bus:
+        session = zenoh.open(zenoh_config(settings))
+        log.debug("zenoh session %s open (%s)", session.zid(), settings.mode)
+        return cls(session, site=site, service=service)
+
+    def __enter__(self) -> Bus:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _keep(self, entity: T) -> T:
+        with self._lock:
+            if self._closed:
+                raise RuntimeError("the bus is closed")
+            self._declared.append(entity)
+        return entity
+
+    # publishing
+    def publisher(self, key: str, cls: type[M], *, block: bool | None = None) -> Publisher[M]:
+        """A publisher of ``cls`` on ``key``.
+
+        ``block`` chooses congestion control: frames default to dropping under congestion
+        (a stale frame is worthless), everything else to blocking (never lost).
+        """
+        if block is None:
+            block = not codec.is_frame_type(cls)
+        return self._keep(Publisher(self, key, cls, block=block))
+
+    # subscribing
+    def subscribe(
+        self,
+        key: str,
+        cls: type[M],
+        *,
+        mode: QueueMode = "fifo",
+        capacity: int = 4096,
+    ) -> Subscription[M]:
+        """Queue JSON messages of ``cls`` from ``key`` (may hold wildcards)."""
+        return self._keep(Subscription(self, key, json_decoder(cls), mode, capacity))
+
+    def subscribe_frames(
+        self,
+        key: str,
+        cls: type[M],
+        *,
+        mode: QueueMode = "ring",
+        capacity: int = 1,
+    ) -> Subscription[codec.Frame[M]]:
+        """Queue frames (LiDAR or camera) from ``key``; a ring of one by default."""
+        return self._keep(Subscription(self, key, frame_decoder(cls), mode, capacity))
+
+    def subscribe_raw(
+        self, key: str, *, mode: QueueMode = "fifo", capacity: int = 65536
+    ) -> Subscription[bytes]:
+        """Queue undecoded payloads (recorders and taps)."""
+        return self._keep(Subscription(self, key, raw_decoder, mode, capacity))
+
+    def on(
+        self, key: str, cls: type[M], callback: Callable[[str, M], None]
+    ) -> CallbackSubscription[M]:
+        """Call ``callback(key, message)`` on Zenoh's thread for each valid JSON message."""
+        return self._keep(CallbackSubscription(self, key, json_decoder(cls), callback))
+
+    def on_raw(
+        self, key: str, callback: Callable[[str, bytes], None]
+    ) -> CallbackSubscription[bytes]:
+        return self._keep(CallbackSubscription(self, key, raw_decoder, callback))
+
+    # queries
+    def serve(self, key: str, respond: Callable[[], bytes | None]) -> None:
+        """Answer queries on ``key`` with the bytes ``respond()`` returns (None: no reply)."""
+
+        def on_query(query: zenoh.Query) -> None:
+            try:
+                payload = respond()
+                if payload is not None:
+                    query.reply(key, payload)
+            except Exception:
+                log.exception("queryable %s failed to answer", key)
+
+        self._keep(self.session.declare_queryable(key, on_query))
+
+    def query(self, key: str, cls: type[M], timeout_s: float = 2.0) -> list[M]:
+        """Ask ``key``'s queryables; return every valid reply."""
+        replies = self.session.get(key, timeout=timeout_s)
+        values: list[M] = []
+        for reply in replies:
+            if reply.ok is None:
+                continue
+            try:
+                values.append(codec.decode_json(reply.ok.payload.to_bytes(), cls))
+            except codec.DecodeError as exc:
+                self.stats.count_invalid(key, exc.reason, exc.detail)
+        return values
+
+    def query_bytes(self, key: str, timeout_s: float = 2.0) -> list[bytes]:
+        return [
+            reply.ok.payload.to_bytes()
+            for reply in self.session.get(key, timeout=timeout_s)
+            if reply.ok is not None
+        ]
+
+    # liveliness
+    def declare_alive(self) -> None:
+        """Declare this service's liveliness token at ``wz/<site>/status/<service>``."""
+        self._keep(self.session.liveliness().declare_token(self.keys.status(self.service)))
+
+    def alive(self, key: str | None = None, timeout_s: float = 1.0) -> list[str]:
+        """Keys of the liveliness tokens alive now under ``key`` (default: this site's status)."""
+        selector = key or self.keys.status_all
+        replies = self.session.liveliness().get(selector, timeout=timeout_s)
+        return sorted({str(reply.ok.key_expr) for reply in replies if reply.ok is not None})
+
+    # shutdown
+    def close(self) -> None:
+        """Undeclare every publisher, subscriber, queryable and token; close the session."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            declared, self._declared = self._declared, []
+        for entity in reversed(declared):
+            try:
+                entity.undeclare()
+            except Exception as exc:  # a session torn down under us must not block the rest
+                log.debug("undeclare failed during close: %r", exc)
+        self.session.close()
+
+    @property
+    def closed(self) -> bool:
+        return self._closed

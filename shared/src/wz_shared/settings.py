@@ -1,0 +1,67 @@
+"""Settings shared by every service, read from the environment with pydantic-settings.
+
+Each service defines its own ``<Service>Settings(ServiceSettings)`` with its own env prefix
+(``WZ_SIM_``, ``WZ_LIDAR_`` ...) and builds it in ``main()``; the bus settings below are common
+and read with the prefix ``WZ_BUS_`` so one environment configures every process of a stack.
+Units are in the names.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Literal
+
+from pydantic import Field, field_validator
+from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
+
+from wz_shared.site import DEFAULT_SITE_PATH
+
+#: Where the local stack's router listens by default (loopback only).
+DEFAULT_ROUTER_ENDPOINT = "tcp/127.0.0.1:7447"
+
+
+def _split_endpoints(value: object) -> object:
+    """Accept ``a,b`` or a JSON list from the environment."""
+    if isinstance(value, str):
+        value = value.strip()
+        if value.startswith("["):
+            return value  # let pydantic parse the JSON list
+        return [part.strip() for part in value.split(",") if part.strip()]
+    return value
+
+
+class BusSettings(BaseSettings):
+    """How a process joins the Zenoh bus (env prefix ``WZ_BUS_``).
+
+    The embedded default is a peer on loopback that connects to the local router endpoint and
+    listens on an ephemeral loopback port, with multicast scouting off: nothing is reachable
+    from another host unless a deployment config says so.
+    """
+
+    model_config = SettingsConfigDict(env_prefix="WZ_BUS_", extra="ignore")
+
+    mode: Literal["peer", "client", "router"] = "peer"
+    connect_endpoints: Annotated[list[str], NoDecode] = Field(
+        default_factory=lambda: [DEFAULT_ROUTER_ENDPOINT]
+    )
+    listen_endpoints: Annotated[list[str], NoDecode] = Field(
+        default_factory=lambda: ["tcp/127.0.0.1:0"]
+    )
+    multicast_scouting: bool = False
+    #: A zenoh JSON5 config file (deployments); the fields above override what it says.
+    config_file: Path | None = None
+
+    @field_validator("connect_endpoints", "listen_endpoints", mode="before")
+    @classmethod
+    def _parse_endpoints(cls, value: object) -> object:
+        return _split_endpoints(value)
+
+
+class ServiceSettings(BaseSettings):
+    """Fields every service has; subclasses set their own ``env_prefix``."""
+
+    model_config = SettingsConfigDict(env_prefix="WZ_", extra="ignore")
+
+    site_file: Path = DEFAULT_SITE_PATH
+    status_period_s: Annotated[float, Field(gt=0.0)] = 1.0
+    log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"

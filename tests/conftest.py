@@ -1,0 +1,27 @@
+"""Fixtures shared by every test: free loopback ports, bus settings, sample messages."""
+
+from __future__ import annotations
+
+import socket
+from collections.abc import Iterator
+
+import pytest
+from wz_shared.settings import BusSettings
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that nothing listens on now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+@pytest.fixture
+def port() -> int:
+    return free_port()
+
+
+@pytest.fixture
+def listening_bus_settings(port: int) -> Iterator[BusSettings]:
+    """A peer that listens on a free loopback port and connects nowhere."""
+    yield BusSettings(mode="peer", listen_endpoints=[f"tcp/127.0.0.1:{port}"], connect_endpoints=[])

@@ -1,0 +1,147 @@
+"""Two real processes over Zenoh on loopback: exact counts, frames, rings, bad input."""
+
+from __future__ import annotations
+
+import contextlib
+import subprocess
+import sys
+import time
+from collections import Counter
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from wz_shared.bus import Bus
+from wz_shared.messages import JSON_MESSAGES, Alert, CameraFrameMeta, LidarFrameMeta
+from wz_shared.settings import BusSettings
+
+from tests.shared.samples import json_samples, lidar_frame
+
+ROOT = Path(__file__).resolve().parents[2]
+SITE = "test-site"
+
+
+@pytest.fixture
+def bus(listening_bus_settings: BusSettings) -> Iterator[Bus]:
+    with Bus.open(listening_bus_settings, site=SITE, service="bus-test") as opened:
+        yield opened
+
+
+def start_peer(port: int, *args: str) -> subprocess.Popen[bytes]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "tests.shared.bus_peer", f"tcp/127.0.0.1:{port}", *args],
+        cwd=ROOT,
+    )
+
+
+def finish_peer(bus: Bus, peer: subprocess.Popen[bytes]) -> None:
+    """Acknowledge, then require the peer to exit cleanly."""
+    ack = bus.publisher(f"{bus.keys.prefix}/test/ack", Alert)
+    deadline = time.monotonic() + 20.0
+    while peer.poll() is None and time.monotonic() < deadline:
+        ack.put_bytes(b"ack")
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            peer.wait(0.2)
+    if peer.poll() is None:
+        peer.kill()
+    assert peer.wait() == 0
+
+
+def test_every_message_type_between_processes(bus: Bus, port: int) -> None:
+    count = 25
+    subscriptions = {
+        kind: bus.subscribe(f"{bus.keys.prefix}/test/{kind}", cls)
+        for kind, cls in JSON_MESSAGES.items()
+    }
+    lidar = bus.subscribe_frames(
+        bus.keys.raw_lidar("lidar-mast"), LidarFrameMeta, mode="fifo", capacity=64
+    )
+    camera = bus.subscribe_frames(
+        bus.keys.raw_camera("camera-mast"), CameraFrameMeta, mode="fifo", capacity=64
+    )
+    peer = start_peer(port, "all", str(count))
+    received: Counter[str] = Counter()
+    for kind, sub in subscriptions.items():
+        for i in range(count):
+            message = sub.recv(15.0)
+            assert message is not None, f"{kind}: only {i} of {count} arrived"
+            assert message == next(m for m in json_samples(i) if m.kind == kind)
+            received[kind] += 1
+    for i in range(count):
+        frame = lidar.recv(15.0)
+        assert frame is not None and frame.meta.frame_index == i
+        np.testing.assert_array_equal(frame.points(), lidar_frame(i, 256)[1])
+        image = camera.recv(15.0)
+        assert image is not None and image.meta.frame_index == i
+        received["lidar_frame"] += 1
+        received["camera_frame"] += 1
+    finish_peer(bus, peer)
+    # Exactly count of each: nothing extra arrived after the last expected message.
+    assert all(sub.recv(0.2) is None for sub in subscriptions.values())
+    assert lidar.recv(0.0) is None and camera.recv(0.0) is None
+    assert received == Counter(
+        {kind: count for kind in [*JSON_MESSAGES, "lidar_frame", "camera_frame"]}
+    )
+    assert not bus.stats.invalid
+
+
+def test_2mb_frames_at_20hz_fifo_lossless(bus: Bus, port: int) -> None:
+    count, points = 60, 131_072  # 131072 points x 16 bytes = 2 MiB per frame, 3 s at 20 Hz
+    frames = bus.subscribe_frames(
+        bus.keys.raw_lidar("lidar-mast"), LidarFrameMeta, mode="fifo", capacity=8
+    )
+    peer = start_peer(port, "frames", str(count), "20", str(points), "1")
+    indices = []
+    for _ in range(count):
+        frame = frames.recv(20.0)
+        assert frame is not None, f"only {len(indices)} of {count} frames arrived"
+        assert frame.points().shape == (points, 4)
+        indices.append(frame.meta.frame_index)
+    finish_peer(bus, peer)
+    assert indices == list(range(count))
+    assert frames.recv(0.2) is None
+    assert not bus.stats.dropped
+
+
+def test_slow_consumer_on_ring_gets_newest_frame(bus: Bus, port: int) -> None:
+    count = 40
+    ring = bus.subscribe_frames(
+        bus.keys.raw_lidar("lidar-mast"), LidarFrameMeta, mode="ring", capacity=1
+    )
+    peer = start_peer(port, "frames", str(count), "50", "4096", "0")
+    seen: list[int] = []
+    while not seen or seen[-1] < count - 1:
+        frame = ring.recv(20.0)
+        assert frame is not None, f"ring stalled after {seen}"
+        seen.append(frame.meta.frame_index)
+        time.sleep(0.1)  # the consumer is 5x slower than the 50 Hz producer
+    finish_peer(bus, peer)
+    assert seen == sorted(seen)
+    assert seen[-1] == count - 1  # the newest frame, not a backlog
+    assert len(seen) < count / 2
+    key = bus.keys.raw_lidar("lidar-mast")
+    assert bus.stats.dropped[key] + len(seen) == bus.stats.received[key] == count
+
+
+def test_malformed_payloads_counted_and_dropped(bus: Bus, port: int) -> None:
+    alerts = bus.subscribe(bus.keys.alerts_all, Alert)
+    frames = bus.subscribe_frames(
+        bus.keys.raw_lidar("lidar-mast"), LidarFrameMeta, mode="fifo", capacity=16
+    )
+    peer = start_peer(port, "malformed")
+    good_alerts = [alerts.recv(15.0), alerts.recv(15.0)]
+    good_frames = [frames.recv(15.0), frames.recv(15.0)]
+    finish_peer(bus, peer)
+    assert all(isinstance(a, Alert) for a in good_alerts)
+    assert [f.meta.frame_index for f in good_frames if f is not None] == [7, 7]
+    invalid = {reason: n for (_, reason), n in bus.stats.invalid.items()}
+    assert invalid == {
+        "bad_json": 1,
+        "schema_version": 1,
+        "invalid": 1,
+        "oversize": 1,
+        "truncated": 2,
+    }
+    # And the subscriber keeps receiving after them.
+    assert alerts.recv(0.2) is None
