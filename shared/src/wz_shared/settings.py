@@ -58,10 +58,16 @@ class BusSettings(BaseSettings):
 
 
 class ServiceSettings(BaseSettings):
-    """Fields every service has; subclasses set their own ``env_prefix``."""
+    """Fields every service has; subclasses set their own ``env_prefix``.
 
-    model_config = SettingsConfigDict(env_prefix="WZ_", extra="ignore")
+    These few are stack-wide, so they keep one name whatever the service's prefix:
+    ``WZ_SITE_FILE``, ``WZ_STATUS_PERIOD_S``, ``WZ_LOG_LEVEL``.
+    """
 
-    site_file: Path = DEFAULT_SITE_PATH
-    status_period_s: Annotated[float, Field(gt=0.0)] = 1.0
-    log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
+    model_config = SettingsConfigDict(env_prefix="WZ_", extra="ignore", populate_by_name=True)
+
+    site_file: Path = Field(default=DEFAULT_SITE_PATH, validation_alias="WZ_SITE_FILE")
+    status_period_s: Annotated[float, Field(gt=0.0, validation_alias="WZ_STATUS_PERIOD_S")] = 1.0
+    log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = Field(
+        default="INFO", validation_alias="WZ_LOG_LEVEL"
+    )

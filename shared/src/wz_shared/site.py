@@ -18,18 +18,27 @@ as in SUMO) of a two-lane road of 3.66 m lanes sits at ``d = -1.83``.
 
 from __future__ import annotations
 
+import itertools
 import math
+from collections.abc import Mapping
 from enum import StrEnum
+from functools import cached_property
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal, Self
 
+import numpy as np
+import numpy.typing as npt
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from wz_shared.geometry import GeoFrame, RoadFrame
 
 MPH_TO_MPS = 0.44704
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 SiteId = Annotated[str, Field(pattern=r"^[a-z0-9][a-z0-9_-]{0,62}$")]
+# Site attributes computed once and kept in the instance's __dict__ (functools.cached_property).
+_CACHED_FRAMES = ("road_frame", "geo_frame")
 
 
 class _Strict(BaseModel):
@@ -175,13 +184,12 @@ class Site(_Strict):
 
     @field_validator("centerline_xy_m")
     @classmethod
-    def _distinct_vertices(
-        cls, points: list[tuple[float, float]]
-    ) -> list[tuple[float, float]]:
+    def _distinct_vertices(cls, points: list[tuple[float, float]]) -> list[tuple[float, float]]:
         for i in range(1, len(points)):
             (x0, y0), (x1, y1) = points[i - 1], points[i]
             if math.hypot(x1 - x0, y1 - y0) < 1e-3:
                 raise ValueError(f"centerline vertices {i - 1} and {i} coincide")
+        RoadFrame(points)  # raises ValueError naming a vertex where the line turns too sharply
         return points
 
     @model_validator(mode="after")
@@ -190,7 +198,7 @@ class Site(_Strict):
         if indices != list(range(len(self.lanes))):
             raise ValueError(f"lane indices must be 0..{len(self.lanes) - 1}, got {indices}")
         offsets = [lane.center_offset_m for lane in sorted(self.lanes, key=lambda lane: lane.index)]
-        if any(b <= a for a, b in zip(offsets, offsets[1:], strict=False)):
+        if any(b <= a for a, b in itertools.pairwise(offsets)):
             raise ValueError("lane center offsets must increase with lane index (right to left)")
         if self.closed_lane_index >= len(self.lanes):
             raise ValueError(
@@ -216,9 +224,56 @@ class Site(_Strict):
     def road_length_m(self) -> float:
         """Length of the centerline polyline [m]."""
         pts = self.centerline_xy_m
-        return sum(
-            math.hypot(x1 - x0, y1 - y0) for (x0, y0), (x1, y1) in zip(pts, pts[1:], strict=False)
-        )
+        return sum(math.hypot(x1 - x0, y1 - y0) for (x0, y0), (x1, y1) in itertools.pairwise(pts))
+
+    def model_copy(self, *, update: Mapping[str, Any] | None = None, deep: bool = False) -> Self:
+        """Copy, dropping the cached frames: ``update`` may change the centerline or origin."""
+        copied = super().model_copy(update=update, deep=deep)
+        for name in _CACHED_FRAMES:
+            copied.__dict__.pop(name, None)
+        return copied
+
+    @cached_property
+    def road_frame(self) -> RoadFrame:
+        """Station/offset frame of the centerline, built on first use and kept."""
+        return RoadFrame(self.centerline_xy_m)
+
+    @cached_property
+    def geo_frame(self) -> GeoFrame:
+        """WGS84 <-> site frame (local ENU at ``origin``), built on first use and kept."""
+        return GeoFrame(self.origin.latitude_deg, self.origin.longitude_deg, self.origin.altitude_m)
+
+    def lane_index_at(self, offset_m: npt.ArrayLike) -> npt.NDArray[np.intp]:
+        """Lane at each lateral offset.
+
+        Parameters
+        ----------
+        offset_m : array_like, shape (...)
+            Offset d [m] from the centerline, positive to the left.
+
+        Returns
+        -------
+        ndarray of int, shape (...)
+            Index of the lane whose ``[center - width / 2, center + width / 2)`` holds d, or -1
+            outside every lane (shoulders, off the road). Where two lanes overlap the lower
+            index wins.
+        """
+        offset = np.asarray(offset_m, dtype=np.float64)
+        index = np.full(offset.shape, -1, dtype=np.intp)
+        for lane in sorted(self.lanes, key=lambda lane: lane.index, reverse=True):
+            half = 0.5 * lane.width_m
+            inside = (offset >= lane.center_offset_m - half) & (
+                offset < lane.center_offset_m + half
+            )
+            index[inside] = lane.index
+        return index
+
+    def area_at(self, station_m: float) -> AreaKind | None:
+        """Work-zone area holding a station [m] (``[start, end)``), or None outside the zone."""
+        for area in self.work_zone:
+            if area.start_station_m <= station_m < area.end_station_m:
+                return area.kind
+        return None
 
     def lane(self, index: int) -> Lane:
         for lane in self.lanes:
