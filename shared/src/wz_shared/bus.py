@@ -392,10 +392,12 @@ class Bus:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def _keep(self, entity: T) -> T:
+    def _keep(self, declare: Callable[[], T]) -> T:
+        """Declare an entity (refused once closed) and remember it for :meth:`close`."""
         with self._lock:
             if self._closed:
                 raise RuntimeError("the bus is closed")
+            entity = declare()
             self._declared.append(entity)
         return entity
 
@@ -408,7 +410,7 @@ class Bus:
         """
         if block is None:
             block = not codec.is_frame_type(cls)
-        return self._keep(Publisher(self, key, cls, block=block))
+        return self._keep(lambda: Publisher(self, key, cls, block=block))
 
     # subscribing
     def subscribe(
@@ -420,7 +422,7 @@ class Bus:
         capacity: int = 4096,
     ) -> Subscription[M]:
         """Queue JSON messages of ``cls`` from ``key`` (may hold wildcards)."""
-        return self._keep(Subscription(self, key, json_decoder(cls), mode, capacity))
+        return self._keep(lambda: Subscription(self, key, json_decoder(cls), mode, capacity))
 
     def subscribe_frames(
         self,
@@ -431,24 +433,24 @@ class Bus:
         capacity: int = 1,
     ) -> Subscription[codec.Frame[M]]:
         """Queue frames (LiDAR or camera) from ``key``; a ring of one by default."""
-        return self._keep(Subscription(self, key, frame_decoder(cls), mode, capacity))
+        return self._keep(lambda: Subscription(self, key, frame_decoder(cls), mode, capacity))
 
     def subscribe_raw(
         self, key: str, *, mode: QueueMode = "fifo", capacity: int = 65536
     ) -> Subscription[bytes]:
         """Queue undecoded payloads (recorders and taps)."""
-        return self._keep(Subscription(self, key, raw_decoder, mode, capacity))
+        return self._keep(lambda: Subscription(self, key, raw_decoder, mode, capacity))
 
     def on(
         self, key: str, cls: type[M], callback: Callable[[str, M], None]
     ) -> CallbackSubscription[M]:
         """Call ``callback(key, message)`` on Zenoh's thread for each valid JSON message."""
-        return self._keep(CallbackSubscription(self, key, json_decoder(cls), callback))
+        return self._keep(lambda: CallbackSubscription(self, key, json_decoder(cls), callback))
 
     def on_raw(
         self, key: str, callback: Callable[[str, bytes], None]
     ) -> CallbackSubscription[bytes]:
-        return self._keep(CallbackSubscription(self, key, raw_decoder, callback))
+        return self._keep(lambda: CallbackSubscription(self, key, raw_decoder, callback))
 
     # queries
     def serve(self, key: str, respond: Callable[[], bytes | None]) -> None:
@@ -462,7 +464,7 @@ class Bus:
             except Exception:
                 log.exception("queryable %s failed to answer", key)
 
-        self._keep(self.session.declare_queryable(key, on_query))
+        self._keep(lambda: self.session.declare_queryable(key, on_query))
 
     def query(self, key: str, cls: type[M], timeout_s: float = 2.0) -> list[M]:
         """Ask ``key``'s queryables; return every valid reply."""
@@ -487,7 +489,7 @@ class Bus:
     # liveliness
     def declare_alive(self) -> None:
         """Declare this service's liveliness token at ``wz/<site>/status/<service>``."""
-        self._keep(self.session.liveliness().declare_token(self.keys.status(self.service)))
+        self._keep(lambda: self.session.liveliness().declare_token(self.keys.status(self.service)))
 
     def alive(self, key: str | None = None, timeout_s: float = 1.0) -> list[str]:
         """Keys of the liveliness tokens alive now under ``key`` (default: this site's status)."""
