@@ -1,0 +1,47 @@
+"""Settings of the simulator service (env prefix ``WZ_SIM_``), units in the names."""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+from typing import Annotated
+
+from pydantic import Field
+from pydantic_settings import SettingsConfigDict
+from wz_shared.settings import ServiceSettings
+
+
+def _default_work_dir() -> Path:
+    return Path(tempfile.gettempdir()) / "wz-simulator"
+
+
+class SimulatorSettings(ServiceSettings):
+    """What the simulator runs: site, seed, step, traffic demand, pacing and duration.
+
+    ``site_file`` (inherited) defaults to the shared default site. Build it in ``main()``; tests
+    pass values as keyword arguments.
+    """
+
+    model_config = SettingsConfigDict(env_prefix="WZ_SIM_", extra="ignore")
+
+    #: Seed of SUMO and of the demand generator.
+    seed: int = 42
+    #: Simulation step, the truth rate's period [s] (0.05 s = 20 Hz).
+    step_s: Annotated[float, Field(gt=0.0, le=1.0)] = 0.05
+    #: Arrival flow over all lanes [veh/h].
+    vehicles_per_hour: Annotated[float, Field(gt=0.0, le=10000.0)] = 1400.0
+    #: Fraction of semi-trailer trucks [-].
+    truck_share: Annotated[float, Field(ge=0.0, le=1.0)] = 0.15
+    #: Fraction of aggressive drivers [-].
+    aggressive_share: Annotated[float, Field(ge=0.0, le=1.0)] = 0.15
+    #: Simulated seconds per wall-clock second; 1.0 = real time, 0 = as fast as possible.
+    realtime_factor: Annotated[float, Field(ge=0.0)] = 1.0
+    #: Simulated time to run [s]; 0 = forever.
+    duration_s: Annotated[float, Field(ge=0.0)] = 0.0
+    #: Lane changes move sideways at each vehicle type's lateral speed (about 3.7 s for a
+    #: normal car, 2 s for an aggressive one); False = SUMO's instantaneous jump to the lane.
+    continuous_lane_changes: bool = True
+    #: A vehicle blocked this long is teleported (and counted) [s]; 0 = never.
+    teleport_after_s: Annotated[float, Field(ge=0.0)] = 120.0
+    #: Folder for the SUMO network cache and route files.
+    work_dir: Path = Field(default_factory=_default_work_dir)

@@ -1,0 +1,94 @@
+"""Seeded demand: reproducible, chunk-independent, with the configured flow and shares."""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pytest
+from wz_shared.messages import DriverProfile, VehicleClass
+from wz_simulator.traffic.demand import (
+    DemandConfig,
+    DemandGenerator,
+    default_vehicle_types,
+    type_id_for,
+    write_routes,
+)
+
+CONFIG = DemandConfig(vehicles_per_hour=1400.0, truck_share=0.15, aggressive_share=0.15, seed=3)
+
+
+def test_same_seed_same_departures_however_fetched() -> None:
+    whole = DemandGenerator(CONFIG).until(3600.0)
+    chunked_generator = DemandGenerator(CONFIG)
+    chunked = [d for end in (10.0, 300.0, 301.0, 3600.0) for d in chunked_generator.until(end)]
+    assert whole == chunked
+    other = DemandGenerator(DemandConfig(**{**CONFIG.__dict__, "seed": 4})).until(3600.0)
+    assert other != whole
+
+
+def test_flow_shares_and_lanes_match_the_config() -> None:
+    hours = 20.0
+    departures = DemandGenerator(CONFIG).until(hours * 3600.0)
+    types = default_vehicle_types()
+    assert len(departures) == pytest.approx(1400 * hours, rel=0.03)
+    times = np.array([d.depart_s for d in departures])
+    assert np.all(np.diff(times) >= 0.0)
+    assert len({d.vehicle_id for d in departures}) == len(departures)
+    trucks = np.mean([types[d.type_id].vehicle_class == VehicleClass.TRUCK for d in departures])
+    aggressive = np.mean(
+        [types[d.type_id].driver_profile == DriverProfile.AGGRESSIVE for d in departures]
+    )
+    assert trucks == pytest.approx(0.15, abs=0.01)
+    assert aggressive == pytest.approx(0.15, abs=0.01)
+    lanes = np.bincount([d.depart_lane for d in departures])
+    assert lanes.size == 2 and abs(lanes[0] - lanes[1]) < 0.03 * len(departures)
+    for departure in departures[:500]:
+        low, high = types[departure.type_id].lc_strategic_range
+        assert low <= departure.lc_strategic <= high
+        assert 0.0 <= departure.notice_fraction <= 1.0
+
+
+def test_vehicle_types_have_realistic_bodies_and_distinct_profiles() -> None:
+    types = default_vehicle_types()
+    car = types[type_id_for(VehicleClass.CAR, DriverProfile.NORMAL)]
+    truck = types[type_id_for(VehicleClass.TRUCK, DriverProfile.NORMAL)]
+    assert (car.length_m, car.width_m, car.height_m) == (4.6, 1.8, 1.5)
+    assert (truck.length_m, truck.width_m, truck.height_m) == (16.5, 2.6, 4.0)
+    assert truck.sumo_vclass == "truck"
+    for vehicle_class in VehicleClass.CAR, VehicleClass.TRUCK:
+        normal = types[type_id_for(vehicle_class, DriverProfile.NORMAL)]
+        aggressive = types[type_id_for(vehicle_class, DriverProfile.AGGRESSIVE)]
+        assert aggressive.speed_factor.mean >= normal.speed_factor.mean + 0.15
+        assert aggressive.decel_mps2 > normal.decel_mps2
+        assert aggressive.emergency_decel_mps2 > normal.emergency_decel_mps2
+        assert aggressive.tau_s < normal.tau_s
+        assert max(aggressive.lc_strategic_range) < min(normal.lc_strategic_range)
+        assert aggressive.lane_change["lcAssertive"] > normal.lane_change["lcAssertive"]
+        assert aggressive.lane_change["lcSpeedGain"] > normal.lane_change["lcSpeedGain"]
+
+
+def test_route_file_lists_types_route_and_vehicles(tmp_path: Path) -> None:
+    departures = DemandGenerator(CONFIG).until(120.0)
+    path = write_routes(
+        tmp_path / "d.rou.xml", ["e00", "e01"], default_vehicle_types().values(), departures
+    )
+    root = ET.parse(path).getroot()
+    assert {t.attrib["id"] for t in root.iter("vType")} == {
+        "car_normal",
+        "car_aggressive",
+        "truck_normal",
+        "truck_aggressive",
+    }
+    assert root.find("route").attrib["edges"] == "e00 e01"  # type: ignore[union-attr]
+    vehicles = root.findall("vehicle")
+    assert [v.attrib["id"] for v in vehicles] == [d.vehicle_id for d in departures]
+    assert all(v.attrib["departSpeed"] == "desired" for v in vehicles)
+
+
+def test_bad_config_is_refused() -> None:
+    with pytest.raises(ValueError, match="truck_share"):
+        DemandConfig(vehicles_per_hour=100.0, truck_share=1.5, aggressive_share=0.1, seed=1)
+    with pytest.raises(ValueError, match="vehicles_per_hour"):
+        DemandConfig(vehicles_per_hour=0.0, truck_share=0.1, aggressive_share=0.1, seed=1)
