@@ -1,0 +1,395 @@
+"""Markdown for BENCHMARKS.md from the results the benchmarks return (no measuring here)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+SMALL_PATHS = {
+    "zenoh": "plain Zenoh publisher and Python callback, bytes, no codec (baseline)",
+    "zenoh-fifo": "plain Zenoh, Zenoh's `FifoChannel`, `recv()` on the main thread, no codec",
+    "bus-raw": "`Bus`: `put_bytes`, `subscribe_raw` FIFO queue, `recv` on the main thread",
+    "bus-callback": "`Bus`: `put` (encode), `on` (decode on Zenoh's thread), no queue",
+    "bus-json": "`Bus`: `put` (encode), `subscribe` FIFO queue, `recv` + decode: a service's path",
+}
+FRAME_PATHS = {
+    "zenoh-frames": "plain Zenoh, bytes, Python callback (the echo republishes the received "
+    "payload without copying it)",
+    "bus-frames": "`encode_lidar_frame` + `put_bytes`, `subscribe_frames` FIFO, `recv` + decode "
+    "(the echo decodes and re-encodes)",
+}
+THROUGHPUT_PATHS = {
+    "zenoh": "plain Zenoh `put(bytes)`; a Python callback counts",
+    "zenoh-fifo": "plain Zenoh `put(bytes)`; Zenoh's `FifoChannel`, `recv()` on the main thread",
+    "bus-raw": "`Bus.put_bytes`; `subscribe_raw` FIFO, `recv` on the main thread",
+    "bus-json": "`Bus.put` (encode); `subscribe` FIFO, `recv` + decode",
+    "zenoh-frames": "plain Zenoh `put(bytes)` of pre-built payloads; a Python callback counts",
+    "bus-frames": "`encode_lidar_frame` + `put_bytes`; `subscribe_frames` FIFO, `recv` + decode",
+}
+
+
+def _us(value: float) -> str:
+    return f"{value:.0f} µs" if value >= 100 else f"{value:.1f} µs"
+
+
+def _ms(value: float) -> str:
+    return f"{value:.2f} ms" if value < 10 else f"{value:.1f} ms"
+
+
+def _latency(value_us: float) -> str:
+    return _us(value_us) if value_us < 1000 else _ms(value_us / 1000)
+
+
+def _rate(value: float) -> str:
+    return f"{value:,.0f}"
+
+
+def _round_range(values_us: list[float]) -> str:
+    if len(values_us) == 1:
+        return _latency(values_us[0])
+    return f"{_latency(min(values_us))} – {_latency(max(values_us))}"
+
+
+def _table(header: list[str], rows: list[list[str]]) -> list[str]:
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    return lines
+
+
+def _base_path(name: str) -> str:
+    return name.removesuffix("-noshm")
+
+
+# --- machine and summary ----------------------------------------------------------------------
+
+
+def _machine(machine: dict[str, Any]) -> list[str]:
+    versions = machine["versions"]
+    rows = [
+        ["CPU", f"{machine['cpu_model']}"],
+        ["Cores", f"{machine['cores']} ({machine['cores_usable']} usable by this process)"],
+        ["Memory", f"{machine['memory_gib']} GiB"],
+        ["OS", f"{machine['os']}, kernel {machine['kernel']}"],
+        ["Python", machine["python"]],
+        ["Zenoh (eclipse-zenoh)", versions["eclipse-zenoh"]],
+        ["numpy", versions["numpy"]],
+        ["pydantic", versions["pydantic"]],
+        ["SUMO (eclipse-sumo / libsumo)", f"{versions['eclipse-sumo']} / {versions['libsumo']}"],
+    ]
+    return ["## Machine", "", *_table(["", ""], rows), ""]
+
+
+def _interference(benchmarks: dict[str, Any]) -> list[str]:
+    """A warning when other work shared the machine during a benchmark."""
+    shares = {
+        name: entry["cpu_other_during"]
+        for name, entry in benchmarks.items()
+        if entry.get("cpu_other_during", 0.0) > 0.1
+    }
+    if not shares:
+        return []
+    listed = ", ".join(f"`{name}` {100 * share:.0f} %" for name, share in shares.items())
+    return [
+        f"> **Other work shared this machine during the run** ({listed} of its CPU): on 2 "
+        "cores that inflates the tails (p99, max) most and the medians less. Prefer a run on "
+        "an idle machine.",
+        "",
+    ]
+
+
+def _summary(benchmarks: dict[str, Any]) -> list[str]:
+    lines: list[str] = []
+    latency = benchmarks.get("bus_latency", {}).get("result")
+    if latency:
+        small, frames = latency["small"], latency["frames"]
+        bus, raw = small["bus-json"]["one_way_us"], small["zenoh"]["one_way_us"]
+        lines.append(
+            f"- A ~200-byte JSON message between two processes through our bus: "
+            f"**{_us(bus['p50'])}** one way (p99 {_us(bus['p99'])}); plain Zenoh "
+            f"{_us(raw['p50'])} (p99 {_us(raw['p99'])}): "
+            f"**{latency['ratios']['bus-json / zenoh (p50)']:.1f}x**."
+        )
+        shm = frames["bus-frames"]["one_way_us"]
+        noshm = frames["bus-frames-noshm"]["one_way_us"]
+        lines.append(
+            f"- A 2 MB LiDAR frame through our bus: **{_latency(shm['p50'])}** one way with "
+            f"Zenoh's shared memory (p99 {_latency(shm['p99'])}), {_latency(noshm['p50'])} "
+            f"without (p99 {_latency(noshm['p99'])})."
+        )
+    throughput = benchmarks.get("bus_throughput", {}).get("result")
+    if throughput:
+        small, frames = throughput["small"], throughput["frames"]
+        lines.append(
+            f"- Throughput, ~200-byte messages: **{_rate(small['bus-json']['messages_per_s'])} "
+            f"msg/s** decoded through our bus, {_rate(small['zenoh']['messages_per_s'])} msg/s "
+            f"plain Zenoh; 2 MB frames: **{_rate(frames['bus-frames']['messages_per_s'])} "
+            f"frames/s** ({frames['bus-frames']['megabytes_per_s']:,.0f} MB/s) with shared "
+            f"memory, {_rate(frames['bus-frames-noshm']['messages_per_s'])} without. "
+            + ("Nothing lost." if throughput["all_delivered"] else "**Samples were lost.**")
+        )
+    sumo = benchmarks.get("sumo_step", {}).get("result")
+    if sumo:
+        stepping = sumo["stepping"]
+        ten = sumo["end_to_end"]
+        lines.append(
+            f"- SUMO step with {stepping['vehicles']['median']:.0f} vehicles: "
+            f"**{_ms(stepping['step_ms']['p50'])}** (p99 {_ms(stepping['step_ms']['p99'])}), "
+            f"{stepping['realtime_factor_median']:.0f}x real time at a "
+            f"{stepping['step_s']} s step; "
+            + "; ".join(
+                f"{run['duration_s'] / 60:.0f} simulated minutes at "
+                f"{run['vehicles_per_hour']:.0f} veh/h in {run['total_s']:.1f} s"
+                for run in ten
+            )
+            + "."
+        )
+    return ["## Summary", "", *lines, ""] if lines else []
+
+
+# --- per benchmark ----------------------------------------------------------------------------
+
+
+def _bus_latency(result: dict[str, Any]) -> list[str]:
+    lines = [
+        "Ping-pong between this process and an echo process over Zenoh on `tcp/127.0.0.1` "
+        "(two peers, explicit endpoints, multicast off). The echo republishes each sample on "
+        "another key through the same API; one-way latency = round trip / 2. One sample in "
+        "flight at a time, after a warm-up. Each hop wakes a waiting thread; on this virtual "
+        "machine a thread woken on an idle core also pays that core's wake-up, so medians "
+        "are lower when other work keeps the cores busy (and tails higher).",
+        "",
+        "### Small messages (~200 bytes: a `RadarScan` with one target, or 200 raw bytes)",
+        "",
+    ]
+    rows = []
+    for name, entry in result["small"].items():
+        stats = entry["one_way_us"]
+        rows.append(
+            [
+                f"`{name}`",
+                SMALL_PATHS.get(name, ""),
+                str(entry["payload_bytes"]),
+                f"{stats['n']} ({entry['rounds']})",
+                f"**{_us(stats['p50'])}**",
+                _round_range(entry["round_p50_us"]),
+                _us(stats["p90"]),
+                _us(stats["p99"]),
+                _us(stats["max"]),
+            ]
+        )
+    header = [
+        "Path",
+        "What a sample goes through",
+        "Bytes",
+        "Samples (rounds)",
+        "p50",
+        "p50 of each round",
+        "p90",
+        "p99",
+        "max",
+    ]
+    lines += [*_table(header, rows), ""]
+    lines += ["### LiDAR frames (131072 points x 4 float32, 2 MB)", ""]
+    rows = []
+    for name, entry in result["frames"].items():
+        stats = entry["one_way_us"]
+        rows.append(
+            [
+                f"`{_base_path(name)}`",
+                "on" if entry["shm"] else "off",
+                FRAME_PATHS.get(_base_path(name), ""),
+                f"{entry['payload_bytes']:,}",
+                f"{stats['n']} ({entry['rounds']})",
+                f"**{_latency(stats['p50'])}**",
+                _round_range(entry["round_p50_us"]),
+                _latency(stats["p90"]),
+                _latency(stats["p99"]),
+                _latency(stats["max"]),
+            ]
+        )
+    header = [
+        "Path",
+        "Shared memory",
+        "What",
+        "Bytes",
+        "Samples (rounds)",
+        "p50",
+        "p50 of each round",
+        "p90",
+        "p99",
+        "max",
+    ]
+    lines += [*_table(header, rows), ""]
+    lines += ["### Ratios", ""]
+    lines += _table(
+        ["Ratio", "Value"], [[name, f"{value:.2f}"] for name, value in result["ratios"].items()]
+    )
+    return [*lines, ""]
+
+
+def _bus_throughput(result: dict[str, Any]) -> list[str]:
+    lines = [
+        "The peer publishes numbered samples as fast as it can (blocking congestion control, "
+        "reliable); this process takes every one, checks the order, and times first to last "
+        "arrival. Counts are checked after the peer has stopped: exact, none lost, none extra. "
+        "Each path runs in several rounds (fresh processes, round-robin over the paths); the "
+        "rates are the median round's, with every round's beside them.",
+        "",
+    ]
+    rows = []
+    for table in ("small", "frames"):
+        for name, entry in result[table].items():
+            rows.append(
+                [
+                    f"`{_base_path(name)}`",
+                    "on" if entry["shm"] else "off",
+                    THROUGHPUT_PATHS.get(_base_path(name), ""),
+                    f"{entry['payload_bytes']:,}",
+                    f"{entry['rounds']} x {entry['sent_per_round']:,}",
+                    f"{entry['lost']} / {entry['extra']} / {entry['out_of_order']}",
+                    f"**{_rate(entry['messages_per_s'])}**",
+                    ", ".join(_rate(rate) for rate in entry["messages_per_s_rounds"]),
+                    f"{entry['megabytes_per_s']:,.1f}",
+                    _rate(entry["publisher_messages_per_s"]),
+                ]
+            )
+    header = [
+        "Path",
+        "Shared memory",
+        "What",
+        "Bytes",
+        "Sent",
+        "Lost / extra / out of order",
+        "Received msg/s",
+        "Each round",
+        "MB/s",
+        "Publisher puts/s",
+    ]
+    lines += [*_table(header, rows), ""]
+    lines.append(
+        "All delivered exactly, in order."
+        if result["all_delivered"]
+        else "**Some samples were lost, duplicated or out of order (see the table).**"
+    )
+    lines += ["", "### Ratios", ""]
+    lines += _table(
+        ["Ratio", "Value"], [[name, f"{value:.2f}"] for name, value in result["ratios"].items()]
+    )
+    return [*lines, ""]
+
+
+def _sumo_step(result: dict[str, Any]) -> list[str]:
+    stepping = result["stepping"]
+    vehicles = stepping["vehicles"]
+    lines = [
+        f"`TrafficWorld` on the default site (libsumo, its own process), "
+        f"{stepping['vehicles_per_hour']:.0f} veh/h, step {stepping['step_s']} s, "
+        f"`realtime_factor=0`. Warm-up until {stepping['target_vehicles']} vehicles were on the "
+        f"road ({stepping['warmup_vehicles']} after {stepping['warmup_sim_s']:.0f} simulated s, "
+        f"{stepping['warmup_wall_s']:.1f} s wall), "
+        f"then {stepping['steps']} timed steps with {vehicles['min']} / "
+        f"{vehicles['median']:.0f} / {vehicles['max']} vehicles (min / median / max).",
+        "",
+    ]
+    step = stepping["step_ms"]
+    parts = [
+        ("`TrafficWorld.step()` (SUMO step + `VehicleTruth` messages)", stepping["step_ms"]),
+        ("of which, re-measured: `site.road_frame.to_road` of the vehicles", stepping["to_road_ms"]),
+        ("of which, re-measured: validating the `VehicleTruth`s", stepping["vehicle_truth_validate_ms"]),
+        ("for comparison: `VehicleTruth.model_construct` (no validation)", stepping["vehicle_truth_construct_ms"]),
+        (
+            f"node's extra: `GroundTruth` build + encode "
+            f"({stepping['ground_truth_bytes_median'] / 1000:.1f} kB)",
+            stepping["ground_truth_build_encode_ms"],
+        ),
+    ]  # fmt: skip
+    rows = [[what, f"**{_ms(s['p50'])}**", _ms(s["p99"]), _ms(s["max"])] for what, s in parts]
+    lines += [*_table(["Per step", "p50", "p99", "max"], rows), ""]
+    lines += _table(
+        ["Derived", "Value"],
+        [
+            [
+                f"real-time factor at a {stepping['step_s']} s step (step / median step time)",
+                f"**{stepping['realtime_factor_median']:.0f}x**",
+            ],
+            [
+                "real-time factor over the timed steps (sum of step times)",
+                f"{stepping['realtime_factor_overall']:.0f}x",
+            ],
+            [
+                f"share of the {1000 * stepping['step_s']:.0f} ms step budget used (median)",
+                f"{100 * step['p50'] / (1000 * stepping['step_s']):.1f} %",
+            ],
+            ["step time per vehicle (mean)", _us(stepping["per_vehicle_step_us"])],
+            ["libsumo start-up, network built in a fresh folder", f"{stepping['startup_s']:.2f} s"],
+            ["collisions / teleports during the timed steps", f"{stepping['collisions']} / {stepping['teleports']}"],
+        ],
+    )  # fmt: skip
+    lines += ["", "### Whole runs, end to end", ""]
+    rows = [
+        [
+            f"{run['vehicles_per_hour']:.0f}",
+            f"{run['duration_s']:.0f} s",
+            f"{run['steps']:,}",
+            f"{run['vehicles']['median']:.0f} / {run['vehicles']['max']}",
+            f"{run['startup_s']:.2f} s",
+            f"{run['stepping_s']:.2f} s",
+            f"**{run['total_s']:.2f} s**",
+            f"{run['realtime_factor']:.0f}x",
+            f"{run['departed']} / {run['arrived']}",
+            f"{run['collisions']} / {run['teleports']}",
+        ]
+        for run in result["end_to_end"]
+    ]
+    header = [
+        "veh/h",
+        "Simulated",
+        "Steps",
+        "Vehicles median / max",
+        "Start-up",
+        "Stepping",
+        "Total",
+        "Sim / wall",
+        "Departed / arrived",
+        "Collisions / teleports",
+    ]
+    lines += _table(header, rows)
+    return [*lines, ""]
+
+
+SECTIONS: dict[str, tuple[str, Callable[[dict[str, Any]], list[str]]]] = {
+    "bus_latency": ("one-way latency between two processes", _bus_latency),
+    "bus_throughput": ("messages per second between two processes", _bus_throughput),
+    "sumo_step": ("the simulator's SUMO step", _sumo_step),
+}
+
+
+def render(results: dict[str, Any]) -> str:
+    """The whole BENCHMARKS.md."""
+    lines = [
+        "# Benchmarks",
+        "",
+        f"Written by `{results['command']}` at {results['generated_at']} (UTC); do not edit: "
+        "run it again. Raw numbers: `benchmarks/results.json`. Each benchmark is a module "
+        "in `benchmarks/` with its method in its docstring.",
+        "",
+        *_interference(results["benchmarks"]),
+        *_summary(results["benchmarks"]),
+        *_machine(results["machine"]),
+    ]
+    for name, entry in results["benchmarks"].items():
+        title, section = SECTIONS[name]
+        lines += [f"## `{name}`: {title}", ""]
+        lines += [
+            f"Measured {entry['measured_at']}, "
+            f"{'**quick run** (fewer samples)' if entry['quick'] else 'full run'}, "
+            f"{entry['wall_s']} s. Share of the machine's CPU used by other work just before: "
+            f"{100 * entry['cpu_busy_before']:.0f} %, during: "
+            f"{100 * entry.get('cpu_other_during', float('nan')):.0f} %.",
+            "",
+        ]
+        if "error" in entry:
+            lines += ["**Failed:**", "", "```", entry["error"].rstrip(), "```", ""]
+        else:
+            lines += section(entry["result"])
+    return "\n".join(lines).rstrip() + "\n"
