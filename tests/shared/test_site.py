@@ -186,3 +186,23 @@ def test_lane_index_at_follows_the_road(site: Site) -> None:
 )
 def test_area_at(site: Site, station_m: float, expected: AreaKind | None) -> None:
     assert site.area_at(station_m) == expected
+
+
+def test_pose_rotation_axes() -> None:
+    from wz_shared.site import Pose
+
+    # Facing north (yaw 90): forward is +y, left is -x, up is +z.
+    r = Pose(x_m=0, y_m=0, z_m=0, yaw_deg=90.0).rotation()
+    np.testing.assert_allclose(r[:, 0], [0, 1, 0], atol=1e-12)
+    np.testing.assert_allclose(r[:, 1], [-1, 0, 0], atol=1e-12)
+    np.testing.assert_allclose(r[:, 2], [0, 0, 1], atol=1e-12)
+    # Pitch -10 (looking down): forward dips below the horizon.
+    forward = Pose(x_m=0, y_m=0, z_m=6, pitch_deg=-10.0).rotation()[:, 0]
+    np.testing.assert_allclose(forward, [np.cos(np.radians(10)), 0, -np.sin(np.radians(10))])
+    # Roll +5: the left axis rises (right side down).
+    left = Pose(x_m=0, y_m=0, z_m=6, roll_deg=5.0).rotation()[:, 1]
+    assert left[2] > 0
+    # Always a proper rotation.
+    r = Pose(x_m=1, y_m=2, z_m=3, yaw_deg=-93, pitch_deg=-8, roll_deg=2).rotation()
+    np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-12)
+    assert np.linalg.det(r) == pytest.approx(1.0)

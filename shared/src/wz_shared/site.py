@@ -103,9 +103,9 @@ class SpeedLimit(_Strict):
 class Pose(_Strict):
     """Sensor pose in the site frame: position [m] and yaw/pitch/roll [deg].
 
-    yaw is measured counter-clockwise from the site x axis (east); pitch is positive nose-up
-    (a sensor looking down at the road has negative pitch); rotations apply as Rz(yaw) Ry(pitch)
-    Rx(roll) with the sensor's x axis forward, y left and z up.
+    The sensor frame has x forward, y left, z up. yaw is measured counter-clockwise from the
+    site x axis (east); pitch is positive nose-up (a sensor looking down at the road has
+    negative pitch); roll is positive right side down (about x). See :meth:`rotation`.
     """
 
     x_m: FiniteFloat
@@ -114,6 +114,28 @@ class Pose(_Strict):
     yaw_deg: FiniteFloat = 0.0
     pitch_deg: FiniteFloat = 0.0
     roll_deg: FiniteFloat = 0.0
+
+    @property
+    def position_m(self) -> npt.NDArray[np.float64]:
+        """Position in the site frame, shape (3,)."""
+        return np.array([self.x_m, self.y_m, self.z_m])
+
+    def rotation(self) -> npt.NDArray[np.float64]:
+        """Rotation from the sensor frame to the site frame, shape (3, 3).
+
+        ``p_site = R @ p_sensor + position``; the columns of ``R`` are the sensor's x
+        (forward), y (left) and z (up) axes in the site frame. ``R = Rz(yaw) Ry(-pitch)
+        Rx(roll)``: the minus makes positive pitch raise the x axis (with y to the left, a
+        right-handed ``Ry(+pitch)`` would lower it). Every sensor model uses this one matrix.
+        """
+        yaw, pitch, roll = (math.radians(a) for a in (self.yaw_deg, self.pitch_deg, self.roll_deg))
+        cy, sy = math.cos(yaw), math.sin(yaw)
+        cp, sp = math.cos(-pitch), math.sin(-pitch)
+        cr, sr = math.cos(roll), math.sin(roll)
+        rz = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
+        ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
+        rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
+        return np.asarray(rz @ ry @ rx, dtype=np.float64)
 
 
 class LidarIntrinsics(_Strict):
