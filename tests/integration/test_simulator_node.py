@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import os
 import signal
 import subprocess
@@ -43,7 +44,7 @@ def test_simulator_node_publishes_truth_and_serves_site(port: int, tmp_path: Pat
             steps = [m.step_index for m in messages]
             assert steps == list(range(steps[0], steps[0] + len(steps)))  # FIFO: none lost
             stamps = [m.stamp for m in messages]
-            assert all(abs((b - a) - 0.05) < 1e-6 for a, b in zip(stamps, stamps[1:], strict=False))
+            assert all(abs((b - a) - 0.05) < 1e-6 for a, b in itertools.pairwise(stamps))
             vehicle = messages[-1].vehicles[0]
             assert vehicle.station_m < 300 and vehicle.speed_mps > 10
             health = status.recv(10.0)

@@ -1,0 +1,374 @@
+"""The ``wz`` command: run the local stack, watch it, record and replay the bus.
+
+Subcommands: ``router``, ``up``, ``demo``, ``status``, ``tap``, ``record``, ``replay``
+(``wz <command> --help`` for each). The command's own logs go to stderr (structured, see
+:mod:`wz_shared.logs`); stdout carries only its output (tables, tapped messages, children's
+lines), so it can be piped.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import zenoh
+from wz_shared.logs import configure_logging
+from wz_shared.settings import DEFAULT_ROUTER_ENDPOINT
+from wz_shared.site import SiteFileError, load_site
+
+from wz_cli.common import (
+    DEFAULT_CONNECT_HELP,
+    CliError,
+    default_site_id,
+    emit,
+    open_bus,
+    site_file_from_env,
+    stop_on_signals,
+)
+
+log = logging.getLogger("wz_cli")
+
+#: The site label of commands that work across sites (tap, record, replay).
+ANY_SITE = "any-site"
+
+Handler = Callable[[argparse.Namespace], int]
+
+
+def _positive_float(text: str) -> float:
+    value = float(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    return value
+
+
+def _non_negative_float(text: str) -> float:
+    value = float(text)
+    if not value >= 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
+    return value
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {text}")
+    return value
+
+
+def _add_connect(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--connect", action="append", metavar="ENDPOINT", help=DEFAULT_CONNECT_HELP)
+
+
+def _key_expr_arg(text: str) -> str:
+    try:
+        zenoh.KeyExpr(text)
+    except zenoh.ZError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a valid key expression: {exc}") from exc
+    return text
+
+
+# --- subcommands ----------------------------------------------------------------------------
+
+
+def cmd_router(args: argparse.Namespace) -> int:
+    from wz_cli.router import router_config, run_router
+
+    stop = stop_on_signals()
+    return run_router(router_config(args.listen, args.config), stop)
+
+
+def cmd_up(args: argparse.Namespace) -> int:
+    from wz_cli.stack import StackOptions, select
+    from wz_cli.supervisor import Supervisor
+
+    site_file: Path = args.site or site_file_from_env()
+    try:
+        site = load_site(site_file)
+    except SiteFileError as exc:
+        raise CliError(str(exc)) from exc
+    configure_logging(service=f"wz-{args.command}", site=site.site_id, level=args.log_level)
+    only = [name.strip() for item in args.only or [] for name in item.split(",") if name.strip()]
+    try:
+        services = select(only or None)
+    except ValueError as exc:
+        raise CliError(str(exc)) from exc
+    missing = [spec for spec in services if not spec.installed()]
+    if missing:
+        raise CliError(
+            "not installed here: "
+            + ", ".join(f"{spec.name} (module {spec.module})" for spec in missing)
+            + "; run `uv sync` in the workspace root, or leave them out with --only"
+        )
+    options = StackOptions(
+        router_endpoint=args.listen,
+        site_file=site_file,
+        realtime_factor=args.realtime_factor,
+        seed=args.seed,
+    )
+    stop = stop_on_signals()
+    if args.command == "demo":
+        _demo_banner(site.site_id, args.listen)
+    return Supervisor(services, options, stop).run()
+
+
+def _demo_banner(site_id: str, endpoint: str) -> None:
+    connect = "" if endpoint == DEFAULT_ROUTER_ENDPOINT else f" --connect {endpoint}"
+    for line in (
+        f"wz demo: starting the simulated work zone at site {site_id} (router {endpoint}).",
+        "Where to look, in another terminal:",
+        f"  wz status{connect}                  services alive, rates, drops",
+        f"  wz tap{connect} 'wz/*/truth/**'     the simulated vehicles, live",
+        f"  wz record{connect} demo.mcap        record the bus (opens in Foxglove); "
+        "then wz replay demo.mcap",
+        "Ctrl-C stops everything.",
+    ):
+        emit(line)
+
+
+def cmd_status(args: argparse.Namespace) -> int:
+    from wz_cli.status import collect, render_json, render_table
+
+    site = args.site or default_site_id()
+    with open_bus(args.connect, site=site, service="wz-status") as bus:
+        views = collect(bus, site, args.timeout)
+    if args.json:
+        emit(render_json(site, views))
+    else:
+        for line in render_table(site, views):
+            emit(line)
+    return 0 if any(view.alive for view in views) else 1
+
+
+def cmd_tap(args: argparse.Namespace) -> int:
+    import shutil
+
+    from wz_cli.tap import run_tap
+
+    stop = stop_on_signals()
+    width = shutil.get_terminal_size((160, 24)).columns
+    with open_bus(args.connect, site=ANY_SITE, service="wz-tap") as bus:
+        return run_tap(
+            bus,
+            args.key_expr,
+            count=args.count,
+            timeout_s=args.timeout,
+            full_json=args.json,
+            width=width,
+            stop=stop,
+        )
+
+
+def cmd_record(args: argparse.Namespace) -> int:
+    from wz_cli.record import run_record
+
+    stop = stop_on_signals()
+    with open_bus(args.connect, site=ANY_SITE, service="wz-record") as bus:
+        return run_record(
+            bus,
+            args.out,
+            args.key_exprs or ["wz/**"],
+            duration_s=args.duration,
+            max_messages=args.max_messages,
+            overwrite=args.overwrite,
+            stop=stop,
+            connect=args.connect or [],
+        )
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    from wz_cli.replay import run_replay
+
+    if not args.recording.is_file():
+        raise CliError(f"no such recording: {args.recording}", 1)
+    stop = stop_on_signals()
+    with open_bus(args.connect, site=ANY_SITE, service="wz-replay") as bus:
+        return run_replay(
+            bus,
+            args.recording,
+            rate=None if args.fast else args.rate,
+            loop=args.loop,
+            wait_subscribers_s=args.wait_subscribers,
+            stop=stop,
+        )
+
+
+# --- the parser -----------------------------------------------------------------------------
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="wz",
+        description="Work-zone edge sensing: run the local stack, watch it, record and replay.",
+        epilog="Exit codes: 0 success, 1 failure (see each command), 2 usage error.",
+    )
+    parser.add_argument(
+        "--log-level",
+        default=os.environ.get("WZ_LOG_LEVEL", "INFO"),
+        choices=["DEBUG", "INFO", "WARNING", "ERROR"],
+        help="level of the command's own logs on stderr (default INFO or WZ_LOG_LEVEL)",
+    )
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    router = commands.add_parser(
+        "router",
+        help="run the local Zenoh router until SIGINT/SIGTERM",
+        description="A Zenoh session in router mode (no zenohd needed); multicast scouting off.",
+    )
+    router.add_argument(
+        "--listen",
+        action="append",
+        metavar="ENDPOINT",
+        help=f"endpoint to listen on (repeatable; default {DEFAULT_ROUTER_ENDPOINT}, or the "
+        "config file's)",
+    )
+    router.add_argument(
+        "--config", type=Path, help="a zenoh JSON5 config, e.g. deploy/zenoh/router-local.json5"
+    )
+    router.set_defaults(handler=cmd_router)
+
+    for name, summary in (
+        ("up", "run the local stack: the router, then one process per service"),
+        ("demo", "the README's demo: `wz up` on the default site, with where to look"),
+    ):
+        up = commands.add_parser(
+            name,
+            help=summary,
+            description=summary + ". Children are restarted when they crash (backoff 0.5 s "
+            "doubling to 30 s); Ctrl-C or SIGTERM stops them all (exit 0).",
+        )
+        up.add_argument(
+            "--site", type=Path, help="site file (default: WZ_SITE_FILE or the default site)"
+        )
+        up.add_argument(
+            "--only",
+            action="append",
+            metavar="NAME[,NAME...]",
+            help="run only these services (comma-separated or repeated), e.g. simulator",
+        )
+        up.add_argument(
+            "--realtime-factor",
+            type=_non_negative_float,
+            metavar="X",
+            help="simulated seconds per wall-clock second (0 = as fast as possible)",
+        )
+        up.add_argument("--seed", type=int, help="seed of the simulation")
+        up.add_argument(
+            "--listen",
+            default=DEFAULT_ROUTER_ENDPOINT,
+            metavar="ENDPOINT",
+            help=f"the router's endpoint, tcp/<host>:<port> (default {DEFAULT_ROUTER_ENDPOINT})",
+        )
+        up.set_defaults(handler=cmd_up)
+
+    status = commands.add_parser(
+        "status",
+        help="which services are alive, with their rates and drops",
+        description="Query the services' liveliness tokens under wz/<site>/status/* and listen "
+        "to their status messages.",
+        epilog="Exit code: 0 if at least one service is alive, 1 if none is.",
+    )
+    status.add_argument("--site", help="site id (default: the site of WZ_SITE_FILE / default)")
+    status.add_argument(
+        "--timeout",
+        type=_positive_float,
+        default=3.0,
+        metavar="S",
+        help="how long to wait for status messages [s] (default 3)",
+    )
+    status.add_argument("--json", action="store_true", help="one JSON object instead of a table")
+    _add_connect(status)
+    status.set_defaults(handler=cmd_status)
+
+    tap = commands.add_parser(
+        "tap",
+        help="print live messages on a key expression, one line each",
+        description="Print `key  kind  summary` per message; invalid payloads as <invalid: ...>.",
+        epilog="Exit code: 1 if --timeout ran out before --count messages, else 0.",
+    )
+    tap.add_argument("key_expr", type=_key_expr_arg, metavar="KEYEXPR", help="e.g. 'wz/*/truth/**'")
+    tap.add_argument("--count", type=_positive_int, metavar="N", help="stop after N messages")
+    tap.add_argument("--timeout", type=_positive_float, metavar="S", help="stop after S seconds")
+    tap.add_argument("--json", action="store_true", help="the full JSON of each message")
+    _add_connect(tap)
+    tap.set_defaults(handler=cmd_tap)
+
+    record = commands.add_parser(
+        "record",
+        help="record bus payloads into an MCAP file (opens in Foxglove)",
+        description="Record raw payloads, one MCAP channel per key, until --duration, "
+        "--max-messages or Ctrl-C; then finish the file.",
+    )
+    record.add_argument("out", type=Path, metavar="OUT.mcap")
+    record.add_argument(
+        "key_exprs",
+        nargs="*",
+        type=_key_expr_arg,
+        metavar="KEYEXPR",
+        help="what to record (default wz/**)",
+    )
+    record.add_argument("--duration", type=_positive_float, metavar="S", help="stop after S s")
+    record.add_argument(
+        "--max-messages", type=_positive_int, metavar="N", help="stop after N messages"
+    )
+    record.add_argument("--overwrite", action="store_true", help="replace OUT.mcap if it exists")
+    _add_connect(record)
+    record.set_defaults(handler=cmd_record)
+
+    replay = commands.add_parser(
+        "replay",
+        help="publish a recording back on the bus",
+        description="Publish each recorded payload on its key, at the recorded pace.",
+        epilog="Exit code: 3 if the recording was cut short (everything readable was replayed), "
+        "1 if it cannot be read, else 0.",
+    )
+    replay.add_argument("recording", type=Path, metavar="IN.mcap")
+    pace = replay.add_mutually_exclusive_group()
+    pace.add_argument(
+        "--rate",
+        type=_positive_float,
+        default=1.0,
+        metavar="X",
+        help="X times the recorded pace (default 1)",
+    )
+    pace.add_argument("--fast", action="store_true", help="as fast as possible")
+    replay.add_argument("--loop", action="store_true", help="start over at the end, until Ctrl-C")
+    replay.add_argument(
+        "--wait-subscribers",
+        type=_non_negative_float,
+        default=2.0,
+        metavar="S",
+        help="wait at most S seconds in all for subscribers to appear (default 2)",
+    )
+    _add_connect(replay)
+    replay.set_defaults(handler=cmd_replay)
+    return parser
+
+
+def run(argv: Sequence[str] | None = None) -> int:
+    """Parse ``argv``, run the command, return its exit code."""
+    args = build_parser().parse_args(argv)
+    configure_logging(service=f"wz-{args.command}", site="-", level=args.log_level)
+    handler: Handler = args.handler
+    try:
+        return handler(args)
+    except CliError as exc:
+        log.error("%s", exc)
+        return exc.exit_code
+    except BrokenPipeError:
+        # stdout was closed by its reader (`wz tap ... | head`): not an error. Point stdout at
+        # /dev/null so the interpreter's final flush does not fail again.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 0
+
+
+def main() -> None:
+    sys.exit(run())
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,66 @@
+"""``wz router``: the local Zenoh router, a Python session in router mode.
+
+No zenohd binary is needed: every service of the local stack connects to this process. It keeps
+no storage; it only routes. Multicast scouting is always off (endpoints are explicit), so
+nothing on the network finds it unless a listen endpoint on a public interface says so.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import threading
+from collections.abc import Sequence
+from pathlib import Path
+
+import zenoh
+from wz_shared.settings import DEFAULT_ROUTER_ENDPOINT
+
+from wz_cli.common import CliError
+
+log = logging.getLogger(__name__)
+
+#: Config of the local router, shipped as a file too.
+LOCAL_ROUTER_CONFIG = (
+    Path(__file__).resolve().parents[3] / "deploy" / "zenoh" / "router-local.json5"
+)
+
+
+def router_config(listen: Sequence[str] | None, config_file: Path | None) -> zenoh.Config:
+    """The router's Zenoh config: ``config_file`` if given, else the built-in local one.
+
+    ``listen`` replaces the listen endpoints of either; multicast scouting is forced off.
+    """
+    if config_file is not None:
+        try:
+            config = zenoh.Config.from_file(str(config_file))
+        except zenoh.ZError as exc:  # unreadable, or not a zenoh config
+            raise CliError(f"cannot use zenoh config {config_file}: {exc}") from exc
+    else:
+        config = zenoh.Config()
+        config.insert_json5("listen/endpoints", json.dumps([DEFAULT_ROUTER_ENDPOINT]))
+        config.insert_json5("connect/endpoints", json.dumps([]))
+    config.insert_json5("mode", json.dumps("router"))
+    if listen:
+        try:
+            config.insert_json5("listen/endpoints", json.dumps(list(listen)))
+        except zenoh.ZError as exc:
+            raise CliError(f"bad --listen endpoint in {', '.join(listen)}: {exc}") from exc
+    config.insert_json5("scouting/multicast/enabled", json.dumps(False))
+    return config
+
+
+def run_router(config: zenoh.Config, stop: threading.Event) -> int:
+    """Route until ``stop`` is set; return the exit code."""
+    listen = json.loads(config.get_json("listen/endpoints"))
+    try:
+        session = zenoh.open(config)
+    except zenoh.ZError as exc:  # e.g. the port is taken
+        raise CliError(f"cannot start the router on {', '.join(listen)}: {exc}", 1) from exc
+    try:
+        log.info("router %s listening on %s", session.zid(), ", ".join(listen))
+        stop.wait()
+    finally:
+        session.close()  # type: ignore[no-untyped-call]
+    log.info("router stopped")
+    return 0

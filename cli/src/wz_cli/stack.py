@@ -1,0 +1,129 @@
+"""The local stack: which processes ``wz up`` runs, in start order, and the environment of each.
+
+To add a service, append one :class:`ServiceSpec` to :data:`STACK` (in pipeline order, so a
+producer starts before its consumers); ``wz up``, ``wz up --only`` and ``wz demo`` pick it up.
+The services planned next, in that order: ``lidar-detector``, ``camera-radar-detector``,
+``fusion-tracker``, ``alert-service``, ``gateway``.
+
+Every child learns where the bus is and which site it serves from the environment:
+
+- ``WZ_BUS_MODE=peer``, ``WZ_BUS_CONNECT_ENDPOINTS=<the router>``,
+  ``WZ_BUS_LISTEN_ENDPOINTS=tcp/127.0.0.1:0`` (loopback only, an ephemeral port);
+- ``WZ_SITE_FILE`` and ``<prefix>SITE_FILE`` (each service reads its settings with its own env
+  prefix, e.g. ``WZ_SIM_``);
+- ``WZ_LOG_FORMAT=json``: one JSON log line per event, re-emitted by the supervisor;
+- the options of ``wz up`` that a service takes (``--realtime-factor``, ``--seed``) as
+  ``<prefix>REALTIME_FACTOR`` and ``<prefix>SEED``.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+
+@dataclass(frozen=True)
+class StackOptions:
+    """What ``wz up`` passes to every service."""
+
+    router_endpoint: str
+    site_file: Path
+    realtime_factor: float | None = None
+    seed: int | None = None
+
+
+@dataclass(frozen=True)
+class ServiceSpec:
+    """One process of the local stack.
+
+    ``name`` prefixes its output lines and should be the service name it reports its status
+    under (``wz/<site>/status/<name>``).
+    """
+
+    name: str
+    #: Run as ``python -m <module>`` with the supervisor's interpreter.
+    module: str
+    summary: str
+    #: Prefix of the service's settings in the environment (``WZ_SIM_`` ...).
+    env_prefix: str
+    args: tuple[str, ...] = ()
+    #: Which ``wz up`` options the service takes: a subset of {"realtime_factor", "seed"}.
+    takes: frozenset[str] = frozenset()
+    #: Fixed extra environment.
+    env: Mapping[str, str] = field(default_factory=dict)
+
+    def argv(self, python: str = sys.executable) -> list[str]:
+        return [python, "-m", self.module, *self.args]
+
+    def installed(self) -> bool:
+        """Whether the service's module can be imported by this interpreter."""
+        try:
+            return importlib.util.find_spec(self.module) is not None
+        except ModuleNotFoundError:  # its parent package is missing
+            return False
+
+    def child_env(self, base: Mapping[str, str], options: StackOptions) -> dict[str, str]:
+        """The environment of this service's process: ``base`` plus the stack's settings."""
+        env = dict(base)
+        site_file = str(options.site_file.resolve())
+        env.update(
+            {
+                "WZ_BUS_MODE": "peer",
+                "WZ_BUS_CONNECT_ENDPOINTS": options.router_endpoint,
+                "WZ_BUS_LISTEN_ENDPOINTS": "tcp/127.0.0.1:0",
+                "WZ_BUS_MULTICAST_SCOUTING": "false",
+                "WZ_SITE_FILE": site_file,
+                f"{self.env_prefix}SITE_FILE": site_file,
+                "WZ_LOG_FORMAT": "json",
+                "PYTHONUNBUFFERED": "1",
+            }
+        )
+        if options.realtime_factor is not None and "realtime_factor" in self.takes:
+            env[f"{self.env_prefix}REALTIME_FACTOR"] = repr(options.realtime_factor)
+        if options.seed is not None and "seed" in self.takes:
+            env[f"{self.env_prefix}SEED"] = str(options.seed)
+        env.update(self.env)
+        return env
+
+
+#: The router, started first; ``wz up`` appends ``--listen <endpoint>``.
+ROUTER = ServiceSpec(
+    name="router",
+    module="wz_cli.main",
+    summary="the local Zenoh router every service connects to",
+    env_prefix="WZ_ROUTER_",
+    args=("router",),
+)
+
+#: The services, in start order.
+STACK: tuple[ServiceSpec, ...] = (
+    ServiceSpec(
+        name="simulator",
+        module="wz_simulator.node",
+        summary="SUMO work-zone traffic; publishes ground truth (sensor models follow)",
+        env_prefix="WZ_SIM_",
+        takes=frozenset({"realtime_factor", "seed"}),
+    ),
+)
+
+
+def select(only: Sequence[str] | None, stack: Sequence[ServiceSpec] = STACK) -> list[ServiceSpec]:
+    """The services named in ``only`` (all when None), in stack order.
+
+    Raises
+    ------
+    ValueError
+        For a name that is not in the stack, listing the names that are.
+    """
+    if not only:
+        return list(stack)
+    known = {spec.name for spec in stack}
+    unknown = [name for name in only if name not in known]
+    if unknown:
+        raise ValueError(
+            f"no service named {', '.join(unknown)} in the stack; known: {', '.join(sorted(known))}"
+        )
+    return [spec for spec in stack if spec.name in only]

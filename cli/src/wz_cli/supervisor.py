@@ -1,0 +1,321 @@
+"""``wz up``: run the local stack, one process per service, and keep it running.
+
+The router starts first; the services start once its port accepts connections. Each child's
+stdout and stderr lines are re-emitted on the supervisor's stdout, prefixed with its name
+(``simulator | {...}``). A child that exits while the stack is up (a crash, ``kill -9``) is
+restarted after an exponential backoff: 0.5 s, doubling up to 30 s, back to 0.5 s once a run
+has lasted 30 s. SIGINT or SIGTERM stops the stack: SIGTERM to every service, up to 5 s for them
+to exit, then SIGKILL; then the router the same way.
+
+No child outlives the supervisor: on Linux each child asks the kernel for SIGTERM when its
+parent dies (``PR_SET_PDEATHSIG``), so even ``kill -9`` of the supervisor stops the stack.
+The signal is tied to the thread that started the child: children are started from the main
+thread only.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import logging
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import IO
+
+from wz_cli.common import CliError, emit, port_accepts, tcp_address, wait_for_port
+from wz_cli.stack import ROUTER, ServiceSpec, StackOptions
+
+log = logging.getLogger(__name__)
+
+#: How long the router may take to accept connections [s] (it opens in about 0.5 s).
+ROUTER_READY_TIMEOUT_S = 15.0
+#: How long children get between SIGTERM and SIGKILL on shutdown [s].
+STOP_GRACE_S = 5.0
+#: How often the supervisor looks at its children [s].
+POLL_PERIOD_S = 0.1
+
+_PR_SET_PDEATHSIG = 1
+
+
+@dataclass
+class Backoff:
+    """Delay before restarting a child that exited: doubles per crash, resets after a good run.
+
+    The first restart waits ``initial_s``; each next one twice the previous, at most ``cap_s``.
+    A run that lasted ``reset_after_s`` or more counts as healthy: the next delay is
+    ``initial_s`` again.
+    """
+
+    initial_s: float = 0.5
+    cap_s: float = 30.0
+    reset_after_s: float = 30.0
+    _next_s: float = field(default=-1.0, repr=False)
+
+    def delay_after_exit(self, uptime_s: float) -> float:
+        """The delay [s] before restarting a child that ran ``uptime_s`` seconds."""
+        if self._next_s < 0 or uptime_s >= self.reset_after_s:
+            self._next_s = self.initial_s
+        delay = self._next_s
+        self._next_s = min(self._next_s * 2.0, self.cap_s)
+        return delay
+
+
+def describe_exit(returncode: int) -> str:
+    """``exited with code 1`` or ``killed by SIGKILL (signal 9)``."""
+    if returncode < 0:
+        try:
+            name = signal.Signals(-returncode).name
+        except ValueError:
+            name = "an unknown signal"
+        return f"killed by {name} (signal {-returncode})"
+    return f"exited with code {returncode}"
+
+
+def _die_with_parent_hook() -> Callable[[], None] | None:
+    """A ``preexec_fn`` that makes the child get SIGTERM when the supervisor dies (Linux)."""
+    if not sys.platform.startswith("linux"):
+        return None
+    # Resolved here, in the parent: the hook runs between fork and exec, where it should do as
+    # little as possible (no imports, no library loading).
+    prctl = ctypes.CDLL(None, use_errno=True).prctl
+    parent_pid = os.getpid()
+
+    def die_with_parent() -> None:
+        prctl(_PR_SET_PDEATHSIG, signal.SIGTERM.value, 0, 0, 0)
+        if os.getppid() != parent_pid:  # the parent died before prctl took effect
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    return die_with_parent
+
+
+class PrefixedOutput:
+    """Re-emits children's lines on stdout as ``name | line``, names aligned."""
+
+    def __init__(self, names: Sequence[str]) -> None:
+        self.width = max((len(name) for name in names), default=0)
+
+    def write(self, name: str, line: str) -> None:
+        # When stdout is closed the lines have nowhere to go; the children run on.
+        with contextlib.suppress(BrokenPipeError, ValueError):
+            emit(f"{name:<{self.width}} | {line}")
+
+
+class Child:
+    """One supervised process: started, watched, restarted with backoff, stopped."""
+
+    def __init__(
+        self,
+        spec: ServiceSpec,
+        argv: list[str],
+        env: dict[str, str],
+        output: PrefixedOutput,
+        backoff: Backoff | None = None,
+    ) -> None:
+        self.spec = spec
+        self.name = spec.name
+        self.argv = argv
+        self.env = env
+        self.output = output
+        self.backoff = backoff or Backoff()
+        self.process: subprocess.Popen[bytes] | None = None
+        self.started_at = 0.0
+        self.restart_at: float | None = None
+        self.restarts = 0
+        self._readers: list[threading.Thread] = []
+
+    @property
+    def running(self) -> bool:
+        return self.process is not None and self.process.poll() is None
+
+    def start(self) -> None:
+        """Start the process (from the main thread); on failure schedule a retry."""
+        self.restart_at = None
+        self.started_at = time.monotonic()
+        try:
+            self.process = subprocess.Popen(
+                self.argv,
+                env=self.env,
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                start_new_session=False,
+                # Runs between fork and exec; it only calls prctl (resolved beforehand).
+                preexec_fn=_die_with_parent_hook(),
+            )
+        except OSError as exc:
+            delay = self.backoff.delay_after_exit(0.0)
+            log.error("cannot start %s: %s; retrying in %.1f s", self.name, exc, delay)
+            self.process = None
+            self.restart_at = time.monotonic() + delay
+            return
+        log.info(
+            "started %s (pid %d)%s",
+            self.name,
+            self.process.pid,
+            f", restart #{self.restarts}" if self.restarts else "",
+            extra={"child": self.name, "pid": self.process.pid},
+        )
+        assert self.process.stdout is not None and self.process.stderr is not None
+        self._readers = [
+            threading.Thread(
+                target=self._pump, args=(stream,), name=f"{self.name}-{what}", daemon=True
+            )
+            for what, stream in (("out", self.process.stdout), ("err", self.process.stderr))
+        ]
+        for reader in self._readers:
+            reader.start()
+
+    def _pump(self, stream: IO[bytes]) -> None:
+        with stream:
+            for raw in iter(stream.readline, b""):
+                self.output.write(self.name, raw.decode("utf-8", "replace").rstrip("\r\n"))
+
+    def supervise(self, now: float) -> None:
+        """Notice an exit and schedule the restart; restart when its time has come."""
+        if self.process is not None:
+            returncode = self.process.poll()
+            if returncode is None:
+                return
+            uptime_s = now - self.started_at
+            delay = self.backoff.delay_after_exit(uptime_s)
+            log.warning(
+                "%s (pid %d) %s after %.1f s; restarting in %.1f s",
+                self.name,
+                self.process.pid,
+                describe_exit(returncode),
+                uptime_s,
+                delay,
+                extra={"child": self.name, "pid": self.process.pid, "returncode": returncode},
+            )
+            self.process = None
+            self.restart_at = now + delay
+        elif self.restart_at is not None and now >= self.restart_at:
+            self.restarts += 1
+            self.start()
+
+    def join_output(self, timeout_s: float = 1.0) -> None:
+        """Wait for the last lines of output to be re-emitted."""
+        for reader in self._readers:
+            reader.join(timeout_s)
+
+
+def stop_children(children: Sequence[Child], grace_s: float = STOP_GRACE_S) -> None:
+    """SIGTERM every running child, wait up to ``grace_s`` in all, SIGKILL the rest."""
+    running = [c for c in children if c.process is not None and c.process.poll() is None]
+    for child in running:
+        assert child.process is not None
+        with contextlib.suppress(ProcessLookupError):
+            child.process.send_signal(signal.SIGTERM)
+    deadline = time.monotonic() + grace_s
+    for child in running:
+        assert child.process is not None
+        try:
+            returncode = child.process.wait(max(0.0, deadline - time.monotonic()))
+            log.info("%s (pid %d) %s", child.name, child.process.pid, describe_exit(returncode))
+        except subprocess.TimeoutExpired:
+            log.warning(
+                "%s (pid %d) did not stop within %.0f s of SIGTERM: killing it",
+                child.name,
+                child.process.pid,
+                grace_s,
+            )
+            child.process.kill()
+            child.process.wait()
+    for child in children:
+        child.restart_at = None
+        child.join_output()
+
+
+class Supervisor:
+    """Starts the router, then the services; restarts what crashes; stops all on ``stop``."""
+
+    def __init__(
+        self,
+        services: Sequence[ServiceSpec],
+        options: StackOptions,
+        stop: threading.Event,
+        *,
+        python: str = sys.executable,
+        base_env: dict[str, str] | None = None,
+        stop_grace_s: float = STOP_GRACE_S,
+    ) -> None:
+        address = tcp_address(options.router_endpoint)
+        if address is None:
+            raise CliError(
+                f"the router endpoint must be tcp/<host>:<port>, got {options.router_endpoint!r}"
+            )
+        self.router_address = address
+        self.options = options
+        self.stop = stop
+        self.stop_grace_s = stop_grace_s
+        env = dict(os.environ if base_env is None else base_env)
+        output = PrefixedOutput([ROUTER.name, *(spec.name for spec in services)])
+        self.router = Child(
+            ROUTER,
+            [*ROUTER.argv(python), "--listen", options.router_endpoint],
+            ROUTER.child_env(env, options),
+            output,
+        )
+        self.services = [
+            Child(spec, spec.argv(python), spec.child_env(env, options), output)
+            for spec in services
+        ]
+
+    @property
+    def children(self) -> list[Child]:
+        return [self.router, *self.services]
+
+    def run(self) -> int:
+        host, port = self.router_address
+        if port_accepts(host, port):
+            raise CliError(
+                f"something already listens on {self.options.router_endpoint} (another `wz up`?); "
+                "stop it, or choose another endpoint with --listen",
+                1,
+            )
+        try:
+            if not self._start_router():
+                return 0 if self.stop.is_set() else 1
+            for child in self.services:
+                child.start()
+            log.info(
+                "stack up: router at %s, services: %s",
+                self.options.router_endpoint,
+                ", ".join(child.name for child in self.services) or "none",
+            )
+            while not self.stop.is_set():
+                now = time.monotonic()
+                for child in self.children:
+                    child.supervise(now)
+                self.stop.wait(POLL_PERIOD_S)
+        finally:
+            log.info("stopping the stack")
+            stop_children(self.services, self.stop_grace_s)
+            stop_children([self.router], self.stop_grace_s)
+        log.info("stack stopped")
+        return 0
+
+    def _start_router(self) -> bool:
+        self.router.start()
+        host, port = self.router_address
+        process = self.router.process
+        ready = process is not None and wait_for_port(
+            host,
+            port,
+            ROUTER_READY_TIMEOUT_S,
+            still_worth_waiting=lambda: process.poll() is None and not self.stop.is_set(),
+        )
+        if not ready and not self.stop.is_set():
+            why = (
+                describe_exit(process.returncode)
+                if process is not None and process.poll() is not None
+                else f"its port did not open within {ROUTER_READY_TIMEOUT_S:.0f} s"
+            )
+            log.error("the router did not come up at %s: %s", self.options.router_endpoint, why)
+        return ready
