@@ -40,9 +40,6 @@ from typing import Any
 
 import numpy as np
 import zenoh
-from wz_shared import codec
-from wz_shared.bus import Bus
-from wz_shared.messages import LidarFrameMeta, RadarScan
 
 from benchmarks.common import (
     FRAME_POINTS,
@@ -62,6 +59,9 @@ from benchmarks.common import (
     small_raw,
     summarize,
 )
+from wz_shared import codec
+from wz_shared.bus import Bus
+from wz_shared.messages import LidarFrameMeta, RadarScan
 
 log = logging.getLogger(__name__)
 

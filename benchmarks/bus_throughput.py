@@ -31,9 +31,6 @@ from typing import Any
 
 import numpy as np
 import zenoh
-from wz_shared import codec
-from wz_shared.bus import Bus, Subscription
-from wz_shared.messages import LidarFrameMeta, RadarScan
 
 from benchmarks.common import (
     FRAME_POINTS,
@@ -50,6 +47,9 @@ from benchmarks.common import (
     small_message,
     small_raw,
 )
+from wz_shared import codec
+from wz_shared.bus import Bus, Subscription
+from wz_shared.messages import LidarFrameMeta, RadarScan
 
 log = logging.getLogger(__name__)
 

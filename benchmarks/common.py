@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+
 from wz_shared.keys import Keys
 from wz_shared.messages import LidarFrameMeta, RadarScan, RadarTarget
 from wz_shared.settings import BusSettings

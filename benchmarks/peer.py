@@ -36,9 +36,6 @@ import time
 from typing import Any
 
 import zenoh
-from wz_shared import codec
-from wz_shared.bus import Bus
-from wz_shared.messages import LidarFrameMeta, RadarScan
 
 from benchmarks.common import (
     FRAME_POINTS,
@@ -54,6 +51,9 @@ from benchmarks.common import (
     small_message,
     small_raw,
 )
+from wz_shared import codec
+from wz_shared.bus import Bus
+from wz_shared.messages import LidarFrameMeta, RadarScan
 
 ECHO_APIS = ("zenoh", "zenoh-fifo", "bus-raw", "bus-json", "bus-callback", "bus-frames")
 PUBLISH_APIS = ("zenoh", "zenoh-frames", "bus-raw", "bus-json", "bus-frames")

@@ -22,6 +22,7 @@ import threading
 import time
 from collections.abc import Callable
 
+from tests.shared.samples import SITE, camera_frame, encoded_lidar, json_samples
 from wz_shared import codec
 from wz_shared.bus import Bus
 from wz_shared.keys import Keys
@@ -33,8 +34,6 @@ from wz_shared.messages import (
     Message,
 )
 from wz_shared.settings import BusSettings
-
-from tests.shared.samples import SITE, camera_frame, encoded_lidar, json_samples
 
 KEYS = Keys(SITE)
 JUNK_KEY = f"{KEYS.prefix}/test/junk"

@@ -9,6 +9,9 @@ from pathlib import Path
 
 import pytest
 from mcap.reader import make_reader
+
+from tests.cli.bus_tools import JUNK_KEY, mix, tap_mix
+from tests.shared.samples import json_samples
 from wz_cli.common import CliError, tcp_address
 from wz_cli.main import build_parser
 from wz_cli.record import distinct_key_exprs
@@ -26,9 +29,6 @@ from wz_cli.supervisor import Backoff, describe_exit
 from wz_cli.tap import describe
 from wz_shared import codec
 from wz_shared.messages import JSON_MESSAGES, Alert, GroundTruth
-
-from tests.cli.bus_tools import JUNK_KEY, mix, tap_mix
-from tests.shared.samples import json_samples
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -11,10 +11,10 @@ import subprocess
 from pathlib import Path
 
 from mcap.reader import make_reader
-from wz_cli.recording import RecordingWriter
 
 from tests.cli.bus_tools import Sample, expected_counts, mix
 from tests.cli.procs import run_wz, running, start_helper, start_wz, wait_for
+from wz_cli.recording import RecordingWriter
 
 COUNT = 20  # of every message type and frame kind
 

@@ -19,11 +19,11 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+
+from tests.cli.procs import ROOT, free_port, run_wz, running, wait_for, wz_argv, wz_env
 from wz_cli.stack import ServiceSpec, StackOptions
 from wz_cli.supervisor import Supervisor
 from wz_shared.site import DEFAULT_SITE_PATH
-
-from tests.cli.procs import ROOT, free_port, run_wz, running, wait_for, wz_argv, wz_env
 
 
 def _state(pid: int) -> str | None:

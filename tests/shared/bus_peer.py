@@ -18,12 +18,11 @@ import json
 import sys
 import time
 
+from tests.shared.samples import camera_frame, encoded_lidar, json_samples
 from wz_shared import codec
 from wz_shared.bus import Bus, Publisher
 from wz_shared.messages import Alert, CameraFrameMeta, LidarFrameMeta, Message
 from wz_shared.settings import BusSettings
-
-from tests.shared.samples import camera_frame, encoded_lidar, json_samples
 
 SITE = "test-site"
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+
 from wz_shared import codec
 from wz_shared.messages import (
     Alert,

@@ -12,11 +12,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from tests.shared.samples import json_samples, lidar_frame
 from wz_shared.bus import Bus
 from wz_shared.messages import JSON_MESSAGES, Alert, CameraFrameMeta, LidarFrameMeta
 from wz_shared.settings import BusSettings
-
-from tests.shared.samples import json_samples, lidar_frame
 
 ROOT = Path(__file__).resolve().parents[2]
 SITE = "test-site"

@@ -11,6 +11,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pydantic import BaseModel
+
+from tests.shared.samples import TINY_JPEG, camera_frame, json_samples, lidar_frame
 from wz_shared import codec
 from wz_shared.messages import (
     FRAME_MESSAGES,
@@ -21,8 +23,6 @@ from wz_shared.messages import (
     LidarFrameMeta,
     Message,
 )
-
-from tests.shared.samples import TINY_JPEG, camera_frame, json_samples, lidar_frame
 
 # Finite floats that survive JSON (the codec writes what pydantic writes).
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)

@@ -10,6 +10,7 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from pyproj import Geod
+
 from wz_shared.geometry import GRID_REACH_M, GeoFrame, RoadFrame
 from wz_shared.site import DEFAULT_SITE_PATH, load_site
 

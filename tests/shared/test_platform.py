@@ -12,14 +12,14 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+
+from tests.shared.samples import json_samples
 from wz_shared.bus import Bus
 from wz_shared.keys import Keys, site_of_key
 from wz_shared.logs import JsonFormatter, configure_logging
 from wz_shared.messages import Alert
 from wz_shared.settings import BusSettings
 from wz_shared.timebase import Pacer, SimClock
-
-from tests.shared.samples import json_samples
 
 ROOT = Path(__file__).resolve().parents[2]
 ALERT = next(m for m in json_samples() if isinstance(m, Alert))

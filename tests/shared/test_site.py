@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
+
 from wz_shared.geometry import GeoFrame, RoadFrame
 from wz_shared.site import DEFAULT_SITE_PATH, AreaKind, Site, SiteFileError, load_site
 

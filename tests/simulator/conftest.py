@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+
 from wz_shared.site import DEFAULT_SITE_PATH, Site, load_site
 
 

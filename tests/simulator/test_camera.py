@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from wz_shared.messages import VehicleClass
 from wz_shared.site import CameraIntrinsics, LidarIntrinsics, Pose, SensorMount
 from wz_simulator.sensors import camera as camera_module

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from wz_shared.codec import decode_json, encode_json
 from wz_shared.messages import DriverProfile, RadarScan, VehicleClass, VehicleTruth
 from wz_shared.site import CameraIntrinsics, Pose, RadarIntrinsics, SensorMount

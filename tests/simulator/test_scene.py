@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from wz_shared.messages import VehicleTruth
 from wz_shared.site import DEFAULT_SITE_PATH, AreaKind, load_site
 from wz_simulator.sensors.scene import Box, Material, static_scene, vehicle_boxes

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 from pydantic import ValidationError
+
 from wz_shared.site import DEFAULT_SITE_PATH
 from wz_simulator.settings import SimulatorSettings
 

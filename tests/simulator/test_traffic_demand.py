@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from wz_shared.messages import DriverProfile, VehicleClass
 from wz_simulator.traffic.demand import (
     DemandConfig,

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from wz_shared.site import AreaKind, Site, SpeedLimit
 from wz_simulator.traffic.network import (
     NetworkBuildError,

@@ -13,6 +13,7 @@ from pathlib import Path
 import libsumo
 import numpy as np
 import pytest
+
 from wz_shared.messages import DriverProfile, VehicleClass, VehicleTruth
 from wz_shared.site import AreaKind, Site
 from wz_simulator.settings import SimulatorSettings

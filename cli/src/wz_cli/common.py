@@ -15,6 +15,7 @@ from pathlib import Path
 from types import FrameType
 
 import zenoh
+
 from wz_shared.bus import Bus
 from wz_shared.settings import DEFAULT_ROUTER_ENDPOINT, BusSettings
 from wz_shared.site import DEFAULT_SITE_PATH, SiteFileError, load_site

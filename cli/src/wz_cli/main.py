@@ -16,9 +16,6 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import zenoh
-from wz_shared.logs import configure_logging
-from wz_shared.settings import DEFAULT_ROUTER_ENDPOINT
-from wz_shared.site import SiteFileError, load_site
 
 from wz_cli.common import (
     DEFAULT_CONNECT_HELP,
@@ -29,6 +26,9 @@ from wz_cli.common import (
     site_file_from_env,
     stop_on_signals,
 )
+from wz_shared.logs import configure_logging
+from wz_shared.settings import DEFAULT_ROUTER_ENDPOINT
+from wz_shared.site import SiteFileError, load_site
 
 log = logging.getLogger("wz_cli")
 

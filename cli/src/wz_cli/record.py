@@ -19,10 +19,10 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 import zenoh
-from wz_shared.bus import Bus, Subscription
 
 from wz_cli.common import CliError, emit, format_table
 from wz_cli.recording import RecordingWriter, recording_metadata
+from wz_shared.bus import Bus, Subscription
 
 log = logging.getLogger(__name__)
 

@@ -41,6 +41,7 @@ from mcap.records import Channel, Chunk, Metadata, Schema
 from mcap.records import Message as McapMessage
 from mcap.stream_reader import get_chunk_data_stream
 from mcap.writer import CompressionType, Writer
+
 from wz_shared import codec
 from wz_shared.messages import FRAME_MESSAGES, JSON_MESSAGES
 

@@ -20,8 +20,6 @@ from pathlib import Path
 from typing import Any, Literal
 
 import zenoh
-from wz_shared.bus import Bus, Publisher
-from wz_shared.messages import FRAME_MESSAGES, JSON_MESSAGES, Message
 
 from wz_cli.common import CliError, emit, format_table
 from wz_cli.recording import (
@@ -31,6 +29,8 @@ from wz_cli.recording import (
     RecordingReader,
     describe_report,
 )
+from wz_shared.bus import Bus, Publisher
+from wz_shared.messages import FRAME_MESSAGES, JSON_MESSAGES, Message
 
 log = logging.getLogger(__name__)
 

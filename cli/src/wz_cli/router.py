@@ -14,9 +14,9 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import zenoh
-from wz_shared.settings import DEFAULT_ROUTER_ENDPOINT
 
 from wz_cli.common import CliError
+from wz_shared.settings import DEFAULT_ROUTER_ENDPOINT
 
 log = logging.getLogger(__name__)
 

@@ -13,11 +13,10 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
+from wz_cli.common import format_duration, format_table
 from wz_shared.bus import Bus
 from wz_shared.keys import Keys
 from wz_shared.messages import ServiceStatus
-
-from wz_cli.common import format_duration, format_table
 
 
 @dataclass(frozen=True)

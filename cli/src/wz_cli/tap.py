@@ -15,6 +15,7 @@ import logging
 import threading
 import time
 
+from wz_cli.common import emit
 from wz_shared import codec
 from wz_shared.bus import Bus
 from wz_shared.messages import (
@@ -24,8 +25,6 @@ from wz_shared.messages import (
     LidarFrameMeta,
     Message,
 )
-
-from wz_cli.common import emit
 
 log = logging.getLogger(__name__)
 

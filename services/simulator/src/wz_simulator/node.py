@@ -5,6 +5,9 @@ Run it as ``python -m wz_simulator.node`` (``wz up`` does). Settings come from t
 
 - ``wz/<site>/truth/vehicles``: a :class:`GroundTruth` every simulation step (20 Hz by default),
   stamped with simulation time;
+- ``wz/<site>/raw/lidar/<id>``, ``raw/camera/<id>``, ``raw/radar/<id>``: each sensor of the site
+  at its own rate (frames as binary envelopes, radar scans as JSON), stamped with the firing
+  time (see :mod:`wz_simulator.sensors.rig`);
 - ``wz/<site>/status/simulator``: liveliness and health (see :mod:`wz_shared.service`);
 
 and answers queries on ``wz/<site>/config/site`` with the site description as JSON.
@@ -16,18 +19,59 @@ import logging
 import threading
 from collections.abc import Callable
 
+from wz_shared.bus import Bus, Publisher
+from wz_shared.codec import encode_camera_frame, encode_lidar_frame
 from wz_shared.logs import configure_logging
-from wz_shared.messages import GroundTruth
+from wz_shared.messages import CameraFrameMeta, GroundTruth, LidarFrameMeta, RadarScan
 from wz_shared.service import ServiceRuntime
 from wz_shared.settings import BusSettings
-from wz_shared.site import load_site
+from wz_shared.site import Site, load_site
 from wz_shared.timebase import Pacer, SimClock
-
+from wz_simulator.sensors.rig import (
+    CameraOutput,
+    LidarOutput,
+    SensorOutput,
+    SensorRig,
+)
+from wz_simulator.sensors.scene import WEATHER_PRESETS
 from wz_simulator.settings import SimulatorSettings
 from wz_simulator.traffic.world import TrafficWorld
 
 SERVICE = "simulator"
 log = logging.getLogger(__name__)
+
+
+class SensorPublisher:
+    """Encodes each sensor's output and publishes it on that sensor's raw key."""
+
+    def __init__(self, bus: Bus, site: Site) -> None:
+        keys = bus.keys
+        self._lidar: dict[str, Publisher[LidarFrameMeta]] = {}
+        self._camera: dict[str, Publisher[CameraFrameMeta]] = {}
+        self._radar: dict[str, Publisher[RadarScan]] = {}
+        for mount in site.sensors:
+            if mount.kind == "lidar":
+                self._lidar[mount.sensor_id] = bus.publisher(
+                    keys.raw_lidar(mount.sensor_id), LidarFrameMeta
+                )
+            elif mount.kind == "camera":
+                self._camera[mount.sensor_id] = bus.publisher(
+                    keys.raw_camera(mount.sensor_id), CameraFrameMeta
+                )
+            else:
+                self._radar[mount.sensor_id] = bus.publisher(
+                    keys.raw_radar(mount.sensor_id), RadarScan
+                )
+
+    def publish(self, output: SensorOutput) -> None:
+        if isinstance(output, LidarOutput):
+            scan = output.scan
+            self._lidar[output.sensor_id].put_bytes(encode_lidar_frame(scan.meta, scan.points))
+        elif isinstance(output, CameraOutput):
+            envelope = encode_camera_frame(output.meta, output.jpeg)
+            self._camera[output.sensor_id].put_bytes(envelope)
+        else:
+            self._radar[output.sensor_id].put(output.result.scan)
 
 
 def run_loop(
@@ -36,8 +80,10 @@ def run_loop(
     clock: SimClock,
     pacer: Pacer,
     stop: threading.Event,
+    rig: SensorRig | None = None,
+    publish_sensor: Callable[[SensorOutput], None] | None = None,
 ) -> int:
-    """Step the world until ``stop`` or its duration; publish truth each step.
+    """Step the world until ``stop`` or its duration; publish truth and due sensor frames.
 
     Returns the number of steps taken.
     """
@@ -56,6 +102,9 @@ def run_loop(
                 vehicles=vehicles,
             )
         )
+        if rig is not None and publish_sensor is not None:
+            for output in rig.fire(vehicles, now_s):
+                publish_sensor(output)
         steps += 1
         pacer.wait_until(now_s, stop)
     return steps
@@ -80,7 +129,19 @@ def main() -> None:
         bus = runtime.bus
         truth = bus.publisher(bus.keys.truth, GroundTruth)
         bus.serve(bus.keys.config_site, lambda: site_json)
-        steps = run_loop(world, truth.put, clock, Pacer(settings.realtime_factor), runtime.stop)
+        rig = None
+        publish_sensor = None
+        if settings.sensors_enabled and site.sensors:
+            rig = SensorRig(
+                site, WEATHER_PRESETS[settings.weather], settings.seed,
+                jpeg_quality=settings.jpeg_quality,
+            )  # fmt: skip
+            publish_sensor = SensorPublisher(bus, site).publish
+            log.info("sensors: %s (%s)", [m.sensor_id for m in rig.mounts], settings.weather)
+        steps = run_loop(
+            world, truth.put, clock, Pacer(settings.realtime_factor), runtime.stop, rig,
+            publish_sensor,
+        )  # fmt: skip
         log.info(
             "simulation ended after %d steps (%.1f s simulated): %s",
             steps,

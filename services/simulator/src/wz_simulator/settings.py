@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import tempfile
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import Field
 from pydantic_settings import SettingsConfigDict
+
 from wz_shared.settings import ServiceSettings
 
 
@@ -43,5 +44,11 @@ class SimulatorSettings(ServiceSettings):
     continuous_lane_changes: bool = True
     #: A vehicle blocked this long is teleported (and counted) [s]; 0 = never.
     teleport_after_s: Annotated[float, Field(ge=0.0)] = 120.0
+    #: Simulate and publish the site's sensors (LiDAR, camera, radar); off: truth only.
+    sensors_enabled: bool = True
+    #: Weather preset of the sensor models: day, dusk, rain or fog.
+    weather: Literal["day", "dusk", "rain", "fog"] = "day"
+    #: JPEG quality of published camera frames (1-100).
+    jpeg_quality: Annotated[int, Field(ge=1, le=100)] = 90
     #: Folder for the SUMO network cache and route files.
     work_dir: Path = Field(default_factory=_default_work_dir)

@@ -38,9 +38,9 @@ from typing import Protocol
 import cv2
 import numpy as np
 import numpy.typing as npt
+
 from wz_shared.messages import VehicleClass
 from wz_shared.site import CameraIntrinsics, SensorMount
-
 from wz_simulator.sensors.scene import BOX_FACES, Box, GroundPolygon, Light, Material, Weather
 
 F64 = npt.NDArray[np.float64]

@@ -83,9 +83,9 @@ from types import MappingProxyType
 
 import numpy as np
 import numpy.typing as npt
+
 from wz_shared.messages import RadarScan, RadarTarget, VehicleClass, VehicleTruth
 from wz_shared.site import Pose, RadarIntrinsics, SensorMount
-
 from wz_simulator.sensors.scene import Weather
 
 FloatArray = npt.NDArray[np.float64]

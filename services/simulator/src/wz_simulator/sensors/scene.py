@@ -20,6 +20,7 @@ from enum import IntEnum
 
 import numpy as np
 import numpy.typing as npt
+
 from wz_shared.geometry import RoadFrame
 from wz_shared.messages import VehicleTruth
 from wz_shared.site import AreaKind, Site

@@ -35,6 +35,7 @@ from types import MappingProxyType
 from xml.etree import ElementTree as ET
 
 import numpy as np
+
 from wz_shared.messages import DriverProfile, VehicleClass
 
 #: SUMO id of the one route every vehicle drives (the whole road).

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
 from wz_shared.site import AreaKind, Site
 
 logger = logging.getLogger(__name__)

@@ -44,9 +44,9 @@ from types import TracebackType
 
 import libsumo
 import numpy as np
+
 from wz_shared.messages import DriverProfile, VehicleClass, VehicleTruth
 from wz_shared.site import AreaKind, Site
-
 from wz_simulator.settings import SimulatorSettings
 from wz_simulator.traffic.demand import (
     ROUTE_ID,
