@@ -9,8 +9,10 @@ lines), so it can be piped.
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import logging
 import os
+import subprocess
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -196,6 +198,21 @@ def cmd_replay(args: argparse.Namespace) -> int:
         )
 
 
+#: Commands that run a tool of the simulator service in its own process: the CLI stays light
+#: (no SUMO, open3d or OpenCV imports) and works where the simulator is not installed.
+SIMULATOR_TOOLS = {
+    "dataset": ("wz_simulator.dataset", "export camera frames (YOLO) and LiDAR frames (3D boxes)"),
+    "pictures": ("wz_simulator.pictures", "write pictures of the simulated sensors with truth"),
+}
+
+
+def cmd_simulator_tool(args: argparse.Namespace) -> int:
+    module = SIMULATOR_TOOLS[args.command][0]
+    if importlib.util.find_spec(module.split(".")[0]) is None:
+        raise CliError(f"wz {args.command} needs the simulator service (wz-simulator)", 1)
+    return subprocess.call([sys.executable, "-m", module, *args.tool_args])
+
+
 # --- the parser -----------------------------------------------------------------------------
 
 
@@ -345,11 +362,29 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_connect(replay)
     replay.set_defaults(handler=cmd_replay)
+
+    for name, (module, summary) in SIMULATOR_TOOLS.items():
+        tool = commands.add_parser(
+            name, help=summary, description=f"{summary} (runs python -m {module}; "
+            f"see `wz {name} --help`)", add_help=False,
+        )  # fmt: skip
+        tool.add_argument("tool_args", nargs=argparse.REMAINDER, help="the tool's options")
+        tool.set_defaults(handler=cmd_simulator_tool)
     return parser
 
 
 def run(argv: Sequence[str] | None = None) -> int:
     """Parse ``argv``, run the command, return its exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] in SIMULATOR_TOOLS:
+        # Everything after the command is the tool's own: argparse would claim its options.
+        tool = argparse.Namespace(command=argv[0], tool_args=argv[1:])
+        configure_logging(service=f"wz-{argv[0]}", site="-")
+        try:
+            return cmd_simulator_tool(tool)
+        except CliError as exc:
+            log.error("%s", exc)
+            return exc.exit_code
     args = build_parser().parse_args(argv)
     configure_logging(service=f"wz-{args.command}", site="-", level=args.log_level)
     handler: Handler = args.handler

@@ -1376,7 +1376,7 @@ class CameraModel:
         emissive = arrays.materials[box_of_quad] == _LIGHT
         colour[emissive] = quads.base_rgb[emissive] * (1.6 if lighting.lamps_on else 0.9)
         lamp = np.isin(quads.kind, _LAMP_KINDS)
-        if lighting.lamps_on:
+        if lighting.lamps_on and lamp.any():
             colour[lamp] = [_LAMP_GLOW_RGB[int(k)] for k in quads.kind[lamp]]
         range_m = self._range_to(quads.site.mean(axis=1))
         colour = _atmosphere(lighting, colour, range_m)

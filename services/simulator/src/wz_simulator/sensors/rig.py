@@ -156,11 +156,11 @@ class SensorRig:
         """Every frame due up to ``until_s`` (default: the truth's time), in time order."""
         outputs: list[SensorOutput] = []
         for sensor_id, index, fire_s in self.due(truth_stamp_s if until_s is None else until_s):
-            outputs.append(self._fire_one(sensor_id, index, fire_s, vehicles, truth_stamp_s))
+            outputs.append(self.capture(sensor_id, index, fire_s, vehicles, truth_stamp_s))
             self._schedules[sensor_id].next_index = index + 1
         return outputs
 
-    def _fire_one(
+    def capture(
         self,
         sensor_id: str,
         index: int,
@@ -168,6 +168,7 @@ class SensorRig:
         vehicles: Sequence[VehicleTruth],
         truth_stamp_s: float,
     ) -> SensorOutput:
+        """One frame of one sensor at ``fire_s``, outside the schedule (datasets, pictures)."""
         if sensor_id in self._lidars:
             scan = self._lidars[sensor_id].scan(
                 vehicles, fire_s, index, truth_stamp_s=truth_stamp_s

@@ -182,8 +182,6 @@ CAR_COLORS: tuple[tuple[int, int, int], ...] = (
 TRAILER_COLORS: tuple[tuple[int, int, int], ...] = ((235, 235, 230), (200, 200, 195), (170, 40, 30))
 TIRE_RGB = (25, 25, 25)
 GLASS_RGB = (40, 55, 70)
-HEADLIGHT_RGB = (240, 240, 220)
-TAILLIGHT_RGB = (200, 20, 20)
 
 
 def _palette_index(vehicle_id: str, size: int) -> int:
@@ -207,9 +205,10 @@ def _part(
 def vehicle_boxes(vehicles: Sequence[VehicleTruth], dt_s: float = 0.0) -> list[Box]:
     """Bodies of the vehicles as boxes, each moved ``dt_s`` along its heading at its speed.
 
-    A car is a lower body, a glass cabin with a roof, four wheels, head and tail lamps; a
-    semi-trailer truck a tractor cab with a windscreen, a box trailer on a gap above the road,
-    and wheels. Labels are 1-based indices into ``vehicles``.
+    A car is a lower body, a glass cabin with a roof and four wheels; a semi-trailer truck a
+    tractor cab with a windscreen, a box trailer on a gap above the road, and wheels. Lamps,
+    grilles and plates are the camera's decals on these faces (too small for the LiDAR to
+    resolve). Labels are 1-based indices into ``vehicles``.
 
     Parameters
     ----------
@@ -239,7 +238,7 @@ def vehicle_boxes(vehicles: Sequence[VehicleTruth], dt_s: float = 0.0) -> list[B
             cab_width = 0.96 * width if vehicle.vehicle_class == "truck" else width
             boxes.append(part(cab_center, 0.0, 0.5, cab_top, cab_length, cab_width,
                               Material.TRUCK_BODY, cab_rgb))
-            boxes.append(part(half - 0.02, 0.0, 0.55 * cab_top, 0.92 * cab_top, 0.06,
+            boxes.append(part(half - 0.03, 0.0, 0.55 * cab_top, 0.92 * cab_top, 0.06,
                               width * 0.85, Material.GLASS, GLASS_RGB))
             if vehicle.vehicle_class == "truck":
                 trailer_length = length - cab_length - 0.6
@@ -249,7 +248,6 @@ def vehicle_boxes(vehicles: Sequence[VehicleTruth], dt_s: float = 0.0) -> list[B
                 axles = (half - 0.8, half - cab_length - 0.2, -half + 2.2, -half + 1.0)
             else:
                 axles = (half - 2.5, -half + 2.5)
-            lamp_front = half
         else:
             body_rgb = CAR_COLORS[_palette_index(vehicle.vehicle_id, len(CAR_COLORS))]
             sill, belt = 0.28, 0.58 * height
@@ -260,18 +258,10 @@ def vehicle_boxes(vehicles: Sequence[VehicleTruth], dt_s: float = 0.0) -> list[B
             boxes.append(part(-0.05 * length, 0.0, 0.94 * height, height, cabin_length * 0.9,
                               0.86 * width, Material.CAR_PAINT, body_rgb))
             axles = (half - 0.85 * min(1.0, length / 4.6), -half + 0.85 * min(1.0, length / 4.6))
-            lamp_front = half
         for along in axles:
             for side in (-1.0, 1.0):
                 boxes.append(part(along, side * (0.5 * width - 0.14), 0.0, wheel_d, wheel_d,
                                   0.26, Material.TIRE, TIRE_RGB))
-        lamp_z0 = 0.5 if vehicle.vehicle_class == "car" else 0.7
-        for side in (-1.0, 1.0):
-            across = side * (0.5 * width - 0.25)
-            boxes.append(part(lamp_front + 0.01, across, lamp_z0, lamp_z0 + 0.14, 0.04, 0.3,
-                              Material.LIGHT, HEADLIGHT_RGB))
-            boxes.append(part(-half - 0.01, across, lamp_z0 + 0.1, lamp_z0 + 0.26, 0.04, 0.25,
-                              Material.LIGHT, TAILLIGHT_RGB))
     return boxes
 
 
