@@ -15,7 +15,7 @@ from wz_shared.codec import decode_json, encode_json
 from wz_shared.messages import DriverProfile, RadarScan, VehicleClass, VehicleTruth
 from wz_shared.site import CameraIntrinsics, Pose, RadarIntrinsics, SensorMount
 from wz_simulator.sensors import radar as radar_module
-from wz_simulator.sensors.radar import RadarModel, sensor_rotation
+from wz_simulator.sensors.radar import RadarModel
 from wz_simulator.sensors.scene import Weather
 
 CAR_Z_M = 0.75  # centre height of a 1.5 m tall car
@@ -188,7 +188,7 @@ def test_broadside_truck_reflects_once_from_the_middle_of_its_side() -> None:
 
 
 def test_sensor_rotation_axes() -> None:
-    rotation = sensor_rotation(Pose(x_m=0, y_m=0, z_m=0, yaw_deg=90.0, pitch_deg=10.0))
+    rotation = Pose(x_m=0, y_m=0, z_m=0, yaw_deg=90.0, pitch_deg=10.0).rotation()
     # Yaw 90 deg: forward is north, tilted up by the positive pitch; left is west.
     np.testing.assert_allclose(
         rotation[:, 0], [0.0, math.cos(math.radians(10)), math.sin(math.radians(10))], atol=1e-12

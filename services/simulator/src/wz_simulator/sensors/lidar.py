@@ -111,7 +111,7 @@ import numpy.typing as npt
 import open3d as o3d
 
 from wz_shared.messages import LidarFrameMeta, VehicleTruth
-from wz_shared.site import LidarIntrinsics, Pose, SensorMount
+from wz_shared.site import LidarIntrinsics, SensorMount
 from wz_simulator.sensors.scene import (
     BOX_FACES,
     STATIC_LABEL,
@@ -376,23 +376,6 @@ class LidarScan:
         return image
 
 
-def sensor_rotation(pose: Pose) -> FloatArray:
-    """Rotation from the sensor frame to the site frame, shape (3, 3).
-
-    ``p_site = R @ p_sensor + position`` with ``R = Rz(yaw) Ry(-pitch) Rx(roll)``; the columns of
-    R are the sensor's x (forward), y (left) and z (up) axes in the site frame.
-    """
-    yaw, pitch, roll = (math.radians(a) for a in (pose.yaw_deg, pose.pitch_deg, pose.roll_deg))
-    cy, sy = math.cos(yaw), math.sin(yaw)
-    cp, sp = math.cos(-pitch), math.sin(-pitch)
-    cr, sr = math.cos(roll), math.sin(roll)
-    rz = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
-    ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
-    rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
-    rotation: FloatArray = rz @ ry @ rx
-    return rotation
-
-
 def fog_extinction_per_m(visibility_m: float, wavelength_nm: float = 905.0) -> float:
     """Fog extinction coefficient [1/m] from the meteorological visibility [m].
 
@@ -607,7 +590,7 @@ class LidarModel:
         self.max_range_m = intrinsics.max_range_m
         pose = mount.pose
         self.position_m: FloatArray = np.array([pose.x_m, pose.y_m, pose.z_m])
-        self.rotation: FloatArray = sensor_rotation(pose)
+        self.rotation: FloatArray = pose.rotation()
         self.extinction_per_m = fog_extinction_per_m(
             weather.fog_visibility_m, physics.wavelength_nm
         ) + rain_extinction_per_m(

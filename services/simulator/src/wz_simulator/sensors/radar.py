@@ -85,7 +85,7 @@ import numpy as np
 import numpy.typing as npt
 
 from wz_shared.messages import RadarScan, RadarTarget, VehicleClass, VehicleTruth
-from wz_shared.site import Pose, RadarIntrinsics, SensorMount
+from wz_shared.site import RadarIntrinsics, SensorMount
 from wz_simulator.sensors.scene import Weather
 
 FloatArray = npt.NDArray[np.float64]
@@ -108,11 +108,6 @@ RAIN_ATTENUATION_ALPHA = 0.75
 CLUTTER_RCS_SPREAD_DB = 5.0
 #: Ranges below this are clamped in the radar equation [m] (keeps R^-4 finite).
 _MIN_SNR_RANGE_M = 1.0
-
-
-def sensor_rotation(pose: Pose) -> FloatArray:
-    """Rotation from the sensor frame to the site frame (see :meth:`Pose.rotation`)."""
-    return pose.rotation()
 
 
 def _wrap_rad(angle_rad: FloatArray) -> FloatArray:
@@ -278,7 +273,7 @@ class RadarModel:
 
         pose = mount.pose
         self.position_m: FloatArray = np.array([pose.x_m, pose.y_m, pose.z_m])
-        self.rotation: FloatArray = sensor_rotation(pose)
+        self.rotation: FloatArray = pose.rotation()
         # Threshold T in noise-power units: P_fa = exp(-T).
         self.threshold = -math.log(cell_false_alarm_probability)
         # Swerling I: P_d = exp(-T / (1 + SNR))  =>  SNR_ref = T / -ln(P_d,ref) - 1.
