@@ -1,0 +1,1 @@
+"""LiDAR detector service: the paper's reference pipeline and a background-model fast path."""

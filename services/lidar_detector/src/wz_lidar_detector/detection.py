@@ -1,0 +1,98 @@
+"""Inputs and outputs of both detection paths (pure data, sensor frame).
+
+Both paths take a :class:`PointFrame` (points in the sensor frame: x forward, y left, z up) and
+return a :class:`DetectionResult`: oriented 3D boxes in the sensor frame, the foreground mask,
+and the time each named step took. The node moves boxes to the site frame with the mount pose.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from wz_shared.messages import VehicleClass
+
+Float32Array = npt.NDArray[np.float32]
+FloatArray = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
+
+
+@dataclass(frozen=True)
+class PointFrame:
+    """One LiDAR frame.
+
+    Attributes
+    ----------
+    points
+        ``(N, 4)`` float32: x, y, z [m] in the sensor frame and intensity (NaN where the sensor
+        gives none). NaN x marks a no-return slot of an organized frame.
+    rows, columns
+        Shape of an organized frame (``rows * columns == N``, row-major by beam then column);
+        ``rows == 1`` for an unorganized cloud.
+    stamp_s
+        Capture time [s] (sweep start).
+    """
+
+    points: Float32Array
+    rows: int
+    columns: int
+    stamp_s: float = 0.0
+
+    @property
+    def organized(self) -> bool:
+        return self.rows > 1 and self.rows * self.columns == len(self.points)
+
+    @classmethod
+    def unorganized(cls, points: npt.ArrayLike, stamp_s: float = 0.0) -> PointFrame:
+        """A cloud without beam/column structure; a missing intensity column becomes NaN."""
+        array = np.asarray(points, dtype=np.float32)
+        if array.ndim != 2 or array.shape[1] not in (3, 4):
+            raise ValueError(f"points must have shape (N, 3) or (N, 4), got {array.shape}")
+        if array.shape[1] == 3:
+            array = np.column_stack([array, np.full(len(array), np.nan, dtype=np.float32)])
+        return cls(points=array, rows=1, columns=len(array), stamp_s=stamp_s)
+
+
+@dataclass(frozen=True)
+class BoxDetection:
+    """One detected vehicle: an oriented box in the sensor frame.
+
+    Attributes
+    ----------
+    center_xyz_m
+        Box centre [m].
+    size_lwh_m
+        Length (along ``heading_rad``), width, height [m].
+    heading_rad
+        Heading of the length axis, counter-clockwise from the sensor's x axis [rad]; a box is
+        symmetric, so heading is defined modulo pi unless the path knows the direction.
+    object_class
+        Class from the box's dimensions.
+    num_points
+        Points of the cluster.
+    covariance_xy_m2
+        2x2 covariance of the centre's x, y [m^2] in the sensor frame.
+    score
+        Confidence 0..1.
+    """
+
+    center_xyz_m: tuple[float, float, float]
+    size_lwh_m: tuple[float, float, float]
+    heading_rad: float
+    object_class: VehicleClass
+    num_points: int
+    covariance_xy_m2: tuple[tuple[float, float], tuple[float, float]]
+    score: float = 1.0
+
+
+@dataclass
+class DetectionResult:
+    """Output of one path on one frame."""
+
+    detections: list[BoxDetection]
+    #: Foreground (object) points that went into clustering, as a mask over the input points.
+    foreground: BoolArray
+    #: Wall time of each named step [s], in order.
+    timings_s: dict[str, float] = field(default_factory=dict)
