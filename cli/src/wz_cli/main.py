@@ -1,9 +1,9 @@
 """The ``wz`` command: run the local stack, watch it, record and replay the bus.
 
-Subcommands: ``router``, ``up``, ``demo``, ``status``, ``tap``, ``record``, ``replay``
-(``wz <command> --help`` for each). The command's own logs go to stderr (structured, see
-:mod:`wz_shared.logs`); stdout carries only its output (tables, tapped messages, children's
-lines), so it can be piped.
+Subcommands: ``router``, ``up``, ``demo``, ``status``, ``tap``, ``record``, ``replay``, and the
+services' tools ``dataset``, ``pictures`` and ``detect-lidar`` (``wz <command> --help`` for each).
+The command's own logs go to stderr (structured, see :mod:`wz_shared.logs`); stdout carries only
+its output (tables, tapped messages, children's lines), so it can be piped.
 """
 
 from __future__ import annotations
@@ -198,18 +198,23 @@ def cmd_replay(args: argparse.Namespace) -> int:
         )
 
 
-#: Commands that run a tool of the simulator service in its own process: the CLI stays light
-#: (no SUMO, open3d or OpenCV imports) and works where the simulator is not installed.
-SIMULATOR_TOOLS = {
+#: Commands that run a tool of a service in its own process: the CLI stays light (no SUMO,
+#: open3d or OpenCV imports) and works where that service is not installed.
+SERVICE_TOOLS = {
     "dataset": ("wz_simulator.dataset", "export camera frames (YOLO) and LiDAR frames (3D boxes)"),
     "pictures": ("wz_simulator.pictures", "write pictures of the simulated sensors with truth"),
+    "detect-lidar": (
+        "wz_lidar_detector.cli",
+        "detect vehicles in PCD/PLY/NPZ LiDAR files, one JSON line per file",
+    ),
 }
 
 
-def cmd_simulator_tool(args: argparse.Namespace) -> int:
-    module = SIMULATOR_TOOLS[args.command][0]
-    if importlib.util.find_spec(module.split(".")[0]) is None:
-        raise CliError(f"wz {args.command} needs the simulator service (wz-simulator)", 1)
+def cmd_service_tool(args: argparse.Namespace) -> int:
+    module = SERVICE_TOOLS[args.command][0]
+    package = module.split(".")[0]
+    if importlib.util.find_spec(package) is None:
+        raise CliError(f"wz {args.command} needs the {package.replace('_', '-')} package", 1)
     return subprocess.call([sys.executable, "-m", module, *args.tool_args])
 
 
@@ -363,25 +368,25 @@ def build_parser() -> argparse.ArgumentParser:
     _add_connect(replay)
     replay.set_defaults(handler=cmd_replay)
 
-    for name, (module, summary) in SIMULATOR_TOOLS.items():
+    for name, (module, summary) in SERVICE_TOOLS.items():
         tool = commands.add_parser(
             name, help=summary, description=f"{summary} (runs python -m {module}; "
             f"see `wz {name} --help`)", add_help=False,
         )  # fmt: skip
         tool.add_argument("tool_args", nargs=argparse.REMAINDER, help="the tool's options")
-        tool.set_defaults(handler=cmd_simulator_tool)
+        tool.set_defaults(handler=cmd_service_tool)
     return parser
 
 
 def run(argv: Sequence[str] | None = None) -> int:
     """Parse ``argv``, run the command, return its exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    if argv and argv[0] in SIMULATOR_TOOLS:
+    if argv and argv[0] in SERVICE_TOOLS:
         # Everything after the command is the tool's own: argparse would claim its options.
         tool = argparse.Namespace(command=argv[0], tool_args=argv[1:])
         configure_logging(service=f"wz-{argv[0]}", site="-")
         try:
-            return cmd_simulator_tool(tool)
+            return cmd_service_tool(tool)
         except CliError as exc:
             log.error("%s", exc)
             return exc.exit_code

@@ -2,8 +2,8 @@
 
 To add a service, append one :class:`ServiceSpec` to :data:`STACK` (in pipeline order, so a
 producer starts before its consumers); ``wz up``, ``wz up --only`` and ``wz demo`` pick it up.
-The services planned next, in that order: ``lidar-detector``, ``camera-radar-detector``,
-``fusion-tracker``, ``alert-service``, ``gateway``.
+The services planned next, in that order: ``camera-radar-detector``, ``fusion-tracker``,
+``alert-service``, ``gateway``.
 
 Every child learns where the bus is and which site it serves from the environment:
 
@@ -106,6 +106,12 @@ STACK: tuple[ServiceSpec, ...] = (
         summary="SUMO work-zone traffic; publishes ground truth (sensor models follow)",
         env_prefix="WZ_SIM_",
         takes=frozenset({"realtime_factor", "seed"}),
+    ),
+    ServiceSpec(
+        name="lidar-detector",
+        module="wz_lidar_detector.node",
+        summary="LiDAR frames to vehicle detections (background-model fast path or the paper's)",
+        env_prefix="WZ_LIDAR_",
     ),
 )
 

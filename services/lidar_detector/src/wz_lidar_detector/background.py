@@ -1,0 +1,875 @@
+"""Background models for a roadside LiDAR that does not move (pure core, sensor frame).
+
+A sensor on a mast sees the same road, kerbs, barriers and trees in every frame; what differs
+from that static background is traffic. A background model answers, per point of a frame, "is
+this point nearer than the background along its ray (or in free space)?" in a millisecond or two,
+which replaces the reference path's ROI, ground fit, height filter and outlier removal.
+
+Two models, one protocol (:class:`BackgroundModel`):
+
+:class:`RangeImageBackground` (organized frames: one slot per beam and column)
+    Per slot, the range of the background along that ray. Learned from K frames at start-up as a
+    high percentile of each slot's ranges, so vehicles passing (always *nearer* than the
+    background) are ignored as long as they cover a slot in fewer than about ``percentile`` % of
+    its returns (the background must show in the rest; the percentile sits that far above the
+    background's own range noise, well inside the margin). A slot that returns in fewer than ``min_return_fraction`` of the frames is
+    *open sky* (its background range is +inf). Foreground: a valid point nearer than the
+    background by more than ``max(margin_min_m, margin_range_fraction * background range)``, and
+    within ``max_range_m``; so any return in an open-sky slot within range is foreground (a
+    vehicle against the sky, or rain: the clusterer's size limits deal with the latter). The model
+    follows slow changes (:meth:`RangeImageBackground.update`): an EMA of the range in slots that
+    currently see the background, and a slot whose return stays *farther* than the model for
+    ``reveal_frames`` frames in a row takes the new range (a parked vehicle that left). A new static
+    object nearer than the model (a cone placed after start-up) stays foreground: the tracker sees
+    it as a stationary object, which is the safe side in a work zone.
+:class:`VoxelBackground` (any cloud, organized or not; or a given background cloud)
+    Occupancy of a voxel grid: the set of voxels the background occupies, as sorted int64 keys
+    (21 bits per axis). Built from a background cloud (e.g. an accumulated map) or learned from
+    frames (voxels occupied in at least ``min_occupancy_fraction`` of them), optionally dilated
+    by one voxel (26-neighbourhood) to absorb the jitter of surfaces near a voxel face. Foreground:
+    a valid point whose voxel is not background, including points outside the learned extent
+    (unknown space is not background; limit the range in the pipeline). Static: it does not
+    update; learn a new one to refresh it.
+
+Both give the height of the ground under a point (:meth:`BackgroundModel.ground_z_m`), from the
+lowest background point in each ``ground_cell_m`` square (:class:`GroundGrid`), so that a
+vehicle's box can stand on the road even when its lowest returns were lost to the background
+margin.
+
+Save and load: ``.npz`` at a path the caller gives, with ``format_version``, the model ``kind``
+and its shape (rows x columns) or voxel size; a file of another kind, version or shape raises
+:class:`BackgroundFileError` (a ``ValueError``) saying what differs. A frame whose slot count
+differs from a range-image model raises :class:`ShapeMismatchError` (the node then rebuilds).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+import numpy.typing as npt
+from pydantic import BaseModel, ConfigDict, Field
+from scipy.spatial import cKDTree
+
+from wz_lidar_detector.detection import BoolArray, Float32Array, FloatArray, PointFrame
+
+Int64Array = npt.NDArray[np.int64]
+UInt64Array = npt.NDArray[np.uint64]
+PathLike = str | os.PathLike[str]
+
+#: Version of the ``.npz`` layout written by :meth:`RangeImageBackground.save` and
+#: :meth:`VoxelBackground.save`; bump it when the layout changes.
+FORMAT_VERSION = 1
+
+# Voxel keys: each integer voxel index is offset by 2**20 and packed into 21 bits
+# (x << 42 | y << 21 | z), which covers +-2**20 voxels per axis (+-524 km at 0.5 m).
+_KEY_BITS = 21
+_KEY_OFFSET = 1 << (_KEY_BITS - 1)
+_KEY_MASK = (1 << _KEY_BITS) - 1
+# Ground cells: x and y cell indices offset by 2**30 (non-negative, below 2**31) and packed as
+# x << 32 | y, so that the key stays positive.
+_CELL_OFFSET = 1 << 30
+#: Voxel index offsets of the 26-neighbourhood and the voxel itself, (27, 3).
+_NEIGHBOURHOOD_27 = np.array(
+    [(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)], dtype=np.int64
+)
+
+
+class BackgroundFileError(ValueError):
+    """A background ``.npz`` that cannot be loaded as asked (kind, version or shape differ)."""
+
+
+class ShapeMismatchError(ValueError):
+    """A frame whose beam/column layout differs from the range-image model's."""
+
+
+@runtime_checkable
+class BackgroundModel(Protocol):
+    """What the fast pipeline needs from a background model."""
+
+    def foreground_mask(self, frame: PointFrame) -> BoolArray:
+        """``(N,)`` bool over ``frame.points``: valid points that are not background."""
+        ...
+
+    def ground_z_m(self, xy_m: FloatArray) -> FloatArray:
+        """``(K,)`` ground height [m] under each ``(K, 2)`` x, y [m]; NaN where unknown."""
+        ...
+
+    def update(self, frame: PointFrame) -> None:
+        """Let the model follow slow changes of the scene (a no-op for static models)."""
+        ...
+
+
+# --------------------------------------------------------------------------------------------
+# Keys and ground
+# --------------------------------------------------------------------------------------------
+
+
+def voxel_indices(xyz_m: npt.ArrayLike, voxel_m: float) -> Int64Array:
+    """Integer voxel index of each point.
+
+    Parameters
+    ----------
+    xyz_m
+        ``(N, 3)`` finite points [m].
+    voxel_m
+        Voxel edge [m]; voxel ``(i, j, k)`` spans ``[i * voxel_m, (i + 1) * voxel_m)`` in x, etc.
+
+    Returns
+    -------
+    Int64Array
+        ``(N, 3)`` voxel indices.
+    """
+    xyz = np.asarray(xyz_m, dtype=np.float64).reshape(-1, 3)
+    return np.floor(xyz / voxel_m).astype(np.int64)
+
+
+def pack_keys(indices: Int64Array) -> Int64Array:
+    """``(N, 3)`` voxel indices to ``(N,)`` int64 keys (21 bits per axis); order is x, y, z."""
+    shifted = indices + _KEY_OFFSET
+    if shifted.size and (shifted.min() < 0 or shifted.max() > _KEY_MASK):
+        raise ValueError(f"voxel index beyond +-{_KEY_OFFSET} voxels: make the voxels larger")
+    packed: Int64Array = (shifted[:, 0] << (2 * _KEY_BITS)) | (shifted[:, 1] << _KEY_BITS)
+    packed |= shifted[:, 2]
+    return packed
+
+
+def unpack_keys(keys: Int64Array) -> Int64Array:
+    """Inverse of :func:`pack_keys`: ``(N,)`` keys to ``(N, 3)`` voxel indices."""
+    fields = [(keys >> (shift * _KEY_BITS)) & _KEY_MASK for shift in (2, 1, 0)]
+    indices: Int64Array = np.stack(fields, axis=1) - _KEY_OFFSET
+    return indices
+
+
+def dilate_keys(keys: Int64Array) -> Int64Array:
+    """Sorted unique keys of the voxels and their 26 neighbours."""
+    indices = unpack_keys(keys)
+    grown = (indices[:, None, :] + _NEIGHBOURHOOD_27[None, :, :]).reshape(-1, 3)
+    return np.unique(pack_keys(grown))
+
+
+def _sorted_member(sorted_keys: Int64Array, keys: Int64Array) -> BoolArray:
+    """Whether each of ``keys`` is in ``sorted_keys`` (sorted, unique)."""
+    if len(sorted_keys) == 0:
+        return np.zeros(len(keys), dtype=bool)
+    position = np.searchsorted(sorted_keys, keys)
+    position[position == len(sorted_keys)] = 0
+    found: BoolArray = sorted_keys[position] == keys
+    return found
+
+
+class GroundGrid:
+    """Ground height per square cell, from the lowest background point in it.
+
+    Far from the sensor the ground is hit in rings tens of metres apart (a 64-beam sensor 6 m up
+    sees the ground at 100 m every ~20 m of range), so most cells there hold no background. A
+    lookup in such a cell takes the median of the ``neighbours`` nearest known cells within
+    ``search_radius_m``.
+
+    Parameters
+    ----------
+    cell_m
+        Edge of the square cells [m].
+    cell_keys
+        ``(C,)`` sorted int64 keys of the cells that hold background (x index << 32 | y index,
+        each offset by 2**30).
+    ground_z_m
+        ``(C,)`` lowest background z [m] in each cell.
+    search_radius_m
+        How far to look for known cells around an unknown one [m]; 0 for no search.
+    neighbours
+        Known cells whose median is taken.
+    """
+
+    def __init__(
+        self,
+        cell_m: float,
+        cell_keys: Int64Array,
+        ground_z_m: FloatArray,
+        *,
+        search_radius_m: float = 30.0,
+        neighbours: int = 4,
+    ) -> None:
+        if cell_keys.shape != ground_z_m.shape:
+            raise ValueError("cell_keys and ground_z_m must have the same shape")
+        self.cell_m = float(cell_m)
+        self.cell_keys = cell_keys
+        self.ground_z = ground_z_m
+        self.search_radius_m = float(search_radius_m)
+        self.neighbours = int(neighbours)
+        self._tree: cKDTree | None = None
+
+    @staticmethod
+    def _keys(xy_m: FloatArray, cell_m: float) -> Int64Array:
+        ij = np.floor(xy_m / cell_m).astype(np.int64) + _CELL_OFFSET
+        keys: Int64Array = (ij[:, 0] << 32) | ij[:, 1]
+        return keys
+
+    @classmethod
+    def from_points(cls, xyz_m: npt.ArrayLike, cell_m: float = 1.0) -> GroundGrid:
+        """Lowest z of the finite points in each cell.
+
+        Parameters
+        ----------
+        xyz_m
+            ``(N, 3)`` background points [m] (NaN rows are ignored).
+        cell_m
+            Cell edge [m].
+        """
+        xyz = np.asarray(xyz_m, dtype=np.float64).reshape(-1, 3)
+        xyz = xyz[np.isfinite(xyz).all(axis=1)]
+        keys = cls._keys(xyz[:, :2], cell_m)
+        order = np.lexsort((xyz[:, 2], keys))  # by cell, then z ascending
+        keys, z = keys[order], xyz[order, 2]
+        first = np.ones(len(keys), dtype=bool)
+        first[1:] = keys[1:] != keys[:-1]
+        return cls(cell_m, keys[first], z[first])
+
+    def _cell_centres(self) -> FloatArray:
+        i = (self.cell_keys >> 32) - _CELL_OFFSET
+        j = (self.cell_keys & 0xFFFFFFFF) - _CELL_OFFSET
+        centres: FloatArray = (np.column_stack([i, j]) + 0.5) * self.cell_m
+        return centres
+
+    def lookup(self, xy_m: npt.ArrayLike) -> FloatArray:
+        """Ground z [m] under each ``(K, 2)`` x, y [m]; NaN where nothing is known nearby."""
+        xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
+        if len(self.cell_keys) == 0:
+            return np.full(len(xy), np.nan)
+        keys = self._keys(xy, self.cell_m)
+        position = np.searchsorted(self.cell_keys, keys)
+        position[position == len(self.cell_keys)] = 0
+        found = self.cell_keys[position] == keys
+        result: FloatArray = np.where(found, self.ground_z[position], np.nan)
+        if found.all() or self.search_radius_m <= 0:
+            return result
+        if self._tree is None:
+            self._tree = cKDTree(self._cell_centres())
+        missing = np.flatnonzero(~found)
+        count = min(self.neighbours, len(self.cell_keys))
+        distance, index = self._tree.query(
+            xy[missing], k=count, distance_upper_bound=self.search_radius_m
+        )
+        distance, index = distance.reshape(len(missing), -1), index.reshape(len(missing), -1)
+        near = np.isfinite(distance)
+        heights = np.where(near, self.ground_z[np.minimum(index, len(self.ground_z) - 1)], np.nan)
+        # Median of the finite heights of each row (np.nanmedian is ten times slower): sorting
+        # puts NaN last, so the finite ones are the first `known` of each row.
+        heights.sort(axis=1)
+        known = near.sum(axis=1)
+        rows = np.flatnonzero(known > 0)
+        low = heights[rows, (known[rows] - 1) // 2]
+        high = heights[rows, known[rows] // 2]
+        result[missing[rows]] = 0.5 * (low + high)
+        return result
+
+
+def _frame_xyz(frame: PointFrame) -> Float32Array:
+    xyz: Float32Array = np.asarray(frame.points[:, :3], dtype=np.float32)
+    return xyz
+
+
+def _valid(xyz: Float32Array) -> BoolArray:
+    # A no-return slot has NaN x; some drivers write NaN in y or z only, or inf: check all.
+    valid: BoolArray = np.isfinite(xyz[:, 0]) & np.isfinite(xyz[:, 1]) & np.isfinite(xyz[:, 2])
+    return valid
+
+
+def _ranges(xyz: Float32Array) -> Float32Array:
+    # Column by column: numpy's reductions over a short last axis are several times slower.
+    x, y, z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+    ranges: Float32Array = np.sqrt(x * x + y * y + z * z)
+    return ranges
+
+
+def _write_npz(path: PathLike, arrays: dict[str, npt.NDArray[np.generic]]) -> None:
+    # Through a file object so that numpy does not append ".npz" to the caller's path.
+    with open(path, "wb") as stream:
+        np.savez(stream, **arrays)  # type: ignore[arg-type]
+
+
+def _read_npz(path: PathLike, kind: str) -> dict[str, npt.NDArray[np.generic]]:
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            arrays = {name: archive[name] for name in archive.files}
+    except (OSError, ValueError) as error:
+        raise BackgroundFileError(
+            f"{os.fspath(path)}: not a readable .npz file ({error})"
+        ) from error
+    for name in ("format_version", "kind"):
+        if name not in arrays:
+            raise BackgroundFileError(f"{os.fspath(path)}: no '{name}': not a background model")
+    version = int(arrays["format_version"])
+    if version != FORMAT_VERSION:
+        raise BackgroundFileError(
+            f"{os.fspath(path)}: background format version {version}, this software reads "
+            f"version {FORMAT_VERSION}: learn the background again"
+        )
+    found_kind = str(arrays["kind"])
+    if found_kind != kind:
+        raise BackgroundFileError(
+            f"{os.fspath(path)}: holds a '{found_kind}' background, expected '{kind}'"
+        )
+    return arrays
+
+
+def _ground_arrays(ground: GroundGrid | None) -> dict[str, npt.NDArray[np.generic]]:
+    ground = ground or GroundGrid(1.0, np.zeros(0, np.int64), np.zeros(0))
+    return {
+        "ground_cell_m": np.array(ground.cell_m),
+        "ground_cell_keys": ground.cell_keys,
+        "ground_z_m": ground.ground_z,
+        "ground_search_radius_m": np.array(ground.search_radius_m),
+        "ground_neighbours": np.array(ground.neighbours),
+    }
+
+
+def _ground_from(arrays: dict[str, npt.NDArray[np.generic]]) -> GroundGrid | None:
+    keys = np.asarray(arrays["ground_cell_keys"], dtype=np.int64)
+    if len(keys) == 0:
+        return None
+    return GroundGrid(
+        float(arrays["ground_cell_m"]),
+        keys,
+        np.asarray(arrays["ground_z_m"], dtype=np.float64),
+        search_radius_m=float(arrays["ground_search_radius_m"]),
+        neighbours=int(arrays["ground_neighbours"]),
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# Range-image background
+# --------------------------------------------------------------------------------------------
+
+
+class RangeBackgroundSettings(BaseModel):
+    """Parameters of :class:`RangeImageBackground` (lengths in metres)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    #: Percentile of a slot's ranges over the learning frames taken as its background [%].
+    learn_percentile: float = Field(default=90.0, ge=50.0, le=100.0)
+    #: A slot returning in fewer than this fraction of the learning frames is open sky.
+    min_return_fraction: float = Field(default=0.2, gt=0.0, le=1.0)
+    #: Foreground when nearer than the background by more than
+    #: ``max(margin_min_m, margin_range_fraction * background range)``.
+    margin_min_m: float = Field(default=0.3, ge=0.0)
+    margin_range_fraction: float = Field(default=0.01, ge=0.0)
+    #: Returns farther than this are never foreground [m].
+    max_range_m: float = Field(default=200.0, gt=0.0)
+    #: EMA weight of the current range in slots that see their background (per frame).
+    ema_weight: float = Field(default=0.02, ge=0.0, le=1.0)
+    #: Frames in a row a slot must return farther than its model before the model takes the
+    #: new range (at 10 Hz, 100 frames = 10 s).
+    reveal_frames: int = Field(default=100, ge=1)
+    #: Cell edge of the ground-height grid [m].
+    ground_cell_m: float = Field(default=1.0, gt=0.0)
+
+
+class RangeImageBackground:
+    """Background range per (beam, column) slot of an organized frame.
+
+    Parameters
+    ----------
+    background_range_m
+        ``(rows, columns)`` background range [m] of each slot; +inf for open sky.
+    settings
+        Margins and update rates.
+    ground
+        Ground heights, or None when unknown.
+    """
+
+    kind = "range_image"
+
+    def __init__(
+        self,
+        background_range_m: npt.ArrayLike,
+        settings: RangeBackgroundSettings | None = None,
+        ground: GroundGrid | None = None,
+    ) -> None:
+        image = np.array(background_range_m, dtype=np.float32)
+        if image.ndim != 2 or min(image.shape) < 1:
+            raise ValueError(f"background_range_m must be (rows, columns), got {image.shape}")
+        if np.isnan(image).any():
+            raise ValueError("background_range_m holds NaN: use +inf for open sky")
+        self.settings = settings or RangeBackgroundSettings()
+        self._range_m: Float32Array = image.reshape(-1)
+        self._shape = (int(image.shape[0]), int(image.shape[1]))
+        self._farther_frames = np.zeros(image.size, dtype=np.int32)
+        self.ground = ground
+
+    @property
+    def rows(self) -> int:
+        return self._shape[0]
+
+    @property
+    def columns(self) -> int:
+        return self._shape[1]
+
+    @property
+    def background_range_m(self) -> Float32Array:
+        """``(rows, columns)`` copy of the background range [m]; +inf for open sky."""
+        return self._range_m.reshape(self._shape).copy()
+
+    @classmethod
+    def learn(
+        cls, frames: Sequence[PointFrame], settings: RangeBackgroundSettings | None = None
+    ) -> RangeImageBackground:
+        """Learn the background from organized frames of one sensor.
+
+        Parameters
+        ----------
+        frames
+            K >= 1 organized frames of the same rows x columns. Vehicles may pass: a slot's
+            background is the ``learn_percentile`` of its valid ranges, so a vehicle covering a
+            slot in fewer than about ``learn_percentile`` % of its returns does not count.
+        settings
+            Parameters; defaults if None.
+
+        Returns
+        -------
+        RangeImageBackground
+            With a ground grid from the background points (each slot's mean ray direction times
+            its background range).
+        """
+        settings = settings or RangeBackgroundSettings()
+        if not frames:
+            raise ValueError("learning a range-image background needs at least one frame")
+        shape = (frames[0].rows, frames[0].columns)
+        for index, frame in enumerate(frames):
+            if not frame.organized:
+                raise ShapeMismatchError(f"frame {index} is not organized: use VoxelBackground")
+            if (frame.rows, frame.columns) != shape:
+                raise ShapeMismatchError(
+                    f"frame {index} has {frame.rows}x{frame.columns} slots, frame 0 has "
+                    f"{shape[0]}x{shape[1]}: learn from frames of one sensor mode"
+                )
+        slots = shape[0] * shape[1]
+        ranges = np.empty((len(frames), slots), dtype=np.float32)
+        direction_sum = np.zeros((slots, 3), dtype=np.float64)
+        for index, frame in enumerate(frames):
+            xyz = _frame_xyz(frame)
+            valid = _valid(xyz)
+            frame_ranges = _ranges(xyz)
+            frame_ranges[~valid] = np.nan
+            ranges[index] = frame_ranges
+            usable = valid & (frame_ranges > 0)
+            direction_sum[usable] += xyz[usable] / frame_ranges[usable, None]
+        returns = np.count_nonzero(~np.isnan(ranges), axis=0)
+        # np.sort puts NaN last, so the valid ranges of a slot are its first `returns` entries.
+        ranges.sort(axis=0)
+        rank = np.floor(settings.learn_percentile / 100.0 * np.maximum(returns - 1, 0))
+        picked = np.take_along_axis(ranges, rank.astype(np.int64)[None, :], axis=0)[0]
+        open_sky = returns < settings.min_return_fraction * len(frames)
+        background = np.where(open_sky | np.isnan(picked), np.inf, picked).astype(np.float32)
+        norm = np.linalg.norm(direction_sum, axis=1)
+        seen = ~open_sky & (norm > 0)
+        points = direction_sum[seen] / norm[seen, None] * background[seen, None]
+        ground = GroundGrid.from_points(points, settings.ground_cell_m) if len(points) else None
+        return cls(background.reshape(shape), settings, ground)
+
+    def _check(self, frame: PointFrame) -> None:
+        if not frame.organized or (frame.rows, frame.columns) != self._shape:
+            raise ShapeMismatchError(
+                f"frame has {frame.rows}x{frame.columns} slots ({len(frame.points)} points), the "
+                f"background model {self.rows}x{self.columns}: the sensor's mode changed, "
+                "rebuild the background model"
+            )
+
+    def _margin_m(self) -> Float32Array:
+        # Open-sky slots (+inf) get the minimum margin, not inf (inf - inf would be NaN).
+        settings = self.settings
+        finite_range = np.where(np.isinf(self._range_m), np.float32(0.0), self._range_m)
+        margin: Float32Array = np.maximum(
+            np.float32(settings.margin_min_m),
+            np.float32(settings.margin_range_fraction) * finite_range,
+        )
+        return margin
+
+    def foreground_mask(self, frame: PointFrame) -> BoolArray:
+        """Valid points nearer than their slot's background by more than the margin.
+
+        Parameters
+        ----------
+        frame
+            Organized frame of the model's rows x columns.
+
+        Returns
+        -------
+        BoolArray
+            ``(rows * columns,)``; False for no-return slots and returns beyond ``max_range_m``.
+            In open-sky slots every valid return within ``max_range_m`` is foreground.
+
+        Raises
+        ------
+        ShapeMismatchError
+            The frame's layout differs from the model's.
+        """
+        self._check(frame)
+        xyz = _frame_xyz(frame)
+        with np.errstate(invalid="ignore"):
+            ranges = _ranges(xyz)
+            # NaN ranges compare False, so no-return slots are never foreground.
+            nearer = ranges < self._range_m - self._margin_m()
+            mask: BoolArray = nearer & (ranges <= np.float32(self.settings.max_range_m))
+        return mask
+
+    def update(self, frame: PointFrame) -> None:
+        """Follow slow changes of the scene (see the module docstring).
+
+        Slots that see their background (within the margin) move their range towards the
+        current one by ``ema_weight``; a slot that returns farther than its background for
+        ``reveal_frames`` frames in a row takes the current range. Open-sky slots stay open sky.
+
+        Raises
+        ------
+        ShapeMismatchError
+            The frame's layout differs from the model's.
+        """
+        self._check(frame)
+        with np.errstate(invalid="ignore"):
+            ranges = _ranges(_frame_xyz(frame))
+            margin = self._margin_m()
+            difference = ranges - self._range_m  # NaN where no return, -inf in open sky
+            on_background = np.abs(difference) <= margin
+            farther = difference > margin
+        self._range_m[on_background] += (
+            np.float32(self.settings.ema_weight) * (difference[on_background])
+        )
+        self._farther_frames[farther] += 1
+        # A nearer return (traffic) breaks the run; a no-return slot neither extends nor breaks it.
+        self._farther_frames[on_background | (difference < -margin)] = 0
+        revealed = self._farther_frames >= self.settings.reveal_frames
+        self._range_m[revealed] = ranges[revealed]
+        self._farther_frames[revealed] = 0
+
+    def ground_z_m(self, xy_m: FloatArray) -> FloatArray:
+        """Ground height [m] under ``(K, 2)`` x, y [m]; NaN where unknown."""
+        if self.ground is None:
+            return np.full(len(np.asarray(xy_m).reshape(-1, 2)), np.nan)
+        return self.ground.lookup(xy_m)
+
+    def save(self, path: PathLike) -> None:
+        """Write the model to ``path`` (``.npz``; the name is used as given)."""
+        _write_npz(
+            path,
+            {
+                "format_version": np.array(FORMAT_VERSION),
+                "kind": np.array(self.kind),
+                "rows": np.array(self.rows),
+                "columns": np.array(self.columns),
+                "background_range_m": self._range_m.reshape(self._shape),
+                "settings_json": np.array(self.settings.model_dump_json()),
+                **_ground_arrays(self.ground),
+            },
+        )
+
+    @classmethod
+    def load(
+        cls, path: PathLike, *, rows: int | None = None, columns: int | None = None
+    ) -> RangeImageBackground:
+        """Read a model written by :meth:`save`.
+
+        Parameters
+        ----------
+        path
+            The ``.npz`` file.
+        rows, columns
+            The layout the caller's sensor has; when given, a model of another layout raises.
+
+        Raises
+        ------
+        BackgroundFileError
+            Not a range-image background, another format version, or another layout.
+        """
+        arrays = _read_npz(path, cls.kind)
+        shape = (int(arrays["rows"]), int(arrays["columns"]))
+        wanted = (
+            rows if rows is not None else shape[0],
+            columns if columns is not None else shape[1],
+        )
+        if wanted != shape:
+            raise BackgroundFileError(
+                f"{os.fspath(path)}: background for {shape[0]}x{shape[1]} slots, the sensor has "
+                f"{wanted[0]}x{wanted[1]}: learn the background again"
+            )
+        settings = RangeBackgroundSettings.model_validate_json(str(arrays["settings_json"]))
+        ground = _ground_from(arrays)
+        return cls(np.asarray(arrays["background_range_m"]).reshape(shape), settings, ground)
+
+
+# --------------------------------------------------------------------------------------------
+# Voxel background
+# --------------------------------------------------------------------------------------------
+
+
+class VoxelBackground:
+    """Occupancy of a voxel grid by the static background.
+
+    The model is the sorted array of occupied voxel keys. For speed, :meth:`foreground_mask`
+    looks points up in a dense bit table over the keys' bounding box (one bit per voxel, 64
+    voxels of a column per word): about 2 ms for 144k slots where a ``searchsorted`` over the
+    keys takes about 8 ms. When the table would exceed ``max_table_bytes`` (a huge or fine
+    grid) the lookup falls back to ``searchsorted``.
+
+    Parameters
+    ----------
+    keys
+        ``(V,)`` int64 keys (:func:`pack_keys`) of the background voxels; sorted and made unique
+        here.
+    voxel_m
+        Voxel edge [m].
+    ground
+        Ground heights, or None when unknown.
+    max_table_bytes
+        Largest dense lookup table to build [bytes].
+    """
+
+    kind = "voxel"
+
+    def __init__(
+        self,
+        keys: Int64Array,
+        voxel_m: float,
+        ground: GroundGrid | None = None,
+        *,
+        max_table_bytes: int = 256 * 2**20,
+    ) -> None:
+        if not voxel_m > 0:
+            raise ValueError(f"voxel_m must be positive, got {voxel_m}")
+        self.keys: Int64Array = np.unique(np.asarray(keys, dtype=np.int64))
+        self.voxel_m = float(voxel_m)
+        self.ground = ground
+        self._table: UInt64Array | None = None
+        self._origin = np.zeros(3, dtype=np.int64)
+        self._extent = np.zeros(3, dtype=np.int64)
+        if len(self.keys):
+            indices = unpack_keys(self.keys)
+            origin, extent = indices.min(axis=0), np.ptp(indices, axis=0) + 1
+            words = (int(extent[2]) + 63) // 64
+            if words * int(extent[0]) * int(extent[1]) * 8 <= max_table_bytes:
+                relative = indices - origin
+                # Word-major layout: most points fall in the lowest 64 voxels of their column,
+                # so lookups touch one compact plane of the table.
+                table = np.zeros((words, int(extent[0]), int(extent[1])), dtype=np.uint64)
+                bits = np.left_shift(np.uint64(1), (relative[:, 2] & 63).astype(np.uint64))
+                np.bitwise_or.at(table, (relative[:, 2] >> 6, relative[:, 0], relative[:, 1]), bits)
+                self._table = table
+                self._origin, self._extent = origin, extent
+
+    @property
+    def num_voxels(self) -> int:
+        return len(self.keys)
+
+    @classmethod
+    def from_points(
+        cls,
+        xyz_m: npt.ArrayLike,
+        voxel_m: float = 0.5,
+        *,
+        dilate: bool = False,
+        ground_cell_m: float = 1.0,
+    ) -> VoxelBackground:
+        """Background = the voxels that a background cloud occupies.
+
+        Parameters
+        ----------
+        xyz_m
+            ``(N, 3)`` background points [m] (e.g. an accumulated map); NaN rows are ignored.
+        voxel_m
+            Voxel edge [m].
+        dilate
+            Add the 26 neighbours of every occupied voxel.
+        ground_cell_m
+            Cell edge of the ground grid [m]; the ground is the lowest occupied voxel's centre
+            in each cell (so within half a voxel of the true surface).
+        """
+        xyz = np.asarray(xyz_m, dtype=np.float64).reshape(-1, 3)
+        xyz = xyz[np.isfinite(xyz).all(axis=1)]
+        keys = np.unique(pack_keys(voxel_indices(xyz, voxel_m)))
+        return cls._from_keys(keys, voxel_m, dilate, ground_cell_m)
+
+    @classmethod
+    def from_frames(
+        cls,
+        frames: Sequence[PointFrame],
+        voxel_m: float = 0.5,
+        *,
+        min_occupancy_fraction: float = 0.3,
+        dilate: bool = False,
+        ground_cell_m: float = 1.0,
+    ) -> VoxelBackground:
+        """Background = voxels occupied in at least ``min_occupancy_fraction`` of the frames.
+
+        Parameters
+        ----------
+        frames
+            K >= 1 frames of a sensor that did not move (organized or not). Vehicles passing
+            occupy a voxel in few frames and are left out.
+        voxel_m
+            Voxel edge [m].
+        min_occupancy_fraction
+            Fraction of the frames a voxel must be occupied in (0..1]. Keep it well under 0.5:
+            a surface that lies on a voxel face (a flat road at a round height) splits its
+            returns between two voxels, each occupied in about half the frames. Learn while
+            traffic moves: a lane stopped for more than this fraction becomes background.
+        dilate, ground_cell_m
+            As in :meth:`from_points`.
+        """
+        if not frames:
+            raise ValueError("learning a voxel background needs at least one frame")
+        if not 0.0 < min_occupancy_fraction <= 1.0:
+            raise ValueError(
+                f"min_occupancy_fraction must be in (0, 1], got {min_occupancy_fraction}"
+            )
+        per_frame = []
+        for frame in frames:
+            xyz = _frame_xyz(frame)
+            xyz = xyz[_valid(xyz)]
+            per_frame.append(np.unique(pack_keys(voxel_indices(xyz, voxel_m))))
+        keys, counts = np.unique(np.concatenate(per_frame), return_counts=True)
+        keys = keys[counts >= min_occupancy_fraction * len(frames)]
+        return cls._from_keys(keys, voxel_m, dilate, ground_cell_m)
+
+    @classmethod
+    def _from_keys(
+        cls, keys: Int64Array, voxel_m: float, dilate: bool, ground_cell_m: float
+    ) -> VoxelBackground:
+        centres = (unpack_keys(keys) + 0.5) * voxel_m
+        ground = GroundGrid.from_points(centres, ground_cell_m) if len(keys) else None
+        return cls(dilate_keys(keys) if dilate and len(keys) else keys, voxel_m, ground)
+
+    def is_background(self, xyz_m: npt.ArrayLike) -> BoolArray:
+        """Whether each ``(N, 3)`` point [m] falls in a background voxel (NaN rows: False)."""
+        xyz = np.asarray(xyz_m, dtype=np.float32).reshape(-1, 3)
+        if self._table is None:
+            result = np.zeros(len(xyz), dtype=bool)
+            valid = _valid(xyz)
+            keys = pack_keys(voxel_indices(xyz[valid], self.voxel_m))
+            result[valid] = _sorted_member(self.keys, keys)
+            return result
+        inside = np.ones(len(xyz), dtype=bool)
+        cells = []
+        scale = np.float32(1.0 / self.voxel_m)
+        with np.errstate(invalid="ignore"):
+            for axis in range(3):
+                # float32 throughout: a point exactly on a voxel face may fall either side,
+                # which a margin of one voxel (dilate) makes harmless.
+                cell = np.floor(xyz[:, axis] * scale) - np.float32(self._origin[axis])
+                inside &= (cell >= 0) & (cell < self._extent[axis])  # NaN: False
+                cells.append(cell)
+        cx, cy, cz = (np.where(inside, cell, 0).astype(np.int64) for cell in cells)
+        word = np.take(self._table, ((cz >> 6) * self._extent[0] + cx) * self._extent[1] + cy)
+        bit = (word >> (cz & 63).astype(np.uint64)) & np.uint64(1)
+        found: BoolArray = inside & bit.astype(bool)
+        return found
+
+    def foreground_mask(self, frame: PointFrame) -> BoolArray:
+        """Valid points whose voxel is not background.
+
+        Returns
+        -------
+        BoolArray
+            ``(N,)`` over ``frame.points``; points outside the model's extent are foreground.
+        """
+        xyz = _frame_xyz(frame)
+        mask: BoolArray = _valid(xyz) & ~self.is_background(xyz)
+        return mask
+
+    def update(self, frame: PointFrame) -> None:
+        """No-op: the voxel model is static (learn a new one to refresh it)."""
+
+    def ground_z_m(self, xy_m: FloatArray) -> FloatArray:
+        """Ground height [m] under ``(K, 2)`` x, y [m]; NaN where unknown."""
+        if self.ground is None:
+            return np.full(len(np.asarray(xy_m).reshape(-1, 2)), np.nan)
+        return self.ground.lookup(xy_m)
+
+    def save(self, path: PathLike) -> None:
+        """Write the model to ``path`` (``.npz``; the name is used as given)."""
+        _write_npz(
+            path,
+            {
+                "format_version": np.array(FORMAT_VERSION),
+                "kind": np.array(self.kind),
+                "voxel_m": np.array(self.voxel_m),
+                "keys": self.keys,
+                **_ground_arrays(self.ground),
+            },
+        )
+
+    @classmethod
+    def load(cls, path: PathLike, *, voxel_m: float | None = None) -> VoxelBackground:
+        """Read a model written by :meth:`save`.
+
+        Parameters
+        ----------
+        path
+            The ``.npz`` file.
+        voxel_m
+            The voxel size the caller expects [m]; when given, a model of another size raises.
+
+        Raises
+        ------
+        BackgroundFileError
+            Not a voxel background, another format version, or another voxel size.
+        """
+        arrays = _read_npz(path, cls.kind)
+        stored = float(arrays["voxel_m"])
+        if voxel_m is not None and not np.isclose(stored, voxel_m):
+            raise BackgroundFileError(
+                f"{os.fspath(path)}: background voxels of {stored} m, expected {voxel_m} m: "
+                "learn the background again or change the setting"
+            )
+        ground = _ground_from(arrays)
+        return cls(np.asarray(arrays["keys"], dtype=np.int64), stored, ground)
+
+
+def load_background(path: PathLike) -> RangeImageBackground | VoxelBackground:
+    """Read either kind of model from ``path``, by the ``kind`` it holds."""
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            kind = str(archive["kind"]) if "kind" in archive.files else ""
+    except (OSError, ValueError) as error:
+        raise BackgroundFileError(
+            f"{os.fspath(path)}: not a readable .npz file ({error})"
+        ) from error
+    if kind == RangeImageBackground.kind:
+        return RangeImageBackground.load(path)
+    if kind == VoxelBackground.kind:
+        return VoxelBackground.load(path)
+    raise BackgroundFileError(f"{os.fspath(path)}: not a background model (kind '{kind}')")
+
+
+def learn_background_from_frames(
+    frames: Sequence[PointFrame],
+    *,
+    range_settings: RangeBackgroundSettings | None = None,
+    voxel_m: float = 0.5,
+    min_occupancy_fraction: float = 0.3,
+) -> RangeImageBackground | VoxelBackground:
+    """The model that suits the frames: per-slot ranges when organized, else voxels.
+
+    Parameters
+    ----------
+    frames
+        K >= 1 frames of one sensor that did not move.
+    range_settings
+        For :class:`RangeImageBackground` (organized frames of one layout).
+    voxel_m, min_occupancy_fraction
+        For :class:`VoxelBackground` (otherwise).
+    """
+    if not frames:
+        raise ValueError("learning a background needs at least one frame")
+    first = frames[0]
+    same_layout = all(
+        frame.organized and (frame.rows, frame.columns) == (first.rows, first.columns)
+        for frame in frames
+    )
+    if same_layout:
+        return RangeImageBackground.learn(frames, range_settings)
+    return VoxelBackground.from_frames(
+        frames, voxel_m, min_occupancy_fraction=min_occupancy_fraction
+    )

@@ -1,0 +1,396 @@
+"""A vehicle's box from the faces a roadside LiDAR sees of it (pure core, sensor frame).
+
+A LiDAR sees the faces of a vehicle that turn towards it: one face (the front of a far vehicle
+coming head-on, or the side of a vehicle abeam) or two (an L: side and front). The centroid of
+those points lies on the visible faces, up to half a vehicle length (or width) nearer the sensor
+than the vehicle's centre. This module fits the box instead:
+
+1. **Heading**: search-based rectangle fitting with the *closeness* criterion of Zhang et al.
+   (2017), "Efficient L-Shape Fitting for Vehicle Detection Using Laser Scanners" (IEEE IV). For
+   each candidate orientation theta, project the points on ``e1 = (cos, sin)`` and
+   ``e2 = (-sin, cos)``; a point's distance to the nearest rectangle edge along each axis is
+   ``d_i = min(max(c_i) - c_i, c_i - min(c_i))``, and the score is
+
+       score(theta) = sum_points 1 / max(min(d_1, d_2), d_0)
+
+   (points that hug two perpendicular edges score high). All candidates are scored at once as an
+   ``(N, H)`` array: a coarse sweep of ``heading_step_deg`` over [0, 90) deg, or over
+   ``prior +- tolerance`` when a heading prior is given (a roadside sensor knows that traffic
+   moves along the road), then a fine sweep of ``refine_step_deg`` around the best.
+2. **Length axis**: with a prior, the axis nearest the prior. Without one, the longer visible
+   extent when it is longer than ``end_face_max_m`` (a side is in view); otherwise the shape is
+   ambiguous (an end face and the hood, or a short stretch of side) and the vehicle is taken to
+   be seen end-on, as a sensor looking along the road sees far vehicles: the length axis is the
+   one nearer the line of sight. Give the prior where the road's direction is known.
+3. **Completion**: the visible extent underestimates the hidden sides. Along each axis the box is
+   grown to at least the class's typical dimension (:data:`CLASS_SHAPES`), *away from the
+   sensor*: the visible face is the one nearer the sensor, so the far edge moves. When the
+   sensor's projection on the axis falls inside the visible span (a vehicle abeam), the box grows
+   evenly at both ends. The class used for the completion comes from the visible extents (lower
+   bounds): heavy when the visible length or the height passes the reference path's heavy
+   thresholds, a motorcycle
+   when an L no bigger than a motorcycle is seen along a known length axis (without it, such an
+   L is more likely a car end-on), otherwise a car (4.5 x 1.8 m). A heavy vehicle's length
+   ranges from 6 to 25 m, so it is taken from what is visible when its side is in view (seen
+   at least ``side_view_min_deg`` off its length axis: a box's side face is in view whole or
+   not at all), and completed to ``heavy_length_m`` (16 m, a tractor-semitrailer, the usual
+   heavy vehicle on a freeway) only when it is seen end-on.
+   The centre is the completed box's centre.
+4. **Height**: from the top of the points down to the ground (the background's ground height
+   under the vehicle when known, else the lowest point).
+5. **Class**: :func:`wz_lidar_detector.reference.class_from_size` of the completed box, the same
+   rule as the reference path.
+6. **Covariance** of the centre's x, y [m^2], the sum of
+
+   - the sensor's part, in the bearing frame of the centre: ``sigma_range = range_noise_m``
+     along the ray and ``sigma_across = range * angular_resolution`` across it (edges are
+     located to about one beam step);
+   - the shape's part, in the box frame: along an axis completed from one end,
+     ``(sigma_dim / 2)^2`` (the centre moves by half the error of the assumed dimension); grown at
+     both ends, ``+ ((dim - visible) / 2)^2 / 3`` as well; seen whole, 0 (but the length of a
+     heavy vehicle seen end-on is always uncertain: ``(heavy_length_std_m / 2)^2``).
+
+   So one face seen gives a covariance long along the unseen dimension; an L gives a small one.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+import numpy.typing as npt
+from pydantic import BaseModel, ConfigDict, Field
+
+from wz_lidar_detector.detection import FloatArray
+from wz_lidar_detector.reference import (
+    HEAVY_MIN_HEIGHT_M,
+    HEAVY_MIN_LENGTH_M,
+    MOTORCYCLE_MAX_LENGTH_M,
+    MOTORCYCLE_MAX_WIDTH_M,
+    class_from_size,
+)
+from wz_shared.messages import VehicleClass
+
+
+class BoxFitSettings(BaseModel):
+    """Parameters of :func:`fit_box` (lengths in metres, angles in degrees)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    #: Step of the coarse heading sweep [deg].
+    heading_step_deg: float = Field(default=1.0, gt=0.0, le=15.0)
+    #: Step of the fine sweep around the coarse best [deg].
+    refine_step_deg: float = Field(default=0.1, gt=0.0)
+    #: Zhang's d_0: distances below it count as it, so one point on an edge cannot dominate [m].
+    closeness_floor_m: float = Field(default=0.01, gt=0.0)
+    #: Points used for the heading search (an even subsample); extents use all points.
+    max_fit_points: int = Field(default=400, ge=8)
+    #: A visible extent below this along an axis: that axis shows no face [m].
+    thin_face_m: float = Field(default=0.5, ge=0.0)
+    #: Without a prior, a single face no longer than this is a front or rear face [m].
+    end_face_max_m: float = Field(default=2.6, gt=0.0)
+    #: Range noise of one return, 1 sigma [m].
+    range_noise_m: float = Field(default=0.05, gt=0.0)
+    #: Angle between neighbouring beams or columns, the coarser of the two [deg].
+    angular_resolution_deg: float = Field(default=0.2, gt=0.0)
+    #: Length a heavy vehicle is completed to when less of it is visible [m]. On a freeway most
+    #: heavy vehicles are tractor-semitrailers (16-22 m; the simulator's are 16.5 m); lower it
+    #: where box trucks and buses dominate. Its spread is ``heavy_length_std_m``.
+    heavy_length_m: float = Field(default=16.0, gt=0.0)
+    heavy_length_std_m: float = Field(default=4.0, ge=0.0)
+    #: A heavy vehicle seen at least this far off its length axis shows its side whole: its
+    #: visible length is its length, not completed [deg].
+    side_view_min_deg: float = Field(default=20.0, ge=0.0, le=90.0)
+
+
+@dataclass(frozen=True)
+class ClassShape:
+    """Typical plan dimensions of a class [m] and their spread (1 sigma) [m]."""
+
+    length_m: float
+    width_m: float
+    length_std_m: float
+    width_std_m: float
+    #: The length is open-ended (trucks from 6 to 25 m): always uncertain along the length.
+    open_length: bool = False
+
+
+#: Typical dimensions used to complete a box from its visible faces; a heavy vehicle's length
+#: and its spread come from :class:`BoxFitSettings`.
+CLASS_SHAPES: dict[VehicleClass, ClassShape] = {
+    VehicleClass.CAR: ClassShape(4.5, 1.8, 0.4, 0.1),
+    VehicleClass.MOTORCYCLE: ClassShape(2.2, 0.8, 0.2, 0.1),
+    VehicleClass.TRUCK: ClassShape(16.0, 2.5, 4.0, 0.1, open_length=True),
+}
+
+
+@dataclass(frozen=True)
+class BoxFit:
+    """A completed box.
+
+    Attributes
+    ----------
+    center_xyz_m
+        Centre of the completed box [m].
+    size_lwh_m
+        Length (along ``heading_rad``), width, height [m].
+    heading_rad
+        Direction of the length axis [rad], counter-clockwise from x; within ``pi/2`` of the
+        prior when one was given, else in (-pi/2, pi/2].
+    object_class
+        :func:`class_from_size` of the completed box.
+    covariance_xy_m2
+        ``(2, 2)`` covariance of the centre's x, y [m^2].
+    visible_lw_m
+        Visible extent of the points along the length and width axes [m].
+    faces_seen
+        1 (a single face, or a blob) or 2 (an L).
+    completed_lw
+        Whether the length / width was grown beyond the visible extent.
+    """
+
+    center_xyz_m: tuple[float, float, float]
+    size_lwh_m: tuple[float, float, float]
+    heading_rad: float
+    object_class: VehicleClass
+    covariance_xy_m2: FloatArray
+    visible_lw_m: tuple[float, float]
+    faces_seen: int
+    completed_lw: tuple[bool, bool]
+
+
+def closeness_scores(xy_m: FloatArray, headings_rad: FloatArray, floor_m: float) -> FloatArray:
+    """Zhang's closeness criterion of each candidate rectangle orientation.
+
+    Parameters
+    ----------
+    xy_m
+        ``(N, 2)`` points [m].
+    headings_rad
+        ``(H,)`` candidate orientations of the rectangle's first axis [rad].
+    floor_m
+        ``d_0`` [m].
+
+    Returns
+    -------
+    FloatArray
+        ``(H,)`` scores; the best orientation has the highest.
+    """
+    cos, sin = np.cos(headings_rad), np.sin(headings_rad)
+    x, y = xy_m[:, :1], xy_m[:, 1:2]
+    # (N, H) projections on e1 = (cos, sin) and e2 = (-sin, cos).
+    along = x * cos + y * sin
+    across = y * cos - x * sin
+    d_along = np.minimum(along.max(axis=0) - along, along - along.min(axis=0))
+    d_across = np.minimum(across.max(axis=0) - across, across - across.min(axis=0))
+    distance = np.maximum(np.minimum(d_along, d_across), floor_m)
+    scores: FloatArray = (1.0 / distance).sum(axis=0)
+    return scores
+
+
+def search_orientation(
+    xy_m: FloatArray,
+    settings: BoxFitSettings,
+    prior_rad: float | None = None,
+    tolerance_rad: float = math.radians(20.0),
+) -> float:
+    """Best rectangle orientation [rad] by a coarse then a fine closeness sweep.
+
+    Parameters
+    ----------
+    xy_m
+        ``(N, 2)`` points [m] (at least 2).
+    settings
+        Sweep steps and ``d_0``.
+    prior_rad, tolerance_rad
+        When a prior is given, only orientations within ``prior +- tolerance`` are tried, and the
+        result is the rectangle axis nearest the prior. Otherwise [0, pi/2).
+    """
+    stride = max(1, math.ceil(len(xy_m) / settings.max_fit_points))
+    points = xy_m[::stride] - xy_m.mean(axis=0)
+    floor_m = settings.closeness_floor_m
+    coarse = math.radians(settings.heading_step_deg)
+    if prior_rad is None:
+        low, high = 0.0, math.pi / 2 - 1e-12
+    else:
+        half = min(tolerance_rad, math.pi / 4)
+        low, high = prior_rad - half, prior_rad + half
+    candidates: FloatArray = np.linspace(low, high, max(2, math.ceil((high - low) / coarse) + 1))
+    best = float(candidates[np.argmax(closeness_scores(points, candidates, floor_m))])
+    fine = math.radians(settings.refine_step_deg)
+    count = max(1, math.ceil(coarse / fine))
+    candidates = best + fine * np.arange(-count, count + 1, dtype=np.float64)
+    if prior_rad is not None:
+        candidates = np.clip(candidates, low, high)
+    return float(candidates[np.argmax(closeness_scores(points, candidates, floor_m))])
+
+
+def _completion_class(
+    visible_length_m: float,
+    visible_width_m: float,
+    height_m: float,
+    faces_seen: int,
+    length_axis_known: bool,
+) -> VehicleClass:
+    if visible_length_m >= HEAVY_MIN_LENGTH_M or height_m >= HEAVY_MIN_HEIGHT_M:
+        return VehicleClass.TRUCK
+    # Only an L along a known length axis tells a motorcycle from a car seen end-on.
+    if (
+        length_axis_known
+        and faces_seen == 2
+        and visible_length_m <= MOTORCYCLE_MAX_LENGTH_M
+        and visible_width_m <= MOTORCYCLE_MAX_WIDTH_M
+    ):
+        return VehicleClass.MOTORCYCLE
+    return VehicleClass.CAR
+
+
+def _complete(low: float, high: float, dimension: float) -> tuple[float, float, str]:
+    """Grow ``[low, high]`` (coordinates along an axis; the sensor at 0) to ``dimension``.
+
+    Returns the new interval and how: ``"seen"``, ``"one_end"`` or ``"both_ends"``.
+    """
+    if high - low >= dimension:
+        return low, high, "seen"
+    if low >= 0.0:  # the sensor is before the near face: grow the far end
+        return low, low + dimension, "one_end"
+    if high <= 0.0:
+        return high - dimension, high, "one_end"
+    middle = 0.5 * (low + high)
+    return middle - 0.5 * dimension, middle + 0.5 * dimension, "both_ends"
+
+
+def fit_box(
+    points_xyz_m: npt.ArrayLike,
+    *,
+    heading_prior_rad: float | None = None,
+    heading_tolerance_rad: float = math.radians(20.0),
+    ground_z_m: float | None = None,
+    settings: BoxFitSettings | None = None,
+) -> BoxFit:
+    """Fit a vehicle's box to the points of its visible faces (see the module docstring).
+
+    Parameters
+    ----------
+    points_xyz_m
+        ``(N, 3)`` finite points of one vehicle [m], sensor frame (sensor at the origin).
+    heading_prior_rad
+        Expected direction of travel [rad] (e.g. the road's direction here), or None.
+    heading_tolerance_rad
+        How far the heading may be from the prior [rad] (at most pi/4 is used).
+    ground_z_m
+        Ground height under the vehicle [m], or None to use the lowest point.
+    settings
+        Search and noise parameters; defaults if None.
+
+    Returns
+    -------
+    BoxFit
+        The completed box, its class and the covariance of its centre.
+    """
+    settings = settings or BoxFitSettings()
+    points = np.asarray(points_xyz_m, dtype=np.float64).reshape(-1, 3)
+    if len(points) == 0:
+        raise ValueError("fit_box needs at least one point")
+    xy = points[:, :2]
+
+    if len(points) >= 2 and np.ptp(xy, axis=0).max() > 1e-6:
+        theta = search_orientation(xy, settings, heading_prior_rad, heading_tolerance_rad)
+    else:
+        theta = 0.0 if heading_prior_rad is None else heading_prior_rad
+    extent = []
+    for angle in (theta, theta + math.pi / 2):
+        projection = xy @ np.array([math.cos(angle), math.sin(angle)])
+        extent.append(float(np.ptp(projection)))
+    faces_seen = 2 if min(extent) >= settings.thin_face_m else 1
+    if heading_prior_rad is None:
+        if max(extent) > settings.end_face_max_m:
+            length_axis = 0 if extent[0] >= extent[1] else 1  # a side is in view
+        else:
+            # No face longer than a vehicle's end: most likely seen end-on, so the length
+            # axis is the one nearer the line of sight.
+            sight = math.atan2(float(xy[:, 1].mean()), float(xy[:, 0].mean()))
+            off_sight = abs(math.sin(theta - sight))  # 0 when axis 0 lies along the sight line
+            length_axis = 0 if off_sight <= math.sqrt(0.5) else 1
+        heading = theta + length_axis * math.pi / 2
+        heading = (heading + math.pi / 2) % math.pi - math.pi / 2  # (-pi/2, pi/2]
+        if heading <= -math.pi / 2 + 1e-12:
+            heading += math.pi
+    else:
+        heading = theta  # the search kept theta within the tolerance of the prior
+
+    e_length = np.array([math.cos(heading), math.sin(heading)])
+    e_width = np.array([-math.sin(heading), math.cos(heading)])
+    along, across = xy @ e_length, xy @ e_width
+    visible_length = float(np.ptp(along))
+    visible_width = float(np.ptp(across))
+
+    top = float(points[:, 2].max())
+    bottom = float(points[:, 2].min())
+    if ground_z_m is not None and math.isfinite(ground_z_m):
+        bottom = min(bottom, ground_z_m)
+    height = top - bottom
+
+    completion = _completion_class(
+        visible_length,
+        visible_width,
+        height,
+        faces_seen,
+        length_axis_known=heading_prior_rad is not None or max(extent) > settings.end_face_max_m,
+    )
+    shape = CLASS_SHAPES[completion]
+    # A side face is either wholly in view or not (boxes are convex): seen from well off the
+    # length axis, the visible length of a heavy vehicle is its length (a 6 m box truck beside
+    # the mast is not a 16 m semitrailer); seen end-on, its length is hidden.
+    sight_rad = math.atan2(float(xy[:, 1].mean()), float(xy[:, 0].mean()))
+    side_in_view = abs(math.sin(sight_rad - heading)) >= math.sin(
+        math.radians(settings.side_view_min_deg)
+    )
+    length_open = shape.open_length and not side_in_view
+    if shape.open_length:
+        shape = replace(
+            shape,
+            length_m=settings.heavy_length_m if length_open else 0.0,
+            length_std_m=settings.heavy_length_std_m,
+        )
+    low_l, high_l, how_l = _complete(float(along.min()), float(along.max()), shape.length_m)
+    low_w, high_w, how_w = _complete(float(across.min()), float(across.max()), shape.width_m)
+    length, width = high_l - low_l, high_w - low_w
+    centre_xy = 0.5 * (low_l + high_l) * e_length + 0.5 * (low_w + high_w) * e_width
+
+    # Shape part of the covariance, in the box frame (length, width).
+    def shape_variance(how: str, dimension_std: float, visible: float, dimension: float) -> float:
+        if how == "seen":
+            return 0.0
+        variance = (0.5 * dimension_std) ** 2
+        if how == "both_ends":
+            variance += (0.5 * (dimension - visible)) ** 2 / 3.0
+        return variance
+
+    variance_length = shape_variance(how_l, shape.length_std_m, visible_length, shape.length_m)
+    if length_open:
+        variance_length = max(variance_length, (0.5 * shape.length_std_m) ** 2)
+    variance_width = shape_variance(how_w, shape.width_std_m, visible_width, shape.width_m)
+    box_axes = np.column_stack([e_length, e_width])
+    covariance = box_axes @ np.diag([variance_length, variance_width]) @ box_axes.T
+    # Sensor part, in the bearing frame of the centre: along the ray and across it.
+    range_m = float(np.hypot(*centre_xy))
+    bearing = math.atan2(centre_xy[1], centre_xy[0])
+    ray_axes = np.array(
+        [[math.cos(bearing), -math.sin(bearing)], [math.sin(bearing), math.cos(bearing)]]
+    )
+    sigma_across = max(range_m, 1.0) * math.radians(settings.angular_resolution_deg)
+    covariance += ray_axes @ np.diag([settings.range_noise_m**2, sigma_across**2]) @ ray_axes.T
+    covariance = 0.5 * (covariance + covariance.T)
+
+    return BoxFit(
+        center_xyz_m=(float(centre_xy[0]), float(centre_xy[1]), 0.5 * (top + bottom)),
+        size_lwh_m=(length, width, height),
+        heading_rad=heading,
+        object_class=class_from_size(length, width, height),
+        covariance_xy_m2=covariance,
+        visible_lw_m=(visible_length, visible_width),
+        faces_seen=faces_seen,
+        completed_lw=(how_l != "seen", how_w != "seen"),
+    )

@@ -1,0 +1,421 @@
+"""The LiDAR detector node: LiDAR frames in, site-frame detections out.
+
+Run it as ``python -m wz_lidar_detector.node`` (``wz up`` does). Settings come from the
+environment (``WZ_LIDAR_*`` for the detector, ``WZ_BUS_*`` for the bus; see
+:mod:`wz_lidar_detector.settings`). It
+
+- takes frames from ``wz/<site>/raw/lidar/<sensor>`` through a ring of one: the newest frame
+  wins, and the frames a slow detector had no time for are counted as dropped by the bus;
+- with the fast path, first learns the background from ``learn_frames`` frames (or loads it
+  from ``background_file``), then detects; the reference path detects from the first frame;
+- publishes one :class:`DetectionBatch` per processed frame on ``wz/<site>/detections/<sensor>``
+  (site frame, ``stamp`` = the frame's stamp, ``latency_s`` = time from taking the frame to
+  publishing), an empty one when the frame holds no vehicle;
+- reports health on ``wz/<site>/status/lidar-detector``; ``state`` is ``starting`` while the
+  background is being learned and ``degraded`` while it is relearned after a layout change.
+
+Bad input never stops it. Each problem is counted in the status message's ``invalid_counts``
+under ``<raw key>|<reason>`` and logged once per reason:
+
+- envelopes that do not decode (garbage, truncated, payload size not what the metadata says):
+  the bus's own reasons (``bad_magic``, ``truncated``, ``size_mismatch``, ``bad_json`` ...);
+- ``wrong_sensor``: the metadata names another sensor or site;
+- ``wrong_shape``: ``rows x columns`` is not the number of points (processed as unorganized);
+- ``absurd_coordinates``: points with a coordinate beyond ``max_abs_coordinate_m`` or infinite
+  (set to no return; the rest of the frame is processed);
+- ``no_returns``: not one valid point (nothing published: a blind sensor is not an empty road);
+- ``shape_change``: the layout differs from the previous frame's (the fast path learns a
+  background for the new layout, keeping the old one should that layout come back);
+- ``detector_error``: the detection core raised (the traceback is logged once);
+- ``bad_detection``: a detection with non-finite values (dropped from the batch).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+import zipfile
+from collections import OrderedDict
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+from pydantic import ValidationError
+
+from wz_lidar_detector.background import (
+    BackgroundFileError,
+    BackgroundModel,
+    RangeImageBackground,
+    VoxelBackground,
+    learn_background_from_frames,
+    load_background,
+)
+from wz_lidar_detector.detection import DetectionResult, Float32Array, PointFrame
+from wz_lidar_detector.fast import FastPipeline
+from wz_lidar_detector.reference import ReferencePipeline
+from wz_lidar_detector.settings import LidarDetectorSettings, lidar_mount
+from wz_lidar_detector.transform import box_to_site, to_detection
+from wz_shared.codec import Frame
+from wz_shared.logs import configure_logging
+from wz_shared.messages import Detection, DetectionBatch, LidarFrameMeta, ServiceState
+from wz_shared.service import ServiceRuntime
+from wz_shared.settings import BusSettings
+from wz_shared.site import SensorMount, load_site
+from wz_shared.timebase import SimClock
+
+SERVICE = "lidar-detector"
+log = logging.getLogger("wz_lidar_detector.node")
+
+#: Layout of a frame: (rows, columns) when organized, (1, 0) for any unorganized cloud.
+Layout = tuple[int, int]
+UNORGANIZED: Layout = (1, 0)
+#: Backgrounds kept for layouts seen before (a sensor switching between two modes).
+MAX_LAYOUTS = 2
+#: How a problem is reported: (reason, detail).
+Report = Callable[[str, str], None]
+
+
+def layout_of(frame: PointFrame) -> Layout:
+    return (frame.rows, frame.columns) if frame.organized else UNORGANIZED
+
+
+def describe(layout: Layout) -> str:
+    return "unorganized" if layout == UNORGANIZED else f"{layout[0]}x{layout[1]}"
+
+
+class BackgroundLearner:
+    """Backgrounds of the fast path, one per frame layout, learned from the first K frames.
+
+    Parameters
+    ----------
+    settings
+        ``learn_frames``, the background and fast-path parameters, ``background_file``.
+    """
+
+    def __init__(self, settings: LidarDetectorSettings) -> None:
+        self.settings = settings
+        self._pipelines: OrderedDict[Layout, FastPipeline] = OrderedDict()
+        #: A voxel model given from a file fits every layout.
+        self._any_layout: FastPipeline | None = None
+        self._learning: Layout | None = None
+        self._frames: list[PointFrame] = []
+        self._started_s = 0.0
+
+    def use(self, background: BackgroundModel) -> None:
+        """Take a model (loaded from a file, or given by the caller) instead of learning one."""
+        pipeline = FastPipeline(self.settings.fast, background)
+        if isinstance(background, RangeImageBackground):
+            self._pipelines[(background.rows, background.columns)] = pipeline
+        else:
+            self._any_layout = pipeline
+
+    def load(self, path: Path) -> bool:
+        """Load a saved model from ``path`` if it exists; False (logged) when it cannot."""
+        if not path.is_file():
+            log.info("no saved background at %s: it will be learned", path)
+            return False
+        try:
+            background = load_background(path)
+        except (BackgroundFileError, OSError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+            log.warning("cannot use the saved background (%s): it will be learned again", exc)
+            return False
+        self.use(background)
+        log.info("loaded the %s background from %s", background.kind, path)
+        return True
+
+    def pipeline(self, layout: Layout) -> FastPipeline | None:
+        """The pipeline whose background fits ``layout``, or None while it is being learned."""
+        pipeline = self._pipelines.get(layout)
+        if pipeline is not None:
+            self._pipelines.move_to_end(layout)
+            return pipeline
+        return self._any_layout
+
+    @property
+    def learning(self) -> bool:
+        return self._learning is not None
+
+    @property
+    def has_background(self) -> bool:
+        return bool(self._pipelines) or self._any_layout is not None
+
+    def learn(self, frame: PointFrame) -> FastPipeline | None:
+        """Add a frame to the learning set of its layout; the new pipeline once K are in."""
+        layout = layout_of(frame)
+        if self._learning != layout:
+            if self._learning is not None:
+                log.warning(
+                    "the layout changed from %s to %s while learning: starting over",
+                    describe(self._learning),
+                    describe(layout),
+                )
+            self._learning, self._frames = layout, []
+            self._started_s = time.monotonic()
+            log.info(
+                "learning the background of %s frames from %d frames",
+                describe(layout),
+                self.settings.learn_frames,
+            )
+        self._frames.append(frame)
+        wanted = self.settings.learn_frames
+        if len(self._frames) < wanted:
+            if len(self._frames) % max(1, wanted // 5) == 0:
+                log.info("learning the background: %d/%d frames", len(self._frames), wanted)
+            return None
+        background = learn_background_from_frames(
+            self._frames,
+            range_settings=self.settings.range_background,
+            voxel_m=self.settings.voxel_m,
+            min_occupancy_fraction=self.settings.voxel_min_occupancy_fraction,
+        )
+        pipeline = FastPipeline(self.settings.fast, background)
+        self._pipelines[layout] = pipeline
+        while len(self._pipelines) > MAX_LAYOUTS:
+            self._pipelines.popitem(last=False)
+        log.info(
+            "learned the %s background of %s frames from %d frames in %.2f s",
+            background.kind,
+            describe(layout),
+            wanted,
+            time.monotonic() - self._started_s,
+        )
+        self._learning, self._frames = None, []
+        if self.settings.background_file is not None:
+            self._save(background, self.settings.background_file)
+        return pipeline
+
+    @staticmethod
+    def _save(background: RangeImageBackground | VoxelBackground, path: Path) -> None:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            background.save(path)
+        except OSError as exc:
+            log.warning("could not save the background to %s: %s", path, exc)
+        else:
+            log.info("saved the background to %s", path)
+
+
+class LidarDetector:
+    """What the node does with one frame, without the bus: check, learn, detect, move to site.
+
+    Parameters
+    ----------
+    site_id
+        The site the node serves (frames of another site are refused).
+    mount
+        The sensor: its id (frames of another sensor are refused) and pose (sensor to site).
+    settings
+        The service's settings (path, learning, limits).
+    report
+        Called with ``(reason, detail)`` for every problem (the node counts them in the bus
+        stats).
+    """
+
+    def __init__(
+        self, site_id: str, mount: SensorMount, settings: LidarDetectorSettings, report: Report
+    ) -> None:
+        self.site_id = site_id
+        self.mount = mount
+        self.settings = settings
+        self.report = report
+        self.reference = (
+            ReferencePipeline(settings.reference) if settings.path == "reference" else None
+        )
+        self.backgrounds = BackgroundLearner(settings)
+        self._layout: Layout | None = None
+        self._logged: set[str] = set()
+        #: Stamp of the newest frame taken [s] (the node's clock on simulation time).
+        self.last_stamp_s = 0.0
+
+    @property
+    def state(self) -> ServiceState:
+        """``starting`` until a background exists; ``degraded`` while the layout of the newest
+        frame has none (learning it); else ``running``."""
+        has_background = self.backgrounds.has_background
+        if self.reference is not None:
+            return ServiceState.RUNNING
+        if self._layout is None:
+            return ServiceState.RUNNING if has_background else ServiceState.STARTING
+        if self.backgrounds.pipeline(self._layout) is not None:
+            return ServiceState.RUNNING
+        return ServiceState.DEGRADED if has_background else ServiceState.STARTING
+
+    def handle(
+        self, meta: LidarFrameMeta, points: Float32Array, taken_s: float
+    ) -> DetectionBatch | None:
+        """Process one decoded frame.
+
+        Parameters
+        ----------
+        meta
+            The frame's metadata (validated by the codec).
+        points
+            ``(num_points, 4)`` float32 x, y, z [m] (sensor frame), intensity; not modified.
+        taken_s
+            ``time.monotonic()`` when the frame was taken from the queue (for ``latency_s``).
+
+        Returns
+        -------
+        DetectionBatch or None
+            None while learning the background, or for a frame that cannot be used (reported).
+        """
+        if meta.source_id != self.mount.sensor_id or meta.site != self.site_id:
+            self.report(
+                "wrong_sensor",
+                f"frame of {meta.site}/{meta.source_id} on the key of "
+                f"{self.site_id}/{self.mount.sensor_id}",
+            )
+            return None
+        frame = self._point_frame(meta, points)
+        if frame is None:
+            return None
+        self.last_stamp_s = max(self.last_stamp_s, meta.stamp)
+        layout = layout_of(frame)
+        if self._layout is not None and layout != self._layout:
+            self.report(
+                "shape_change",
+                f"frame {meta.frame_index} is {describe(layout)}, the previous one was "
+                f"{describe(self._layout)}",
+            )
+            log.warning(
+                "the frame layout changed from %s to %s",
+                describe(self._layout),
+                describe(layout),
+                extra={"sensor": self.mount.sensor_id},
+            )
+        self._layout = layout
+        try:
+            result = self._detect(frame, layout)
+        except Exception as exc:  # a core that fails on one frame must not stop the node
+            self.report("detector_error", repr(exc))
+            if "detector_error" not in self._logged:
+                self._logged.add("detector_error")
+                log.exception("the detector failed on frame %d; going on", meta.frame_index)
+            return None
+        if result is None:
+            return None
+        detections = self._site_detections(result)
+        return DetectionBatch(
+            site=self.site_id,
+            source_id=self.mount.sensor_id,
+            stamp=meta.stamp,
+            frame_index=meta.frame_index,
+            detections=detections,
+            latency_s=max(0.0, time.monotonic() - taken_s),
+        )
+
+    def _point_frame(self, meta: LidarFrameMeta, points: Float32Array) -> PointFrame | None:
+        """A clean copy of the frame: corrupt points set to no return; None if none is left."""
+        cloud = np.array(points, dtype=np.float32, copy=True).reshape(-1, 4)
+        # The codec has checked an organized frame's rows x columns; an unorganized one may
+        # still claim beams it does not have.
+        if not meta.organized and meta.rows > 1 and meta.rows * meta.columns != len(cloud):
+            self.report(
+                "wrong_shape",
+                f"frame {meta.frame_index}: {meta.rows}x{meta.columns} slots but {len(cloud)} "
+                "points; processed as unorganized",
+            )
+        rows, columns = (meta.rows, meta.columns) if meta.organized else (1, len(cloud))
+        xyz = cloud[:, :3]
+        with np.errstate(invalid="ignore"):
+            finite = np.isfinite(xyz).all(axis=1)
+            absurd = (finite & (np.abs(xyz) > self.settings.max_abs_coordinate_m).any(axis=1)) | (
+                ~finite & ~np.isnan(xyz).all(axis=1)
+            )
+        if absurd.any():
+            self.report(
+                "absurd_coordinates",
+                f"frame {meta.frame_index}: {int(absurd.sum())} points beyond "
+                f"{self.settings.max_abs_coordinate_m:g} m or not finite, set to no return",
+            )
+            cloud[absurd, :3] = np.nan
+            finite &= ~absurd
+        if not finite.any():
+            self.report("no_returns", f"frame {meta.frame_index} has no valid point")
+            return None
+        return PointFrame(points=cloud, rows=rows, columns=columns, stamp_s=meta.stamp)
+
+    def _detect(self, frame: PointFrame, layout: Layout) -> DetectionResult | None:
+        if self.reference is not None:
+            return self.reference.detect(frame)
+        pipeline = self.backgrounds.pipeline(layout)
+        if pipeline is None:
+            self.backgrounds.learn(frame)
+            return None
+        return pipeline.detect(frame)
+
+    def _site_detections(self, result: DetectionResult) -> list[Detection]:
+        detections = []
+        for box in result.detections:
+            try:
+                detections.append(to_detection(box_to_site(box, self.mount.pose)))
+            except (ValidationError, ValueError) as exc:
+                self.report("bad_detection", f"{box}: {exc}")
+        return detections
+
+
+def run(
+    runtime: ServiceRuntime,
+    site_id: str,
+    mount: SensorMount,
+    settings: LidarDetectorSettings,
+    clock: SimClock,
+) -> int:
+    """Build the detector on the runtime's bus and take frames until ``runtime.stop``.
+
+    ``clock`` follows the newest frame's stamp (the status messages' time: simulation time in
+    simulation). Returns the number of frames processed.
+    """
+    bus = runtime.bus
+    raw_key = bus.keys.raw_lidar(mount.sensor_id)
+    detector = LidarDetector(
+        site_id,
+        mount,
+        settings,
+        report=lambda reason, detail: bus.stats.count_invalid(raw_key, reason, detail),
+    )
+    if settings.path == "fast" and settings.background_file is not None:
+        detector.backgrounds.load(settings.background_file)
+    frames = bus.subscribe_frames(raw_key, LidarFrameMeta)  # a ring of one: latest wins
+    publisher = bus.publisher(bus.keys.detections(mount.sensor_id), DetectionBatch)
+    log.info("detecting on %s with the %s path", raw_key, settings.path)
+    processed = 0
+    runtime.state = detector.state
+    while not runtime.stop.is_set():
+        frame: Frame[LidarFrameMeta] | None = frames.recv(0.25)
+        if frame is None:
+            continue
+        taken_s = time.monotonic()
+        batch = detector.handle(frame.meta, frame.points(), taken_s)
+        runtime.state = detector.state
+        clock.advance_to(detector.last_stamp_s)
+        if batch is not None:
+            publisher.put(batch)
+            processed += 1
+    return processed
+
+
+def main() -> None:
+    settings = LidarDetectorSettings()
+    site = load_site(settings.site_file)
+    try:
+        mount = lidar_mount(site, settings.sensor_id)
+    except ValueError as exc:
+        raise SystemExit(f"lidar-detector: {exc}") from exc
+    configure_logging(
+        service=SERVICE, site=site.site_id, sensor=mount.sensor_id, level=settings.log_level
+    )
+    clock = SimClock()
+    with ServiceRuntime(
+        SERVICE,
+        site.site_id,
+        BusSettings(),
+        status_period_s=settings.status_period_s,
+        clock_stamp=clock.now,
+    ) as runtime:
+        processed = run(runtime, site.site_id, mount, settings, clock)
+    log.info("stopped after %d frames", processed)
+
+
+if __name__ == "__main__":
+    main()

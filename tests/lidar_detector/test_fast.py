@@ -1,0 +1,443 @@
+"""The fast path: background models, L-shape box fitting, and the pipeline on synthetic scenes.
+
+The scene: a sensor 5 m above flat ground, a 3 m wall 20 m to its left, open sky above; upright
+boxes for vehicles (0.2-0.4 m above the ground, as bodies are). A small organized range image
+(32 beams x 480 columns) is ray cast exactly, with seeded range noise.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wz_lidar_detector.background import (
+    BackgroundFileError,
+    GroundGrid,
+    RangeBackgroundSettings,
+    RangeImageBackground,
+    ShapeMismatchError,
+    VoxelBackground,
+    learn_background_from_frames,
+    load_background,
+)
+from wz_lidar_detector.boxfit import fit_box
+from wz_lidar_detector.detection import PointFrame
+from wz_lidar_detector.fast import FastPipeline, FastSettings, euclidean_clusters
+from wz_shared.messages import VehicleClass
+
+ROWS, COLUMNS = 32, 480
+SENSOR_HEIGHT_M = 5.0
+WALL_Y_M, WALL_TOP_Z_M = 20.0, -2.0
+MAX_RANGE_M = 120.0
+NOISE_M = 0.01
+
+
+@dataclass(frozen=True)
+class Box:
+    x_m: float
+    y_m: float
+    heading_rad: float
+    length_m: float
+    width_m: float
+    bottom_z_m: float
+    top_z_m: float
+
+
+CAR = Box(15.0, 8.0, 0.0, 4.5, 1.8, -4.8, -3.5)
+TRUCK = Box(32.0, 12.0, 0.03, 16.5, 2.5, -4.6, -1.2)  # a tractor-semitrailer, 3.8 m high
+
+
+def _directions() -> np.ndarray:
+    elevation = np.radians(np.linspace(2.0, -30.0, ROWS))[:, None]
+    azimuth = np.radians(np.linspace(60.0, -60.0, COLUMNS))[None, :]
+    return np.stack(
+        np.broadcast_arrays(
+            np.cos(elevation) * np.cos(azimuth),
+            np.cos(elevation) * np.sin(azimuth),
+            np.sin(elevation),
+        ),
+        axis=-1,
+    ).reshape(-1, 3)
+
+
+DIRECTIONS = _directions()
+
+
+def _box_range(box: Box) -> np.ndarray:
+    """Range [m] along each ray to an upright box (slab test in the box frame); inf on a miss."""
+    c, s = math.cos(box.heading_rad), math.sin(box.heading_rad)
+    centre = np.array([box.x_m, box.y_m, 0.5 * (box.bottom_z_m + box.top_z_m)])
+    half = np.array([box.length_m, box.width_m, box.top_z_m - box.bottom_z_m]) / 2
+    rotation = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])  # sensor -> box frame
+    origin = rotation @ -centre
+    direction = DIRECTIONS @ rotation.T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1 = (-half - origin) / direction
+        t2 = (half - origin) / direction
+    near = np.nanmax(np.minimum(t1, t2), axis=1)
+    far = np.nanmin(np.maximum(t1, t2), axis=1)
+    hit = (far >= near) & (near > 0)
+    return np.where(hit, near, np.inf)
+
+
+def _cast(boxes: list[Box], rng: np.random.Generator) -> tuple[PointFrame, np.ndarray]:
+    """An organized frame of the scene and, per slot, the index of the box hit (-1: none)."""
+    dz, dy = DIRECTIONS[:, 2], DIRECTIONS[:, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ground = np.where(dz < 0, -SENSOR_HEIGHT_M / dz, np.inf)
+        wall = np.where(dy > 0, WALL_Y_M / dy, np.inf)
+    wall_z = wall * dz
+    wall = np.where((wall_z >= -SENSOR_HEIGHT_M) & (wall_z <= WALL_TOP_Z_M), wall, np.inf)
+    ranges = np.stack([ground, wall] + [_box_range(box) for box in boxes], axis=1)
+    nearest = np.argmin(ranges, axis=1)
+    distance = ranges[np.arange(len(ranges)), nearest]
+    distance = distance + rng.normal(0.0, NOISE_M, len(distance))
+    returned = distance <= MAX_RANGE_M
+    points = np.full((len(DIRECTIONS), 4), np.nan, dtype=np.float32)
+    points[returned, :3] = DIRECTIONS[returned] * distance[returned, None]
+    points[returned, 3] = 0.5
+    label = np.where(returned & (nearest >= 2), nearest - 2, -1)
+    return PointFrame(points=points, rows=ROWS, columns=COLUMNS), label
+
+
+def _learning_frames(rng: np.random.Generator, count: int = 30) -> list[PointFrame]:
+    """Frames with one car passing through at 4 m per frame."""
+    return [
+        _cast([Box(-40.0 + 4.0 * k, 9.0, 0.0, 4.5, 1.8, -4.8, -3.5)], rng)[0] for k in range(count)
+    ]
+
+
+@pytest.fixture(scope="module")
+def scene() -> tuple[list[PointFrame], PointFrame, np.ndarray]:
+    rng = np.random.default_rng(7)
+    learning = _learning_frames(rng)
+    frame, label = _cast([CAR, TRUCK], rng)
+    return learning, frame, label
+
+
+@pytest.fixture(scope="module")
+def range_background(
+    scene: tuple[list[PointFrame], PointFrame, np.ndarray],
+) -> RangeImageBackground:
+    return RangeImageBackground.learn(scene[0])
+
+
+# --------------------------------------------------------------------------------------------
+# Range-image background
+# --------------------------------------------------------------------------------------------
+
+
+def test_range_background_ignores_passing_car_and_marks_open_sky(
+    scene: tuple[list[PointFrame], PointFrame, np.ndarray],
+    range_background: RangeImageBackground,
+) -> None:
+    rng = np.random.default_rng(1)
+    empty_frame, _ = _cast([], rng)
+    truth = np.linalg.norm(empty_frame.points[:, :3], axis=1).reshape(ROWS, COLUMNS)
+    model = range_background.background_range_m
+    returned = np.isfinite(truth)
+    # Every slot that sees the static scene has the static range (the passing car is ignored)...
+    assert np.all(np.isfinite(model[returned]))
+    assert np.max(np.abs(model[returned] - truth[returned])) < 0.1
+    # ... and slots that never return are open sky.
+    assert np.all(np.isinf(model[~returned]))
+    # Nothing of an empty frame is foreground.
+    assert range_background.foreground_mask(empty_frame).sum() == 0
+
+
+def test_range_background_foreground_is_the_vehicles(
+    scene: tuple[list[PointFrame], PointFrame, np.ndarray],
+    range_background: RangeImageBackground,
+) -> None:
+    _, frame, label = scene
+    mask = range_background.foreground_mask(frame)
+    vehicle = label >= 0
+    assert vehicle.sum() > 300
+    recall = (mask & vehicle).sum() / vehicle.sum()
+    assert recall > 0.98
+    assert (mask & ~vehicle).sum() <= 2
+    # The truck's top stands against the sky above the wall: open-sky slots give foreground.
+    sky = np.isinf(range_background.background_range_m.reshape(-1))
+    assert (mask & sky).sum() > 0
+
+
+def test_fast_pipeline_finds_both_vehicles_with_centres(
+    scene: tuple[list[PointFrame], PointFrame, np.ndarray],
+    range_background: RangeImageBackground,
+) -> None:
+    _, frame, label = scene
+    settings = FastSettings(heading_prior_rad=0.0, update_background=False)
+    result = FastPipeline(settings, range_background).detect(frame)
+    assert list(result.timings_s) == ["foreground", "cluster", "boxes"]
+    assert len(result.detections) == 2
+    by_class = {d.object_class: d for d in result.detections}
+    assert set(by_class) == {VehicleClass.CAR, VehicleClass.TRUCK}
+    for truth, detection in (
+        (CAR, by_class[VehicleClass.CAR]),
+        (TRUCK, by_class[VehicleClass.TRUCK]),
+    ):
+        error = math.hypot(
+            detection.center_xyz_m[0] - truth.x_m, detection.center_xyz_m[1] - truth.y_m
+        )
+        assert error < 0.3, (detection, truth)
+        # Height from the background's ground (z = -5), not from the lowest return.
+        assert detection.size_lwh_m[2] == pytest.approx(truth.top_z_m + SENSOR_HEIGHT_M, abs=0.25)
+        covariance = np.array(detection.covariance_xy_m2)
+        assert np.allclose(covariance, covariance.T)
+        assert np.all(np.linalg.eigvalsh(covariance) > 0)
+    # Nearly all vehicle returns are in the two boxes (a roof fragment that one coarse beam
+    # sees apart from the body is dropped as lower than 0.4 m, not reported as a third vehicle).
+    in_boxes = sum(d.num_points for d in result.detections)
+    assert in_boxes >= 0.95 * (result.foreground & (label >= 0)).sum()
+
+
+def test_update_reveals_a_parked_vehicle_that_left() -> None:
+    rng = np.random.default_rng(3)
+    parked = Box(20.0, 10.0, 0.0, 4.5, 1.8, -4.8, -3.5)
+    learning = [_cast([parked], rng)[0] for _ in range(5)]
+    settings = RangeBackgroundSettings(reveal_frames=3)
+    background = RangeImageBackground.learn(learning, settings)
+    with_parked, label = _cast([parked], rng)
+    assert background.foreground_mask(with_parked).sum() == 0  # part of the background
+    for _ in range(settings.reveal_frames):
+        background.update(_cast([], rng)[0])  # it left: its slots now see farther
+    mask = background.foreground_mask(_cast([parked], rng)[0])
+    assert mask.sum() >= 0.95 * (label >= 0).sum()  # back again: foreground
+
+
+# --------------------------------------------------------------------------------------------
+# Voxel background
+# --------------------------------------------------------------------------------------------
+
+
+def test_voxel_background_from_frames(
+    scene: tuple[list[PointFrame], PointFrame, np.ndarray],
+) -> None:
+    learning, frame, label = scene
+    unorganized = [PointFrame.unorganized(f.points[np.isfinite(f.points[:, 0])]) for f in learning]
+    # The ground (z = -5) lies on a voxel face: its returns split between two voxels, each
+    # occupied in about half the frames, which the default 0.3 keeps.
+    background = VoxelBackground.from_frames(unorganized, 0.5)
+    mask = background.foreground_mask(frame)
+    vehicle = label >= 0
+    # Vehicle returns in the ground's voxels (the lowest 0.3 m of a body) are lost.
+    assert (mask & vehicle).sum() / vehicle.sum() > 0.7
+    # Ground returns whose range noise straddles voxel faces at grazing angles are occupied in
+    # too few frames: isolated speckle, which clustering drops (two detections below).
+    returns = np.isfinite(frame.points[:, 0])
+    assert (mask & ~vehicle).sum() <= 0.005 * returns.sum()
+    # The dense bit table and the searchsorted fallback agree.
+    fallback = VoxelBackground(background.keys, background.voxel_m, max_table_bytes=0)
+    assert np.array_equal(fallback.foreground_mask(frame), mask)
+    result = FastPipeline(FastSettings(heading_prior_rad=0.0), background).detect(frame)
+    assert len(result.detections) == 2
+    # Ground from the lowest background voxels: within half a voxel of z = -5.
+    assert background.ground_z_m(np.array([[15.0, 8.0]]))[0] == pytest.approx(-5.0, abs=0.3)
+
+
+def test_voxel_background_from_points_and_dilation() -> None:
+    wall = np.column_stack([np.linspace(0.0, 10.0, 200), np.full(200, 5.0), np.full(200, 1.0)])
+    plain = VoxelBackground.from_points(wall, 0.5)
+    dilated = VoxelBackground.from_points(wall, 0.5, dilate=True)
+    near_wall = PointFrame.unorganized([[5.0, 5.4, 1.0], [5.0, 4.6, 1.0], [5.0, 7.0, 1.0]])
+    assert plain.foreground_mask(near_wall).tolist() == [False, True, True]
+    assert dilated.foreground_mask(near_wall).tolist() == [False, False, True]
+    assert dilated.num_voxels > plain.num_voxels
+
+
+# --------------------------------------------------------------------------------------------
+# Save / load, shapes, empty frames
+# --------------------------------------------------------------------------------------------
+
+
+def test_save_load_round_trip(
+    tmp_path: Path,
+    scene: tuple[list[PointFrame], PointFrame, np.ndarray],
+    range_background: RangeImageBackground,
+) -> None:
+    _, frame, _ = scene
+    range_path = tmp_path / "range.npz"
+    range_background.save(range_path)
+    loaded = RangeImageBackground.load(range_path, rows=ROWS, columns=COLUMNS)
+    assert np.array_equal(loaded.background_range_m, range_background.background_range_m)
+    assert np.array_equal(loaded.foreground_mask(frame), range_background.foreground_mask(frame))
+    assert loaded.settings == range_background.settings
+    assert isinstance(load_background(range_path), RangeImageBackground)
+
+    voxel = VoxelBackground.from_points(frame.points[np.isfinite(frame.points[:, 0]), :3], 0.4)
+    voxel_path = tmp_path / "voxel"  # no suffix: used as given
+    voxel.save(voxel_path)
+    loaded_voxel = VoxelBackground.load(voxel_path, voxel_m=0.4)
+    assert np.array_equal(loaded_voxel.keys, voxel.keys)
+    assert np.array_equal(loaded_voxel.foreground_mask(frame), voxel.foreground_mask(frame))
+
+    with pytest.raises(BackgroundFileError, match="64x480"):
+        RangeImageBackground.load(range_path, rows=64)
+    with pytest.raises(BackgroundFileError, match=r"0\.4 m, expected 0\.5 m"):
+        VoxelBackground.load(voxel_path, voxel_m=0.5)
+    with pytest.raises(BackgroundFileError, match="'voxel' background, expected 'range_image'"):
+        RangeImageBackground.load(voxel_path)
+
+
+def test_frame_of_another_layout_raises(
+    range_background: RangeImageBackground,
+) -> None:
+    other = PointFrame(
+        points=np.zeros((ROWS * (COLUMNS + 1), 4), np.float32), rows=ROWS, columns=COLUMNS + 1
+    )
+    with pytest.raises(ShapeMismatchError, match="rebuild the background"):
+        range_background.foreground_mask(other)
+    with pytest.raises(ShapeMismatchError):
+        range_background.foreground_mask(PointFrame.unorganized(np.zeros((5, 3))))
+
+
+def test_empty_and_all_nan_frames_give_empty_results(
+    range_background: RangeImageBackground,
+) -> None:
+    all_nan = PointFrame(
+        points=np.full((ROWS * COLUMNS, 4), np.nan, np.float32), rows=ROWS, columns=COLUMNS
+    )
+    result = FastPipeline(FastSettings(), range_background).detect(all_nan)
+    assert result.detections == []
+    assert result.foreground.shape == (ROWS * COLUMNS,) and not result.foreground.any()
+
+    voxel = VoxelBackground.from_points(np.zeros((1, 3)), 0.5)
+    empty = PointFrame.unorganized(np.zeros((0, 4)))
+    result = FastPipeline(FastSettings(), voxel).detect(empty)
+    assert result.detections == [] and result.foreground.shape == (0,)
+
+
+def test_learn_background_from_frames_picks_the_model(
+    scene: tuple[list[PointFrame], PointFrame, np.ndarray],
+) -> None:
+    learning = scene[0][:3]
+    assert isinstance(learn_background_from_frames(learning), RangeImageBackground)
+    clouds = [PointFrame.unorganized(f.points[np.isfinite(f.points[:, 0])]) for f in learning]
+    assert isinstance(learn_background_from_frames(clouds), VoxelBackground)
+
+
+# --------------------------------------------------------------------------------------------
+# Clustering and box fitting
+# --------------------------------------------------------------------------------------------
+
+
+def test_euclidean_clusters_split_at_the_gap() -> None:
+    rng = np.random.default_rng(5)
+    first = rng.uniform([0, 0, 0], [4, 2, 1.5], (300, 3))
+    second = rng.uniform([6, 0, 0], [10, 2, 1.5], (300, 3))  # 2 m gap
+    labels = euclidean_clusters(np.vstack([first, second]), 0.25, 1.0)
+    assert len(set(labels[:300].tolist())) == 1 and len(set(labels[300:].tolist())) == 1
+    assert labels[0] != labels[300]
+
+
+def _visible_faces(
+    centre: tuple[float, float], heading: float, length: float, width: float, faces: str
+) -> np.ndarray:
+    """Points on a rectangle's faces that turn towards the sensor (at the origin).
+
+    ``faces`` is "visible" (every face facing the sensor: an L or one face) or "near_end" (only
+    the end face nearer the sensor).
+    """
+    rng = np.random.default_rng(11)
+    axes = np.array(
+        [[math.cos(heading), math.sin(heading)], [-math.sin(heading), math.cos(heading)]]
+    )
+    centre_xy = np.array(centre)
+    points = []
+    for axis, (half_along, half_across) in enumerate(
+        ((length / 2, width / 2), (width / 2, length / 2))
+    ):
+        for sign in (-1.0, 1.0):
+            normal = sign * axes[axis]
+            face_middle = centre_xy + half_along * normal
+            if np.dot(-face_middle, normal) <= 0:
+                continue  # faces away from the sensor
+            if faces == "near_end" and axis != 0:
+                continue
+            offsets = np.arange(-half_across, half_across + 1e-9, 0.05)
+            points.append(face_middle + offsets[:, None] * axes[1 - axis])
+    xy = np.vstack(points) + rng.normal(0.0, 0.01, (sum(len(p) for p in points), 2))
+    z = rng.uniform(-4.5, -3.6, len(xy))
+    return np.column_stack([xy, z])
+
+
+def test_l_shape_fit_recovers_centre_and_heading() -> None:
+    centre, heading = (20.0, 8.0), math.radians(10.0)
+    points = _visible_faces(centre, heading, 4.6, 1.9, "visible")
+    fit = fit_box(points)
+    assert fit.faces_seen == 2
+    assert math.hypot(fit.center_xyz_m[0] - centre[0], fit.center_xyz_m[1] - centre[1]) < 0.05
+    heading_error = (fit.heading_rad - heading + math.pi / 2) % math.pi - math.pi / 2
+    assert abs(math.degrees(heading_error)) < 1.0
+    assert fit.size_lwh_m[:2] == pytest.approx((4.6, 1.9), abs=0.05)
+    assert fit.object_class == VehicleClass.CAR
+
+
+def test_one_face_with_prior_is_completed_away_from_the_sensor() -> None:
+    centre, heading, length = (40.0, 6.0), 0.0, 4.6
+    points = _visible_faces(centre, heading, length, 1.8, "near_end")
+    fit = fit_box(points, heading_prior_rad=0.02, heading_tolerance_rad=math.radians(20))
+    # The whole end face is seen (1.8 m, less the noise): the width is not grown beyond it
+    # by more than the noise.
+    fit_error = math.hypot(fit.center_xyz_m[0] - centre[0], fit.center_xyz_m[1] - centre[1])
+    centroid = points[:, :2].mean(axis=0)
+    centroid_error = math.hypot(centroid[0] - centre[0], centroid[1] - centre[1])
+    assert fit.faces_seen == 1 and fit.completed_lw[0]
+    assert fit.size_lwh_m[1] == pytest.approx(1.8, abs=0.03)
+    assert fit_error < 0.3
+    assert centroid_error == pytest.approx(length / 2, abs=0.1)
+    assert fit_error < 0.2 * centroid_error
+    # The unseen dimension (the length, along x here) is the uncertain one.
+    covariance = fit.covariance_xy_m2
+    assert covariance[0, 0] > 1.5 * covariance[1, 1]
+    # An L of the same car gives a smaller covariance along the length.
+    l_fit = fit_box(_visible_faces((40.0, 6.0), 0.0, 4.6, 1.8, "visible"), heading_prior_rad=0.0)
+    assert l_fit.covariance_xy_m2[0, 0] < covariance[0, 0]
+
+
+def test_far_points_link_over_wider_gaps() -> None:
+    def pair(range_m: float) -> np.ndarray:
+        # Two runs of points 1.3 m apart across the line of sight.
+        run = np.column_stack([np.full(5, range_m), np.arange(5) * 0.3, np.zeros(5)])
+        return np.vstack([run, run + np.array([0.0, 2.5, 0.0])])
+
+    for range_m, linked in ((10.0, False), (100.0, True)):
+        labels = euclidean_clusters(pair(range_m), 0.25, 1.0, eps_range_fraction=0.015)
+        assert bool(labels[0] == labels[-1]) is linked, range_m
+    assert len(set(euclidean_clusters(pair(100.0), 0.25, 1.0).tolist())) == 2
+
+
+def test_ground_grid_falls_back_to_nearby_cells() -> None:
+    # Ground seen only in rings 20 m apart, as a sensor sees it far away.
+    ring_x = np.repeat([80.0, 100.0], 11)
+    ring_y = np.tile(np.linspace(-5.0, 5.0, 11), 2)
+    grid = GroundGrid.from_points(np.column_stack([ring_x, ring_y, np.full(22, -6.0)]))
+    heights = grid.lookup(np.array([[80.2, 0.3], [90.0, 0.0], [200.0, 0.0]]))
+    assert heights[0] == -6.0  # a known cell
+    assert heights[1] == pytest.approx(-6.0)  # between rings: the nearest known cells
+    assert np.isnan(heights[2])  # nothing within 30 m
+
+
+def test_fragment_inside_a_fitted_box_is_absorbed() -> None:
+    # A car's rear and the first 2.8 m of its side; 1.3 m farther along the side, a fragment
+    # (a side at a grazing angle breaks into columns far apart).
+    car = _visible_faces((20.0, 8.0), 0.0, 4.6, 1.8, "visible")
+    main = car[car[:, 0] < 20.5]
+    fragment = np.column_stack([np.linspace(21.8, 22.2, 6), np.full(6, 7.1), np.full(6, -4.0)])
+    ground = np.column_stack(
+        [
+            np.repeat(np.arange(0.0, 40.0), 20),
+            np.tile(np.arange(-10.0, 10.0), 40),
+            np.full(800, -5.0),
+        ]
+    )
+    background = VoxelBackground.from_points(ground, 0.5)
+    frame = PointFrame.unorganized(np.vstack([main, fragment]))
+    settings = FastSettings(heading_prior_rad=0.0)
+    result = FastPipeline(settings, background).detect(frame)
+    assert len(result.detections) == 1
+    assert result.detections[0].num_points == len(main) + len(fragment)
