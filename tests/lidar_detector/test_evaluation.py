@@ -60,3 +60,15 @@ def test_detection_outside_the_footprint_margin_does_not_count() -> None:
     total = scorer.total()
     assert (total.hits, total.false_alarms) == (0, 1)
     assert math.isnan(percentile([], 50))
+
+
+def test_heading_prior_from_the_site_road() -> None:
+    from wz_lidar_detector.node import road_heading_in_sensor_frame
+    from wz_shared.site import DEFAULT_SITE_PATH, Pose, load_site
+
+    site = load_site(DEFAULT_SITE_PATH)
+    mount = site.sensor("lidar-mast")
+    # The road runs north at the mast; the sensor looks south: travel is along its -x axis.
+    assert abs(math.cos(road_heading_in_sensor_frame(site, mount)) + 1.0) < 1e-9
+    turned = mount.model_copy(update={"pose": Pose(x_m=7.5, y_m=980.0, z_m=6.0, yaw_deg=0.0)})
+    assert road_heading_in_sensor_frame(site, turned) == pytest.approx(math.pi / 2, abs=1e-6)

@@ -757,12 +757,21 @@ class VoxelBackground:
             for axis in range(3):
                 # float32 throughout: a point exactly on a voxel face may fall either side,
                 # which a margin of one voxel (dilate) makes harmless.
-                cell = np.floor(xyz[:, axis] * scale) - np.float32(self._origin[axis])
-                inside &= (cell >= 0) & (cell < self._extent[axis])  # NaN: False
-                cells.append(cell)
-        cx, cy, cz = (np.where(inside, cell, 0).astype(np.int64) for cell in cells)
-        word = np.take(self._table, ((cz >> 6) * self._extent[0] + cx) * self._extent[1] + cy)
-        bit = (word >> (cz & 63).astype(np.uint64)) & np.uint64(1)
+                cell = np.floor(xyz[:, axis] * scale)
+                cell -= np.float32(self._origin[axis])
+                inside &= cell >= 0  # NaN compares False
+                inside &= cell < self._extent[axis]
+                # Outside (or NaN) cells cast to garbage; take(mode="clip") keeps the index in
+                # the table and `inside` discards the answer.
+                cells.append(cell.astype(np.int32))
+        cx, cy, cz = cells
+        extent_x, extent_y = int(self._extent[0]), int(self._extent[1])
+        flat = (cz >> 6) * extent_x
+        flat += cx
+        flat *= extent_y
+        flat += cy
+        word = np.take(self._table, flat, mode="clip")
+        bit = np.right_shift(word, (cz & 63).astype(np.uint64)) & np.uint64(1)
         found: BoolArray = inside & bit.astype(bool)
         return found
 

@@ -85,7 +85,7 @@ class BoxFitSettings(BaseModel):
     #: Zhang's d_0: distances below it count as it, so one point on an edge cannot dominate [m].
     closeness_floor_m: float = Field(default=0.01, gt=0.0)
     #: Points used for the heading search (an even subsample); extents use all points.
-    max_fit_points: int = Field(default=400, ge=8)
+    max_fit_points: int = Field(default=200, ge=8)
     #: A visible extent below this along an axis: that axis shows no face [m].
     thin_face_m: float = Field(default=0.5, ge=0.0)
     #: Without a prior, a single face no longer than this is a front or rear face [m].
@@ -177,15 +177,21 @@ def closeness_scores(xy_m: FloatArray, headings_rad: FloatArray, floor_m: float)
     FloatArray
         ``(H,)`` scores; the best orientation has the highest.
     """
-    cos, sin = np.cos(headings_rad), np.sin(headings_rad)
-    x, y = xy_m[:, :1], xy_m[:, 1:2]
-    # (N, H) projections on e1 = (cos, sin) and e2 = (-sin, cos).
-    along = x * cos + y * sin
-    across = y * cos - x * sin
-    d_along = np.minimum(along.max(axis=0) - along, along - along.min(axis=0))
-    d_across = np.minimum(across.max(axis=0) - across, across - across.min(axis=0))
-    distance = np.maximum(np.minimum(d_along, d_across), floor_m)
-    scores: FloatArray = (1.0 / distance).sum(axis=0)
+    # (H, N) projections on e1 = (cos, sin) and e2 = (-sin, cos): one row per candidate, so
+    # that the reductions run along contiguous memory.
+    cos, sin = np.cos(headings_rad)[:, None], np.sin(headings_rad)[:, None]
+    x, y = xy_m[:, 0], xy_m[:, 1]
+    along = cos * x + sin * y
+    across = cos * y - sin * x
+    distance = np.minimum(
+        along.max(axis=1, keepdims=True) - along, along - along.min(axis=1, keepdims=True)
+    )
+    d_across = np.minimum(
+        across.max(axis=1, keepdims=True) - across, across - across.min(axis=1, keepdims=True)
+    )
+    np.minimum(distance, d_across, out=distance)
+    np.maximum(distance, floor_m, out=distance)
+    scores: FloatArray = np.reciprocal(distance, out=distance).sum(axis=1)
     return scores
 
 

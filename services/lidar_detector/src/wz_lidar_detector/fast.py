@@ -111,7 +111,7 @@ class FastSettings(BaseModel):
     #: Direction of travel in the sensor frame [rad] (the road's direction), or None.
     heading_prior_rad: float | None = None
     #: How far a vehicle's heading may be from the prior [deg].
-    heading_tolerance_deg: float = Field(default=20.0, gt=0.0, le=45.0)
+    heading_tolerance_deg: float = Field(default=10.0, gt=0.0, le=45.0)
     #: Points at which a detection's score reaches 1 (score = min(1, points / this)).
     full_score_points: int = Field(default=50, ge=1)
     box: BoxFitSettings = Field(default_factory=BoxFitSettings)

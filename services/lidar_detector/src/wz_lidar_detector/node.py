@@ -33,6 +33,7 @@ under ``<raw key>|<reason>`` and logged once per reason:
 from __future__ import annotations
 
 import logging
+import math
 import time
 import zipfile
 from collections import OrderedDict
@@ -60,7 +61,7 @@ from wz_shared.logs import configure_logging
 from wz_shared.messages import Detection, DetectionBatch, LidarFrameMeta, ServiceState
 from wz_shared.service import ServiceRuntime
 from wz_shared.settings import BusSettings
-from wz_shared.site import SensorMount, load_site
+from wz_shared.site import SensorMount, Site, load_site
 from wz_shared.timebase import SimClock
 
 SERVICE = "lidar-detector"
@@ -395,6 +396,19 @@ def run(
     return processed
 
 
+def road_heading_in_sensor_frame(site: Site, mount: SensorMount) -> float:
+    """Direction of travel at the sensor's station, as a heading in the sensor frame [rad].
+
+    Traffic on a roadside sensor's road moves along the road: the fast path's box fit searches
+    headings near this one.
+    """
+    pose = mount.pose
+    station, _ = site.road_frame.to_road(pose.x_m, pose.y_m)
+    road = float(site.road_frame.heading_at(station))
+    direction_sensor = pose.rotation().T @ np.array([math.cos(road), math.sin(road), 0.0])
+    return float(math.atan2(direction_sensor[1], direction_sensor[0]))
+
+
 def main() -> None:
     settings = LidarDetectorSettings()
     site = load_site(settings.site_file)
@@ -405,6 +419,13 @@ def main() -> None:
     configure_logging(
         service=SERVICE, site=site.site_id, sensor=mount.sensor_id, level=settings.log_level
     )
+    if settings.fast.heading_prior_rad is None:
+        prior = road_heading_in_sensor_frame(site, mount)
+        settings = settings.model_copy(
+            update={"fast": settings.fast.model_copy(update={"heading_prior_rad": prior})}
+        )
+        log.info("heading prior from the site's road: %.1f deg in the sensor frame",
+                 math.degrees(prior))  # fmt: skip
     clock = SimClock()
     with ServiceRuntime(
         SERVICE,
