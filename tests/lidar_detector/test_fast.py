@@ -149,6 +149,36 @@ def test_range_background_ignores_passing_car_and_marks_open_sky(
     assert range_background.foreground_mask(empty_frame).sum() == 0
 
 
+def test_range_background_needs_a_surface_that_shows() -> None:
+    nan = math.nan
+    ranges = np.array(
+        [
+            # A wall at 50 m, a vehicle in front of it in 3 of 10 frames: the wall.
+            [50, 20, 50, 50, 21, 50, 50, 22, 50, 50],
+            # Nothing there; traffic crosses the ray in 4 frames at ever different ranges.
+            [nan, 30, nan, 32, nan, nan, 35, nan, 38, nan],
+            # A dark surface at 60 m that returns in 3 frames out of 10: still background.
+            [60, nan, nan, 60, nan, nan, nan, 60, nan, nan],
+            # Never a return.
+            [nan] * 10,
+        ]
+    )
+    directions = np.array([[1.0, 0, 0], [0, 1.0, 0], [0.6, 0.8, 0], [0, 0, 1.0]])
+    frames = [
+        PointFrame(
+            np.column_stack([directions * ranges[:, k : k + 1], np.zeros(4)]).astype(np.float32),
+            rows=2,
+            columns=2,
+        )
+        for k in range(ranges.shape[1])
+    ]
+    model = RangeImageBackground.learn(frames).background_range_m.reshape(-1)
+    assert model[0] == pytest.approx(50.0)
+    assert np.isinf(model[1])
+    assert model[2] == pytest.approx(60.0)
+    assert np.isinf(model[3])
+
+
 def test_range_background_foreground_is_the_vehicles(
     scene: tuple[list[PointFrame], PointFrame, np.ndarray],
     range_background: RangeImageBackground,
@@ -281,6 +311,16 @@ def test_save_load_round_trip(
         VoxelBackground.load(voxel_path, voxel_m=0.5)
     with pytest.raises(BackgroundFileError, match="'voxel' background, expected 'range_image'"):
         RangeImageBackground.load(voxel_path)
+    with np.load(range_path) as archive:
+        arrays = {name: archive[name] for name in archive.files}
+    old = tmp_path / "old.npz"
+    np.savez(old, **{**arrays, "format_version": np.array(1)})
+    with pytest.raises(BackgroundFileError, match="format version 1"):
+        RangeImageBackground.load(old)
+    broken = tmp_path / "broken.npz"
+    broken.write_bytes(range_path.read_bytes()[:100])
+    with pytest.raises(BackgroundFileError, match="not a readable"):
+        load_background(broken)
 
 
 def test_frame_of_another_layout_raises(
@@ -441,3 +481,22 @@ def test_fragment_inside_a_fitted_box_is_absorbed() -> None:
     result = FastPipeline(settings, background).detect(frame)
     assert len(result.detections) == 1
     assert result.detections[0].num_points == len(main) + len(fragment)
+
+
+def test_heavy_vehicle_length_is_completed_only_when_seen_end_on() -> None:
+    def tall(points: np.ndarray) -> np.ndarray:
+        points = points.copy()
+        points[:, 2] = np.linspace(-4.5, -1.0, len(points))  # 3.5 m of a 4 m high body
+        return points
+
+    # Seen end-on far away: the length is hidden, a semitrailer's is assumed.
+    end_on = tall(_visible_faces((60.0, 5.0), 0.0, 16.5, 2.5, "near_end"))
+    fit = fit_box(end_on, heading_prior_rad=0.0, ground_z_m=-5.0)
+    assert fit.object_class == VehicleClass.TRUCK
+    assert fit.size_lwh_m[0] == pytest.approx(16.0)
+    assert fit.center_xyz_m[0] == pytest.approx(60.0 - 8.25 + 8.0, abs=0.1)
+    # A 7 m box truck beside the mast shows its whole side: its length is what is visible.
+    beside = tall(_visible_faces((3.0, 8.0), 0.0, 7.0, 2.5, "visible"))
+    fit = fit_box(beside, heading_prior_rad=0.0, ground_z_m=-5.0)
+    assert fit.size_lwh_m[0] == pytest.approx(7.0, abs=0.05)
+    assert math.hypot(fit.center_xyz_m[0] - 3.0, fit.center_xyz_m[1] - 8.0) < 0.05

@@ -13,10 +13,15 @@ than the vehicle's centre. This module fits the box instead:
 
        score(theta) = sum_points 1 / max(min(d_1, d_2), d_0)
 
-   (points that hug two perpendicular edges score high). All candidates are scored at once as an
-   ``(N, H)`` array: a coarse sweep of ``heading_step_deg`` over [0, 90) deg, or over
-   ``prior +- tolerance`` when a heading prior is given (a roadside sensor knows that traffic
-   moves along the road), then a fine sweep of ``refine_step_deg`` around the best.
+   (points that hug two perpendicular edges score high). The criterion is defined on a scan's
+   visible outline, so the points are first reduced to the nearest one per bearing bin (a
+   multi-beam sensor also returns roof, hood and windscreen points inside the outline). All
+   candidates are scored at once as an ``(H, N)`` array: a coarse sweep of
+   ``heading_step_deg`` over [0, 90) deg, or over ``prior +- tolerance`` when a heading prior is
+   given (a roadside sensor knows that traffic moves along the road), then a fine sweep of
+   ``refine_step_deg`` around the best. With a prior, a cluster shorter than
+   ``min_side_for_heading_m`` along it shows only an end (curved bumper and hood, which do not
+   tell the heading) and keeps the prior.
 2. **Length axis**: with a prior, the axis nearest the prior. Without one, the longer visible
    extent when it is longer than ``end_face_max_m`` (a side is in view); otherwise the shape is
    ambiguous (an end face and the hood, or a short stretch of side) and the vehicle is taken to
@@ -28,9 +33,9 @@ than the vehicle's centre. This module fits the box instead:
    sensor's projection on the axis falls inside the visible span (a vehicle abeam), the box grows
    evenly at both ends. The class used for the completion comes from the visible extents (lower
    bounds): heavy when the visible length or the height passes the reference path's heavy
-   thresholds, a motorcycle
-   when an L no bigger than a motorcycle is seen along a known length axis (without it, such an
-   L is more likely a car end-on), otherwise a car (4.5 x 1.8 m). A heavy vehicle's length
+   thresholds, a motorcycle when an L no bigger than a motorcycle is seen along a known length
+   axis (without it, such an L is more likely a car end-on), otherwise a car (4.5 x 1.8 m).
+   A heavy vehicle's length
    ranges from 6 to 25 m, so it is taken from what is visible when its side is in view (seen
    at least ``side_view_min_deg`` off its length axis: a box's side face is in view whole or
    not at all), and completed to ``heavy_length_m`` (16 m, a tractor-semitrailer, the usual
@@ -84,8 +89,14 @@ class BoxFitSettings(BaseModel):
     refine_step_deg: float = Field(default=0.1, gt=0.0)
     #: Zhang's d_0: distances below it count as it, so one point on an edge cannot dominate [m].
     closeness_floor_m: float = Field(default=0.01, gt=0.0)
-    #: Points used for the heading search (an even subsample); extents use all points.
+    #: The heading search runs on the visible outline: the nearest point per bearing bin of
+    #: this width [deg] (roof, hood and windscreen returns lie inside the outline); 0: all.
+    outline_bin_deg: float = Field(default=0.2, ge=0.0)
+    #: Points of the outline used for the heading search (an even subsample); extents use all.
     max_fit_points: int = Field(default=200, ge=8)
+    #: With a prior, a cluster shorter than this along the prior shows no side, only an end
+    #: (bumper, hood: curved), which does not tell the heading: it keeps the prior [m].
+    min_side_for_heading_m: float = Field(default=1.5, ge=0.0)
     #: A visible extent below this along an axis: that axis shows no face [m].
     thin_face_m: float = Field(default=0.5, ge=0.0)
     #: Without a prior, a single face no longer than this is a front or rear face [m].
@@ -195,6 +206,30 @@ def closeness_scores(xy_m: FloatArray, headings_rad: FloatArray, floor_m: float)
     return scores
 
 
+def visible_outline(xy_m: FloatArray, bin_rad: float) -> FloatArray:
+    """The outline a sensor at the origin sees: the nearest point in each bearing bin.
+
+    Parameters
+    ----------
+    xy_m
+        ``(N, 2)`` points [m].
+    bin_rad
+        Width of the bearing bins [rad] (about the sensor's horizontal resolution).
+
+    Returns
+    -------
+    FloatArray
+        ``(K, 2)`` points, K <= N, in bearing order.
+    """
+    bins = np.floor(np.arctan2(xy_m[:, 1], xy_m[:, 0]) / bin_rad).astype(np.int64)
+    order = np.lexsort((np.hypot(xy_m[:, 0], xy_m[:, 1]), bins))  # by bin, nearest first
+    sorted_bins = bins[order]
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = sorted_bins[1:] != sorted_bins[:-1]
+    outline: FloatArray = xy_m[order[first]]
+    return outline
+
+
 def search_orientation(
     xy_m: FloatArray,
     settings: BoxFitSettings,
@@ -213,6 +248,10 @@ def search_orientation(
         When a prior is given, only orientations within ``prior +- tolerance`` are tried, and the
         result is the rectangle axis nearest the prior. Otherwise [0, pi/2).
     """
+    if settings.outline_bin_deg > 0 and len(xy_m) > 3:
+        outline = visible_outline(xy_m, math.radians(settings.outline_bin_deg))
+        if len(outline) >= 3:
+            xy_m = outline
     stride = max(1, math.ceil(len(xy_m) / settings.max_fit_points))
     points = xy_m[::stride] - xy_m.mean(axis=0)
     floor_m = settings.closeness_floor_m
@@ -267,6 +306,20 @@ def _complete(low: float, high: float, dimension: float) -> tuple[float, float, 
     return middle - 0.5 * dimension, middle + 0.5 * dimension, "both_ends"
 
 
+def _rotated_covariance(variance_a: float, variance_b: float, angle_rad: float) -> FloatArray:
+    """``R diag(a, b) R^T``, R the rotation by ``angle_rad``: a 2x2 covariance [m^2] with
+    variance ``a`` along ``angle_rad`` and ``b`` across it."""
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    cross = c * s * (variance_a - variance_b)
+    covariance: FloatArray = np.array(
+        [
+            [c * c * variance_a + s * s * variance_b, cross],
+            [cross, s * s * variance_a + c * c * variance_b],
+        ]
+    )
+    return covariance
+
+
 def fit_box(
     points_xyz_m: npt.ArrayLike,
     *,
@@ -300,37 +353,46 @@ def fit_box(
     if len(points) == 0:
         raise ValueError("fit_box needs at least one point")
     xy = points[:, :2]
+    x, y = points[:, 0], points[:, 1]
+    mean_x, mean_y = float(x.mean()), float(y.mean())
 
-    if len(points) >= 2 and np.ptp(xy, axis=0).max() > 1e-6:
+    searchable = len(points) >= 2 and max(float(x.max() - x.min()), float(y.max() - y.min())) > 1e-6
+    if heading_prior_rad is not None and searchable:
+        along_prior = x * math.cos(heading_prior_rad) + y * math.sin(heading_prior_rad)
+        searchable = float(along_prior.max() - along_prior.min()) >= settings.min_side_for_heading_m
+    if searchable:
         theta = search_orientation(xy, settings, heading_prior_rad, heading_tolerance_rad)
     else:
         theta = 0.0 if heading_prior_rad is None else heading_prior_rad
-    extent = []
-    for angle in (theta, theta + math.pi / 2):
-        projection = xy @ np.array([math.cos(angle), math.sin(angle)])
-        extent.append(float(np.ptp(projection)))
+    cos_t, sin_t = math.cos(theta), math.sin(theta)
+    # Projections on the rectangle's axes: axis 0 along theta, axis 1 across.
+    projections = (x * cos_t + y * sin_t, y * cos_t - x * sin_t)
+    extent = [float(p.max() - p.min()) for p in projections]
     faces_seen = 2 if min(extent) >= settings.thin_face_m else 1
+    sight_rad = math.atan2(mean_y, mean_x)
     if heading_prior_rad is None:
         if max(extent) > settings.end_face_max_m:
             length_axis = 0 if extent[0] >= extent[1] else 1  # a side is in view
         else:
             # No face longer than a vehicle's end: most likely seen end-on, so the length
             # axis is the one nearer the line of sight.
-            sight = math.atan2(float(xy[:, 1].mean()), float(xy[:, 0].mean()))
-            off_sight = abs(math.sin(theta - sight))  # 0 when axis 0 lies along the sight line
+            off_sight = abs(math.sin(theta - sight_rad))  # 0: axis 0 lies along the sight line
             length_axis = 0 if off_sight <= math.sqrt(0.5) else 1
         heading = theta + length_axis * math.pi / 2
         heading = (heading + math.pi / 2) % math.pi - math.pi / 2  # (-pi/2, pi/2]
         if heading <= -math.pi / 2 + 1e-12:
             heading += math.pi
     else:
+        length_axis = 0
         heading = theta  # the search kept theta within the tolerance of the prior
-
-    e_length = np.array([math.cos(heading), math.sin(heading)])
-    e_width = np.array([-math.sin(heading), math.cos(heading)])
-    along, across = xy @ e_length, xy @ e_width
-    visible_length = float(np.ptp(along))
-    visible_width = float(np.ptp(across))
+    cos_h, sin_h = math.cos(heading), math.sin(heading)
+    if length_axis == 0 and heading == theta:
+        along, across = projections
+    else:
+        along, across = x * cos_h + y * sin_h, y * cos_h - x * sin_h
+    along_min, along_max = float(along.min()), float(along.max())
+    across_min, across_max = float(across.min()), float(across.max())
+    visible_length, visible_width = along_max - along_min, across_max - across_min
 
     top = float(points[:, 2].max())
     bottom = float(points[:, 2].min())
@@ -349,7 +411,6 @@ def fit_box(
     # A side face is either wholly in view or not (boxes are convex): seen from well off the
     # length axis, the visible length of a heavy vehicle is its length (a 6 m box truck beside
     # the mast is not a 16 m semitrailer); seen end-on, its length is hidden.
-    sight_rad = math.atan2(float(xy[:, 1].mean()), float(xy[:, 0].mean()))
     side_in_view = abs(math.sin(sight_rad - heading)) >= math.sin(
         math.radians(settings.side_view_min_deg)
     )
@@ -360,10 +421,12 @@ def fit_box(
             length_m=settings.heavy_length_m if length_open else 0.0,
             length_std_m=settings.heavy_length_std_m,
         )
-    low_l, high_l, how_l = _complete(float(along.min()), float(along.max()), shape.length_m)
-    low_w, high_w, how_w = _complete(float(across.min()), float(across.max()), shape.width_m)
+    low_l, high_l, how_l = _complete(along_min, along_max, shape.length_m)
+    low_w, high_w, how_w = _complete(across_min, across_max, shape.width_m)
     length, width = high_l - low_l, high_w - low_w
-    centre_xy = 0.5 * (low_l + high_l) * e_length + 0.5 * (low_w + high_w) * e_width
+    mid_l, mid_w = 0.5 * (low_l + high_l), 0.5 * (low_w + high_w)
+    centre_x = mid_l * cos_h - mid_w * sin_h
+    centre_y = mid_l * sin_h + mid_w * cos_h
 
     # Shape part of the covariance, in the box frame (length, width).
     def shape_variance(how: str, dimension_std: float, visible: float, dimension: float) -> float:
@@ -378,20 +441,16 @@ def fit_box(
     if length_open:
         variance_length = max(variance_length, (0.5 * shape.length_std_m) ** 2)
     variance_width = shape_variance(how_w, shape.width_std_m, visible_width, shape.width_m)
-    box_axes = np.column_stack([e_length, e_width])
-    covariance = box_axes @ np.diag([variance_length, variance_width]) @ box_axes.T
     # Sensor part, in the bearing frame of the centre: along the ray and across it.
-    range_m = float(np.hypot(*centre_xy))
-    bearing = math.atan2(centre_xy[1], centre_xy[0])
-    ray_axes = np.array(
-        [[math.cos(bearing), -math.sin(bearing)], [math.sin(bearing), math.cos(bearing)]]
-    )
+    range_m = math.hypot(centre_x, centre_y)
     sigma_across = max(range_m, 1.0) * math.radians(settings.angular_resolution_deg)
-    covariance += ray_axes @ np.diag([settings.range_noise_m**2, sigma_across**2]) @ ray_axes.T
-    covariance = 0.5 * (covariance + covariance.T)
+    covariance = _rotated_covariance(variance_length, variance_width, heading)
+    covariance += _rotated_covariance(
+        settings.range_noise_m**2, sigma_across**2, math.atan2(centre_y, centre_x)
+    )
 
     return BoxFit(
-        center_xyz_m=(float(centre_xy[0]), float(centre_xy[1]), 0.5 * (top + bottom)),
+        center_xyz_m=(centre_x, centre_y, 0.5 * (top + bottom)),
         size_lwh_m=(length, width, height),
         heading_rad=heading,
         object_class=class_from_size(length, width, height),

@@ -14,14 +14,21 @@ foreground  ``background.foreground_mask(frame)``, then returns nearer than ``mi
             mast, the housing) or farther than ``max_range_m`` are dropped. The result's
             ``foreground`` is this mask: the points that went into clustering.
 cluster     Euclidean clustering (:func:`euclidean_clusters`): foreground points are averaged
-            per cube of ``cluster_cell_m``, cube means closer than ``cluster_eps_m`` are linked
-            (vertical distances scaled by ``cluster_z_scale``: far beams are sparse vertically)
-            (``scipy.spatial.cKDTree.query_pairs``) and the connected components
-            (``scipy.sparse.csgraph.connected_components``) are the clusters.
-boxes       per cluster of at least ``min_cluster_points``: drop ground-level speckle (top less
-            than ``min_top_above_ground_m`` above the ground) and things that do not stand on
-            the road (lowest point more than ``max_base_above_ground_m`` above it: foliage,
-            signs, birds; only where the background knows the ground), then :func:`fit_box`.
+            per cube of ``cluster_cell_m``; cube means closer than ``cluster_eps_m`` are
+            linked (``scipy.spatial.cKDTree.query_pairs``), with vertical distances scaled by
+            ``cluster_z_scale`` (a far vehicle's beams are far apart vertically) and, beyond
+            ``cluster_eps_m / cluster_eps_range_fraction``, a linking distance of
+            ``cluster_eps_range_fraction`` times the range (far vehicles return sparse points);
+            the connected components (``scipy.sparse.csgraph.connected_components``) are the
+            clusters.
+boxes       clusters of at least ``min_cluster_points``, largest first: a cluster with at least
+            half of its points within ``absorb_margin_m`` of a box already fitted is a fragment
+            of that vehicle (a side seen at a grazing angle breaks into columns far apart) and
+            only adds to its points; ground-level speckle (top less than
+            ``min_top_above_ground_m`` above the ground) and things that do not stand on the
+            road (lowest point more than ``max_base_above_ground_m`` above it: foliage, signs,
+            birds; only where the background knows the ground) are dropped; the rest get
+            :func:`fit_box` with the background's ground height and the heading prior.
 update      ``background.update(frame)`` when ``update_background`` (a range-image model
             follows slow changes; a voxel model ignores it).
 =========== =====================================================================================
@@ -287,16 +294,14 @@ class FastPipeline:
         fitted: list[_Fitted] = []
         # Largest first, so that a fragment meets the box of the vehicle it belongs to.
         by_size = np.argsort(-sizes, kind="stable")
-        for label in by_size[sizes[by_size] >= settings.min_cluster_points]:
-            cluster = xyz[order[starts[label] : starts[label + 1]]]
+        candidates = by_size[sizes[by_size] >= settings.min_cluster_points]
+        clusters = [xyz[order[starts[label] : starts[label + 1]]] for label in candidates]
+        grounds = self._ground_heights(clusters)
+        for cluster, ground in zip(clusters, grounds, strict=True):
             owner = self._owner(fitted, cluster[:, :2])
             if owner is not None:
                 owner.num_points += len(cluster)
                 continue
-            stride = max(1, math.ceil(len(cluster) / _GROUND_SAMPLES))
-            ground_samples = self.background.ground_z_m(cluster[::stride, :2])
-            known = ground_samples[np.isfinite(ground_samples)]
-            ground = float(np.median(known)) if len(known) else None
             top, base = float(cluster[:, 2].max()), float(cluster[:, 2].min())
             if top - (base if ground is None else min(ground, base)) < (
                 settings.min_top_above_ground_m
@@ -313,6 +318,21 @@ class FastPipeline:
             )
             fitted.append(_Fitted(fit, len(cluster)))
         return [self._detection(box) for box in fitted]
+
+    def _ground_heights(self, clusters: list[FloatArray]) -> list[float | None]:
+        """Median ground height [m] under each cluster (None where unknown), in one lookup."""
+        samples = [c[:: max(1, math.ceil(len(c) / _GROUND_SAMPLES)), :2] for c in clusters]
+        if not samples:
+            return []
+        heights = self.background.ground_z_m(np.concatenate(samples))
+        grounds: list[float | None] = []
+        start = 0
+        for sample in samples:
+            known = heights[start : start + len(sample)]
+            known = known[np.isfinite(known)]
+            grounds.append(float(np.median(known)) if len(known) else None)
+            start += len(sample)
+        return grounds
 
     def _owner(self, fitted: list[_Fitted], xy_m: FloatArray) -> _Fitted | None:
         """The first fitted box holding at least half of ``(K, 2)`` points, if any."""
