@@ -143,6 +143,29 @@ def _summary(benchmarks: dict[str, Any]) -> list[str]:
             )
             + "."
         )
+    sensors = benchmarks.get("sensors", {}).get("result")
+    if sensors:
+        lidar = sensors["frames"]["lidar"]["day"]
+        camera = sensors["frames"]["camera"]["day"]
+        radar = sensors["frames"]["radar"]["day"]
+        targets = sensors["targets"]
+        lines.append(
+            f"- Sensors with {sensors['frames']['traffic']['vehicles_in_lidar_range']['median']:.0f} "
+            f"vehicles within the LiDAR's range (day): LiDAR frame ({lidar['rays']:,} rays) "
+            f"**{_ms(lidar['frame_ms']['p50'])}** (target {_ms(targets['lidar_frame_ms'])}), "
+            f"camera render {camera['width_px']}x{camera['height_px']} "
+            f"**{_ms(camera['render_ms']['p50'])}** (target {_ms(targets['camera_render_ms'])}) "
+            f"+ JPEG {_ms(camera['jpeg_ms']['p50'])}, radar scan **{_ms(radar['scan_ms']['p50'])}** "
+            f"(target {_ms(targets['radar_scan_ms'])}); the whole simulator with all three: "
+            f"**{sensors['node']['sim_per_wall']:.1f}x real time** as a node process over Zenoh, "
+            f"{sensors['loop']['sim_per_wall']:.1f}x in process (target "
+            f"{targets['sim_rate']:.0f}x); "
+            + (
+                "frame counts exact."
+                if sensors["frame_counts_exact"]
+                else "**frame counts not exact** (see the section)."
+            )
+        )
     return ["## Summary", "", *lines, ""] if lines else []
 
 
@@ -357,10 +380,284 @@ def _sumo_step(result: dict[str, Any]) -> list[str]:
     return [*lines, ""]
 
 
+def _spread(counts: dict[str, Any]) -> str:
+    """min / median / max of a count."""
+    return f"{counts['min']} / {counts['median']:.0f} / {counts['max']}"
+
+
+def _frame_stats(stats: dict[str, float]) -> list[str]:
+    return [f"**{_ms(stats['p50'])}**", _ms(stats["p90"]), _ms(stats["p99"]), _ms(stats["max"])]
+
+
+def _gc(split: dict[str, Any]) -> list[str]:
+    """Calls a full garbage collection fell in; the slowest call without one."""
+    return [str(split["calls_with_full_gc"]), _ms(split["max_ms_without_full_gc"])]
+
+
+def _sensors(result: dict[str, Any]) -> list[str]:
+    frames, loop, node = result["frames"], result["loop"], result["node"]
+    traffic, targets, ratios = frames["traffic"], result["targets"], result["ratios"]
+    lidar, camera, radar = frames["lidar"], frames["camera"], frames["radar"]
+    lines = [
+        f"Default site. Traffic for the per-frame times: `TrafficWorld` at "
+        f"{traffic['vehicles_per_hour']:.0f} veh/h (seed {traffic['seed']}), warmed up "
+        f"{traffic['warmup_sim_s']:.0f} simulated s (until {traffic['target_in_lidar_range']} "
+        f"vehicles were within the LiDAR's range), then the truths of {traffic['steps']} steps "
+        f"({traffic['steps'] * traffic['step_s']:.0f} s) kept: "
+        f"{_spread(traffic['vehicles_on_road'])} "
+        f"vehicles on the 2 km road, {_spread(traffic['vehicles_in_lidar_range'])} within the "
+        "LiDAR's 200 m (min / median / max). Frame i is made from the truth of step i, as the "
+        f"rig does, after {frames['untimed_frames']} untimed frames. open3d {frames['versions']['open3d']}, OpenCV "
+        f"{frames['versions']['opencv']} ({frames['threads']['opencv']} threads), "
+        f"{frames['threads']['cores']} cores. Wall times; CPU / wall above 1 means more than "
+        "one core at work. A full GC: Python's generation-2 garbage collection ran during the "
+        "call (counted with `gc.callbacks`); the slowest call without one is shown beside.",
+        "",
+    ]
+    rows = [
+        [
+            f"LiDAR frame, {lidar['day']['rays']:,} rays (day)",
+            f"**{_ms(lidar['day']['frame_ms']['p50'])}**",
+            f"<= {_ms(targets['lidar_frame_ms'])}",
+            f"{ratios['lidar_frame_ms']:.2f}",
+        ],
+        [
+            f"camera render {camera['day']['width_px']}x{camera['day']['height_px']} (day)",
+            f"**{_ms(camera['day']['render_ms']['p50'])}**",
+            f"<= {_ms(targets['camera_render_ms'])}",
+            f"{ratios['camera_render_ms']:.2f}",
+        ],
+        [
+            "radar scan (day)",
+            f"**{_ms(radar['day']['scan_ms']['p50'])}**",
+            f"<= {_ms(targets['radar_scan_ms'])}",
+            f"{ratios['radar_scan_ms']:.2f}",
+        ],
+        [
+            "whole simulator, node process over Zenoh (simulated s / wall s)",
+            f"**{node['sim_per_wall']:.2f}x**",
+            f">= {targets['sim_rate']:.0f}x",
+            f"{ratios['sim_rate_node']:.2f}",
+        ],
+        [
+            "whole simulator, `run_loop` in process, no bus",
+            f"**{loop['sim_per_wall']:.2f}x**",
+            f">= {targets['sim_rate']:.0f}x",
+            f"{ratios['sim_rate_loop']:.2f}",
+        ],
+    ]
+    lines += _table(["Median", "Measured", "Target", "Measured / target"], rows)
+    lines += [
+        "",
+        "A time meets its target when measured / target is below 1, the simulation rate when "
+        "it is above 1.",
+        "",
+        "### LiDAR (`LidarModel.scan`)",
+        "",
+        f"Static scene (`static_scene(site)`: {frames['static_scene']['boxes']} boxes, "
+        f"{frames['static_scene']['ground_polygons']} ground polygons) built once in "
+        f"{1000 * frames['static_scene']['build_s']:.0f} ms. The model's build casts every ray "
+        "at the static scene once; a frame casts only rays that may meet a vehicle.",
+        "",
+    ]
+    rows = [
+        [
+            name,
+            f"{1000 * entry['model_build_s']:.0f} ms",
+            f"{entry['frame_ms']['n']}",
+            *_frame_stats(entry["frame_ms"]),
+            *_gc(entry["frame_gc"]),
+            f"{entry['cpu_per_wall']:.2f}",
+            f"{entry['rays']:,}",
+            f"{entry['returns']['median']:,.0f}",
+            _spread(entry["vehicle_points"]),
+            _spread(entry["vehicles_hit"]),
+        ]
+        for name, entry in lidar.items()
+    ]
+    header = [
+        "Weather",
+        "Model build",
+        "Frames",
+        "p50",
+        "p90",
+        "p99",
+        "max",
+        "Frames with a full GC",
+        "max without",
+        "CPU / wall",
+        "Rays",
+        "Returns (median)",
+        "Vehicle points",
+        "Vehicles with points",
+    ]
+    lines += [*_table(header, rows), ""]
+    lines += [
+        "### Camera (`CameraModel.render`, `encode_jpeg`)",
+        "",
+        "Vehicles passed: those within 600 m of the camera along the road (the rig's cull); "
+        "drawn: those with at least one visible pixel. `vehicle_boxes` builds their boxes "
+        "(the rig does it before each render). The model's build renders the static background "
+        "once.",
+        "",
+    ]
+    rows = [
+        [
+            name,
+            f"{1000 * entry['model_build_s']:.0f} ms",
+            f"{entry['render_ms']['n']}",
+            f"{entry['vehicles_passed']['median']:.0f} / {entry['vehicles_drawn']['median']:.0f}",
+            _ms(entry["vehicle_boxes_ms"]["p50"]),
+            *_frame_stats(entry["render_ms"]),
+            *_gc(entry["render_gc"]),
+            f"{entry['render_cpu_per_wall']:.2f}",
+            f"**{_ms(entry['jpeg_ms']['p50'])}**",
+            _ms(entry["jpeg_ms"]["p90"]),
+            f"{entry['jpeg_bytes_median'] / 1000:.0f} kB",
+        ]
+        for name, entry in camera.items()
+    ]
+    header = [
+        "Weather",
+        "Model build",
+        "Frames",
+        "Vehicles passed / drawn",
+        "`vehicle_boxes` p50",
+        "render p50",
+        "p90",
+        "p99",
+        "max",
+        "Renders with a full GC",
+        "max without",
+        "CPU / wall",
+        f"JPEG (q{camera['day']['jpeg_quality']}) p50",
+        "p90",
+        "JPEG size",
+    ]
+    lines += [*_table(header, rows), ""]
+    lines += [
+        "### Radar (`RadarModel.scan`)",
+        "",
+        "Vehicles in view: in the field of view and range; visible: of those, not occluded.",
+        "",
+    ]
+    rows = [
+        [
+            name,
+            f"{entry['scan_ms']['n']}",
+            *_frame_stats(entry["scan_ms"]),
+            f"{entry['vehicles_in_view']['median']:.0f} / "
+            f"{entry['vehicles_visible']['median']:.0f}",
+            _spread(entry["targets"]),
+        ]
+        for name, entry in radar.items()
+    ]
+    header = [
+        "Weather",
+        "Scans",
+        "p50",
+        "p90",
+        "p99",
+        "max",
+        "Vehicles in view / visible",
+        "Targets",
+    ]
+    lines += [*_table(header, rows), ""]
+    lines += [
+        "### The whole simulator: SUMO and the three sensors at their rates",
+        "",
+        f"Both runs: {loop['vehicles_per_hour']:.0f} veh/h, seed {loop['seed']}, "
+        f"{loop['weather']}, `realtime_factor=0`, a window of {loop['duration_s']:.0f} "
+        f"simulated s after {loop['warmup_sim_s']:.0f} s of warm-up "
+        f"({_spread(loop['vehicles_on_road'])} vehicles on the road in the window).",
+        "",
+        f"- **Node process over Zenoh: {node['sim_per_wall']:.2f}x real time** in the window "
+        f"({node['window_wall_s']:.1f} s wall for {node['duration_s']:.0f} simulated s). "
+        "`python -m wz_simulator.node` with `WZ_SIM_DURATION_S` = "
+        f"{node['warmup_sim_s'] + node['duration_s']:.0f}, publishing on a real Zenoh bus "
+        "(default config, shared memory on) to a second process that counts and stamps every "
+        "sample (it decodes frame metadata and the truth, and shares the 2 cores). The node "
+        "has no warm-up, so its sensors fire from t = 0; the window's wall time is read from "
+        "the arrivals of the truths stamped at its ends. Whole run: "
+        f"{node['run_sim_per_wall']:.2f}x from the first truth to the last, "
+        f"{node['process_wall_s']:.1f} s for the process, of which "
+        f"{node['startup_s']:.1f} s start-up (bus, SUMO network, static scene, camera "
+        "background) before the first truth.",
+        f"- **`run_loop` in process: {loop['sim_per_wall']:.2f}x real time** "
+        f"({loop['wall_s']:.1f} s wall, CPU / wall {loop['cpu_per_wall']:.2f}): the node's "
+        "loop with a `SensorRig` and callbacks that encode as the node does but publish "
+        "nothing; warm-up without sensors, then the rig (built in "
+        f"{loop['rig_build_s']:.1f} s) on the window's time. Each part timed where it is "
+        "called:",
+        "",
+    ]
+    sim_s = loop["duration_s"]
+    rows = [
+        [
+            entry["what"],
+            f"{entry['s']:.2f} s",
+            f"{1000 * entry['s'] / sim_s:.0f} ms",
+            f"{100 * entry['share']:.1f} %",
+        ]
+        for entry in loop["split"].values()
+    ]
+    lines += [
+        *_table(["Part", "Wall", "Per simulated s", "Share"], rows),
+        "",
+        "Frames per sensor: every index from 0 exactly once, no duplicates; a run of T "
+        "simulated s has T x rate + 1 frames (the frame at t = 0 and the one at the last step "
+        "both fire), a window [start, end) T x rate.",
+        "",
+    ]
+    rows = []
+    for sensor_id, in_loop in loop["frames"].items():
+        in_node = node["frames"][sensor_id]
+        rows.append(
+            [
+                f"`{sensor_id}`",
+                f"{in_loop['rate_hz']:.0f} Hz",
+                f"{in_loop['frames']} ({in_loop['expected']})",
+                f"{in_node['frames']} ({in_node['expected']}), {in_node['missing']} missing, "
+                f"{in_node['duplicates']} duplicated",
+                f"{in_node['in_window']} ({in_node['in_window_expected']})",
+                f"{in_loop['mb_per_sim_s']:.2f} MB",
+            ]
+        )
+    truth = node["truth_messages"]
+    rows.append(
+        [
+            "truth (`GroundTruth`)",
+            "20 Hz",
+            f"{loop['truth_messages']} ({loop['steps']})",
+            f"{truth['frames']} ({truth['expected']}), {truth['missing']} missing, "
+            f"{truth['duplicates']} duplicated",
+            "",
+            "",
+        ]
+    )
+    header = [
+        "Sensor",
+        "Rate",
+        "`run_loop`: frames (expected)",
+        "Node over Zenoh, whole run: received (expected)",
+        "In the window (expected)",
+        "Payload per simulated s",
+    ]
+    lines += _table(header, rows)
+    lines += [
+        "",
+        "All frame counts exact."
+        if result["frame_counts_exact"]
+        else "**Some frame counts are not exact (see the table).**",
+    ]
+    return [*lines, ""]
+
+
 SECTIONS: dict[str, tuple[str, Callable[[dict[str, Any]], list[str]]]] = {
     "bus_latency": ("one-way latency between two processes", _bus_latency),
     "bus_throughput": ("messages per second between two processes", _bus_throughput),
     "sumo_step": ("the simulator's SUMO step", _sumo_step),
+    "sensors": ("the simulator's sensor models and the whole simulator", _sensors),
 }
 
 
