@@ -27,7 +27,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from benchmarks import bus_latency, bus_throughput, report, sensors, sumo_step
+from benchmarks import bus_latency, bus_throughput, lidar_detection, report, sensors, sumo_step
 from benchmarks.common import ROOT
 
 log = logging.getLogger("benchmarks")
@@ -37,6 +37,7 @@ BENCHMARKS: dict[str, Callable[[bool], dict[str, Any]]] = {
     "bus_throughput": bus_throughput.run,
     "sumo_step": sumo_step.run,
     "sensors": sensors.run,
+    "lidar_detection": lidar_detection.run,
 }
 RESULTS_PATH = ROOT / "benchmarks" / "results.json"
 MARKDOWN_PATH = ROOT / "BENCHMARKS.md"

@@ -14,6 +14,8 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
+
 from wz_shared.messages import CameraFrameMeta, VehicleTruth
 from wz_shared.site import SensorMount, Site
 from wz_simulator.sensors.camera import CameraFrame, CameraModel, encode_jpeg
@@ -23,6 +25,8 @@ from wz_simulator.sensors.scene import StaticScene, Weather, static_scene, vehic
 
 #: Vehicles farther than this along the road from a camera are not drawn [m] (sub-pixel).
 CAMERA_CULL_STATION_M = 600.0
+#: Vehicles this much beyond a LiDAR's maximum range are not cast [m] (a truck is 16.5 m).
+LIDAR_CULL_MARGIN_M = 30.0
 
 
 @dataclass(frozen=True)
@@ -118,6 +122,7 @@ class SensorRig:
         self._cameras: dict[str, CameraModel] = {}
         self._radars: dict[str, RadarModel] = {}
         self._camera_station_m: dict[str, float] = {}
+        self._camera_forward_xy: dict[str, tuple[float, float]] = {}
         self._schedules: dict[str, _Schedule] = {}
         for position, mount in enumerate(site.sensors):
             if mount not in self.mounts:
@@ -134,6 +139,9 @@ class SensorRig:
                 )
                 station, _ = site.road_frame.to_road(mount.pose.x_m, mount.pose.y_m)
                 self._camera_station_m[mount.sensor_id] = float(station)
+                forward = mount.pose.rotation()[:, 0]
+                norm = float(np.hypot(forward[0], forward[1])) or 1.0
+                self._camera_forward_xy[mount.sensor_id] = (forward[0] / norm, forward[1] / norm)
             else:
                 self._radars[mount.sensor_id] = RadarModel(
                     mount, weather, sensor_seed, site_id=site.site_id
@@ -170,15 +178,25 @@ class SensorRig:
     ) -> SensorOutput:
         """One frame of one sensor at ``fire_s``, outside the schedule (datasets, pictures)."""
         if sensor_id in self._lidars:
-            scan = self._lidars[sensor_id].scan(
-                vehicles, fire_s, index, truth_stamp_s=truth_stamp_s
-            )
+            lidar = self._lidars[sensor_id]
+            # Vehicles the beams cannot reach are left out: labels index the vehicles passed.
+            reach_m = lidar.max_range_m + LIDAR_CULL_MARGIN_M
+            x0, y0 = float(lidar.position_m[0]), float(lidar.position_m[1])
+            near = [v for v in vehicles if math.hypot(v.x_m - x0, v.y_m - y0) < reach_m]
+            scan = lidar.scan(near, fire_s, index, truth_stamp_s=truth_stamp_s)
             return LidarOutput(sensor_id, scan)
         now = moved(vehicles, fire_s - truth_stamp_s)
         if sensor_id in self._cameras:
             camera = self._cameras[sensor_id]
             station = self._camera_station_m[sensor_id]
-            seen = [v for v in now if abs(v.station_m - station) < CAMERA_CULL_STATION_M]
+            fx, fy = self._camera_forward_xy[sensor_id]
+            cx, cy = camera.camera.position_m[0], camera.camera.position_m[1]
+            # In front of the camera (a vehicle's length of slack) and not beyond sight.
+            seen = [
+                v for v in now
+                if abs(v.station_m - station) < CAMERA_CULL_STATION_M
+                and (v.x_m - cx) * fx + (v.y_m - cy) * fy > -v.length_m
+            ]  # fmt: skip
             frame = camera.render(
                 vehicle_boxes(seen), [v.vehicle_id for v in seen], fire_s,
                 [v.vehicle_class for v in seen],
