@@ -19,6 +19,7 @@ import numpy.typing as npt
 import pytest
 from pydantic import ValidationError
 
+from tests.purity import top_level_imports
 from wz_lidar_detector import reference as reference_module
 from wz_lidar_detector.detection import BoxDetection, DetectionResult, PointFrame
 from wz_lidar_detector.reference import (
@@ -482,21 +483,12 @@ def test_real_freeway_frame_finds_each_vehicle_once() -> None:
 
 def test_the_core_does_no_io() -> None:
     """A pure core: numpy, scipy, open3d, pydantic and the project's models; no bus, no files."""
-    tree = ast.parse(inspect.getsource(reference_module))
-    imported = {
-        name.split(".")[0]
-        for node in ast.walk(tree)
-        if isinstance(node, ast.Import | ast.ImportFrom)
-        for name in (
-            [alias.name for alias in node.names]
-            if isinstance(node, ast.Import)
-            else [node.module or ""]
-        )
-    }
+    imported = top_level_imports(reference_module)
     assert imported <= {
         "__future__", "math", "time", "typing", "numpy", "scipy", "open3d", "pydantic",
         "wz_shared", "wz_lidar_detector",
     }  # fmt: skip
+    tree = ast.parse(inspect.getsource(reference_module))
     calls = {
         node.func.id
         for node in ast.walk(tree)

@@ -3,9 +3,7 @@ truth labels from the id buffer, occlusion, clipping, weather, determinism."""
 
 from __future__ import annotations
 
-import ast
 import math
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -13,6 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from tests.purity import top_level_imports
 from wz_shared.messages import VehicleClass
 from wz_shared.site import CameraIntrinsics, LidarIntrinsics, Pose, SensorMount
 from wz_simulator.sensors import camera as camera_module
@@ -515,15 +514,5 @@ def test_jpeg_and_truth_drawing() -> None:
 
 
 def test_core_imports_no_io_library() -> None:
-    tree = ast.parse(Path(camera_module.__file__).read_text(encoding="utf-8"))
-    imported = {
-        alias.name.split(".")[0]
-        for node in ast.walk(tree)
-        if isinstance(node, ast.Import)
-        for alias in node.names
-    } | {
-        (node.module or "").split(".")[0]
-        for node in ast.walk(tree)
-        if isinstance(node, ast.ImportFrom)
-    }
+    imported = top_level_imports(camera_module)
     assert not imported & {"zenoh", "fastapi", "pathlib", "os", "io", "socket", "requests"}

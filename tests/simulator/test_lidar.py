@@ -12,6 +12,7 @@ import numpy as np
 import open3d as o3d
 import pytest
 
+from tests.purity import top_level_imports
 from wz_shared.codec import decode_frame, encode_lidar_frame
 from wz_shared.messages import LidarFrameMeta, VehicleTruth
 from wz_shared.site import LidarIntrinsics, Pose, RadarIntrinsics, SensorMount, Site
@@ -656,21 +657,12 @@ def test_box_triangles_cover_the_faces() -> None:
 
 def test_the_core_does_no_io() -> None:
     """A pure core: numpy, open3d and the shared models only; no bus, web or files."""
-    tree = ast.parse(inspect.getsource(lidar_module))
-    imported = {
-        name.split(".")[0]
-        for node in ast.walk(tree)
-        if isinstance(node, ast.Import | ast.ImportFrom)
-        for name in (
-            [alias.name for alias in node.names]
-            if isinstance(node, ast.Import)
-            else [node.module or ""]
-        )
-    }
+    imported = top_level_imports(lidar_module)
     assert imported <= {
         "__future__", "math", "collections", "dataclasses", "types", "typing",
         "numpy", "open3d", "wz_shared", "wz_simulator",
     }  # fmt: skip
+    tree = ast.parse(inspect.getsource(lidar_module))
     calls = {
         node.func.id
         for node in ast.walk(tree)

@@ -2,15 +2,14 @@
 
 from __future__ import annotations
 
-import ast
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from tests.purity import top_level_imports
 from wz_shared.codec import decode_json, encode_json
 from wz_shared.messages import DriverProfile, RadarScan, VehicleClass, VehicleTruth
 from wz_shared.site import CameraIntrinsics, Pose, RadarIntrinsics, SensorMount
@@ -376,15 +375,5 @@ def test_rejects_a_non_radar_mount() -> None:
 
 
 def test_core_imports_no_io_library() -> None:
-    tree = ast.parse(Path(radar_module.__file__).read_text(encoding="utf-8"))
-    imported = {
-        name.split(".")[0]
-        for node in ast.walk(tree)
-        if isinstance(node, ast.Import | ast.ImportFrom)
-        for name in (
-            [alias.name for alias in node.names]
-            if isinstance(node, ast.Import)
-            else [node.module or ""]
-        )
-    }
+    imported = top_level_imports(radar_module)
     assert imported.isdisjoint({"zenoh", "fastapi", "socket", "open3d", "cv2", "libsumo"})

@@ -41,7 +41,15 @@ import numpy.typing as npt
 
 from wz_shared.messages import VehicleClass
 from wz_shared.site import CameraIntrinsics, SensorMount
-from wz_simulator.sensors.scene import BOX_FACES, Box, GroundPolygon, Light, Material, Weather
+from wz_simulator.sensors.scene import (
+    BOX_CORNER_SIGNS,
+    BOX_FACES,
+    Box,
+    GroundPolygon,
+    Light,
+    Material,
+    Weather,
+)
 
 F64 = npt.NDArray[np.float64]
 F32 = npt.NDArray[np.float32]
@@ -57,20 +65,6 @@ KOSCHMIEDER = 3.912
 _SHIFT = 4  # fractional bits of the fixed-point vertices handed to OpenCV
 _ONE = float(1 << _SHIFT)
 
-# Corner signs in the order of Box.corners(); faces in the order of BOX_FACES.
-_CORNER_SIGNS = np.array(
-    [
-        [-1, -1, -1],
-        [1, -1, -1],
-        [1, 1, -1],
-        [-1, 1, -1],
-        [-1, -1, 1],
-        [1, -1, 1],
-        [1, 1, 1],
-        [-1, 1, 1],
-    ],
-    dtype=np.float64,
-)
 _FACE_CORNERS = np.array(BOX_FACES, dtype=np.intp)  # (6, 4)
 FACE_BOTTOM, FACE_TOP, FACE_RIGHT, FACE_FRONT, FACE_LEFT, FACE_BACK = range(6)
 
@@ -352,7 +346,7 @@ class _BoxArrays:
 
     def corners(self) -> F64:
         """Corners as :meth:`Box.corners` for all boxes at once, shape (B, 8, 3)."""
-        local = 0.5 * _CORNER_SIGNS[None, :, :] * self.sizes[:, None, :]
+        local = 0.5 * BOX_CORNER_SIGNS[None, :, :] * self.sizes[:, None, :]
         ex, ey = self.axes()
         corners: F64 = (
             local[:, :, 0:1] * ex[:, None, :]

@@ -113,6 +113,7 @@ import open3d as o3d
 from wz_shared.messages import LidarFrameMeta, VehicleTruth
 from wz_shared.site import LidarIntrinsics, SensorMount
 from wz_simulator.sensors.scene import (
+    BOX_CORNER_SIGNS,
     BOX_FACES,
     STATIC_LABEL,
     Box,
@@ -177,20 +178,6 @@ KOSCHMIEDER = 3.912
 #: dB per neper-ish: ``gamma [dB/km] / (10 log10 e) / 1000 = alpha [1/m]``.
 _DB_PER_KM_TO_PER_M = 1.0 / (10.0 * math.log10(math.e) * 1000.0)
 
-#: Corners of a unit box (half sizes 1), in :meth:`Box.corners` order.
-_UNIT_CORNERS = np.array(
-    [
-        [-1, -1, -1],
-        [1, -1, -1],
-        [1, 1, -1],
-        [-1, 1, -1],
-        [-1, -1, 1],
-        [1, -1, 1],
-        [1, 1, 1],
-        [-1, 1, 1],
-    ],
-    dtype=np.float64,
-)
 #: Corner indices of the 6 faces of a box (``BOX_FACES``), shape (6, 4).
 _BOX_FACE_CORNERS = np.array(BOX_FACES, dtype=np.intp)
 #: The 12 triangles of a box (two per face of ``BOX_FACES``, in face order), as corner indices.
@@ -424,7 +411,7 @@ def box_corners(centers_m: FloatArray, sizes_lwh_m: FloatArray, yaws_rad: FloatA
     -------
     ndarray, shape (n, 8, 3)
     """
-    local = 0.5 * sizes_lwh_m[:, None, :] * _UNIT_CORNERS[None, :, :]
+    local = 0.5 * sizes_lwh_m[:, None, :] * BOX_CORNER_SIGNS[None, :, :]
     cos_yaw, sin_yaw = np.cos(yaws_rad)[:, None], np.sin(yaws_rad)[:, None]
     corners = np.empty_like(local)
     corners[..., 0] = cos_yaw * local[..., 0] - sin_yaw * local[..., 1]

@@ -44,6 +44,23 @@ class Material(IntEnum):
     VEGETATION = 12
 
 
+#: Corners of a box as signs of its half sizes (length, width, height), in :meth:`Box.corners`
+#: order: the bottom face (-l,-w), (+l,-w), (+l,+w), (-l,+w), then the top face likewise.
+BOX_CORNER_SIGNS = np.array(
+    [
+        [-1, -1, -1],
+        [1, -1, -1],
+        [1, 1, -1],
+        [-1, 1, -1],
+        [-1, -1, 1],
+        [1, -1, 1],
+        [1, 1, 1],
+        [-1, 1, 1],
+    ],
+    dtype=np.float64,
+)
+BOX_CORNER_SIGNS.setflags(write=False)
+
 #: Label of static scene parts (vehicles get 1, 2, ... in the order of the frame's truth).
 STATIC_LABEL = 0
 
@@ -81,19 +98,7 @@ class Box:
         Order: bottom face (-l,-w), (+l,-w), (+l,+w), (-l,+w), then the top face in the same
         order (half sizes, in the box frame before rotation).
         """
-        half_l, half_w, half_h = (0.5 * s for s in self.size_lwh_m)
-        local = np.array(
-            [
-                [-half_l, -half_w, -half_h],
-                [half_l, -half_w, -half_h],
-                [half_l, half_w, -half_h],
-                [-half_l, half_w, -half_h],
-                [-half_l, -half_w, half_h],
-                [half_l, -half_w, half_h],
-                [half_l, half_w, half_h],
-                [-half_l, half_w, half_h],
-            ]
-        )
+        local = BOX_CORNER_SIGNS * (0.5 * np.asarray(self.size_lwh_m))
         cos_yaw, sin_yaw = np.cos(self.yaw_rad), np.sin(self.yaw_rad)
         rotation = np.array([[cos_yaw, -sin_yaw, 0.0], [sin_yaw, cos_yaw, 0.0], [0.0, 0.0, 1.0]])
         return np.asarray(local @ rotation.T + np.asarray(self.center_xyz_m), dtype=np.float64)
