@@ -124,6 +124,8 @@ def _demo_banner(site_id: str, endpoint: str) -> None:
         "Where to look, in another terminal:",
         f"  wz status{connect}                  services alive, rates, drops",
         f"  wz tap{connect} 'wz/*/truth/**'     the simulated vehicles, live",
+        f"  wz tap{connect} 'wz/*/detections/**' the LiDAR detector's vehicles (site frame)",
+        f"  wz tap{connect} 'wz/*/raw/**'       the sensors' frames (LiDAR, camera, radar)",
         f"  wz record{connect} demo.mcap        record the bus (opens in Foxglove); "
         "then wz replay demo.mcap",
         "Ctrl-C stops everything.",

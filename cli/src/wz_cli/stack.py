@@ -103,7 +103,7 @@ STACK: tuple[ServiceSpec, ...] = (
     ServiceSpec(
         name="simulator",
         module="wz_simulator.node",
-        summary="SUMO work-zone traffic; publishes ground truth (sensor models follow)",
+        summary="SUMO work zone with LiDAR, camera and radar models; raw frames and truth",
         env_prefix="WZ_SIM_",
         takes=frozenset({"realtime_factor", "seed"}),
     ),
