@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -20,8 +21,11 @@ from wz_lidar_detector.detection import PointFrame
 ROOT = Path(__file__).resolve().parents[2]
 REAL = ROOT.parent / "shared" / "data" / "real-freeway-lidar"
 CUT = Path(__file__).resolve().parent / "data" / "rawdata-cut.pcd"
+# The real frame sits in ../shared beside the repository (CI has it): only a checkout without it
+# skips, and under CI a missing file fails loudly instead.
 needs_real = pytest.mark.skipif(
-    not (REAL / "rawdata.pcd").is_file(), reason=f"real LiDAR data not found at {REAL}"
+    not (REAL / "rawdata.pcd").is_file() and not os.environ.get("CI"),
+    reason=f"real LiDAR data not found at {REAL}",
 )
 
 

@@ -6,6 +6,7 @@ round trip checks one against the other.
 
 from __future__ import annotations
 
+import os
 import struct
 from collections.abc import Sequence
 from pathlib import Path
@@ -25,8 +26,11 @@ from wz_lidar_detector.readers import (
 
 REAL = Path(__file__).resolve().parents[3] / "shared" / "data" / "real-freeway-lidar"
 CUT = Path(__file__).resolve().parent / "data" / "rawdata-cut.pcd"
+# The real frame sits in ../shared beside the repository (CI has it): only a checkout without it
+# skips, and under CI a missing file fails loudly instead.
 needs_real = pytest.mark.skipif(
-    not (REAL / "rawdata.pcd").is_file(), reason=f"real LiDAR data not found at {REAL}"
+    not (REAL / "rawdata.pcd").is_file() and not os.environ.get("CI"),
+    reason=f"real LiDAR data not found at {REAL}",
 )
 
 Fields = Sequence[tuple[str, str, int]]  # (name, PCD TYPE, SIZE)
