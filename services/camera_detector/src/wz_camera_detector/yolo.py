@@ -8,10 +8,10 @@ The model is a YOLOv8 detector exported by ultralytics to ONNX:
   and size ``cx, cy, w, h`` [px of the letterboxed input], then ``C`` per-class scores in
   [0, 1] (YOLOv8 has no objectness row).
 
-Pixel coordinates are continuous, as in :mod:`wz_simulator.sensors.camera`: the image spans
+Pixel coordinates are continuous, as in :mod:`wz_shared.camera_geometry`: the image spans
 ``[0, W] x [0, H]``, ``u`` to the right and ``v`` down, so a box ``(x1, y1, x2, y2)`` is given by
 its pixel edges. Ranging a detection on the road (the paper's Eq. 1-2) is not done here: that
-geometry lives in :mod:`wz_simulator.sensors.camera` (``paper_flat_road_ground_point``).
+geometry lives in :mod:`wz_shared.camera_geometry` and :mod:`wz_camera_detector.world`.
 
 The model is read from a local file only: a missing, unreadable or mismatched model is a
 :class:`ModelLoadError` at start-up, never a download.

@@ -2,11 +2,11 @@
 
 Two parts, both pure (no bus, no files):
 
-- :class:`PinholeCamera`: the geometry. Intrinsics ``K`` from the horizontal field of view and
-  the resolution (square pixels, principal point at the image centre), extrinsics from the
-  mount's pose, projection of site points to pixels, pixel rays, and the flat-road back-projection
-  (pixel to ground point) both in full (:func:`backproject_to_ground`) and as the paper's
-  Eq. 1-2 (:func:`paper_flat_road_ground_point`), which the camera-radar detector reuses.
+- :class:`PinholeCamera`: the geometry, defined in :mod:`wz_shared.camera_geometry` (so the
+  camera detector ranges with it without depending on the simulator) and re-exported here with
+  :func:`backproject_to_ground`, :func:`paper_pixel_angles` and
+  :func:`paper_flat_road_ground_point`. The renderer draws with the ideal pinhole (no lens
+  distortion).
 - :class:`CameraModel`: the renderer. Sky, ground polygons and static boxes are drawn once into
   a background image and depth buffer (the camera does not move); each frame draws only the
   vehicles' boxes, shaded by the sun, far to near (painter's algorithm on faces, faces clipped
@@ -39,8 +39,14 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+# Re-exported (``X as X``): the geometry moved to the shared library, its names stay here.
+from wz_shared.camera_geometry import LensDistortion as LensDistortion
+from wz_shared.camera_geometry import PinholeCamera as PinholeCamera
+from wz_shared.camera_geometry import backproject_to_ground as backproject_to_ground
+from wz_shared.camera_geometry import paper_flat_road_ground_point as paper_flat_road_ground_point
+from wz_shared.camera_geometry import paper_pixel_angles as paper_pixel_angles
 from wz_shared.messages import VehicleClass
-from wz_shared.site import CameraIntrinsics, SensorMount
+from wz_shared.site import SensorMount
 from wz_simulator.sensors.scene import (
     BOX_CORNER_SIGNS,
     BOX_FACES,
@@ -67,237 +73,6 @@ _ONE = float(1 << _SHIFT)
 
 _FACE_CORNERS = np.array(BOX_FACES, dtype=np.intp)  # (6, 4)
 FACE_BOTTOM, FACE_TOP, FACE_RIGHT, FACE_FRONT, FACE_LEFT, FACE_BACK = range(6)
-
-# Optical axes (columns) in the sensor frame: x_opt = -y_s, y_opt = -z_s, z_opt = x_s.
-_SENSOR_FROM_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
-
-
-def _camera_intrinsics(mount: SensorMount) -> CameraIntrinsics:
-    if not isinstance(mount.intrinsics, CameraIntrinsics):
-        raise ValueError(
-            f"sensor {mount.sensor_id!r} is a {mount.kind}, not a camera: a camera model needs "
-            "camera intrinsics (width_px, height_px, horizontal_fov_deg)"
-        )
-    return mount.intrinsics
-
-
-class PinholeCamera:
-    """Ideal pinhole camera on a fixed mount (no lens distortion).
-
-    Intrinsics, with ``W, H`` the resolution and ``alpha`` the horizontal field of view::
-
-        f = (W / 2) / tan(alpha / 2)   [px]       K = [[f, 0, W/2], [0, f, H/2], [0, 0, 1]]
-
-    Extrinsics: ``p_camera = R^T (p_site - C)`` with ``C`` the mount position and ``R`` the
-    rotation from the optical frame to the site frame.
-
-    Parameters
-    ----------
-    mount
-        A sensor mount with :class:`~wz_shared.site.CameraIntrinsics`.
-    """
-
-    def __init__(self, mount: SensorMount) -> None:
-        intrinsics = _camera_intrinsics(mount)
-        self.mount = mount
-        self.width_px = intrinsics.width_px
-        self.height_px = intrinsics.height_px
-        half_fov = math.radians(intrinsics.horizontal_fov_deg) / 2.0
-        #: Focal length [px] (square pixels).
-        self.focal_px = (self.width_px / 2.0) / math.tan(half_fov)
-        self.cx_px = self.width_px / 2.0
-        self.cy_px = self.height_px / 2.0
-        #: Intrinsic matrix, shape (3, 3).
-        self.K = np.array(
-            [[self.focal_px, 0.0, self.cx_px], [0.0, self.focal_px, self.cy_px], [0.0, 0.0, 1.0]]
-        )
-        #: Vertical field of view [deg] implied by square pixels.
-        self.vertical_fov_deg = math.degrees(
-            2.0 * math.atan(self.height_px / self.width_px * math.tan(half_fov))
-        )
-        pose = mount.pose
-        #: Camera centre C in the site frame [m], shape (3,).
-        self.position_m = np.array([pose.x_m, pose.y_m, pose.z_m])
-        #: Rotation from the optical frame to the site frame, shape (3, 3).
-        self.rotation_site_from_camera: F64 = pose.rotation() @ _SENSOR_FROM_OPTICAL
-
-    def site_to_camera(self, points_site_m: npt.ArrayLike) -> F64:
-        """Site points [m], shape (..., 3), to the optical frame [m], shape (..., 3)."""
-        points = np.asarray(points_site_m, dtype=np.float64)
-        camera: F64 = (points - self.position_m) @ self.rotation_site_from_camera
-        return camera
-
-    def camera_to_site(self, points_camera_m: npt.ArrayLike) -> F64:
-        """Optical-frame points [m], shape (..., 3), to the site frame [m], shape (..., 3)."""
-        points = np.asarray(points_camera_m, dtype=np.float64)
-        site: F64 = points @ self.rotation_site_from_camera.T + self.position_m
-        return site
-
-    def project(self, points_site_m: npt.ArrayLike) -> tuple[F64, F64]:
-        """Project site points to pixels.
-
-        ``u = cx + f X / Z``, ``v = cy + f Y / Z`` with ``(X, Y, Z)`` the optical-frame point.
-
-        Parameters
-        ----------
-        points_site_m
-            Points in the site frame [m], shape (N, 3).
-
-        Returns
-        -------
-        uv_px
-            Continuous pixel coordinates, shape (N, 2); NaN for points not in front of the camera
-            (depth <= 0). Points outside the image are not clipped.
-        depth_m
-            Optical depth Z [m], shape (N,); <= 0 behind the camera.
-        """
-        camera = self.site_to_camera(np.atleast_2d(np.asarray(points_site_m, dtype=np.float64)))
-        depth = camera[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = np.where(depth > 0.0, 1.0 / np.where(depth > 0.0, depth, 1.0), np.nan)
-        uv = np.empty((camera.shape[0], 2))
-        uv[:, 0] = self.cx_px + self.focal_px * camera[:, 0] * inv
-        uv[:, 1] = self.cy_px + self.focal_px * camera[:, 1] * inv
-        return uv, depth.copy()
-
-    def pixel_to_camera_ray(self, uv_px: npt.ArrayLike) -> F64:
-        """Optical-frame rays ``((u - cx) / f, (v - cy) / f, 1)`` (unit depth), shape (N, 3)."""
-        uv = np.atleast_2d(np.asarray(uv_px, dtype=np.float64))
-        rays = np.ones((uv.shape[0], 3))
-        rays[:, 0] = (uv[:, 0] - self.cx_px) / self.focal_px
-        rays[:, 1] = (uv[:, 1] - self.cy_px) / self.focal_px
-        return rays
-
-    def pixel_to_ray(self, uv_px: npt.ArrayLike) -> F64:
-        """Unit viewing directions in the site frame through pixels.
-
-        Parameters
-        ----------
-        uv_px
-            Continuous pixel coordinates, shape (N, 2).
-
-        Returns
-        -------
-        ndarray, shape (N, 3)
-            Unit vectors from the camera centre :attr:`position_m` through each pixel.
-        """
-        rays = self.pixel_to_camera_ray(uv_px) @ self.rotation_site_from_camera.T
-        unit: F64 = rays / np.linalg.norm(rays, axis=1, keepdims=True)
-        return unit
-
-    def ground_point(self, uv_px: npt.ArrayLike, ground_z_m: float = 0.0) -> F64:
-        """Flat-road back-projection, see :func:`backproject_to_ground`."""
-        return backproject_to_ground(self, uv_px, ground_z_m)
-
-
-def backproject_to_ground(
-    camera: PinholeCamera, uv_px: npt.ArrayLike, ground_z_m: float = 0.0
-) -> F64:
-    """Intersect pixel rays with the flat road ``z = ground_z_m`` (full pinhole model).
-
-    ``p = C + t d`` with ``d`` the pixel's ray and ``t = (ground_z - C_z) / d_z``.
-
-    Parameters
-    ----------
-    camera
-        The camera.
-    uv_px
-        Continuous pixel coordinates, shape (N, 2).
-    ground_z_m
-        Height of the road plane in the site frame [m].
-
-    Returns
-    -------
-    ndarray, shape (N, 3)
-        Ground points in the site frame [m]; NaN rows where the ray does not descend to the
-        road in front of the camera (at or above the horizon).
-    """
-    rays = camera.pixel_to_ray(uv_px)
-    drop = ground_z_m - camera.position_m[2]
-    descending = rays[:, 2] < -1e-12
-    scale = drop / np.where(descending, rays[:, 2], -1.0)
-    valid = descending & (scale > 0.0)
-    scale = np.where(valid, scale, 0.0)
-    points: F64 = camera.position_m + scale[:, None] * rays
-    points[~valid] = np.nan
-    return points
-
-
-def paper_pixel_angles(
-    uv_px: npt.ArrayLike, intrinsics: CameraIntrinsics, tilt_rad: float
-) -> tuple[F64, F64]:
-    """Paper's Eq. 1 on both image axes: pixel to angles from the optical axis.
-
-    ``x_phi = atan((W - 2 u) / W * tan(alpha_h / 2))`` (left positive) and
-    ``y_phi = atan((H - 2 v) / H * tan(alpha_v / 2)) + theta`` (up positive), with ``theta`` the
-    camera tilt (the pose's pitch, negative looking down) and ``tan(alpha_v / 2) =
-    H / W * tan(alpha_h / 2)`` for square pixels. ``x_phi`` is the angle in the image's
-    horizontal plane, before the camera's yaw (added after Eq. 2 as a rotation).
-
-    Parameters
-    ----------
-    uv_px
-        Continuous pixel coordinates, shape (N, 2).
-    intrinsics
-        Resolution and horizontal field of view.
-    tilt_rad
-        Camera tilt theta [rad], positive nose-up.
-
-    Returns
-    -------
-    x_phi_rad, y_phi_rad
-        Shape (N,) each [rad].
-    """
-    uv = np.atleast_2d(np.asarray(uv_px, dtype=np.float64))
-    width, height = float(intrinsics.width_px), float(intrinsics.height_px)
-    tan_half_h = math.tan(math.radians(intrinsics.horizontal_fov_deg) / 2.0)
-    tan_half_v = height / width * tan_half_h
-    x_phi = np.arctan((width - 2.0 * uv[:, 0]) / width * tan_half_h)
-    y_phi = np.arctan((height - 2.0 * uv[:, 1]) / height * tan_half_v) + tilt_rad
-    return x_phi, y_phi
-
-
-def paper_flat_road_ground_point(mount: SensorMount, uv_px: npt.ArrayLike) -> F64:
-    """Paper's Eq. 1-2: pixel to a point on the flat road ``z = 0`` from angles alone.
-
-    With ``h`` the camera height, ``(x_phi, y_phi)`` from Eq. 1, ``omega = -y_phi`` the
-    depression of the ray below the horizon and ``y_phi - theta`` the row's angle from the axis::
-
-        forward = h / tan(omega)
-        lateral = h / sin(omega) * tan(x_phi) * cos(y_phi - theta)        (Eq. 2, left positive)
-
-    then rotated by the camera's yaw and shifted to its position. For zero roll this is exact
-    (it equals :func:`backproject_to_ground`); with roll it is the paper's approximation.
-
-    Parameters
-    ----------
-    mount
-        A camera mount (pose and intrinsics).
-    uv_px
-        Continuous pixel coordinates, shape (N, 2).
-
-    Returns
-    -------
-    ndarray, shape (N, 3)
-        Ground points in the site frame [m] (z = 0); NaN rows at or above the horizon.
-    """
-    intrinsics = _camera_intrinsics(mount)
-    pose = mount.pose
-    tilt = math.radians(pose.pitch_deg)
-    x_phi, y_phi = paper_pixel_angles(uv_px, intrinsics, tilt)
-    omega = -y_phi
-    valid = omega > 1e-9
-    safe_omega = np.where(valid, omega, 1.0)
-    forward = pose.z_m / np.tan(safe_omega)
-    lateral = pose.z_m / np.sin(safe_omega) * np.tan(x_phi) * np.cos(y_phi - tilt)
-    yaw = math.radians(pose.yaw_deg)
-    cos_yaw, sin_yaw = math.cos(yaw), math.sin(yaw)
-    points = np.zeros((x_phi.shape[0], 3))
-    points[:, 0] = pose.x_m + forward * cos_yaw - lateral * sin_yaw
-    points[:, 1] = pose.y_m + forward * sin_yaw + lateral * cos_yaw
-    points[~valid] = np.nan
-    return points
-
 
 # --- scene geometry in arrays ------------------------------------------------------------------
 

@@ -1,0 +1,582 @@
+"""Camera-radar association and fusion: the detector's step 5, as a pure core.
+
+Inputs: camera objects already ranged onto the road (site-frame ground positions with their
+2x2 covariance, class, score and image-tracker local id), one :class:`RadarScan` and the radar's
+:class:`SensorMount`. Output: one :class:`FusedObject` per object seen by either sensor.
+:func:`fuse_camera_radar` runs, in this order:
+
+1. **Radar to site frame** (:func:`radar_targets_to_site`). A radar reports slant range ``r``
+   and azimuth ``a`` in its sensor frame. The reflection is assumed to lie at height
+   ``target_height_m`` (the simulated radar reflects at the box centre height), so with the
+   mount height ``h = z_s - target_height_m`` the horizontal range is
+   ``rho = sqrt(r^2 - h^2)``. The mount is taken as level in pitch and roll for this step (a
+   traffic radar is levelled; the simulator's azimuth plane is the sensor's x-y plane), so the
+   site bearing is ``theta = yaw_s + a`` with ``yaw_s`` the ground heading of the sensor's x
+   axis, and the point is ``p = p_s + rho (cos theta, sin theta)``. With the unit line of sight
+   ``u = (cos theta, sin theta)`` and its left normal ``n = (-sin theta, cos theta)``, the
+   Jacobian of ``p`` in ``(r, a)`` is ``J = [u r / rho, n rho]``, so::
+
+       R = J diag(sigma_r^2, sigma_a^2) J^T
+         = (sigma_r r / rho)^2 u u^T + (rho sigma_a)^2 n n^T           [m^2]
+
+2. **Gate** (:func:`gate_distances`). Squared Mahalanobis distance between each camera object
+   ``c`` and radar point ``p``, with both covariances and an extra variance along the radar's
+   line of sight for the reflection point (the radar sees the nearest face of a vehicle, the
+   camera a ground point of its box, so they differ by up to half a vehicle length)::
+
+       S = P_c + R + sigma_extent^2 u u^T,    d^2 = (c - p)^T S^-1 (c - p)
+
+   A pair is admissible when ``d^2 < gate_chi2`` (chi-square with 2 degrees of freedom; the
+   default 13.82 keeps 99.9 % of true pairs). Mahalanobis distance is used rather than separate
+   range and azimuth gates because the camera's error ellipse is not aligned with the radar's
+   polar axes unless the camera and radar share a mast position.
+
+3. **Global nearest neighbour** (:func:`associate`): the assignment minimising the sum of
+   ``d^2`` over admissible pairs (``scipy.optimize.linear_sum_assignment``); pairs beyond the
+   gate are forbidden, never forced.
+
+4. **Fuse** each pair (:func:`fuse_pair`): range and radial speed from the radar, bearing and
+   class from the camera. The fused point is built in the radar's polar frame: the radar's
+   horizontal range ``rho_r`` along the camera's bearing ``theta_c`` seen from the radar,
+   ``p_f = p_s + rho_r u_c``. Its covariance models range and bearing as independent, the
+   range error being the radar's and the bearing error the camera's::
+
+       sigma_rho^2   = (sigma_r r / rho_r)^2                       (radar range, horizontal)
+       sigma_theta^2 = n_c^T P_c n_c / rho_c^2                      (camera bearing, rad^2)
+       P_f = sigma_rho^2 u_c u_c^T + (rho_r^2 sigma_theta^2) n_c n_c^T
+
+   where ``rho_c`` is the camera object's horizontal distance from the radar. The camera's
+   along-line-of-sight error and the radar's azimuth error are discarded, not averaged in: the
+   model suits the usual case of a camera ranging poorly (flat-road ranging from pixel rows) and
+   a radar resolving azimuth poorly (a few degrees of beam).
+
+5. **Speed** (:func:`along_road_speed`): a radial speed ``v_r`` is the projection of the
+   velocity on the line of sight, so with the road heading ``psi`` (direction of travel, site
+   frame) the along-road speed is ``v = v_r / cos(theta - psi)``, positive in the direction of
+   travel; where the line of sight is too close to perpendicular to the road
+   (``|cos| < min_speed_cosine``) the division is meaningless and the speed is None. Without a
+   road heading the speed is ``|v_r|``.
+
+6. **Leftovers.** An unmatched camera object passes through as ``"camera"`` (no speed). An
+   unmatched radar target becomes ``"radar"`` (class unknown, score ``radar_only_score``) when it
+   moves (``|v_r| > min_radar_only_speed_mps``) and is strong enough
+   (``rcs_dbsm >= min_radar_only_rcs_dbsm``): a vehicle the camera misses at night or in fog.
+   Anything else is clutter (guard rails, signs, rain) and dropped.
+
+Nothing here does I/O: the node decodes the scan and camera objects, calls
+:func:`fuse_camera_radar`, and publishes :func:`to_detection` of each result.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+from pydantic import BaseModel, ConfigDict, Field
+from scipy.optimize import linear_sum_assignment
+
+from wz_shared.messages import Detection, RadarScan, RadarTarget, VehicleClass
+from wz_shared.site import RadarIntrinsics, SensorMount
+
+F64 = npt.NDArray[np.float64]
+
+FusedSource = Literal["camera+radar", "camera", "radar"]
+
+#: Variance floor on each principal axis of a built covariance [m^2]: keeps it positive
+#: definite when an intrinsics noise is configured as zero.
+_MIN_VARIANCE_M2 = 1e-6
+
+#: Cost of a forbidden pair in the assignment; far above any admissible ``d^2``.
+_FORBIDDEN_COST = 1e12
+
+
+class AssociationSettings(BaseModel):
+    """Parameters of :func:`fuse_camera_radar`; metres, seconds, radians, dBsm."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    #: Gate on the squared Mahalanobis distance (chi-square, 2 dof; 13.82 keeps 99.9 %).
+    gate_chi2: float = Field(default=13.82, gt=0.0)
+    #: Std of the offset between the radar's reflection point and the camera's ground point
+    #: along the radar's line of sight [m] (about half a car length seen end-on).
+    reflection_extent_std_m: float = Field(default=1.0, ge=0.0)
+    #: Height of the radar reflection above the road [m] (box centre height of a car).
+    target_height_m: float = Field(default=0.75, allow_inf_nan=False)
+    #: Smallest horizontal range used in the Jacobians [m]: a target under the mast has none.
+    min_horizontal_range_m: float = Field(default=1.0, gt=0.0)
+    #: An unmatched radar target is kept when its |radial speed| exceeds this [m/s].
+    min_radar_only_speed_mps: float = Field(default=1.0, ge=0.0)
+    #: ... and its RCS is at least this [dBsm] (simulated clutter sits around -10 dBsm).
+    min_radar_only_rcs_dbsm: float = Field(default=0.0, allow_inf_nan=False)
+    #: Score given to a radar-only detection, in [0, 1].
+    radar_only_score: float = Field(default=0.5, ge=0.0, le=1.0)
+    #: Smallest |cos(line of sight - road heading)| at which a radial speed is converted.
+    min_speed_cosine: float = Field(default=0.2, gt=0.0, le=1.0)
+
+
+@dataclass(frozen=True, slots=True)
+class CameraObject:
+    """One camera object ranged onto the road, in the site frame.
+
+    Attributes
+    ----------
+    local_id
+        The image tracker's local id (>= 0).
+    x_m, y_m
+        Ground position [m], site frame.
+    covariance_m2
+        Position covariance [m^2], shape (2, 2), symmetric positive definite.
+    object_class
+        Class from the image detector.
+    score
+        Detector score in [0, 1].
+    """
+
+    local_id: int
+    x_m: float
+    y_m: float
+    covariance_m2: F64
+    object_class: VehicleClass
+    score: float
+
+
+@dataclass(frozen=True, slots=True)
+class RadarPoint:
+    """One radar target converted to the site frame (see the module docstring, step 1).
+
+    Attributes
+    ----------
+    target_index
+        Index of the target in its scan's ``targets``.
+    x_m, y_m
+        Ground position [m], site frame.
+    covariance_m2
+        Position covariance [m^2], shape (2, 2).
+    slant_range_m
+        Measured slant range ``r`` [m].
+    horizontal_range_m
+        Horizontal range ``rho`` from the mast [m].
+    bearing_rad
+        Site-frame bearing ``theta`` of the line of sight, counter-clockwise from east [rad].
+    radial_speed_mps
+        Radial speed [m/s], positive away from the radar.
+    rcs_dbsm
+        Radar cross-section [dBsm].
+    """
+
+    target_index: int
+    x_m: float
+    y_m: float
+    covariance_m2: F64
+    slant_range_m: float
+    horizontal_range_m: float
+    bearing_rad: float
+    radial_speed_mps: float
+    rcs_dbsm: float
+
+
+@dataclass(frozen=True, slots=True)
+class FusedObject:
+    """One object after camera-radar fusion, in the site frame.
+
+    Attributes
+    ----------
+    source
+        ``"camera+radar"``, ``"camera"`` or ``"radar"``.
+    x_m, y_m
+        Position [m], site frame.
+    covariance_m2
+        Position covariance [m^2], shape (2, 2), symmetric positive definite.
+    object_class
+        The camera's class; ``UNKNOWN`` for a radar-only object.
+    score
+        The camera's score; ``radar_only_score`` for a radar-only object.
+    speed_mps
+        Along-road speed [m/s] (or ``|radial speed|`` without a road heading); None without
+        radar or where the line of sight is nearly across the road.
+    camera_local_id
+        The camera object's local id, None for a radar-only object.
+    radar_target_index
+        Index of the radar target in its scan, None for a camera-only object.
+    """
+
+    source: FusedSource
+    x_m: float
+    y_m: float
+    covariance_m2: F64
+    object_class: VehicleClass
+    score: float
+    speed_mps: float | None
+    camera_local_id: int | None
+    radar_target_index: int | None
+
+
+def _radar_intrinsics(mount: SensorMount) -> RadarIntrinsics:
+    if not isinstance(mount.intrinsics, RadarIntrinsics):
+        raise ValueError(
+            f"sensor {mount.sensor_id!r} is a {mount.kind}, not a radar: "
+            "camera-radar association needs the radar's mount"
+        )
+    return mount.intrinsics
+
+
+def _unit(bearing_rad: float) -> tuple[F64, F64]:
+    """Line-of-sight unit vector ``u`` and its left normal ``n``, each shape (2,)."""
+    cos_b, sin_b = math.cos(bearing_rad), math.sin(bearing_rad)
+    return np.array([cos_b, sin_b]), np.array([-sin_b, cos_b])
+
+
+def _polar_covariance(
+    bearing_rad: float, range_variance_m2: float, lateral_variance_m2: float
+) -> F64:
+    """``sigma_rho^2 u u^T + sigma_lat^2 n n^T`` [m^2], shape (2, 2), each floored."""
+    u, n = _unit(bearing_rad)
+    covariance: F64 = max(range_variance_m2, _MIN_VARIANCE_M2) * np.outer(u, u) + max(
+        lateral_variance_m2, _MIN_VARIANCE_M2
+    ) * np.outer(n, n)
+    return covariance
+
+
+def mount_ground_heading_rad(mount: SensorMount) -> float:
+    """Site-frame heading of the sensor's x axis projected on the ground [rad], CCW from east."""
+    rotation = mount.pose.rotation()
+    return math.atan2(float(rotation[1, 0]), float(rotation[0, 0]))
+
+
+def radar_targets_to_site(
+    targets: Sequence[RadarTarget],
+    mount: SensorMount,
+    settings: AssociationSettings | None = None,
+) -> list[RadarPoint]:
+    """Convert radar targets to site-frame ground points with covariance (module step 1).
+
+    Parameters
+    ----------
+    targets : sequence of RadarTarget, length N
+        Targets in the radar's sensor frame (slant range [m], azimuth [rad]).
+    mount : SensorMount
+        The radar's mount (pose and :class:`RadarIntrinsics` noise stds).
+    settings : AssociationSettings or None
+        ``target_height_m`` and ``min_horizontal_range_m``; defaults when None.
+
+    Returns
+    -------
+    list of RadarPoint, length N
+        In input order; ``target_index`` is the position in ``targets``.
+
+    Raises
+    ------
+    ValueError
+        If ``mount`` is not a radar.
+    """
+    settings = settings or AssociationSettings()
+    intrinsics = _radar_intrinsics(mount)
+    range_std_m = intrinsics.range_noise_std_m
+    azimuth_std_rad = math.radians(intrinsics.azimuth_noise_std_deg)
+    height_m = mount.pose.z_m - settings.target_height_m
+    heading_rad = mount_ground_heading_rad(mount)
+    points: list[RadarPoint] = []
+    for index, target in enumerate(targets):
+        slant_m = target.range_m
+        rho_m = math.sqrt(max(slant_m * slant_m - height_m * height_m, 0.0))
+        # The Jacobian's r / rho grows without bound under the mast; clamp rho there.
+        rho_jacobian_m = max(rho_m, settings.min_horizontal_range_m)
+        bearing = heading_rad + target.azimuth_rad
+        # R = (sigma_r r / rho)^2 u u^T + (rho sigma_a)^2 n n^T
+        covariance = _polar_covariance(
+            bearing,
+            (range_std_m * max(slant_m, rho_jacobian_m) / rho_jacobian_m) ** 2,
+            (rho_jacobian_m * azimuth_std_rad) ** 2,
+        )
+        points.append(
+            RadarPoint(
+                target_index=index,
+                x_m=mount.pose.x_m + rho_m * math.cos(bearing),
+                y_m=mount.pose.y_m + rho_m * math.sin(bearing),
+                covariance_m2=covariance,
+                slant_range_m=slant_m,
+                horizontal_range_m=rho_m,
+                bearing_rad=bearing,
+                radial_speed_mps=target.radial_speed_mps,
+                rcs_dbsm=target.rcs_dbsm,
+            )
+        )
+    return points
+
+
+def gate_distances(
+    camera_objects: Sequence[CameraObject],
+    radar_points: Sequence[RadarPoint],
+    reflection_extent_std_m: float,
+) -> F64:
+    """Squared Mahalanobis distance of every camera-radar pair (module step 2).
+
+    Parameters
+    ----------
+    camera_objects : sequence of CameraObject, length C
+    radar_points : sequence of RadarPoint, length R
+    reflection_extent_std_m : float
+        Std [m] added along each radar line of sight for the reflection-point offset.
+
+    Returns
+    -------
+    ndarray, shape (C, R)
+        ``d^2 = (c - p)^T (P_c + R + sigma_extent^2 u u^T)^-1 (c - p)`` [dimensionless].
+    """
+    n_camera, n_radar = len(camera_objects), len(radar_points)
+    if n_camera == 0 or n_radar == 0:
+        return np.zeros((n_camera, n_radar))
+    camera_xy = np.array([(c.x_m, c.y_m) for c in camera_objects])  # (C, 2)
+    camera_cov = np.stack([c.covariance_m2 for c in camera_objects])  # (C, 2, 2)
+    radar_xy = np.array([(p.x_m, p.y_m) for p in radar_points])  # (R, 2)
+    line_of_sight = np.array([_unit(p.bearing_rad)[0] for p in radar_points])  # (R, 2)
+    radar_cov = np.stack([p.covariance_m2 for p in radar_points]) + (
+        reflection_extent_std_m**2
+    ) * np.einsum("ri,rj->rij", line_of_sight, line_of_sight)  # (R, 2, 2)
+    innovation = camera_xy[:, None, :] - radar_xy[None, :, :]  # (C, R, 2)
+    innovation_cov = camera_cov[:, None, :, :] + radar_cov[None, :, :, :]  # (C, R, 2, 2)
+    solved = np.linalg.solve(innovation_cov, innovation[..., None])[..., 0]
+    distances: F64 = np.einsum("cri,cri->cr", innovation, solved)
+    return distances
+
+
+def associate(distances_sq: F64, gate_chi2: float) -> list[tuple[int, int]]:
+    """Global nearest neighbour on gated squared distances (module step 3).
+
+    Parameters
+    ----------
+    distances_sq : ndarray, shape (C, R)
+        Squared Mahalanobis distances from :func:`gate_distances`.
+    gate_chi2 : float
+        Pairs with ``d^2 >= gate_chi2`` are never matched.
+
+    Returns
+    -------
+    list of (int, int)
+        ``(camera index, radar index)`` pairs minimising the summed ``d^2``, by camera index.
+    """
+    if distances_sq.size == 0:
+        return []
+    admissible = distances_sq < gate_chi2
+    cost = np.where(admissible, distances_sq, _FORBIDDEN_COST)
+    rows, columns = linear_sum_assignment(cost)
+    return [
+        (int(row), int(column))
+        for row, column in zip(rows.tolist(), columns.tolist(), strict=True)
+        if admissible[row, column]
+    ]
+
+
+def along_road_speed(
+    radial_speed_mps: float,
+    bearing_rad: float,
+    road_heading_rad: float | None,
+    min_speed_cosine: float,
+) -> float | None:
+    """Speed from a radial speed (module step 5).
+
+    Parameters
+    ----------
+    radial_speed_mps : float
+        Radial speed [m/s], positive away from the radar.
+    bearing_rad : float
+        Site bearing of the line of sight [rad].
+    road_heading_rad : float or None
+        Direction of travel [rad], site frame; None when unknown.
+    min_speed_cosine : float
+        Smallest ``|cos(bearing - road_heading)|`` at which the conversion is made.
+
+    Returns
+    -------
+    float or None
+        ``v_r / cos(bearing - road_heading)`` [m/s], positive in the direction of travel;
+        ``|v_r|`` without a road heading; None when the line of sight is nearly across the road.
+    """
+    if road_heading_rad is None:
+        return abs(radial_speed_mps)
+    cosine = math.cos(bearing_rad - road_heading_rad)
+    if abs(cosine) < min_speed_cosine:
+        return None
+    return radial_speed_mps / cosine
+
+
+def fuse_pair(
+    camera: CameraObject,
+    radar: RadarPoint,
+    mount: SensorMount,
+    settings: AssociationSettings | None = None,
+    road_heading_rad: float | None = None,
+) -> FusedObject:
+    """Fuse one associated pair: radar range and speed, camera bearing and class (step 4).
+
+    Parameters
+    ----------
+    camera : CameraObject
+    radar : RadarPoint
+        Converted by :func:`radar_targets_to_site` with ``mount``.
+    mount : SensorMount
+        The radar's mount.
+    settings : AssociationSettings or None
+        Defaults when None.
+    road_heading_rad : float or None
+        Direction of travel [rad] for the speed; None for ``|v_r|``.
+
+    Returns
+    -------
+    FusedObject
+        ``source == "camera+radar"``, position ``p_s + rho_r u_c`` and covariance
+        ``sigma_rho^2 u_c u_c^T + rho_r^2 sigma_theta^2 n_c n_c^T`` [m^2].
+    """
+    settings = settings or AssociationSettings()
+    intrinsics = _radar_intrinsics(mount)
+    dx, dy = camera.x_m - mount.pose.x_m, camera.y_m - mount.pose.y_m
+    camera_bearing = math.atan2(dy, dx)
+    camera_rho_m = max(math.hypot(dx, dy), settings.min_horizontal_range_m)
+    radar_rho_m = radar.horizontal_range_m
+    radar_rho_jacobian_m = max(radar_rho_m, settings.min_horizontal_range_m)
+    _, normal = _unit(camera_bearing)
+    # sigma_theta^2 = n^T P_c n / rho_c^2: the camera's lateral variance as a bearing variance.
+    bearing_variance_rad2 = float(normal @ camera.covariance_m2 @ normal) / camera_rho_m**2
+    range_variance_m2 = (
+        intrinsics.range_noise_std_m
+        * max(radar.slant_range_m, radar_rho_jacobian_m)
+        / radar_rho_jacobian_m
+    ) ** 2
+    covariance = _polar_covariance(
+        camera_bearing, range_variance_m2, radar_rho_jacobian_m**2 * bearing_variance_rad2
+    )
+    return FusedObject(
+        source="camera+radar",
+        x_m=mount.pose.x_m + radar_rho_m * math.cos(camera_bearing),
+        y_m=mount.pose.y_m + radar_rho_m * math.sin(camera_bearing),
+        covariance_m2=covariance,
+        object_class=camera.object_class,
+        score=camera.score,
+        speed_mps=along_road_speed(
+            radar.radial_speed_mps, camera_bearing, road_heading_rad, settings.min_speed_cosine
+        ),
+        camera_local_id=camera.local_id,
+        radar_target_index=radar.target_index,
+    )
+
+
+def _camera_only(camera: CameraObject) -> FusedObject:
+    return FusedObject(
+        source="camera",
+        x_m=camera.x_m,
+        y_m=camera.y_m,
+        covariance_m2=np.array(camera.covariance_m2, dtype=np.float64),
+        object_class=camera.object_class,
+        score=camera.score,
+        speed_mps=None,
+        camera_local_id=camera.local_id,
+        radar_target_index=None,
+    )
+
+
+def _radar_only(
+    radar: RadarPoint, settings: AssociationSettings, road_heading_rad: float | None
+) -> FusedObject | None:
+    """A radar-only object, or None for clutter (too slow or too weak)."""
+    moving = abs(radar.radial_speed_mps) > settings.min_radar_only_speed_mps
+    if not moving or radar.rcs_dbsm < settings.min_radar_only_rcs_dbsm:
+        return None
+    return FusedObject(
+        source="radar",
+        x_m=radar.x_m,
+        y_m=radar.y_m,
+        covariance_m2=radar.covariance_m2,
+        object_class=VehicleClass.UNKNOWN,
+        score=settings.radar_only_score,
+        speed_mps=along_road_speed(
+            radar.radial_speed_mps, radar.bearing_rad, road_heading_rad, settings.min_speed_cosine
+        ),
+        camera_local_id=None,
+        radar_target_index=radar.target_index,
+    )
+
+
+def fuse_camera_radar(
+    camera_objects: Sequence[CameraObject],
+    scan: RadarScan,
+    mount: SensorMount,
+    settings: AssociationSettings | None = None,
+    road_heading_rad: float | None = None,
+) -> list[FusedObject]:
+    """Associate and fuse one frame's camera objects with one radar scan (all steps).
+
+    Parameters
+    ----------
+    camera_objects : sequence of CameraObject, length C
+        Site-frame ground positions with covariance.
+    scan : RadarScan
+        The radar scan nearest in time (no motion compensation here).
+    mount : SensorMount
+        The radar's mount.
+    settings : AssociationSettings or None
+        Defaults when None.
+    road_heading_rad : float or None
+        Direction of travel at the site [rad], CCW from east; None for ``|v_r|`` speeds.
+
+    Returns
+    -------
+    list of FusedObject
+        Fused pairs (by camera index), then camera-only objects (by camera index), then
+        radar-only objects (by target index). Every camera object appears exactly once; each
+        radar target at most once.
+
+    Raises
+    ------
+    ValueError
+        If ``mount`` is not a radar.
+    """
+    settings = settings or AssociationSettings()
+    radar_points = radar_targets_to_site(scan.targets, mount, settings)
+    distances_sq = gate_distances(camera_objects, radar_points, settings.reflection_extent_std_m)
+    pairs = associate(distances_sq, settings.gate_chi2)
+    fused = [
+        fuse_pair(camera_objects[c], radar_points[r], mount, settings, road_heading_rad)
+        for c, r in pairs
+    ]
+    matched_camera = {c for c, _ in pairs}
+    matched_radar = {r for _, r in pairs}
+    fused.extend(
+        _camera_only(camera)
+        for index, camera in enumerate(camera_objects)
+        if index not in matched_camera
+    )
+    for index, radar in enumerate(radar_points):
+        if index in matched_radar:
+            continue
+        radar_only = _radar_only(radar, settings, road_heading_rad)
+        if radar_only is not None:
+            fused.append(radar_only)
+    return fused
+
+
+def to_detection(obj: FusedObject) -> Detection:
+    """The bus message of a fused object.
+
+    Parameters
+    ----------
+    obj : FusedObject
+
+    Returns
+    -------
+    Detection
+        Position [m], covariance flattened row-major [m^2], class, score, speed [m/s] and the
+        camera's local id as ``local_track_id`` (None for a radar-only object).
+    """
+    return Detection(
+        x_m=obj.x_m,
+        y_m=obj.y_m,
+        covariance_m2=[float(value) for value in np.asarray(obj.covariance_m2).reshape(4)],
+        object_class=obj.object_class,
+        score=obj.score,
+        speed_mps=obj.speed_mps,
+        local_track_id=obj.camera_local_id,
+    )
