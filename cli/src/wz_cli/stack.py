@@ -113,6 +113,13 @@ STACK: tuple[ServiceSpec, ...] = (
         summary="LiDAR frames to vehicle detections (background-model fast path or the paper's)",
         env_prefix="WZ_LIDAR_",
     ),
+    ServiceSpec(
+        name="camera-detector",
+        module="wz_camera_detector.node",
+        summary="camera frames (+ radar) to vehicle detections (background subtraction until a "
+        "YOLO model ships)",
+        env_prefix="WZ_CAMERA_",
+    ),
 )
 
 

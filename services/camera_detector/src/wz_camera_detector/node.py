@@ -1,0 +1,453 @@
+"""The camera-radar detector node: camera frames (and radar scans) in, site-frame detections out.
+
+Run it as ``python -m wz_camera_detector.node``. Settings come from the environment
+(``WZ_CAMERA_*`` for the detector, ``WZ_BUS_*`` for the bus; see
+:mod:`wz_camera_detector.settings`). It
+
+- takes frames from ``wz/<site>/raw/camera/<camera>`` through a ring of one (the newest frame
+  wins; frames a slow detector had no time for are counted as dropped by the bus), and keeps
+  the newest scan of ``wz/<site>/raw/radar/<radar>`` (a ring of one too);
+- per frame: decodes the JPEG (``cv2.imdecode``), detects boxes with the backend
+  (background subtraction, or a local YOLOv8 ONNX model), tracks them in the image
+  (:class:`ImageTracker`), puts each box on the road (:func:`box_to_ground`, the vehicle
+  heading being the site road's heading at the box's ground point, the size a class's typical
+  one: car 4.6 x 1.8 m for ``car``/``vehicle``, truck 16.5 x 2.6 m for ``truck``/``bus``),
+  gives it the camera covariance (below), and fuses with the newest radar scan when its stamp
+  is within ``radar_max_age_s`` of the frame's (:func:`fuse_camera_radar`, speeds along the
+  road heading at the mast);
+- publishes one :class:`DetectionBatch` per processed frame on
+  ``wz/<site>/detections/<camera>`` (site frame, ``stamp`` and ``frame_index`` of the frame,
+  ``source_id`` the camera, ``latency_s`` from taking the frame to publishing);
+- reports health on ``wz/<site>/status/camera-detector``; ``state`` is ``starting`` while the
+  background backend learns the empty road (its warm-up; nothing is published then).
+
+Camera covariance. A box's column gives a precise bearing, its bottom row a poor range (flat
+road, pitch, the assumed vehicle size), so the covariance is built in the camera's line of
+sight ``u`` (horizontal, camera to object) and its normal ``n``, with ``r`` the horizontal
+range [m]::
+
+    sigma_lat = lateral_std_m + lateral_std_per_m * r      (0.3 m + 0.005 r)
+    sigma_los = range_std_m + range_std_per_m * r          (1.0 m + 0.03 r)
+    P = sigma_los^2 u u^T + sigma_lat^2 n n^T              [m^2]
+
+Bad input never stops it. Each problem is counted in the status message's ``invalid_counts``
+under ``<raw camera key>|<reason>`` (the bus's own decode reasons such as ``bad_magic`` or
+``bad_jpeg`` come first):
+
+- ``bad_image``: the JPEG does not decode (the frame is skipped);
+- ``wrong_sensor``: the metadata names another camera or site;
+- ``out_of_order``: the stamp is not after the previous frame's (skipped);
+- ``detector_error``: the backend raised (traceback logged once);
+- ``above_horizon``: a box whose bottom is at or above the horizon (dropped);
+- ``bad_detection``: a detection with non-finite values (dropped).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Callable
+from typing import Protocol
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+from pydantic import ValidationError
+
+from wz_camera_detector.association import (
+    CameraObject,
+    FusedObject,
+    _camera_only,
+    fuse_camera_radar,
+    to_detection,
+)
+from wz_camera_detector.background import BACKEND, BackgroundSubtractionDetector
+from wz_camera_detector.settings import CameraDetectorSettings, camera_mount, radar_mount
+from wz_camera_detector.tracker import ImageTrack, ImageTracker
+from wz_camera_detector.world import box_to_ground
+from wz_camera_detector.yolo import ImageDetection, ModelLoadError, YoloOnnxDetector
+from wz_shared.camera_geometry import PinholeCamera, camera_intrinsics
+from wz_shared.codec import Frame
+from wz_shared.logs import configure_logging
+from wz_shared.messages import (
+    CameraFrameMeta,
+    Detection,
+    DetectionBatch,
+    RadarScan,
+    ServiceState,
+    VehicleClass,
+)
+from wz_shared.service import ServiceRuntime
+from wz_shared.settings import BusSettings
+from wz_shared.site import SensorMount, Site, load_site
+from wz_shared.timebase import SimClock
+
+SERVICE = "camera-detector"
+log = logging.getLogger("wz_camera_detector.node")
+
+U8 = npt.NDArray[np.uint8]
+F64 = npt.NDArray[np.float64]
+#: How a problem is reported: (reason, detail).
+Report = Callable[[str, str], None]
+
+#: Image class name -> (bus class, typical length [m], width [m]); other names are ignored.
+CLASS_SIZES: dict[str, tuple[VehicleClass, float, float]] = {
+    "car": (VehicleClass.CAR, 4.6, 1.8),
+    # The background backend cannot classify: a car-sized guess, class unknown.
+    "vehicle": (VehicleClass.UNKNOWN, 4.6, 1.8),
+    "truck": (VehicleClass.TRUCK, 16.5, 2.6),
+    "bus": (VehicleClass.BUS, 12.0, 2.55),
+    "motorcycle": (VehicleClass.MOTORCYCLE, 2.2, 0.8),
+}
+
+
+class ImageBackend(Protocol):
+    def detect(self, image_bgr: U8) -> list[ImageDetection]: ...
+
+
+def make_backend(settings: CameraDetectorSettings) -> ImageBackend:
+    """The image detector the settings name.
+
+    Raises
+    ------
+    ModelLoadError
+        ``yolo`` with a model that is missing, unreadable or not a YOLOv8 model (never a
+        download).
+    """
+    if settings.backend == BACKEND:
+        return BackgroundSubtractionDetector(settings.background)
+    if settings.model_path is None:  # the settings validator refuses this already
+        raise ModelLoadError("backend 'yolo' needs WZ_CAMERA_MODEL_PATH (a local .onnx file)")
+    return YoloOnnxDetector(
+        settings.model_path, settings.class_names, conf_threshold=settings.conf_threshold
+    )
+
+
+def road_heading_at(site: Site, x_m: float, y_m: float) -> float:
+    """The site road's heading at the point's station [rad], CCW from east."""
+    station, _ = site.road_frame.to_road(x_m, y_m)
+    return float(np.asarray(site.road_frame.heading_at(station)).reshape(-1)[0])
+
+
+def camera_covariance(
+    camera_xy_m: tuple[float, float], object_xy_m: tuple[float, float],
+    settings: CameraDetectorSettings,
+) -> F64:  # fmt: skip
+    """``sigma_los^2 u u^T + sigma_lat^2 n n^T`` [m^2], shape (2, 2) (module docstring)."""
+    dx, dy = object_xy_m[0] - camera_xy_m[0], object_xy_m[1] - camera_xy_m[1]
+    range_m = math.hypot(dx, dy)
+    bearing = math.atan2(dy, dx)
+    u = np.array([math.cos(bearing), math.sin(bearing)])
+    n = np.array([-u[1], u[0]])
+    lateral = settings.lateral_std_m + settings.lateral_std_per_m * range_m
+    along = settings.range_std_m + settings.range_std_per_m * range_m
+    covariance: F64 = along**2 * np.outer(u, u) + lateral**2 * np.outer(n, n)
+    return covariance
+
+
+class CameraDetector:
+    """What the node does with one frame, without the bus: decode, detect, track, range, fuse.
+
+    Parameters
+    ----------
+    site
+        The site (its id, and its road for headings).
+    camera
+        The camera's mount; frames of another size than its intrinsics are ranged with the same
+        field of view at their own size.
+    radar
+        The radar's mount, None for camera-only detections.
+    settings
+        The service's settings.
+    report
+        Called with ``(reason, detail)`` for every problem.
+    backend
+        The image detector; default :func:`make_backend` (which may raise
+        :class:`ModelLoadError`).
+    """
+
+    def __init__(
+        self,
+        site: Site,
+        camera: SensorMount,
+        radar: SensorMount | None,
+        settings: CameraDetectorSettings,
+        report: Report,
+        backend: ImageBackend | None = None,
+    ) -> None:
+        self.site = site
+        self.camera_mount = camera
+        self.radar_mount = radar
+        self.settings = settings
+        self.report = report
+        self.backend = backend if backend is not None else make_backend(settings)
+        self.tracker = ImageTracker(settings.tracker)
+        self._cameras: dict[tuple[int, int], PinholeCamera] = {}
+        self._radar_heading = (
+            road_heading_at(site, radar.pose.x_m, radar.pose.y_m) if radar is not None else None
+        )
+        self._scan: RadarScan | None = None
+        self._logged: set[str] = set()
+        self._frames_taken = 0
+        #: Stamp of the newest frame taken [s] (the node's clock on simulation time).
+        self.last_stamp_s = 0.0
+
+    @property
+    def state(self) -> ServiceState:
+        """``starting`` while the background backend warms up, else ``running``."""
+        backend = self.backend
+        if isinstance(backend, BackgroundSubtractionDetector) and not backend.warmed_up:
+            return ServiceState.STARTING
+        return ServiceState.RUNNING
+
+    def radar_scan(self, scan: RadarScan) -> None:
+        """Keep ``scan`` if it is the newest seen (by stamp)."""
+        if self.radar_mount is None or scan.source_id != self.radar_mount.sensor_id:
+            return
+        if self._scan is None or scan.stamp >= self._scan.stamp:
+            self._scan = scan
+
+    def camera(self, width_px: int, height_px: int) -> PinholeCamera:
+        """The pinhole model at a frame's size (same pose and field of view as the mount)."""
+        camera = self._cameras.get((width_px, height_px))
+        if camera is None:
+            intrinsics = camera_intrinsics(self.camera_mount)
+            mount = self.camera_mount
+            if (intrinsics.width_px, intrinsics.height_px) != (width_px, height_px):
+                mount = mount.model_copy(
+                    update={
+                        "intrinsics": intrinsics.model_copy(
+                            update={"width_px": width_px, "height_px": height_px}
+                        )
+                    }
+                )
+            camera = self._cameras[(width_px, height_px)] = PinholeCamera(mount)
+        return camera
+
+    def handle(
+        self, meta: CameraFrameMeta, jpeg: bytes | memoryview, taken_s: float
+    ) -> DetectionBatch | None:
+        """Process one frame.
+
+        Parameters
+        ----------
+        meta
+            The frame's metadata (validated by the codec).
+        jpeg
+            The JPEG payload.
+        taken_s
+            ``time.monotonic()`` when the frame was taken from the queue (for ``latency_s``).
+
+        Returns
+        -------
+        DetectionBatch or None
+            None during the background warm-up, or for a frame that cannot be used (reported).
+        """
+        if meta.source_id != self.camera_mount.sensor_id or meta.site != self.site.site_id:
+            self.report(
+                "wrong_sensor",
+                f"frame of {meta.site}/{meta.source_id} on the key of "
+                f"{self.site.site_id}/{self.camera_mount.sensor_id}",
+            )
+            return None
+        image = _decode_jpeg(jpeg)
+        if image is None:
+            self.report("bad_image", f"frame {meta.frame_index}: the JPEG does not decode")
+            return None
+        if self._frames_taken and meta.stamp <= self.last_stamp_s:
+            self.report(
+                "out_of_order",
+                f"frame {meta.frame_index} stamp {meta.stamp:.6f} s is not after "
+                f"{self.last_stamp_s:.6f} s",
+            )
+            return None
+        self.last_stamp_s = meta.stamp
+        self._frames_taken += 1
+        warming_up = self.state == ServiceState.STARTING  # this frame still only teaches
+        try:
+            boxes = self.backend.detect(image)
+        except Exception as exc:  # a backend that fails on one frame must not stop the node
+            self.report("detector_error", repr(exc))
+            if "detector_error" not in self._logged:
+                self._logged.add("detector_error")
+                log.exception("the detector failed on frame %d; going on", meta.frame_index)
+            return None
+        if warming_up:
+            return None
+        boxes = [box for box in boxes if box.class_name in CLASS_SIZES]
+        tracks = self.tracker.update(boxes, meta.stamp)
+        if self.settings.confirmed_only:
+            tracks = [track for track in tracks if track.confirmed]
+        objects = self._camera_objects(tracks, image.shape[1], image.shape[0], meta.frame_index)
+        fused = self._fuse(objects, meta.stamp)
+        return DetectionBatch(
+            site=self.site.site_id,
+            source_id=self.camera_mount.sensor_id,
+            stamp=meta.stamp,
+            frame_index=meta.frame_index,
+            detections=self._detections(fused),
+            latency_s=max(0.0, time.monotonic() - taken_s),
+        )
+
+    def _camera_objects(
+        self, tracks: list[ImageTrack], width_px: int, height_px: int, frame_index: int
+    ) -> list[CameraObject]:
+        camera = self.camera(width_px, height_px)
+        camera_xy = (float(camera.position_m[0]), float(camera.position_m[1]))
+        objects: list[CameraObject] = []
+        for track in tracks:
+            object_class, length_m, width_m = CLASS_SIZES[track.class_name]
+            # Heading from where the box's contact point lies (the road's direction there).
+            x0, y0 = box_to_ground(camera, track.box_xyxy_px, 0.0, 0.0, 0.0)
+            if not (math.isfinite(x0) and math.isfinite(y0)):
+                self.report(
+                    "above_horizon",
+                    f"frame {frame_index}: box {track.box_xyxy_px} reaches above the horizon",
+                )
+                continue
+            heading = road_heading_at(self.site, x0, y0)
+            x_m, y_m = box_to_ground(camera, track.box_xyxy_px, heading, length_m, width_m)
+            objects.append(
+                CameraObject(
+                    local_id=track.local_id,
+                    x_m=x_m,
+                    y_m=y_m,
+                    covariance_m2=camera_covariance(camera_xy, (x_m, y_m), self.settings),
+                    object_class=object_class,
+                    score=track.score,
+                )
+            )
+        return objects
+
+    def _fuse(self, objects: list[CameraObject], stamp_s: float) -> list[FusedObject]:
+        scan = self._scan
+        if (
+            self.radar_mount is None
+            or scan is None
+            or abs(scan.stamp - stamp_s) > self.settings.radar_max_age_s
+        ):
+            return [_camera_only(camera) for camera in objects]
+        return fuse_camera_radar(
+            objects, scan, self.radar_mount, self.settings.association, self._radar_heading
+        )
+
+    def _detections(self, fused: list[FusedObject]) -> list[Detection]:
+        detections = []
+        for obj in fused:
+            try:
+                detections.append(to_detection(obj))
+            except (ValidationError, ValueError) as exc:
+                self.report("bad_detection", f"{obj}: {exc}")
+        return detections
+
+
+def _decode_jpeg(jpeg: bytes | memoryview) -> U8 | None:
+    """BGR uint8 (H, W, 3), or None when the bytes are not a decodable image."""
+    buffer = np.frombuffer(jpeg, dtype=np.uint8)
+    if buffer.size == 0:
+        return None
+    try:
+        image = cv2.imdecode(buffer, cv2.IMREAD_COLOR)
+    except cv2.error:
+        return None
+    if image is None or image.ndim != 3 or image.shape[2] != 3 or image.size == 0:
+        return None
+    return np.asarray(image, dtype=np.uint8)
+
+
+def build_detector(site: Site, settings: CameraDetectorSettings, report: Report) -> CameraDetector:
+    """The detector for the settings' camera and radar; start-up problems as SystemExit.
+
+    Raises
+    ------
+    SystemExit
+        With a message for the operator: an unknown sensor, or a YOLO model that is missing,
+        unreadable or not a YOLOv8 model (the :class:`ModelLoadError` message).
+    """
+    try:
+        camera = camera_mount(site, settings.camera_id)
+        radar = radar_mount(site, settings.radar_id)
+        return CameraDetector(site, camera, radar, settings, report)
+    except (ModelLoadError, ValueError) as exc:
+        raise SystemExit(f"{SERVICE}: {exc}") from exc
+
+
+def run(
+    runtime: ServiceRuntime,
+    site: Site,
+    settings: CameraDetectorSettings,
+    clock: SimClock,
+) -> int:
+    """Build the detector on the runtime's bus and take frames until ``runtime.stop``.
+
+    Returns the number of frames processed (batches published).
+    """
+    bus = runtime.bus
+    camera_id = camera_mount(site, settings.camera_id).sensor_id
+    raw_key = bus.keys.raw_camera(camera_id)
+    detector = build_detector(
+        site, settings,
+        report=lambda reason, detail: bus.stats.count_invalid(raw_key, reason, detail),
+    )  # fmt: skip
+    frames = bus.subscribe_frames(raw_key, CameraFrameMeta)  # a ring of one: latest wins
+    scans = (
+        bus.subscribe(
+            bus.keys.raw_radar(detector.radar_mount.sensor_id), RadarScan, mode="ring", capacity=1
+        )
+        if detector.radar_mount is not None
+        else None
+    )
+    publisher = bus.publisher(bus.keys.detections(camera_id), DetectionBatch)
+    log.info(
+        "detecting on %s with the %s backend, fusing with %s",
+        raw_key,
+        settings.backend,
+        detector.radar_mount.sensor_id if detector.radar_mount is not None else "no radar",
+    )
+    processed = 0
+    runtime.state = detector.state
+    while not runtime.stop.is_set():
+        frame: Frame[CameraFrameMeta] | None = frames.recv(0.25)
+        if scans is not None:
+            while (scan := scans.recv(0.0)) is not None:
+                detector.radar_scan(scan)
+        if frame is None:
+            continue
+        taken_s = time.monotonic()
+        batch = detector.handle(frame.meta, frame.payload, taken_s)
+        runtime.state = detector.state
+        clock.advance_to(detector.last_stamp_s)
+        if batch is not None:
+            publisher.put(batch)
+            processed += 1
+    return processed
+
+
+def main() -> None:
+    try:
+        settings = CameraDetectorSettings()
+    except ValidationError as exc:
+        raise SystemExit(f"{SERVICE}: invalid settings: {exc}") from exc
+    site = load_site(settings.site_file)
+    try:
+        camera_id = camera_mount(site, settings.camera_id).sensor_id
+    except ValueError as exc:
+        raise SystemExit(f"{SERVICE}: {exc}") from exc
+    configure_logging(
+        service=SERVICE, site=site.site_id, sensor=camera_id, level=settings.log_level
+    )
+    clock = SimClock()
+    with ServiceRuntime(
+        SERVICE,
+        site.site_id,
+        BusSettings(),
+        status_period_s=settings.status_period_s,
+        clock_stamp=clock.now,
+    ) as runtime:
+        processed = run(runtime, site, settings, clock)
+    log.info("stopped after %d frames", processed)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,123 @@
+"""Settings of the camera-radar detector service (env prefix ``WZ_CAMERA_``), units in the names.
+
+Nested blocks are read with ``__`` between the levels, e.g.
+``WZ_CAMERA_BACKGROUND__MIN_BLOB_AREA_PX=16`` or ``WZ_CAMERA_TRACKER__MIN_HITS=1``; a whole
+block may also be given as JSON (``WZ_CAMERA_ASSOCIATION='{"gate_chi2": 9.21}'``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Literal
+
+from pydantic import Field, model_validator
+from pydantic_settings import SettingsConfigDict
+
+from wz_camera_detector.association import AssociationSettings
+from wz_camera_detector.background import BackgroundSubtractionSettings
+from wz_camera_detector.tracker import ImageTrackerSettings
+from wz_shared.settings import ServiceSettings
+from wz_shared.site import SensorMount, Site
+
+#: ``radar_id`` value that turns fusion off (camera-only detections).
+NO_RADAR = "none"
+
+
+class CameraDetectorSettings(ServiceSettings):
+    """Which camera (and radar) the node serves, its image backend and the fusion parameters.
+
+    ``site_file`` (inherited) gives the mounts. Build it in ``main()``; tests pass values as
+    keyword arguments.
+    """
+
+    model_config = SettingsConfigDict(
+        env_prefix="WZ_CAMERA_", extra="ignore", env_nested_delimiter="__"
+    )
+
+    #: The camera to serve (frames on ``raw/camera/<id>``); default: the site's first camera.
+    camera_id: str | None = None
+    #: The radar to fuse with (scans on ``raw/radar/<id>``); default: the site's first radar,
+    #: camera-only when the site has none; ``"none"``: camera-only.
+    radar_id: str | None = None
+    #: Image backend: ``background-subtraction`` (no model, learns the empty road first) or
+    #: ``yolo`` (a local YOLOv8 ONNX model, ``model_path``; never downloaded).
+    backend: Literal["background-subtraction", "yolo"] = "background-subtraction"
+    #: The YOLOv8 ``.onnx`` file (required with ``backend="yolo"``).
+    model_path: Path | None = None
+    #: The model's class names, in its class order (yolo); classes that are not vehicles
+    #: (anything but car, vehicle, truck, bus, motorcycle) are ignored.
+    class_names: tuple[str, ...] = ("car", "truck", "bus", "motorcycle")
+    #: Minimum class score of a YOLO detection [0-1].
+    conf_threshold: Annotated[float, Field(ge=0.0, lt=1.0)] = 0.25
+    #: A radar scan is fused with a frame when their stamps differ by at most this [s].
+    radar_max_age_s: Annotated[float, Field(ge=0.0)] = 0.1
+    #: Publish only confirmed image tracks (``tracker.min_hits`` detections); False: every
+    #: track updated by the frame, tentative ones included.
+    confirmed_only: bool = True
+    #: Camera ground-position error, std across the line of sight:
+    #: ``lateral_std_m + lateral_std_per_m * range`` [m] (a pixel column is a precise bearing).
+    lateral_std_m: Annotated[float, Field(gt=0.0)] = 0.3
+    lateral_std_per_m: Annotated[float, Field(ge=0.0)] = 0.005
+    #: ... and along it: ``range_std_m + range_std_per_m * range`` [m] (flat-road ranging from
+    #: a pixel row: road slope, pitch and the assumed vehicle size grow with range).
+    range_std_m: Annotated[float, Field(gt=0.0)] = 1.0
+    range_std_per_m: Annotated[float, Field(ge=0.0)] = 0.03
+    background: BackgroundSubtractionSettings = Field(default_factory=BackgroundSubtractionSettings)
+    tracker: ImageTrackerSettings = Field(default_factory=ImageTrackerSettings)
+    association: AssociationSettings = Field(default_factory=AssociationSettings)
+
+    @model_validator(mode="after")
+    def _yolo_needs_a_model(self) -> CameraDetectorSettings:
+        if self.backend == "yolo" and self.model_path is None:
+            raise ValueError(
+                "backend 'yolo' needs a local model file: set WZ_CAMERA_MODEL_PATH to a YOLOv8 "
+                ".onnx file (nothing is downloaded), or use backend 'background-subtraction'"
+            )
+        return self
+
+
+def _mount_of_kind(site: Site, sensor_id: str | None, kind: str, env: str) -> SensorMount:
+    mounts = [mount for mount in site.sensors if mount.kind == kind]
+    if sensor_id is None:
+        if not mounts:
+            raise ValueError(f"site {site.site_id} has no {kind}: set {env}")
+        return mounts[0]
+    try:
+        mount = site.sensor(sensor_id)
+    except KeyError:
+        known = ", ".join(m.sensor_id for m in mounts) or "none"
+        raise ValueError(
+            f"site {site.site_id} has no sensor {sensor_id!r} (its {kind}s: {known})"
+        ) from None
+    if mount.kind != kind:
+        raise ValueError(
+            f"sensor {sensor_id!r} of site {site.site_id} is a {mount.kind}, not a {kind}"
+        )
+    return mount
+
+
+def camera_mount(site: Site, camera_id: str | None) -> SensorMount:
+    """The mount of ``camera_id`` (default: the site's first camera).
+
+    Raises
+    ------
+    ValueError
+        When the site has no such sensor, or it is not a camera, in words for the operator.
+    """
+    return _mount_of_kind(site, camera_id, "camera", "WZ_CAMERA_CAMERA_ID")
+
+
+def radar_mount(site: Site, radar_id: str | None) -> SensorMount | None:
+    """The mount of ``radar_id``; default: the site's first radar, None when it has none;
+    None for ``"none"``.
+
+    Raises
+    ------
+    ValueError
+        When a named sensor does not exist or is not a radar.
+    """
+    if radar_id is not None and radar_id.lower() == NO_RADAR:
+        return None
+    if radar_id is None and not any(mount.kind == "radar" for mount in site.sensors):
+        return None
+    return _mount_of_kind(site, radar_id, "radar", "WZ_CAMERA_RADAR_ID")
