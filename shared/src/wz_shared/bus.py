@@ -141,7 +141,8 @@ class Publisher(Generic[M]):
         """Publish a JSON message."""
         if self._frame:
             raise TypeError(f"{self.cls.__name__} is frame metadata: use put_bytes(envelope)")
-        self.put_bytes(codec.encode(message))
+        # The frame check above is the one codec.encode would repeat: encode straight away.
+        self.put_bytes(codec.encode_json(message))
 
     def put_bytes(self, payload: bytes) -> None:
         """Publish an already-encoded payload (a frame envelope, or a replayed message)."""

@@ -464,7 +464,8 @@ def fuse_pair(
     )
 
 
-def _camera_only(camera: CameraObject) -> FusedObject:
+def camera_only(camera: CameraObject) -> FusedObject:
+    """A camera object passed through unfused (no radar target in its gate, or no scan)."""
     return FusedObject(
         source="camera",
         x_m=camera.x_m,
@@ -545,7 +546,7 @@ def fuse_camera_radar(
     matched_camera = {c for c, _ in pairs}
     matched_radar = {r for _, r in pairs}
     fused.extend(
-        _camera_only(camera)
+        camera_only(camera)
         for index, camera in enumerate(camera_objects)
         if index not in matched_camera
     )

@@ -58,7 +58,7 @@ from pydantic import ValidationError
 from wz_camera_detector.association import (
     CameraObject,
     FusedObject,
-    _camera_only,
+    camera_only,
     fuse_camera_radar,
     to_detection,
 )
@@ -327,7 +327,7 @@ class CameraDetector:
             or scan is None
             or abs(scan.stamp - stamp_s) > self.settings.radar_max_age_s
         ):
-            return [_camera_only(camera) for camera in objects]
+            return [camera_only(camera) for camera in objects]
         return fuse_camera_radar(
             objects, scan, self.radar_mount, self.settings.association, self._radar_heading
         )
