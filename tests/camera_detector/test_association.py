@@ -304,3 +304,41 @@ def test_every_source_gives_a_valid_detection() -> None:
         assert detection.object_class == obj.object_class
         assert detection.local_track_id == obj.camera_local_id
         assert detection.speed_mps == obj.speed_mps
+
+
+# ----------------------------------------------------------------------------- reflection setback
+
+
+def test_the_echo_is_on_the_near_face_and_the_fused_point_at_the_centre() -> None:
+    """A truck heading straight at the radar: the echo is L/2 nearer than its centre. With its
+    size and heading the fused point is the centre; without, it is the face, 8 m short."""
+    length_m, width_m = 16.5, 2.6
+    x_m, y_m = TRUTH_XY_M[0]
+    bearing = bearing_from_radar(x_m, y_m)
+    heading = bearing + math.pi  # approaching head-on
+    face_x = x_m - 0.5 * length_m * math.cos(bearing)
+    face_y = y_m - 0.5 * length_m * math.sin(bearing)
+    truck = CameraObject(
+        local_id=1, x_m=x_m, y_m=y_m,
+        covariance_m2=polar_covariance(bearing, CAMERA_RANGE_STD_M, CAMERA_LATERAL_STD_M),
+        object_class=VehicleClass.TRUCK, score=0.9,
+        heading_rad=heading, length_m=length_m, width_m=width_m,
+    )  # fmt: skip
+    assert association.reflection_setback_m(truck, bearing) == pytest.approx(0.5 * length_m)
+    scan = scan_of(radar_target(face_x, face_y))
+
+    (fused,) = by_source(fuse_camera_radar([truck], scan, RADAR, SETTINGS), "camera+radar")
+    assert (fused.x_m, fused.y_m) == (pytest.approx(x_m, abs=1e-6), pytest.approx(y_m, abs=1e-6))
+
+    no_size = CameraObject(1, x_m, y_m, truck.covariance_m2, VehicleClass.TRUCK, 0.9)
+    (short,) = fuse_camera_radar([no_size], scan, RADAR, SETTINGS)
+    assert (short.x_m, short.y_m) == (pytest.approx(face_x, abs=1e-6),
+                                      pytest.approx(face_y, abs=1e-6))  # fmt: skip
+
+
+def test_setback_seen_side_on_is_half_the_width() -> None:
+    car = CameraObject(0, 0.0, 0.0, np.eye(2), VehicleClass.CAR, 0.9, heading_rad=0.0,
+                       length_m=4.6, width_m=1.8)  # fmt: skip
+    assert association.reflection_setback_m(car, math.pi / 2) == pytest.approx(0.9)
+    # At 45 degrees the end face's centre (2.3 cos 45) is nearer than the side's (0.9 sin 45).
+    assert association.reflection_setback_m(car, math.pi / 4) == pytest.approx(2.3 / math.sqrt(2))

@@ -323,3 +323,68 @@ def test_model_with_an_undeclared_wrong_class_count_is_caught_by_the_test_infere
     onnx.save(model, str(model_path))
     with pytest.raises(ModelLoadError, match="3 class scores per box but 2 class names"):
         YoloOnnxDetector(model_path, CLASS_NAMES)
+
+
+# ----------------------------------------------------------------------------- model metadata, ROI
+
+
+def _with_metadata(path: Path, **props: str) -> Path:
+    model = onnx.load(str(path))
+    for key, value in props.items():
+        model.metadata_props.add(key=key, value=value)
+    onnx.save(model, str(path))
+    return path
+
+
+def test_class_names_and_roi_come_from_the_model_metadata(tmp_path: Path) -> None:
+    model_path = _with_metadata(
+        _fixed_output_model(tmp_path / "yolo.onnx", _hand_made_output()),
+        wz_class_names="car,truck", wz_roi_xyxy_px="100,200,740,840",
+    )  # fmt: skip
+    detector = YoloOnnxDetector(model_path)
+    assert detector.class_names == ("car", "truck")
+    assert detector.roi_xyxy_px == (100, 200, 740, 840)
+
+    detections = detector.detect(np.zeros((1000, 1000, 3), dtype=np.uint8))
+
+    # The 640x640 ROI is the input at scale 1, no padding: frame = input + (100, 200).
+    assert detections[0] == ImageDetection((180.0, 390.0, 220.0, 410.0), pytest.approx(0.9), "car")
+    assert detections[1].box_xyxy_px == (350.0, 490.0, 450.0, 550.0)
+    # E (610..650 in the input) is clipped to the ROI's right edge, 740 in the frame.
+    assert detections[2].box_xyxy_px == (710.0, 340.0, 740.0, 360.0)
+
+
+def test_explicit_roi_and_names_override_the_metadata(tmp_path: Path) -> None:
+    model_path = _with_metadata(
+        _fixed_output_model(tmp_path / "yolo.onnx", _hand_made_output()),
+        wz_class_names="car,truck", wz_roi_xyxy_px="100,200,740,840",
+    )  # fmt: skip
+    detector = YoloOnnxDetector(model_path, ("auto", "lorry"), roi_xyxy_px=(0, 0, 1280, 720))
+    assert detector.class_names == ("auto", "lorry")
+    frame = np.zeros((720, 1280, 3), dtype=np.uint8)
+    assert detector.detect(frame)[0].box_xyxy_px == (160.0, 100.0, 240.0, 140.0)
+
+
+def test_ultralytics_names_metadata_is_read(tmp_path: Path) -> None:
+    model_path = _with_metadata(
+        _fixed_output_model(tmp_path / "yolo.onnx", _hand_made_output()),
+        names="{0: 'car', 1: 'truck'}",
+    )
+    assert YoloOnnxDetector(model_path).class_names == ("car", "truck")
+
+
+def test_a_model_without_names_needs_them_given(tmp_path: Path) -> None:
+    model_path = _fixed_output_model(tmp_path / "yolo.onnx", _hand_made_output())
+    with pytest.raises(ModelLoadError, match="no class names"):
+        YoloOnnxDetector(model_path)
+
+
+def test_a_frame_smaller_than_the_roi_or_not_bgr_is_refused(tmp_path: Path) -> None:
+    model_path = _fixed_output_model(tmp_path / "yolo.onnx", _hand_made_output())
+    detector = YoloOnnxDetector(model_path, CLASS_NAMES, roi_xyxy_px=(100, 200, 740, 840))
+    with pytest.raises(ValueError, match="does not contain the detector's ROI"):
+        detector.detect(np.zeros((800, 1000, 3), dtype=np.uint8))
+    with pytest.raises(ValueError, match=r"\(H, W, 3\)"):
+        detector.detect(np.zeros((1000, 1000), dtype=np.uint8))
+    with pytest.raises(ValueError, match="empty"):
+        YoloOnnxDetector(model_path, CLASS_NAMES, roi_xyxy_px=(10, 10, 10, 20))

@@ -209,6 +209,10 @@ SERVICE_TOOLS = {
         "wz_lidar_detector.cli",
         "detect vehicles in PCD/PLY/NPZ LiDAR files, one JSON line per file",
     ),
+    "detect-camera": (
+        "wz_camera_detector.cli",
+        "detect vehicles in image or video files, one JSON line per frame",
+    ),
 }
 
 

@@ -19,10 +19,18 @@ Inputs: camera objects already ranged onto the road (site-frame ground positions
        R = J diag(sigma_r^2, sigma_a^2) J^T
          = (sigma_r r / rho)^2 u u^T + (rho sigma_a)^2 n n^T           [m^2]
 
-2. **Gate** (:func:`gate_distances`). Squared Mahalanobis distance between each camera object
-   ``c`` and radar point ``p``, with both covariances and an extra variance along the radar's
-   line of sight for the reflection point (the radar sees the nearest face of a vehicle, the
-   camera a ground point of its box, so they differ by up to half a vehicle length)::
+2. **Gate** (:func:`gate_distances`). The radar echoes from the centre of a vehicle's nearest
+   visible face, the camera object is the vehicle's centre: with the camera's heading ``psi``
+   and class size ``L x W``, the face centre is nearer the radar along its line of sight ``u``
+   by the setback (:func:`reflection_setback_m`)::
+
+       s = max((L / 2) |u . e_psi|, (W / 2) |u . n_psi|)     (end face or side face)
+
+   about half a length for an approaching vehicle (2.3 m for a car, 8 m for a truck). Each
+   camera object is compared at its expected echo point ``c - s u``. Then the squared
+   Mahalanobis distance between that point ``c`` and radar point ``p``, with both covariances
+   and an extra variance along the radar's line of sight for what the setback misses (size and
+   heading guesses, the echo wandering over the face)::
 
        S = P_c + R + sigma_extent^2 u u^T,    d^2 = (c - p)^T S^-1 (c - p)
 
@@ -37,8 +45,9 @@ Inputs: camera objects already ranged onto the road (site-frame ground positions
 
 4. **Fuse** each pair (:func:`fuse_pair`): range and radial speed from the radar, bearing and
    class from the camera. The fused point is built in the radar's polar frame: the radar's
-   horizontal range ``rho_r`` along the camera's bearing ``theta_c`` seen from the radar,
-   ``p_f = p_s + rho_r u_c``. Its covariance models range and bearing as independent, the
+   horizontal range ``rho_r`` plus the setback ``s`` (the echo is on the near face; the
+   position is the centre) along the camera's bearing ``theta_c`` seen from the radar,
+   ``p_f = p_s + (rho_r + s) u_c``. Its covariance models range and bearing as independent, the
    range error being the radar's and the bearing error the camera's::
 
        sigma_rho^2   = (sigma_r r / rho_r)^2                       (radar range, horizontal)
@@ -69,6 +78,7 @@ Nothing here does I/O: the node decodes the scan and camera objects, calls
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -134,6 +144,10 @@ class CameraObject:
         Class from the image detector.
     score
         Detector score in [0, 1].
+    heading_rad
+        Assumed heading [rad], CCW from east (the road's); None: no reflection setback.
+    length_m, width_m
+        Assumed size [m] (the class's typical one), for the radar's reflection setback.
     """
 
     local_id: int
@@ -142,6 +156,9 @@ class CameraObject:
     covariance_m2: F64
     object_class: VehicleClass
     score: float
+    heading_rad: float | None = None
+    length_m: float = 0.0
+    width_m: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -308,6 +325,31 @@ def radar_targets_to_site(
     return points
 
 
+def reflection_setback_m(camera: CameraObject, bearing_rad: float) -> float:
+    """How much nearer the radar the echo (nearest face centre) is than the centre [m] (step 2).
+
+    ``max((L / 2) |u . e_psi|, (W / 2) |u . n_psi|)`` with ``u`` the radar's line of sight at
+    ``bearing_rad``; 0 without a heading.
+    """
+    if camera.heading_rad is None:
+        return 0.0
+    along = abs(math.cos(bearing_rad - camera.heading_rad))
+    across = abs(math.sin(bearing_rad - camera.heading_rad))
+    return max(0.5 * camera.length_m * along, 0.5 * camera.width_m * across)
+
+
+def expected_echo(camera: CameraObject, radar_xy_m: tuple[float, float]) -> CameraObject:
+    """The camera object moved to where the radar should see it: ``c - s u`` (step 2)."""
+    dx, dy = camera.x_m - radar_xy_m[0], camera.y_m - radar_xy_m[1]
+    distance = math.hypot(dx, dy)
+    if distance <= 0.0:
+        return camera
+    setback = min(reflection_setback_m(camera, math.atan2(dy, dx)), distance)
+    return dataclasses.replace(
+        camera, x_m=camera.x_m - setback * dx / distance, y_m=camera.y_m - setback * dy / distance
+    )
+
+
 def gate_distances(
     camera_objects: Sequence[CameraObject],
     radar_points: Sequence[RadarPoint],
@@ -428,7 +470,7 @@ def fuse_pair(
     Returns
     -------
     FusedObject
-        ``source == "camera+radar"``, position ``p_s + rho_r u_c`` and covariance
+        ``source == "camera+radar"``, position ``p_s + (rho_r + s) u_c`` and covariance
         ``sigma_rho^2 u_c u_c^T + rho_r^2 sigma_theta^2 n_c n_c^T`` [m^2].
     """
     settings = settings or AssociationSettings()
@@ -449,10 +491,11 @@ def fuse_pair(
     covariance = _polar_covariance(
         camera_bearing, range_variance_m2, radar_rho_jacobian_m**2 * bearing_variance_rad2
     )
+    centre_rho_m = radar_rho_m + reflection_setback_m(camera, camera_bearing)
     return FusedObject(
         source="camera+radar",
-        x_m=mount.pose.x_m + radar_rho_m * math.cos(camera_bearing),
-        y_m=mount.pose.y_m + radar_rho_m * math.sin(camera_bearing),
+        x_m=mount.pose.x_m + centre_rho_m * math.cos(camera_bearing),
+        y_m=mount.pose.y_m + centre_rho_m * math.sin(camera_bearing),
         covariance_m2=covariance,
         object_class=camera.object_class,
         score=camera.score,
@@ -537,7 +580,9 @@ def fuse_camera_radar(
     """
     settings = settings or AssociationSettings()
     radar_points = radar_targets_to_site(scan.targets, mount, settings)
-    distances_sq = gate_distances(camera_objects, radar_points, settings.reflection_extent_std_m)
+    radar_xy = (mount.pose.x_m, mount.pose.y_m)
+    echoes = [expected_echo(camera, radar_xy) for camera in camera_objects]
+    distances_sq = gate_distances(echoes, radar_points, settings.reflection_extent_std_m)
     pairs = associate(distances_sq, settings.gate_chi2)
     fused = [
         fuse_pair(camera_objects[c], radar_points[r], mount, settings, road_heading_rad)

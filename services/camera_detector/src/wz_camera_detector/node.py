@@ -35,6 +35,8 @@ under ``<raw camera key>|<reason>`` (the bus's own decode reasons such as ``bad_
 ``bad_jpeg`` come first):
 
 - ``bad_image``: the JPEG does not decode (the frame is skipped);
+- ``wrong_size``: the image is not the size its metadata says, or does not contain the
+  detector's region of interest (skipped);
 - ``wrong_sensor``: the metadata names another camera or site;
 - ``out_of_order``: the stamp is not after the previous frame's (skipped);
 - ``detector_error``: the backend raised (traceback logged once);
@@ -120,7 +122,10 @@ def make_backend(settings: CameraDetectorSettings) -> ImageBackend:
     if settings.model_path is None:  # the settings validator refuses this already
         raise ModelLoadError("backend 'yolo' needs WZ_CAMERA_MODEL_PATH (a local .onnx file)")
     return YoloOnnxDetector(
-        settings.model_path, settings.class_names, conf_threshold=settings.conf_threshold
+        settings.model_path,
+        settings.class_names,
+        conf_threshold=settings.conf_threshold,
+        roi_xyxy_px=settings.roi_xyxy_px,
     )
 
 
@@ -255,6 +260,17 @@ class CameraDetector:
         if image is None:
             self.report("bad_image", f"frame {meta.frame_index}: the JPEG does not decode")
             return None
+        height, width = image.shape[:2]
+        roi = getattr(self.backend, "roi_xyxy_px", None)
+        if (width, height) != (meta.width_px, meta.height_px) or (
+            roi is not None and (roi[2] > width or roi[3] > height)
+        ):
+            self.report(
+                "wrong_size",
+                f"frame {meta.frame_index}: image {width}x{height}, metadata "
+                f"{meta.width_px}x{meta.height_px}, detector ROI {roi}",
+            )
+            return None
         if self._frames_taken and meta.stamp <= self.last_stamp_s:
             self.report(
                 "out_of_order",
@@ -316,6 +332,9 @@ class CameraDetector:
                     covariance_m2=camera_covariance(camera_xy, (x_m, y_m), self.settings),
                     object_class=object_class,
                     score=track.score,
+                    heading_rad=heading,
+                    length_m=length_m,
+                    width_m=width_m,
                 )
             )
         return objects

@@ -44,9 +44,13 @@ class CameraDetectorSettings(ServiceSettings):
     backend: Literal["background-subtraction", "yolo"] = "background-subtraction"
     #: The YOLOv8 ``.onnx`` file (required with ``backend="yolo"``).
     model_path: Path | None = None
-    #: The model's class names, in its class order (yolo); classes that are not vehicles
-    #: (anything but car, vehicle, truck, bus, motorcycle) are ignored.
-    class_names: tuple[str, ...] = ("car", "truck", "bus", "motorcycle")
+    #: The model's class names, in its class order (yolo); default: the model's metadata.
+    #: Classes that are not vehicles (anything but car, vehicle, truck, bus, motorcycle) are
+    #: ignored.
+    class_names: tuple[str, ...] | None = None
+    #: Region of interest ``(x0, y0, x1, y1)`` [px] the YOLO model looks at (the frame is
+    #: cropped to it); default: the model's metadata (the ROI it was trained on), else the frame.
+    roi_xyxy_px: tuple[int, int, int, int] | None = None
     #: Minimum class score of a YOLO detection [0-1].
     conf_threshold: Annotated[float, Field(ge=0.0, lt=1.0)] = 0.25
     #: A radar scan is fused with a frame when their stamps differ by at most this [s].

@@ -15,10 +15,17 @@ geometry lives in :mod:`wz_shared.camera_geometry` and :mod:`wz_camera_detector.
 
 The model is read from a local file only: a missing, unreadable or mismatched model is a
 :class:`ModelLoadError` at start-up, never a download.
+
+A model trained by ``services/camera_detector/training/train.py`` describes itself in its ONNX
+metadata: ``wz_class_names`` (comma-separated, in class order) and ``wz_roi_xyxy_px`` (the region
+of interest of the camera frame it was trained on: the detector crops the frame to it before
+letterboxing). Explicit arguments override both. ultralytics' own ``names`` entry is used for
+the class names of other YOLOv8 exports.
 """
 
 from __future__ import annotations
 
+import ast
 import logging
 import time
 from collections.abc import Sequence
@@ -317,6 +324,7 @@ class YoloOnnxDetector:
         Local ``.onnx`` file; nothing is ever downloaded.
     class_names
         Class names in the model's class order; their number must match the model's ``C``.
+        Default: from the model's metadata (``wz_class_names``, else ultralytics' ``names``).
     input_size
         Network input ``(h, w)`` [px]. Default: read from the model (required if the model's
         spatial input dimensions are dynamic; must agree with them if they are static).
@@ -328,6 +336,10 @@ class YoloOnnxDetector:
         ONNX Runtime intra-op threads.
     max_detections
         At most this many detections per frame (the best-scoring ones).
+    roi_xyxy_px
+        Region of interest ``(x0, y0, x1, y1)`` [px of the frame]: the frame is cropped to it
+        before letterboxing; boxes are returned in the whole frame's pixels. Default: the
+        model's ``wz_roi_xyxy_px`` metadata, else the whole frame.
 
     Raises
     ------
@@ -339,14 +351,15 @@ class YoloOnnxDetector:
     def __init__(
         self,
         model_path: Path | str,
-        class_names: Sequence[str],
+        class_names: Sequence[str] | None = None,
         input_size: tuple[int, int] | None = None,
         conf_threshold: float = 0.25,
         iou_threshold: float = 0.5,
         threads: int = 2,
         max_detections: int = 300,
+        roi_xyxy_px: tuple[int, int, int, int] | None = None,
     ) -> None:
-        if not class_names:
+        if class_names is not None and not class_names:
             raise ValueError("class_names is empty: give the model's class names in its order")
         if not 0.0 <= conf_threshold < 1.0:
             raise ValueError(f"conf_threshold must be in [0, 1), got {conf_threshold}")
@@ -357,12 +370,20 @@ class YoloOnnxDetector:
                 f"threads and max_detections must be >= 1, got {threads}, {max_detections}"
             )
         self.model_path = Path(model_path)
-        self.class_names = tuple(class_names)
         self.conf_threshold = conf_threshold
         self.iou_threshold = iou_threshold
         self.max_detections = max_detections
 
         self._session = self._open_session(threads)
+        self.metadata: dict[str, str] = dict(self._session.get_modelmeta().custom_metadata_map)
+        self.class_names = (
+            tuple(class_names) if class_names is not None else self._metadata_class_names()
+        )
+        self.roi_xyxy_px = roi_xyxy_px if roi_xyxy_px is not None else self._metadata_roi()
+        if self.roi_xyxy_px is not None:
+            x0, y0, x1, y1 = self.roi_xyxy_px
+            if not (0 <= x0 < x1 and 0 <= y0 < y1):
+                raise ValueError(f"ROI {self.roi_xyxy_px} is empty or negative")
         self.input_size = self._check_input(input_size)
         self._check_output()
         logger.info(
@@ -372,6 +393,49 @@ class YoloOnnxDetector:
             self.input_size[0],
             len(self.class_names),
         )
+
+    def _metadata_class_names(self) -> tuple[str, ...]:
+        text = self.metadata.get("wz_class_names")
+        if text:
+            return tuple(name.strip() for name in text.split(","))
+        text = self.metadata.get("names")
+        if text:
+            try:
+                names = ast.literal_eval(text)
+                return tuple(str(names[index]) for index in sorted(names))
+            except (ValueError, SyntaxError, TypeError) as error:
+                raise self._fail(f"its metadata names {text!r} cannot be read") from error
+        raise self._fail("it has no class names in its metadata: give class_names explicitly")
+
+    def _metadata_roi(self) -> tuple[int, int, int, int] | None:
+        text = self.metadata.get("wz_roi_xyxy_px")
+        if not text:
+            return None
+        try:
+            x0, y0, x1, y1 = (int(v) for v in text.split(","))
+        except ValueError as error:
+            raise self._fail(f"its metadata ROI {text!r} is not x0,y0,x1,y1") from error
+        return (x0, y0, x1, y1)
+
+    def crop(self, image_bgr: U8) -> tuple[U8, tuple[int, int]]:
+        """The frame cut to the ROI (a view), and the ROI's origin ``(x0, y0)`` [px].
+
+        Raises
+        ------
+        ValueError
+            The frame is not an (H, W, 3) image, or does not contain the ROI.
+        """
+        if image_bgr.ndim != 3 or image_bgr.shape[2] != 3 or image_bgr.size == 0:
+            raise ValueError(f"expected an (H, W, 3) image, got shape {image_bgr.shape}")
+        if self.roi_xyxy_px is None:
+            return image_bgr, (0, 0)
+        x0, y0, x1, y1 = self.roi_xyxy_px
+        height, width = image_bgr.shape[:2]
+        if x1 > width or y1 > height:
+            raise ValueError(
+                f"frame {width}x{height} does not contain the detector's ROI {self.roi_xyxy_px}"
+            )
+        return image_bgr[y0:y1, x0:x1], (x0, y0)
 
     def _fail(self, reason: str) -> ModelLoadError:
         return ModelLoadError(f"camera detector model {self.model_path}: {reason}")
@@ -480,17 +544,23 @@ class YoloOnnxDetector:
         detections
             By decreasing score, boxes in the frame's pixels.
         timings
-            Letterbox, inference, and decode + NMS + mapping back [s].
+            Crop + letterbox, inference, and decode + NMS + mapping back [s].
+
+        Raises
+        ------
+        ValueError
+            The frame is not an (H, W, 3) image or does not contain the ROI.
         """
         start = time.perf_counter()
-        tensor, transform = letterbox(image_bgr, self.input_size)
+        region, (x0, y0) = self.crop(image_bgr)
+        tensor, transform = letterbox(region, self.input_size)
         preprocessed = time.perf_counter()
         output = self._run(tensor)
         inferred = time.perf_counter()
 
         boxes, scores, class_ids = decode(output, self.conf_threshold)
         kept = nms(boxes, scores, self.iou_threshold, class_ids)[: self.max_detections]
-        boxes_px = transform.to_image(boxes[kept])
+        boxes_px = transform.to_image(boxes[kept]) + np.array([x0, y0, x0, y0], dtype=np.float64)
         detections = [
             ImageDetection(
                 box_xyxy_px=(float(box[0]), float(box[1]), float(box[2]), float(box[3])),

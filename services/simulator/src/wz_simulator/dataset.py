@@ -6,6 +6,9 @@ weather preset, samples the sensors every ``--every-s`` seconds after a warm-up,
     DIR/data.yaml                     ultralytics dataset file (paths, class names)
     DIR/images/{train,val}/*.jpg      camera frames
     DIR/labels/{train,val}/*.txt      YOLO labels: class cx cy w h (normalised to the image)
+    DIR/truth/{train,val}/*.json      per camera frame: every vehicle in view with its class,
+                                      visible and full boxes, visibility, ground range from the
+                                      camera and road position (for evaluation by distance)
     DIR/lidar/{train,val}/*.npz       points (N,4) sensor frame, labels (N,), truth boxes
     DIR/manifest.json                 site, sensors, seeds, weathers, counts per class
 
@@ -29,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from wz_shared.logs import configure_logging
-from wz_shared.messages import VehicleClass
+from wz_shared.messages import VehicleClass, VehicleTruth
 from wz_shared.site import Site, load_site
 from wz_simulator.sensors.camera import CameraTruthLabel
 from wz_simulator.sensors.rig import CameraOutput, LidarOutput, SensorRig
@@ -85,6 +88,29 @@ def yolo_lines(
     return lines
 
 
+def truth_records(output: CameraOutput, vehicles: list[VehicleTruth], camera_xy_m: tuple[float, float]) -> list[dict[str, object]]:  # fmt: skip
+    """One record per vehicle that shows in the frame (a visible box), for evaluation."""
+    by_id = {vehicle.vehicle_id: vehicle for vehicle in vehicles}
+    records: list[dict[str, object]] = []
+    for label in output.frame.labels:
+        if label.box_xyxy_px is None:
+            continue
+        vehicle = by_id[label.vehicle_id]  # the rig culls: the label index is not ours
+        records.append({
+            "vehicle_id": label.vehicle_id,
+            "class": label.vehicle_class.value,
+            "box_xyxy_px": [round(v, 2) for v in label.box_xyxy_px],
+            "full_box_xyxy_px": (None if label.full_box_xyxy_px is None
+                                 else [round(v, 2) for v in label.full_box_xyxy_px]),
+            "visibility": round(label.visibility, 4),
+            "range_m": round(math.hypot(vehicle.x_m - camera_xy_m[0],
+                                        vehicle.y_m - camera_xy_m[1]), 3),
+            "station_m": round(vehicle.station_m, 3),
+            "offset_m": round(vehicle.offset_m, 3),
+        })  # fmt: skip
+    return records
+
+
 def _write_lidar(path: Path, output: LidarOutput) -> None:
     scan = output.scan
     boxes = scan.boxes
@@ -109,8 +135,8 @@ def export(site: Site, options: DatasetOptions, work_dir: Path | None = None) ->
     """Run the simulation per weather and write the dataset; return the manifest."""
     out = options.out_dir
     for split in ("train", "val"):
-        (out / "images" / split).mkdir(parents=True, exist_ok=True)
-        (out / "labels" / split).mkdir(parents=True, exist_ok=True)
+        for folder in ("images", "labels", "truth"):
+            (out / folder / split).mkdir(parents=True, exist_ok=True)
         if options.lidar:
             (out / "lidar" / split).mkdir(parents=True, exist_ok=True)
     cameras = [m.sensor_id for m in site.sensors if m.kind == "camera"]
@@ -155,6 +181,10 @@ def export(site: Site, options: DatasetOptions, work_dir: Path | None = None) ->
                         (out / "labels" / split / f"{stem}.txt").write_text(
                             "".join(line + "\n" for line in lines)
                         )
+                        mount = site.sensor(sensor_id).pose
+                        records = truth_records(output, vehicles, (mount.x_m, mount.y_m))
+                        (out / "truth" / split / f"{stem}.json").write_text(json.dumps(
+                            {"stamp_s": now_s, "sensor_id": sensor_id, "vehicles": records}))
                         counts[f"images_{split}"] += 1
                         for line in lines:
                             class_counts[YOLO_CLASSES[int(line.split()[0])].value] += 1

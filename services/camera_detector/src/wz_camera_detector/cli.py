@@ -1,0 +1,244 @@
+"""``wz detect-camera``: run the camera detector on image or video files, one JSON line per frame.
+
+Usage (``python -m wz_camera_detector.cli``, or ``wz detect-camera``)::
+
+    wz detect-camera FILE... [--model M.onnx] [--backend yolo|background-subtraction]
+                     [--site SITE.yaml] [--camera ID] [--conf 0.25] [--roi x0,y0,x1,y1]
+                     [--no-track]
+
+Images (``.jpg``, ``.jpeg``, ``.png``, ``.bmp``) are taken in the order given as one sequence;
+a video file (anything OpenCV's FFmpeg backend opens: ``.mp4``, ``.avi``, ``.mkv`` ...) gives
+its frames in order. Each frame gives one line on stdout::
+
+    {"file": "clip.mp4", "frame": 12, "stamp": 1.2, "width": 1200, "height": 1200,
+     "detections": [{"box": [x1, y1, x2, y2], "class": "car", "score": 0.91, "track_id": 3,
+                     "x": 3.94, "y": 902.31, "station": 902.3, "offset": -1.8, "range": 78.1,
+                     "paper_x": 4.01, "paper_y": 904.7}, ...],
+     "timings_ms": {"detect": 21.3}}
+
+``box`` is in pixels of the frame (edges, continuous). ``x, y`` [m, site frame] is the vehicle
+centre from the calibrated pinhole model of ``--camera`` in ``--site`` with the contact-point
+correction (:func:`wz_camera_detector.world.box_to_ground`, the class's typical size, the road's
+heading); ``paper_x, paper_y`` is the paper's Eq. 1-2 ground point of the box's bottom centre;
+``station, offset`` the centre in the road frame; ``range`` its ground distance from the camera.
+Positions are null for a box reaching above the horizon. ``stamp`` is the video's frame time
+[s] (``CAP_PROP_POS_MSEC``), for images the position in the sequence divided by the camera's
+rate. ``track_id`` is the image tracker's id (``--no-track``: null, each frame on its own).
+
+A file that cannot be read gives ``{"file": ..., "error": "..."}`` (a video that breaks off
+gives that after the frames it had); the other files are still processed and the exit code is
+then 1. The model and its parameters come from the node's settings (``WZ_CAMERA_*``) unless
+given here; the default is the model shipped with the service. Logs go to stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import sys
+import time
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+from pydantic import ValidationError
+
+from wz_camera_detector.node import CLASS_SIZES, ImageBackend, make_backend, road_heading_at
+from wz_camera_detector.settings import CameraDetectorSettings, camera_mount
+from wz_camera_detector.tracker import ImageTracker
+from wz_camera_detector.world import box_to_ground, paper_box_to_ground
+from wz_camera_detector.yolo import ImageDetection, ModelLoadError
+from wz_shared.camera_geometry import PinholeCamera, camera_intrinsics
+from wz_shared.logs import configure_logging
+from wz_shared.site import SensorMount, Site, SiteFileError, load_site
+
+log = logging.getLogger("wz_camera_detector.cli")
+
+U8 = npt.NDArray[np.uint8]
+IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".bmp"}
+
+
+class InputError(Exception):
+    """A file that cannot be read: the message names it."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="wz detect-camera",
+        description="Detect vehicles in image or video files; one JSON line per frame.",
+    )
+    parser.add_argument("files", nargs="+", type=Path, help="images and/or video files")
+    parser.add_argument("--backend", choices=["yolo", "background-subtraction"], default=None)
+    parser.add_argument("--model", type=Path, default=None, help="YOLOv8 .onnx file")
+    parser.add_argument("--site", type=Path, default=None, help="site file (camera pose)")
+    parser.add_argument("--camera", default=None, help="camera id in the site file")
+    parser.add_argument("--conf", type=float, default=None, help="minimum score [0-1)")
+    parser.add_argument("--roi", default=None, help="region of interest x0,y0,x1,y1 [px]")
+    parser.add_argument("--no-track", action="store_true", help="no tracking across frames")
+    return parser
+
+
+def _settings(args: argparse.Namespace) -> CameraDetectorSettings:
+    overrides: dict[str, Any] = {}
+    if args.backend is not None:
+        overrides["backend"] = args.backend
+    if args.model is not None:
+        overrides["model_path"] = args.model
+    if args.site is not None:
+        overrides["site_file"] = args.site
+    if args.camera is not None:
+        overrides["camera_id"] = args.camera
+    if args.conf is not None:
+        overrides["conf_threshold"] = args.conf
+    if args.roi is not None:
+        overrides["roi_xyxy_px"] = tuple(int(v) for v in args.roi.split(","))
+    return CameraDetectorSettings(**overrides)
+
+
+def read_frames(path: Path, rate_hz: float, start_index: int) -> Iterator[tuple[int, float, U8]]:
+    """``(frame index, stamp [s], BGR image)`` of an image or each frame of a video.
+
+    Raises
+    ------
+    InputError
+        The file is missing, not an image, or a video that cannot be opened or ends in error.
+    """
+    if not path.is_file():
+        raise InputError(f"{path}: no such file")
+    if path.suffix.lower() in IMAGE_SUFFIXES:
+        data = np.fromfile(path, dtype=np.uint8)
+        image = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
+        if image is None:
+            raise InputError(f"{path}: not a decodable image")
+        yield start_index, start_index / rate_hz, np.asarray(image, dtype=np.uint8)
+        return
+    capture = cv2.VideoCapture(str(path))
+    try:
+        if not capture.isOpened():
+            raise InputError(f"{path}: not an image, and OpenCV cannot open it as a video")
+        index = 0
+        while True:
+            ok, image = capture.read()
+            if not ok or image is None:
+                break
+            stamp_s = float(capture.get(cv2.CAP_PROP_POS_MSEC)) / 1e3
+            yield index, stamp_s, np.asarray(image, dtype=np.uint8)
+            index += 1
+        if index == 0:
+            raise InputError(f"{path}: a video with no readable frame")
+    finally:
+        capture.release()
+
+
+class FrameProcessor:
+    """Detect, track and range frames of one camera (the node's steps, without radar)."""
+
+    def __init__(
+        self, site: Site, mount: SensorMount, backend: ImageBackend, settings: CameraDetectorSettings,
+        track: bool,
+    ) -> None:  # fmt: skip
+        self.site = site
+        self.mount = mount
+        self.backend = backend
+        self.tracker = ImageTracker(settings.tracker) if track else None
+        self._cameras: dict[tuple[int, int], PinholeCamera] = {}
+
+    def camera(self, width_px: int, height_px: int) -> PinholeCamera:
+        camera = self._cameras.get((width_px, height_px))
+        if camera is None:
+            intrinsics = camera_intrinsics(self.mount)
+            mount = self.mount.model_copy(update={"intrinsics": intrinsics.model_copy(
+                update={"width_px": width_px, "height_px": height_px})})  # fmt: skip
+            camera = self._cameras[(width_px, height_px)] = PinholeCamera(mount)
+        return camera
+
+    def process(self, image: U8, stamp_s: float) -> tuple[list[dict[str, Any]], float]:
+        """Detections of one frame as JSON-ready dicts, and the detector's time [s]."""
+        started = time.perf_counter()
+        found = self.backend.detect(image)
+        detect_s = time.perf_counter() - started
+        found = [d for d in found if d.class_name in CLASS_SIZES]
+        height, width = image.shape[:2]
+        rows: list[tuple[ImageDetection, int | None]]
+        if self.tracker is not None:
+            tracks = self.tracker.update(found, stamp_s)
+            rows = [(ImageDetection(t.box_xyxy_px, t.score, t.class_name), t.local_id)
+                    for t in tracks]  # fmt: skip
+        else:
+            rows = [(d, None) for d in found]
+        camera = self.camera(width, height)
+        mount = camera.mount
+        return [self._record(camera, mount, d, track_id) for d, track_id in rows], detect_s
+
+    def _record(
+        self, camera: PinholeCamera, mount: SensorMount, detection: ImageDetection,
+        track_id: int | None,
+    ) -> dict[str, Any]:  # fmt: skip
+        _, length_m, width_m = CLASS_SIZES[detection.class_name]
+        record: dict[str, Any] = {
+            "box": [round(v, 1) for v in detection.box_xyxy_px],
+            "class": detection.class_name, "score": round(detection.score, 4),
+            "track_id": track_id,
+        }  # fmt: skip
+        contact = box_to_ground(camera, detection.box_xyxy_px, 0.0, 0.0, 0.0)
+        keys = ("x", "y", "station", "offset", "range", "paper_x", "paper_y")
+        if not all(math.isfinite(v) for v in contact):
+            return record | dict.fromkeys(keys)
+        heading = road_heading_at(self.site, *contact)
+        x_m, y_m = box_to_ground(camera, detection.box_xyxy_px, heading, length_m, width_m)
+        station, offset = self.site.road_frame.to_road(x_m, y_m)
+        paper_x, paper_y = paper_box_to_ground(mount, detection.box_xyxy_px)
+        values = (x_m, y_m, float(station), float(offset),
+                  math.hypot(x_m - mount.pose.x_m, y_m - mount.pose.y_m), paper_x, paper_y)  # fmt: skip
+        return record | {k: (round(v, 3) if math.isfinite(v) else None)
+                         for k, v in zip(keys, values, strict=True)}  # fmt: skip
+
+
+def run(files: Sequence[Path], processor: FrameProcessor, rate_hz: float) -> int:
+    """Write one line per frame of each file; 1 if any file failed, else 0."""
+    status = 0
+    image_index = 0
+    for path in files:
+        try:
+            is_image = path.suffix.lower() in IMAGE_SUFFIXES
+            for index, stamp_s, image in read_frames(path, rate_hz, image_index):
+                detections, detect_s = processor.process(image, stamp_s)
+                line = {
+                    "file": str(path), "frame": index, "stamp": round(stamp_s, 6),
+                    "width": int(image.shape[1]), "height": int(image.shape[0]),
+                    "detections": detections, "timings_ms": {"detect": round(detect_s * 1e3, 2)},
+                }  # fmt: skip
+                sys.stdout.write(json.dumps(line) + "\n")
+                sys.stdout.flush()
+                if is_image:
+                    image_index += 1
+        except (InputError, ValueError, cv2.error) as exc:
+            status = 1
+            sys.stdout.write(json.dumps({"file": str(path), "error": str(exc)}) + "\n")
+            log.warning("%s", exc)
+    return status
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        settings = _settings(args)
+        site = load_site(settings.site_file)
+        mount = camera_mount(site, settings.camera_id)
+        configure_logging(service="detect-camera", site=site.site_id, level=settings.log_level)
+        backend = make_backend(settings)
+    except (ValidationError, SiteFileError, ModelLoadError, ValueError) as exc:
+        sys.stderr.write(f"wz detect-camera: {exc}\n")
+        return 2
+    rate_hz = mount.rate_hz
+    processor = FrameProcessor(site, mount, backend, settings, track=not args.no_track)
+    return run(args.files, processor, rate_hz)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
