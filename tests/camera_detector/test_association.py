@@ -342,3 +342,16 @@ def test_setback_seen_side_on_is_half_the_width() -> None:
     assert association.reflection_setback_m(car, math.pi / 2) == pytest.approx(0.9)
     # At 45 degrees the end face's centre (2.3 cos 45) is nearer than the side's (0.9 sin 45).
     assert association.reflection_setback_m(car, math.pi / 4) == pytest.approx(2.3 / math.sqrt(2))
+
+
+def test_radar_range_is_carried_to_the_frame_time_with_the_radial_speed() -> None:
+    x_m, y_m = TRUTH_XY_M[0]
+    target = radar_target(x_m, y_m, radial_speed_mps=-20.0)
+    camera = camera_object(0, x_m, y_m)
+    (now,) = fuse_camera_radar([camera], scan_of(target), RADAR, SETTINGS)
+    (later,) = fuse_camera_radar([camera], scan_of(target), RADAR, SETTINGS, dt_s=0.05)
+    rho = horizontal_range(x_m, y_m)
+    slant = math.hypot(rho, RADAR.pose.z_m - TARGET_HEIGHT_M)
+    moved_m = horizontal_range(now.x_m, now.y_m) - horizontal_range(later.x_m, later.y_m)
+    # Approaching at 20 m/s along the slant line: 1 m in 50 ms, rho / slant of it horizontal.
+    assert moved_m == pytest.approx(20.0 * 0.05 * rho / slant, rel=1e-6)

@@ -452,6 +452,7 @@ def fuse_pair(
     mount: SensorMount,
     settings: AssociationSettings | None = None,
     road_heading_rad: float | None = None,
+    dt_s: float = 0.0,
 ) -> FusedObject:
     """Fuse one associated pair: radar range and speed, camera bearing and class (step 4).
 
@@ -466,6 +467,10 @@ def fuse_pair(
         Defaults when None.
     road_heading_rad : float or None
         Direction of travel [rad] for the speed; None for ``|v_r|``.
+    dt_s : float
+        Camera frame time minus scan time [s]: the radar range is carried to the frame's time
+        with the radial speed, ``rho_r + v_r dt`` (a car at 30 m/s moves 1 m in a 15 Hz scan
+        period).
 
     Returns
     -------
@@ -478,7 +483,8 @@ def fuse_pair(
     dx, dy = camera.x_m - mount.pose.x_m, camera.y_m - mount.pose.y_m
     camera_bearing = math.atan2(dy, dx)
     camera_rho_m = max(math.hypot(dx, dy), settings.min_horizontal_range_m)
-    radar_rho_m = radar.horizontal_range_m
+    slant_ratio = radar.horizontal_range_m / max(radar.slant_range_m, 1e-9)
+    radar_rho_m = max(0.0, radar.horizontal_range_m + radar.radial_speed_mps * slant_ratio * dt_s)
     radar_rho_jacobian_m = max(radar_rho_m, settings.min_horizontal_range_m)
     _, normal = _unit(camera_bearing)
     # sigma_theta^2 = n^T P_c n / rho_c^2: the camera's lateral variance as a bearing variance.
@@ -550,6 +556,7 @@ def fuse_camera_radar(
     mount: SensorMount,
     settings: AssociationSettings | None = None,
     road_heading_rad: float | None = None,
+    dt_s: float = 0.0,
 ) -> list[FusedObject]:
     """Associate and fuse one frame's camera objects with one radar scan (all steps).
 
@@ -565,6 +572,9 @@ def fuse_camera_radar(
         Defaults when None.
     road_heading_rad : float or None
         Direction of travel at the site [rad], CCW from east; None for ``|v_r|`` speeds.
+    dt_s : float
+        Camera frame time minus scan time [s]; radar ranges are carried to the frame's time
+        with their radial speeds (see :func:`fuse_pair`). Gating uses the scan as it is.
 
     Returns
     -------
@@ -585,7 +595,7 @@ def fuse_camera_radar(
     distances_sq = gate_distances(echoes, radar_points, settings.reflection_extent_std_m)
     pairs = associate(distances_sq, settings.gate_chi2)
     fused = [
-        fuse_pair(camera_objects[c], radar_points[r], mount, settings, road_heading_rad)
+        fuse_pair(camera_objects[c], radar_points[r], mount, settings, road_heading_rad, dt_s)
         for c, r in pairs
     ]
     matched_camera = {c for c, _ in pairs}

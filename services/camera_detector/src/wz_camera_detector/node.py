@@ -50,6 +50,7 @@ import logging
 import math
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Protocol
 
 import cv2
@@ -102,6 +103,16 @@ CLASS_SIZES: dict[str, tuple[VehicleClass, float, float]] = {
     "bus": (VehicleClass.BUS, 12.0, 2.55),
     "motorcycle": (VehicleClass.MOTORCYCLE, 2.2, 0.8),
 }
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """What one frame gave: the published image tracks, their ground positions (camera only,
+    by ``local_id``), and the objects after radar fusion."""
+
+    tracks: list[ImageTrack]
+    camera_objects: list[CameraObject]
+    fused: list[FusedObject]
 
 
 class ImageBackend(Protocol):
@@ -280,6 +291,23 @@ class CameraDetector:
             return None
         self.last_stamp_s = meta.stamp
         self._frames_taken += 1
+        result = self.process_image(image, meta.stamp, meta.frame_index)
+        if result is None:
+            return None
+        return DetectionBatch(
+            site=self.site.site_id,
+            source_id=self.camera_mount.sensor_id,
+            stamp=meta.stamp,
+            frame_index=meta.frame_index,
+            detections=self._detections(result.fused),
+            latency_s=max(0.0, time.monotonic() - taken_s),
+        )
+
+    def process_image(self, image: U8, stamp_s: float, frame_index: int) -> FrameResult | None:
+        """Detect, track, range and fuse one decoded frame (no checks on the frame's order).
+
+        Returns None during the background warm-up or when the backend fails (reported).
+        """
         warming_up = self.state == ServiceState.STARTING  # this frame still only teaches
         try:
             boxes = self.backend.detect(image)
@@ -287,24 +315,16 @@ class CameraDetector:
             self.report("detector_error", repr(exc))
             if "detector_error" not in self._logged:
                 self._logged.add("detector_error")
-                log.exception("the detector failed on frame %d; going on", meta.frame_index)
+                log.exception("the detector failed on frame %d; going on", frame_index)
             return None
         if warming_up:
             return None
         boxes = [box for box in boxes if box.class_name in CLASS_SIZES]
-        tracks = self.tracker.update(boxes, meta.stamp)
+        tracks = self.tracker.update(boxes, stamp_s)
         if self.settings.confirmed_only:
             tracks = [track for track in tracks if track.confirmed]
-        objects = self._camera_objects(tracks, image.shape[1], image.shape[0], meta.frame_index)
-        fused = self._fuse(objects, meta.stamp)
-        return DetectionBatch(
-            site=self.site.site_id,
-            source_id=self.camera_mount.sensor_id,
-            stamp=meta.stamp,
-            frame_index=meta.frame_index,
-            detections=self._detections(fused),
-            latency_s=max(0.0, time.monotonic() - taken_s),
-        )
+        objects = self._camera_objects(tracks, image.shape[1], image.shape[0], frame_index)
+        return FrameResult(tracks, objects, self._fuse(objects, stamp_s))
 
     def _camera_objects(
         self, tracks: list[ImageTrack], width_px: int, height_px: int, frame_index: int
@@ -348,8 +368,9 @@ class CameraDetector:
         ):
             return [camera_only(camera) for camera in objects]
         return fuse_camera_radar(
-            objects, scan, self.radar_mount, self.settings.association, self._radar_heading
-        )
+            objects, scan, self.radar_mount, self.settings.association, self._radar_heading,
+            dt_s=stamp_s - scan.stamp,
+        )  # fmt: skip
 
     def _detections(self, fused: list[FusedObject]) -> list[Detection]:
         detections = []

@@ -1,0 +1,1 @@
+"""Evaluation of the pipeline against simulation truth (the ``wz eval*`` commands)."""
