@@ -27,7 +27,15 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from benchmarks import bus_latency, bus_throughput, lidar_detection, report, sensors, sumo_step
+from benchmarks import (
+    bus_latency,
+    bus_throughput,
+    camera_detection,
+    lidar_detection,
+    report,
+    sensors,
+    sumo_step,
+)
 from benchmarks.common import ROOT
 
 log = logging.getLogger("benchmarks")
@@ -38,6 +46,7 @@ BENCHMARKS: dict[str, Callable[[bool], dict[str, Any]]] = {
     "sumo_step": sumo_step.run,
     "sensors": sensors.run,
     "lidar_detection": lidar_detection.run,
+    "camera_detection": camera_detection.run,
 }
 RESULTS_PATH = ROOT / "benchmarks" / "results.json"
 MARKDOWN_PATH = ROOT / "BENCHMARKS.md"

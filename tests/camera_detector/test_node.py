@@ -30,6 +30,7 @@ PERIOD_S = 0.1
 SPEED_MPS = 20.0
 # Pixel areas scaled from the 1200 x 1200 defaults by (400 / 1200)^2 (as test_background.py).
 SETTINGS = CameraDetectorSettings(
+    backend="background-subtraction",
     background=BackgroundSubtractionSettings(
         min_blob_area_px=16, score_area_scale_px=170.0, close_kernel_px=5, warm_up_frames=WARM_UP
     )
@@ -189,7 +190,7 @@ def test_a_garbage_jpeg_is_counted_and_skipped(
 
 def test_yolo_without_a_model_path_is_refused_by_the_settings() -> None:
     with pytest.raises(ValidationError, match="WZ_CAMERA_MODEL_PATH"):
-        CameraDetectorSettings(backend="yolo")
+        CameraDetectorSettings(backend="yolo", model_path=None)
 
 
 def test_yolo_with_a_missing_model_fails_at_start_up(tmp_path: Path) -> None:

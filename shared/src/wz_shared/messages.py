@@ -174,6 +174,14 @@ class DetectionBatch(Message):
 # --- tracking -------------------------------------------------------------------------------
 
 
+class TrackStatus(StrEnum):
+    """Life cycle of a fused track."""
+
+    TENTATIVE = "tentative"  # started, not yet confirmed by enough updates
+    CONFIRMED = "confirmed"  # updated recently
+    COASTING = "coasting"  # confirmed, but no measurement for a while: predicted only
+
+
 class Track(BaseModel):
     """One fused track: state in the site frame and its road-frame projection."""
 
@@ -195,6 +203,10 @@ class Track(BaseModel):
     hits: Annotated[int, Field(ge=0)]
     confirmed: bool
     sources: list[Identifier]  # sensors that updated this track in the cycle
+    status: TrackStatus = TrackStatus.CONFIRMED
+    length_m: PosFloat | None = None  # estimated from the measurements' sizes
+    width_m: PosFloat | None = None
+    last_update_s: FiniteFloat | None = None  # stamp of the newest measurement used
 
 
 class TrackBatch(Message):

@@ -19,6 +19,9 @@ from wz_camera_detector.tracker import ImageTrackerSettings
 from wz_shared.settings import ServiceSettings
 from wz_shared.site import SensorMount, Site
 
+#: The camera model shipped in the package (``training/README.md`` says how it was made).
+DEFAULT_MODEL_PATH = Path(__file__).resolve().parent / "models" / "wz-vehicles-pico-480.onnx"
+
 #: ``radar_id`` value that turns fusion off (camera-only detections).
 NO_RADAR = "none"
 
@@ -39,11 +42,12 @@ class CameraDetectorSettings(ServiceSettings):
     #: The radar to fuse with (scans on ``raw/radar/<id>``); default: the site's first radar,
     #: camera-only when the site has none; ``"none"``: camera-only.
     radar_id: str | None = None
-    #: Image backend: ``background-subtraction`` (no model, learns the empty road first) or
-    #: ``yolo`` (a local YOLOv8 ONNX model, ``model_path``; never downloaded).
-    backend: Literal["background-subtraction", "yolo"] = "background-subtraction"
-    #: The YOLOv8 ``.onnx`` file (required with ``backend="yolo"``).
-    model_path: Path | None = None
+    #: Image backend: ``yolo`` (a local YOLOv8 ONNX model, ``model_path``; never downloaded) or
+    #: ``background-subtraction`` (no model, learns the empty road first; class "vehicle").
+    backend: Literal["background-subtraction", "yolo"] = "yolo"
+    #: The YOLOv8 ``.onnx`` file (required with ``backend="yolo"``); default: the model shipped
+    #: with the service, trained on the simulated work zone (see docs/camera-detector.md).
+    model_path: Path | None = DEFAULT_MODEL_PATH
     #: The model's class names, in its class order (yolo); default: the model's metadata.
     #: Classes that are not vehicles (anything but car, vehicle, truck, bus, motorcycle) are
     #: ignored.

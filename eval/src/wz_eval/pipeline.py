@@ -1,0 +1,176 @@
+"""The perception pipeline on the simulated work zone, in one process, on simulation time.
+
+:func:`run_pipeline` steps SUMO (:class:`TrafficWorld`), fires the site's sensors at their own
+rates (:class:`SensorRig`: LiDAR 20 Hz, camera 10 Hz, radar 15 Hz on the default site) and runs
+the detectors' own per-frame code on every frame: :class:`LidarDetector.handle` (fast path,
+learning its background during the warm-up) and :class:`CameraDetector.process_image` (YOLO,
+image tracking, ranging, radar fusion). It records, in time order:
+
+- the truth of every step (20 Hz);
+- each detector's :class:`DetectionBatch` as the node would publish it (site frame); the camera
+  channel's detections are its fused camera+radar objects, as on the bus;
+- per camera frame, the camera-only positions (calibrated pinhole, before radar fusion);
+- per radar scan, the targets converted to the site frame (echo points, no camera).
+
+The last two exist only for evaluation ("camera alone", "radar alone"). No bus is involved:
+the same code as the nodes, without serialisation, deterministic for a seed. Processes and
+Zenoh are tested elsewhere (``tests/*/test_node*.py``, ``tests/integration``).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from wz_camera_detector.association import (
+    AssociationSettings,
+    radar_targets_to_site,
+    to_detection,
+)
+from wz_camera_detector.node import CameraDetector
+from wz_camera_detector.settings import CameraDetectorSettings, camera_mount, radar_mount
+from wz_lidar_detector.node import LidarDetector
+from wz_lidar_detector.settings import LidarDetectorSettings, lidar_mount
+from wz_shared.messages import Detection, DetectionBatch, VehicleTruth
+from wz_shared.site import Site
+from wz_simulator.sensors.rig import CameraOutput, LidarOutput, RadarOutput, SensorRig
+from wz_simulator.sensors.scene import WEATHER_PRESETS
+from wz_simulator.settings import SimulatorSettings
+from wz_simulator.traffic.world import TrafficWorld
+
+log = logging.getLogger("wz_eval.pipeline")
+
+
+@dataclass(frozen=True)
+class PipelineOptions:
+    """What to simulate. Times in simulated seconds."""
+
+    seed: int = 7
+    duration_s: float = 600.0
+    #: Simulated before scoring starts: traffic fills the road, the LiDAR learns its background.
+    warmup_s: float = 60.0
+    weather: str = "day"
+    vehicles_per_hour: float = 1400.0
+    truck_share: float = 0.15
+    aggressive_share: float = 0.2
+    camera_model: Path | None = None
+    work_dir: Path | None = None
+
+
+@dataclass(frozen=True)
+class SourcePoint:
+    """A position from one sensor alone (camera-only or radar echo), for evaluation."""
+
+    x_m: float
+    y_m: float
+    speed_mps: float | None = None
+
+
+@dataclass
+class PipelineRecord:
+    """Everything :func:`run_pipeline` saw, in time order per list."""
+
+    site: Site
+    options: PipelineOptions
+    truth: list[tuple[float, list[VehicleTruth]]] = field(default_factory=list)
+    batches: list[DetectionBatch] = field(default_factory=list)
+    camera_only: list[tuple[float, list[SourcePoint]]] = field(default_factory=list)
+    radar_only: list[tuple[float, list[SourcePoint]]] = field(default_factory=list)
+    problems: dict[str, int] = field(default_factory=dict)
+    wall_s: float = 0.0
+
+    def sensor_ids(self) -> list[str]:
+        return sorted({batch.source_id for batch in self.batches})
+
+
+def run_pipeline(
+    site: Site,
+    options: PipelineOptions,
+    progress: Callable[[float, float], None] | None = None,
+) -> PipelineRecord:
+    """Simulate and detect; ``progress(sim_s, total_s)`` is called about once a simulated second."""
+    started = time.perf_counter()
+    record = PipelineRecord(site=site, options=options)
+
+    def report(reason: str, detail: str) -> None:
+        record.problems[reason] = record.problems.get(reason, 0) + 1
+
+    lidar = lidar_mount(site, None)
+    camera = camera_mount(site, None)
+    radar = radar_mount(site, None)
+    lidar_settings = LidarDetectorSettings.model_validate({"path": "fast", "learn_frames": 40})
+    lidar_detector = LidarDetector(site.site_id, lidar, lidar_settings, report)
+    camera_kwargs: dict[str, object] = {
+        "backend": "yolo", "radar_id": radar.sensor_id if radar is not None else "none"}
+    if options.camera_model is not None:
+        camera_kwargs["model_path"] = options.camera_model
+    camera_settings = CameraDetectorSettings.model_validate(camera_kwargs)
+    camera_detector = CameraDetector(site, camera, radar, camera_settings, report)
+    association = AssociationSettings()
+    sensor_ids = [lidar.sensor_id, camera.sensor_id] + ([radar.sensor_id] if radar else [])
+    rig = SensorRig(site, WEATHER_PRESETS[options.weather], options.seed, sensor_ids=sensor_ids)
+    total_s = options.warmup_s + options.duration_s
+    sim_settings: dict[str, object] = {
+        "seed": options.seed, "realtime_factor": 0.0, "sensors_enabled": False,
+        "vehicles_per_hour": options.vehicles_per_hour, "truck_share": options.truck_share,
+        "aggressive_share": options.aggressive_share, "duration_s": total_s,
+    }  # fmt: skip
+    if options.work_dir is not None:
+        sim_settings["work_dir"] = options.work_dir
+    # The LiDAR learns from frames in the last part of the warm-up (traffic on the road).
+    learn_from_s = max(0.0, options.warmup_s - 10.0)
+    next_progress_s = 0.0
+    with TrafficWorld(site, SimulatorSettings.model_validate(sim_settings)) as world:
+        while not world.finished:
+            vehicles = world.step()
+            now_s = world.sim_time_s
+            if now_s >= options.warmup_s:
+                record.truth.append((now_s, vehicles))
+            if progress is not None and now_s >= next_progress_s:
+                progress(now_s, total_s)
+                next_progress_s += 1.0
+            for output in rig.fire(vehicles, now_s):
+                if isinstance(output, LidarOutput):
+                    if output.scan.meta.stamp < learn_from_s:
+                        continue
+                    batch = lidar_detector.handle(output.scan.meta, output.scan.points,
+                                                  time.monotonic())  # fmt: skip
+                    if batch is not None and batch.stamp >= options.warmup_s:
+                        record.batches.append(batch)
+                elif isinstance(output, RadarOutput):
+                    scan = output.result.scan
+                    camera_detector.radar_scan(scan)
+                    if scan.stamp >= options.warmup_s and radar is not None:
+                        points = radar_targets_to_site(scan.targets, radar, association)
+                        record.radar_only.append((scan.stamp, [
+                            SourcePoint(p.x_m, p.y_m) for p in points]))  # fmt: skip
+                elif isinstance(output, CameraOutput):
+                    stamp_s = output.meta.stamp
+                    if stamp_s < options.warmup_s - 3.0:  # image tracks confirm before scoring
+                        continue
+                    image = cv2.imdecode(np.frombuffer(output.jpeg, np.uint8), cv2.IMREAD_COLOR)
+                    result = camera_detector.process_image(
+                        np.asarray(image, np.uint8), stamp_s, output.meta.frame_index
+                    )
+                    if result is None or stamp_s < options.warmup_s:
+                        continue
+                    record.camera_only.append((stamp_s, [
+                        SourcePoint(o.x_m, o.y_m) for o in result.camera_objects]))  # fmt: skip
+                    detections: list[Detection] = []
+                    for fused in result.fused:
+                        try:
+                            detections.append(to_detection(fused))
+                        except ValueError:
+                            report("bad_detection", str(fused))
+                    record.batches.append(DetectionBatch(
+                        site=site.site_id, source_id=camera.sensor_id, stamp=stamp_s,
+                        frame_index=output.meta.frame_index, detections=detections))  # fmt: skip
+    record.batches.sort(key=lambda b: (b.stamp, b.source_id))
+    record.wall_s = time.perf_counter() - started
+    return record
