@@ -1,0 +1,970 @@
+"""Multi-target tracker over asynchronous sensors: one track per vehicle in the site frame.
+
+The product's tracker. Sensors (a LiDAR at 20 Hz, a camera with the radar fused in at 10 Hz)
+publish batches of detections with their own stamps; :class:`MultiTargetTracker` turns them into
+tracks with stable ids. Its parts follow the steps of a tracker (as in Stone Soup and Autoware's
+multi_object_tracker), each a small function or method:
+
+**Reorder window.** Batches arrive a little out of stamp order (each sensor has its own latency)
+and a Kalman filter cannot predict backwards. :meth:`MultiTargetTracker.add` therefore buffers
+batches and processes, in stamp order, every batch older than ``newest stamp seen -
+reorder_window_s``; :meth:`~MultiTargetTracker.flush` processes the rest. A batch arriving with
+a stamp before the last processed one is beyond the window: it is counted in
+``counters.batches_late`` and dropped. The price is ``reorder_window_s`` of latency; the gain is
+that any arrival order within the window gives exactly the same tracks. Equal stamps are
+processed by sensor id, so that too does not depend on arrival order.
+
+**One cycle per batch** (:meth:`MultiTargetTracker._process`), at the batch's stamp ``t``:
+
+1. *prune*: delete tentative tracks not updated for ``tentative_max_age_s`` and confirmed ones
+   not updated for ``max_coast_s``;
+2. *predict* every live track from its own last update to ``t`` (``dt`` may be 0); a track's
+   stored state only ever changes at an update, so a prediction for gating costs nothing when
+   the track is not matched;
+3. *gate*: squared Mahalanobis distance of each (track, measurement) pair,
+   ``d^2 = y^T S^-1 y``, ``y = z - H x_p``, ``S = H P_p H^T + R`` (vectorised, (T, M));
+   pairs with ``d^2 > gate_chi2`` are forbidden. Mahalanobis rather than metres because the
+   sensors' errors are far from round: a camera ranges badly along its line of sight and well
+   across it, and a track's predicted uncertainty is long along the road (``road_aligned_q``),
+   so a fixed radius in metres would be too tight one way and too loose the other;
+4. *associate*: global nearest neighbour, the one-to-one assignment minimising the total cost
+   (:func:`gnn_assign`, ``scipy.optimize.linear_sum_assignment``), the cost being the
+   innovation's negative log-likelihood ``d^2 + ln det S`` (:func:`association_cost`).
+   Greedy nearest-first goes wrong where it matters: two cars side by side in adjacent lanes,
+   3.6 m apart. Confirmed tracks are served first, tentative ones get the measurements left
+   (:func:`cascade_assign`): a spurious track started by one outlying detection, uncertain and
+   close to a real vehicle, must not steal the real track's next detections;
+5. *update* the matched tracks in one batched Kalman update (position, then the radar's
+   along-road speed where given and a road heading is known);
+6. *spawn* a tentative track from each unmatched measurement of a sensor allowed to start
+   tracks (``track_start_sensor_ids``: a clutter-prone channel may only continue tracks);
+7. *life cycle*: tentative -> confirmed after ``confirm_hits`` updates within
+   ``confirm_window_s``, and no sooner than ``confirm_min_age_s`` after its first detection;
+   a confirmed track not updated for ``coasting_after_s`` reports
+   "coasting", and is deleted after ``max_coast_s``. Ids increase from 1 and are never reused.
+
+**Identity prior.** Each sensor has its own tracker and tags detections with a
+``local_track_id``. When a measurement's ``(sensor_id, local_track_id)`` last updated track T,
+the pair's cost is lowered by ``local_track_id_bonus`` (units of ``-2 ln likelihood``), so the sensor's own
+continuity breaks near-ties, e.g. two similar cars at the same range. It only ranks pairs that
+pass the gate: a stale or switched local id can never force a pair the gate refuses.
+
+**Process noise.** White-noise acceleration, road-aligned (:func:`~wz_fusion_tracker.kalman.road_aligned_q`):
+``sigma_along`` along the direction of travel, ``sigma_across`` across it. The direction is
+the road's heading at the track's position when the tracker is given a ``heading_at(x, y)``
+hook, otherwise the track's own velocity heading once it moves faster than
+``heading_min_speed_mps``, otherwise isotropic with ``sigma_along``.
+
+**Radar speed.** A detection's ``speed_mps`` (the radar's speed along the road) is used, when a
+``heading_at`` hook gives the road heading ``h``, as a second measurement of the matched track:
+``z = speed``, ``H = [0, 0, cos h, sin h]``, ``R = speed_std_mps^2``; and to initialise a new
+track's velocity. Without a hook it is ignored (its direction would be unknown).
+
+**Per track** the tracker also keeps a class vote (weighted by score; "unknown" never outvotes a
+known class), running medians of the measured length and width, the last update stamp per
+sensor, and the history needed for RTS smoothing (the prior and posterior of every update, see
+:func:`wz_fusion_tracker.smoothing.rts_smooth`).
+
+Nothing here does I/O: the node converts bus messages to :class:`Measurement`, calls
+:meth:`MultiTargetTracker.add`, and publishes :meth:`MultiTargetTracker.tracks`.
+"""
+
+from __future__ import annotations
+
+import heapq
+import logging
+import math
+from collections import deque
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+from scipy.optimize import linear_sum_assignment
+
+from wz_fusion_tracker.kalman import F64, STATE_DIM, TrackStateBank
+
+_log = logging.getLogger(__name__)
+
+IntP = npt.NDArray[np.intp]
+TrackStatus = Literal["tentative", "confirmed", "coasting"]
+HeadingAt = Callable[[float, float], float]
+
+#: The class a detector reports when it cannot tell; never outvotes a known class.
+UNKNOWN_CLASS = "unknown"
+
+#: Cost of a forbidden pair in the assignment: above any sum of allowed costs.
+_FORBIDDEN_COST = 1e9
+
+
+class TrackerSettings(BaseModel):
+    """Parameters of :class:`MultiTargetTracker`; metres and seconds of the site frame."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    # --- motion model ---
+    #: Std of the white acceleration along the direction of travel [m/s^2].
+    sigma_along_mps2: float = Field(default=2.0, gt=0.0)
+    #: Std of the white acceleration across it [m/s^2]; small on a highway, but a lane-drop
+    #: merge reaches about 1 m/s^2 laterally, hence not smaller than 0.5.
+    sigma_across_mps2: float = Field(default=0.5, gt=0.0)
+    #: Without a road heading hook, below this speed a track's heading is not trusted and the
+    #: process noise is isotropic (``sigma_along`` both ways) [m/s].
+    heading_min_speed_mps: float = Field(default=2.0, ge=0.0)
+
+    # --- association ---
+    #: A pair with squared Mahalanobis distance above this is never associated (13.8: the
+    #: 99.9 % quantile of chi-square with 2 degrees of freedom) [-].
+    gate_chi2: float = Field(default=13.8, gt=0.0)
+    #: Cost reduction of a pair whose (sensor, local_track_id) last updated that track, in
+    #: units of the cost, ``-2 ln likelihood`` (4: a likelihood ratio of e^2 = 7.4) [-].
+    local_track_id_bonus: float = Field(default=4.0, ge=0.0)
+
+    # --- channels ---
+    #: Sensor ids whose unmatched detections start tracks; None: every sensor.
+    track_start_sensor_ids: tuple[str, ...] | None = None
+
+    # --- life cycle ---
+    #: Updates (the first included) within ``confirm_window_s`` that confirm a track.
+    confirm_hits: int = Field(default=3, ge=1)
+    #: Window over which ``confirm_hits`` are counted [s].
+    confirm_window_s: float = Field(default=1.0, gt=0.0)
+    #: A track is confirmed no sooner than this after its first detection [s]: with a 20 Hz
+    #: and a 10 Hz sensor, 3 hits take 50 ms, too short to tell a vehicle (or a velocity) from
+    #: a burst of noise.
+    confirm_min_age_s: float = Field(default=0.2, ge=0.0)
+    #: A tentative track not updated for longer than this is deleted [s].
+    tentative_max_age_s: float = Field(default=0.5, gt=0.0)
+    #: A confirmed track not updated for longer than this reports "coasting" [s].
+    coasting_after_s: float = Field(default=0.3, ge=0.0)
+    #: A confirmed track not updated for longer than this is deleted [s].
+    max_coast_s: float = Field(default=1.5, gt=0.0)
+
+    # --- timing ---
+    #: Batches are held this long behind the newest stamp seen, then processed in order [s].
+    reorder_window_s: float = Field(default=0.15, ge=0.0)
+    #: A sensor is a track's source in a snapshot if it updated it within this before it [s].
+    sources_window_s: float = Field(default=0.25, ge=0.0)
+
+    # --- initialisation ---
+    #: Std of a new track's unknown velocity (along the road, with a road prior) [m/s].
+    initial_velocity_std_mps: float = Field(default=15.0, gt=0.0)
+    #: With a road heading hook: std of a new track's velocity across the road [m/s].
+    initial_across_velocity_std_mps: float = Field(default=2.0, gt=0.0)
+    #: With a road heading hook and no radar speed: a new track's speed along the road [m/s].
+    initial_speed_mps: float = 0.0
+
+    # --- radar speed ---
+    #: Use a detection's ``speed_mps`` when a road heading hook is given.
+    use_speed_measurements: bool = True
+    #: Std of a radar speed along the road [m/s].
+    speed_std_mps: float = Field(default=0.5, gt=0.0)
+
+    # --- bookkeeping ---
+    #: Measured lengths and widths kept per track for their running median.
+    size_window: int = Field(default=50, ge=1)
+    #: Updates kept per track for smoothing (the oldest are dropped).
+    max_history: int = Field(default=2000, ge=1)
+    #: Histories of deleted confirmed tracks kept until popped (the oldest are dropped).
+    max_finished_histories: int = Field(default=1000, ge=0)
+
+    @model_validator(mode="after")
+    def _check_life_cycle(self) -> TrackerSettings:
+        if self.coasting_after_s >= self.max_coast_s:
+            raise ValueError(
+                f"coasting_after_s ({self.coasting_after_s}) must be below max_coast_s "
+                f"({self.max_coast_s}): a track coasts before it is deleted"
+            )
+        return self
+
+    def may_start_tracks(self, sensor_id: str) -> bool:
+        """Whether unmatched detections of ``sensor_id`` start tracks."""
+        return self.track_start_sensor_ids is None or sensor_id in self.track_start_sensor_ids
+
+
+@dataclass(frozen=True, slots=True, kw_only=True, eq=False)
+class Measurement:
+    """One detection as the tracker sees it (the node converts bus messages to this).
+
+    Attributes
+    ----------
+    x_m, y_m
+        Position in the site frame [m].
+    covariance_m2
+        Its covariance, shape (2, 2), symmetric positive definite [m^2].
+    sensor_id
+        The sensor that made it; None: the sensor of the batch it comes in.
+    object_class
+        "car", "truck", "bus", "motorcycle" or "unknown".
+    score
+        Detection confidence in [0, 1]; weights the class vote.
+    length_m, width_m
+        Measured size [m], None when not measured.
+    speed_mps
+        Speed along the road (radar) [m/s], None when not measured.
+    local_track_id
+        The sensor's own track id of the object, None when it has none.
+    """
+
+    x_m: float
+    y_m: float
+    covariance_m2: F64
+    sensor_id: str | None = None
+    object_class: str = UNKNOWN_CLASS
+    score: float = 1.0
+    length_m: float | None = None
+    width_m: float | None = None
+    speed_mps: float | None = None
+    local_track_id: int | None = None
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class TrackState:
+    """A snapshot of one track.
+
+    Attributes
+    ----------
+    track_id
+        Unique for the tracker's lifetime, from 1, never reused.
+    stamp_s
+        Time the state refers to [s].
+    x_m, y_m, vx_mps, vy_mps
+        State [m, m/s].
+    P
+        State covariance, shape (4, 4) [m^2, m^2/s, m^2/s^2].
+    status
+        "tentative", "confirmed" (updated within ``coasting_after_s``) or "coasting".
+    object_class
+        The class vote's winner.
+    length_m, width_m
+        Running medians of the measured size [m], None before any measurement.
+    sources
+        Sensors that updated the track within ``sources_window_s`` before ``stamp_s``, sorted.
+    hits
+        Number of updates, the first detection included.
+    age_s
+        Time since the first detection [s].
+    time_since_update_s
+        Time since the latest update [s].
+    last_update_s_by_sensor
+        Latest update stamp per sensor [s].
+    """
+
+    track_id: int
+    stamp_s: float
+    x_m: float
+    y_m: float
+    vx_mps: float
+    vy_mps: float
+    P: F64
+    status: TrackStatus
+    object_class: str
+    length_m: float | None
+    width_m: float | None
+    sources: tuple[str, ...]
+    hits: int
+    age_s: float
+    time_since_update_s: float
+    last_update_s_by_sensor: Mapping[str, float]
+
+    @property
+    def speed_mps(self) -> float:
+        """``|v| = sqrt(vx^2 + vy^2)`` [m/s]."""
+        return math.hypot(self.vx_mps, self.vy_mps)
+
+    @property
+    def heading_rad(self) -> float:
+        """``atan2(vy, vx)``, counter-clockwise from east [rad]."""
+        return math.atan2(self.vy_mps, self.vx_mps)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class TrackHistory:
+    """The updates of one track, for :func:`~wz_fusion_tracker.smoothing.rts_smooth`.
+
+    Entry ``k`` is the update at ``stamps_s[k]``: ``x_pred``/``P_pred`` the prior it started
+    from (predicted from update ``k - 1``; for the first entry, the initial state itself) and
+    ``x_filt``/``P_filt`` its posterior. Shapes (n,), (n, 4), (n, 4, 4).
+    """
+
+    track_id: int
+    stamps_s: F64
+    x_filt: F64
+    P_filt: F64
+    x_pred: F64
+    P_pred: F64
+
+
+@dataclass(slots=True)
+class TrackerCounters:
+    """What the tracker has done since it was created (for the node's status)."""
+
+    batches_received: int = 0
+    batches_processed: int = 0
+    batches_late: int = 0
+    measurements_processed: int = 0
+    tracks_started: int = 0
+    tracks_confirmed: int = 0
+    tracks_deleted: int = 0
+
+
+# ----------------------------------------------------------------------------- association
+
+
+def innovation_statistics(x_pred: F64, P_pred: F64, z: F64, R: F64) -> tuple[F64, F64]:
+    """Squared Mahalanobis distance and ``ln det S`` of every (track, measurement) pair.
+
+    ::
+
+        y = z_j - H x_i,   S = H P_i H^T + R_j,   d^2_ij = y^T S^-1 y
+
+    with ``H = [I 0]`` and the 2x2 inverse written out:
+    ``d^2 = (S_11 y_0^2 - (S_01 + S_10) y_0 y_1 + S_00 y_1^2) / det S``.
+
+    Parameters
+    ----------
+    x_pred, P_pred
+        Predicted states (T, 4) and covariances (T, 4, 4).
+    z, R
+        Measured positions (M, 2) [m] and their covariances (M, 2, 2) [m^2].
+
+    Returns
+    -------
+    d2, log_det_S
+        Both of shape (T, M).
+    """
+    # (T, M) arrays element by element, from (T, 1) track and (1, M) measurement columns
+    y0 = z[None, :, 0] - x_pred[:, 0, None]
+    y1 = z[None, :, 1] - x_pred[:, 1, None]
+    s00 = P_pred[:, 0, 0, None] + R[None, :, 0, 0]
+    s01 = P_pred[:, 0, 1, None] + R[None, :, 0, 1]
+    s10 = P_pred[:, 1, 0, None] + R[None, :, 1, 0]
+    s11 = P_pred[:, 1, 1, None] + R[None, :, 1, 1]
+    det = s00 * s11 - s01 * s10
+    d2: F64 = (s11 * y0 * y0 - (s01 + s10) * y0 * y1 + s00 * y1 * y1) / det
+    return d2, np.log(det)
+
+
+def mahalanobis_squared(x_pred: F64, P_pred: F64, z: F64, R: F64) -> F64:
+    """``d^2 = y^T S^-1 y`` of every (track, measurement) pair, (T, M); see
+    :func:`innovation_statistics`."""
+    return innovation_statistics(x_pred, P_pred, z, R)[0]
+
+
+def association_cost(d2: F64, log_det_S: F64, bonus: F64 | None = None) -> F64:
+    """Cost of pairing a track with a measurement: the Gaussian negative log-likelihood.
+
+    ::
+
+        cost = d^2 + ln det S - bonus   ( = -2 ln N(y; 0, S) - 2 ln 2 pi - bonus )
+
+    Distance alone (``d^2``) favours the most uncertain track, whose large ``S`` makes every
+    measurement look close: a newborn tentative track would steal a confirmed track's
+    detection. The ``ln det S`` term is the price of that uncertainty.
+
+    Parameters
+    ----------
+    d2, log_det_S
+        From :func:`innovation_statistics`, (T, M).
+    bonus
+        Cost reductions (T, M) >= 0 (local-track-id continuity), or None.
+
+    Returns
+    -------
+    cost
+        Shape (T, M).
+    """
+    cost = d2 + log_det_S
+    return cost if bonus is None else cost - bonus
+
+
+def gnn_assign(cost: F64, allowed: npt.NDArray[np.bool_]) -> list[tuple[int, int]]:
+    """Global nearest neighbour: the one-to-one pairing of least total cost among allowed pairs.
+
+    Forbidden pairs (outside the gate) get a cost above any sum of allowed ones and are dropped
+    from the result, so ``linear_sum_assignment`` finds, among the pairings with the most
+    allowed pairs, the one of least total cost. A cost never allows a forbidden pair.
+
+    Parameters
+    ----------
+    cost
+        Cost of each (track, measurement) pair, shape (T, M), e.g. :func:`association_cost`.
+    allowed
+        Which pairs pass the gate, shape (T, M).
+
+    Returns
+    -------
+    pairs
+        ``(track_row, measurement_column)`` by increasing row.
+    """
+    if cost.size == 0 or not allowed.any():
+        return []
+    rows, columns = linear_sum_assignment(np.where(allowed, cost, _FORBIDDEN_COST))
+    return [
+        (int(row), int(column))
+        for row, column in zip(rows, columns, strict=True)
+        if allowed[row, column]
+    ]
+
+
+def cascade_assign(
+    cost: F64, allowed: npt.NDArray[np.bool_], first_rows: npt.NDArray[np.bool_]
+) -> list[tuple[int, int]]:
+    """:func:`gnn_assign` for the ``first_rows`` (confirmed tracks), then for the other rows
+    (tentative tracks) on the measurements left: a new, uncertain track never takes a
+    detection an established track can explain.
+
+    Parameters
+    ----------
+    cost, allowed
+        As for :func:`gnn_assign`, (T, M).
+    first_rows
+        Rows served first, shape (T,).
+
+    Returns
+    -------
+    pairs
+        ``(track_row, measurement_column)`` by increasing row.
+    """
+    pairs: list[tuple[int, int]] = []
+    free_columns = np.ones(cost.shape[1], dtype=bool)
+    for stage_rows in (first_rows, ~first_rows):
+        rows = np.flatnonzero(stage_rows)
+        columns = np.flatnonzero(free_columns)
+        if len(rows) == 0 or len(columns) == 0:
+            continue
+        block = np.ix_(rows, columns)
+        for row, column in gnn_assign(cost[block], allowed[block]):
+            pairs.append((int(rows[row]), int(columns[column])))
+            free_columns[columns[column]] = False
+    return sorted(pairs)
+
+
+# ----------------------------------------------------------------------------- tracks
+
+
+@dataclass(slots=True)
+class _HistoryEntry:
+    stamp_s: float
+    x_pred: F64
+    P_pred: F64
+    x_filt: F64
+    P_filt: F64
+
+
+@dataclass(slots=True, eq=False)
+class _Track:
+    """Bookkeeping of one live track; its ``x`` and ``P`` live in the bank at ``slot``."""
+
+    track_id: int
+    slot: int
+    born_s: float
+    updated_s: float
+    size_window: int
+    max_history: int
+    confirmed: bool = False
+    hits: int = 0
+    road_heading_rad: float | None = None
+    hit_stamps_s: deque[float] = field(default_factory=deque)
+    class_weights: dict[str, float] = field(default_factory=dict)
+    class_last_vote: dict[str, int] = field(default_factory=dict)
+    lengths_m: deque[float] = field(init=False)
+    widths_m: deque[float] = field(init=False)
+    last_update_s_by_sensor: dict[str, float] = field(default_factory=dict)
+    history: deque[_HistoryEntry] = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.lengths_m = deque(maxlen=self.size_window)
+        self.widths_m = deque(maxlen=self.size_window)
+        self.history = deque(maxlen=self.max_history)
+
+    def record_hit(self, measurement: Measurement, sensor_id: str, stamp_s: float) -> None:
+        self.hits += 1
+        self.updated_s = stamp_s
+        if not self.confirmed:
+            self.hit_stamps_s.append(stamp_s)
+        self.last_update_s_by_sensor[sensor_id] = stamp_s
+        # class vote weighted by score; the vote counter breaks ties by recency
+        name = measurement.object_class
+        self.class_weights[name] = self.class_weights.get(name, 0.0) + measurement.score
+        self.class_last_vote[name] = self.hits
+        if measurement.length_m is not None and measurement.length_m > 0.0:
+            self.lengths_m.append(measurement.length_m)
+        if measurement.width_m is not None and measurement.width_m > 0.0:
+            self.widths_m.append(measurement.width_m)
+
+    def object_class(self) -> str:
+        known = [name for name in self.class_weights if name != UNKNOWN_CLASS]
+        if not known:
+            return UNKNOWN_CLASS
+        return max(known, key=lambda name: (self.class_weights[name], self.class_last_vote[name]))
+
+    def status(self, stamp_s: float, coasting_after_s: float) -> TrackStatus:
+        if not self.confirmed:
+            return "tentative"
+        return "coasting" if stamp_s - self.updated_s > coasting_after_s else "confirmed"
+
+    def to_history(self) -> TrackHistory:
+        entries = list(self.history)
+        return TrackHistory(
+            track_id=self.track_id,
+            stamps_s=np.array([e.stamp_s for e in entries]),
+            x_filt=np.array([e.x_filt for e in entries]).reshape(-1, STATE_DIM),
+            P_filt=np.array([e.P_filt for e in entries]).reshape(-1, STATE_DIM, STATE_DIM),
+            x_pred=np.array([e.x_pred for e in entries]).reshape(-1, STATE_DIM),
+            P_pred=np.array([e.P_pred for e in entries]).reshape(-1, STATE_DIM, STATE_DIM),
+        )
+
+
+def _median(values: deque[float]) -> float | None:
+    return float(np.median(np.fromiter(values, dtype=np.float64))) if values else None
+
+
+@dataclass(order=True, slots=True)
+class _PendingBatch:
+    stamp_s: float
+    sensor_id: str
+    arrival: int
+    measurements: Sequence[Measurement] = field(compare=False)
+
+
+# ----------------------------------------------------------------------------- the tracker
+
+
+class MultiTargetTracker:
+    """Tracks vehicles from asynchronous sensor batches (see the module docstring).
+
+    Parameters
+    ----------
+    settings
+        Motion model, gate, channels, life cycle and timing.
+    heading_at
+        Road heading [rad, counter-clockwise from east] at a site position ``(x_m, y_m)``;
+        None: no road prior (process noise follows each track's own velocity, radar speeds are
+        ignored). A non-finite return means "no road here".
+    """
+
+    def __init__(self, settings: TrackerSettings, heading_at: HeadingAt | None = None) -> None:
+        self.settings = settings
+        self._heading_at = heading_at
+        self._bank = TrackStateBank()
+        self._tracks: dict[int, _Track] = {}  # by track id, in creation (= id) order
+        self._next_id = 1
+        self._local_ids: dict[tuple[str, int], int] = {}  # (sensor, local id) -> track id
+        self._pending: list[_PendingBatch] = []  # a heap by (stamp, sensor, arrival)
+        self._arrivals = 0
+        self._newest_stamp_s = -math.inf
+        self._last_processed_s: float | None = None
+        self._finished: deque[TrackHistory] = deque(maxlen=settings.max_finished_histories)
+        self._counters = TrackerCounters()
+
+    # --- input ---
+
+    def add(self, sensor_id: str, stamp_s: float, measurements: Sequence[Measurement]) -> int:
+        """Accept one sensor batch; process every buffered batch now older than the window.
+
+        Parameters
+        ----------
+        sensor_id
+            The sensor that produced the batch.
+        stamp_s
+            The batch's measurement time [s].
+        measurements
+            Its detections (possibly none: an empty batch still tells the time).
+
+        Returns
+        -------
+        processed
+            Number of batches processed by this call (0 when the batch was late).
+
+        Raises
+        ------
+        ValueError
+            ``stamp_s`` is not finite, or a measurement names another sensor.
+        """
+        if not math.isfinite(stamp_s):
+            raise ValueError(f"batch stamp of {sensor_id!r} must be finite, got {stamp_s}")
+        for measurement in measurements:
+            if measurement.sensor_id is not None and measurement.sensor_id != sensor_id:
+                raise ValueError(
+                    f"a measurement of sensor {measurement.sensor_id!r} came in a batch of "
+                    f"{sensor_id!r}"
+                )
+        self._counters.batches_received += 1
+        if self._last_processed_s is not None and stamp_s < self._last_processed_s:
+            self._counters.batches_late += 1
+            _log.debug(
+                "late batch dropped: sensor=%s stamp=%.3f s, last processed %.3f s",
+                sensor_id,
+                stamp_s,
+                self._last_processed_s,
+            )
+            return 0
+        heapq.heappush(
+            self._pending, _PendingBatch(stamp_s, sensor_id, self._arrivals, tuple(measurements))
+        )
+        self._arrivals += 1
+        self._newest_stamp_s = max(self._newest_stamp_s, stamp_s)
+        return self._release(self._newest_stamp_s - self.settings.reorder_window_s)
+
+    def flush(self) -> int:
+        """Process every buffered batch now, in stamp order; the number processed."""
+        return self._release(math.inf)
+
+    def advance_to(self, stamp_s: float) -> int:
+        """Tell the tracker the time is ``stamp_s`` [s] though no batch came (sensors silent).
+
+        Processes the batches older than ``stamp_s - reorder_window_s`` and prunes the tracks at
+        that time, which also makes any later batch before it late.
+
+        Returns
+        -------
+        processed
+            Number of batches processed.
+        """
+        self._newest_stamp_s = max(self._newest_stamp_s, stamp_s)
+        horizon_s = self._newest_stamp_s - self.settings.reorder_window_s
+        processed = self._release(horizon_s)
+        if self._last_processed_s is None or horizon_s > self._last_processed_s:
+            self._last_processed_s = horizon_s
+            self._prune(horizon_s)
+        return processed
+
+    def _release(self, horizon_s: float) -> int:
+        processed = 0
+        while self._pending and self._pending[0].stamp_s <= horizon_s:
+            batch = heapq.heappop(self._pending)
+            self._process(batch.sensor_id, batch.stamp_s, batch.measurements)
+            processed += 1
+        return processed
+
+    # --- output ---
+
+    @property
+    def counters(self) -> TrackerCounters:
+        """A copy of the counters."""
+        return replace(self._counters)
+
+    @property
+    def last_processed_stamp_s(self) -> float | None:
+        """Stamp of the latest processed batch (or :meth:`advance_to` horizon) [s]."""
+        return self._last_processed_s
+
+    @property
+    def pending_batches(self) -> int:
+        """Batches buffered in the reorder window."""
+        return len(self._pending)
+
+    def tracks(self, stamp_s: float | None = None) -> list[TrackState]:
+        """Snapshots of the live tracks, by increasing id; the tracker is not changed.
+
+        Parameters
+        ----------
+        stamp_s
+            Predict every track to this time [s] (not before the last processed stamp); tracks
+            that would be deleted by then are left out. None: each track as of its latest
+            update, status as of the last processed stamp.
+
+        Returns
+        -------
+        tracks
+            Tentative, confirmed and coasting tracks; filter by ``status`` as needed.
+
+        Raises
+        ------
+        ValueError
+            ``stamp_s`` is before the last processed stamp.
+        """
+        if (
+            stamp_s is not None
+            and self._last_processed_s is not None
+            and stamp_s < self._last_processed_s
+        ):
+            raise ValueError(
+                f"tracks asked at {stamp_s:.6f} s, before the last processed stamp "
+                f"({self._last_processed_s:.6f} s)"
+            )
+        reference_s = stamp_s if stamp_s is not None else self._last_processed_s
+        live = list(self._tracks.values())
+        if reference_s is not None:
+            live = [t for t in live if not self._expired(t, reference_s)]
+        if not live:
+            return []
+        slots = np.array([t.slot for t in live], dtype=np.intp)
+        if stamp_s is None:
+            x, P = self._bank.states(slots), self._bank.covariances(slots)
+            stamps = self._bank.stamps_s(slots)
+        else:
+            x, P = self._predicted(live, slots, stamp_s)
+            stamps = np.full(len(live), stamp_s)
+        window_s = self.settings.sources_window_s
+        snapshots = []
+        for row, track in enumerate(live):
+            at_s = float(stamps[row])
+            status_s = reference_s if reference_s is not None else at_s
+            snapshots.append(
+                TrackState(
+                    track_id=track.track_id,
+                    stamp_s=at_s,
+                    x_m=float(x[row, 0]),
+                    y_m=float(x[row, 1]),
+                    vx_mps=float(x[row, 2]),
+                    vy_mps=float(x[row, 3]),
+                    P=P[row],
+                    status=track.status(status_s, self.settings.coasting_after_s),
+                    object_class=track.object_class(),
+                    length_m=_median(track.lengths_m),
+                    width_m=_median(track.widths_m),
+                    sources=tuple(
+                        sorted(
+                            sensor
+                            for sensor, updated_s in track.last_update_s_by_sensor.items()
+                            if status_s - updated_s <= window_s
+                        )
+                    ),
+                    hits=track.hits,
+                    age_s=status_s - track.born_s,
+                    time_since_update_s=status_s - track.updated_s,
+                    last_update_s_by_sensor=dict(track.last_update_s_by_sensor),
+                )
+            )
+        return snapshots
+
+    def history(self, track_id: int) -> TrackHistory:
+        """The stored updates of live track ``track_id`` (KeyError when it is not live)."""
+        return self._tracks[track_id].to_history()
+
+    def pop_finished_histories(self) -> list[TrackHistory]:
+        """Histories of the confirmed tracks deleted since the last call, oldest first."""
+        finished = list(self._finished)
+        self._finished.clear()
+        return finished
+
+    # --- one cycle ---
+
+    def _process(self, sensor_id: str, stamp_s: float, measurements: Sequence[Measurement]) -> None:
+        """Prune, predict, gate, associate, update, spawn, at the batch's stamp."""
+        settings = self.settings
+        self._prune(stamp_s)
+        self._last_processed_s = stamp_s
+        self._counters.batches_processed += 1
+        self._counters.measurements_processed += len(measurements)
+        if not measurements:
+            return
+        z = np.array([[m.x_m, m.y_m] for m in measurements], dtype=np.float64)
+        R = np.array([m.covariance_m2 for m in measurements], dtype=np.float64).reshape(-1, 2, 2)
+
+        live = list(self._tracks.values())
+        pairs: list[tuple[int, int]] = []
+        if live:
+            slots = np.array([t.slot for t in live], dtype=np.intp)
+            x_pred, P_pred = self._predicted(live, slots, stamp_s)
+            d2, log_det_S = innovation_statistics(x_pred, P_pred, z, R)
+            cost = association_cost(
+                d2, log_det_S, self._local_id_bonus(live, sensor_id, measurements)
+            )
+            confirmed = np.array([t.confirmed for t in live], dtype=bool)
+            pairs = cascade_assign(cost, d2 <= settings.gate_chi2, confirmed)
+            if pairs:
+                self._update_matched(
+                    [live[row] for row, _ in pairs],
+                    np.array([row for row, _ in pairs], dtype=np.intp),
+                    np.array([column for _, column in pairs], dtype=np.intp),
+                    slots,
+                    x_pred,
+                    P_pred,
+                    z,
+                    R,
+                    sensor_id,
+                    stamp_s,
+                    measurements,
+                )
+
+        if settings.may_start_tracks(sensor_id):
+            matched = {column for _, column in pairs}
+            for column, measurement in enumerate(measurements):
+                if column not in matched:
+                    self._spawn(measurement, R[column], sensor_id, stamp_s)
+
+    def _predicted(self, live: Sequence[_Track], slots: IntP, stamp_s: float) -> tuple[F64, F64]:
+        """The states of ``live`` predicted to ``stamp_s`` with each track's process noise."""
+        settings = self.settings
+        x = self._bank.states(slots)
+        speed = np.hypot(x[:, 2], x[:, 3])
+        heading = np.arctan2(x[:, 3], x[:, 2])
+        sigma_across = np.where(
+            speed >= settings.heading_min_speed_mps,
+            settings.sigma_across_mps2,
+            settings.sigma_along_mps2,
+        )
+        if self._heading_at is not None:
+            road = np.array(
+                [math.nan if t.road_heading_rad is None else t.road_heading_rad for t in live]
+            )
+            known = np.isfinite(road)
+            heading = np.where(known, road, heading)
+            sigma_across = np.where(known, settings.sigma_across_mps2, sigma_across)
+        return self._bank.predicted(
+            slots, stamp_s, settings.sigma_along_mps2, sigma_across, heading
+        )
+
+    def _local_id_bonus(
+        self, live: Sequence[_Track], sensor_id: str, measurements: Sequence[Measurement]
+    ) -> F64 | None:
+        bonus_value = self.settings.local_track_id_bonus
+        if bonus_value == 0.0:
+            return None
+        row_of = {track.track_id: row for row, track in enumerate(live)}
+        bonus = np.zeros((len(live), len(measurements)))
+        for column, measurement in enumerate(measurements):
+            if measurement.local_track_id is None:
+                continue
+            track_id = self._local_ids.get((sensor_id, measurement.local_track_id))
+            if track_id is not None and track_id in row_of:
+                bonus[row_of[track_id], column] = bonus_value
+        return bonus if bonus.any() else None
+
+    def _update_matched(
+        self,
+        tracks: Sequence[_Track],
+        rows: IntP,
+        columns: IntP,
+        slots: IntP,
+        x_pred: F64,
+        P_pred: F64,
+        z: F64,
+        R: F64,
+        sensor_id: str,
+        stamp_s: float,
+        measurements: Sequence[Measurement],
+    ) -> None:
+        settings = self.settings
+        matched_slots = slots[rows]
+        # the prior: each matched track predicted to the batch's stamp
+        self._bank.set(matched_slots, x_pred[rows], P_pred[rows], stamp_s)
+        # position update, all matched tracks at once
+        self._bank.update(matched_slots, z[columns], R[columns])
+
+        road_heading: list[float | None] = [None] * len(tracks)
+        if self._heading_at is not None:
+            x_post = self._bank.states(matched_slots)
+            road_heading = [self._road_heading(float(p[0]), float(p[1])) for p in x_post]
+            # radar speed along the road: z = s, H = [0, 0, cos h, sin h], R = sigma_s^2
+            speed_rows = [
+                i
+                for i, column in enumerate(columns)
+                if settings.use_speed_measurements
+                and measurements[column].speed_mps is not None
+                and road_heading[i] is not None
+            ]
+            if speed_rows:
+                h = np.array([road_heading[i] for i in speed_rows], dtype=np.float64)
+                H = np.zeros((len(speed_rows), 1, STATE_DIM))
+                H[:, 0, 2], H[:, 0, 3] = np.cos(h), np.sin(h)
+                speeds = np.array(
+                    [[measurements[columns[i]].speed_mps] for i in speed_rows], dtype=np.float64
+                )
+                R_speed = np.full((len(speed_rows), 1, 1), settings.speed_std_mps**2)
+                self._bank.update(matched_slots[speed_rows], speeds, R_speed, H)
+
+        x_post = self._bank.states(matched_slots)
+        P_post = self._bank.covariances(matched_slots)
+        for i, track in enumerate(tracks):
+            measurement = measurements[columns[i]]
+            track.road_heading_rad = road_heading[i]
+            track.record_hit(measurement, sensor_id, stamp_s)
+            track.history.append(
+                _HistoryEntry(
+                    stamp_s,
+                    x_pred[rows[i]].copy(),
+                    P_pred[rows[i]].copy(),
+                    x_post[i].copy(),
+                    P_post[i].copy(),
+                )
+            )
+            if measurement.local_track_id is not None:
+                self._local_ids[(sensor_id, measurement.local_track_id)] = track.track_id
+            self._check_confirmation(track, stamp_s)
+
+    def _road_heading(self, x_m: float, y_m: float) -> float | None:
+        if self._heading_at is None:
+            return None
+        heading = float(self._heading_at(x_m, y_m))
+        return heading if math.isfinite(heading) else None
+
+    def _spawn(self, measurement: Measurement, R: F64, sensor_id: str, stamp_s: float) -> None:
+        """Start a tentative track: ``x = [z, v0]``, ``P = blockdiag(R, P_v)``.
+
+        Without a road heading: ``v0 = 0``, ``P_v = sigma_v^2 I``. With one, ``h``:
+        ``v0 = s (cos h, sin h)`` with ``s`` the radar speed (std ``speed_std_mps``) or
+        ``initial_speed_mps`` (std ``initial_velocity_std_mps``), and
+        ``P_v = Rot(h) diag(std_s^2, sigma_across_v^2) Rot(h)^T``.
+        """
+        settings = self.settings
+        x = np.array([measurement.x_m, measurement.y_m, 0.0, 0.0])
+        P = np.zeros((STATE_DIM, STATE_DIM))
+        P[:2, :2] = R
+        heading = self._road_heading(measurement.x_m, measurement.y_m)
+        if heading is None:
+            P[2, 2] = P[3, 3] = settings.initial_velocity_std_mps**2
+        else:
+            if settings.use_speed_measurements and measurement.speed_mps is not None:
+                speed, speed_std = measurement.speed_mps, settings.speed_std_mps
+            else:
+                speed, speed_std = settings.initial_speed_mps, settings.initial_velocity_std_mps
+            along = np.array([math.cos(heading), math.sin(heading)])
+            across = np.array([-along[1], along[0]])
+            x[2:] = speed * along
+            P[2:, 2:] = speed_std**2 * np.outer(along, along) + (
+                settings.initial_across_velocity_std_mps**2
+            ) * np.outer(across, across)
+        track = _Track(
+            track_id=self._next_id,
+            slot=self._bank.add(x, P, stamp_s),
+            born_s=stamp_s,
+            updated_s=stamp_s,
+            size_window=settings.size_window,
+            max_history=settings.max_history,
+            road_heading_rad=heading,
+        )
+        self._next_id += 1
+        self._tracks[track.track_id] = track
+        self._counters.tracks_started += 1
+        track.record_hit(measurement, sensor_id, stamp_s)
+        track.history.append(_HistoryEntry(stamp_s, x, P, x, P))
+        if measurement.local_track_id is not None:
+            self._local_ids[(sensor_id, measurement.local_track_id)] = track.track_id
+        self._check_confirmation(track, stamp_s)
+
+    def _check_confirmation(self, track: _Track, stamp_s: float) -> None:
+        window_start_s = stamp_s - self.settings.confirm_window_s
+        while track.hit_stamps_s and track.hit_stamps_s[0] < window_start_s:
+            track.hit_stamps_s.popleft()
+        if (
+            not track.confirmed
+            and len(track.hit_stamps_s) >= self.settings.confirm_hits
+            and stamp_s - track.born_s >= self.settings.confirm_min_age_s
+        ):
+            track.confirmed = True
+            track.hit_stamps_s.clear()  # only needed until confirmation
+            self._counters.tracks_confirmed += 1
+
+    def _expired(self, track: _Track, stamp_s: float) -> bool:
+        max_age_s = (
+            self.settings.max_coast_s if track.confirmed else self.settings.tentative_max_age_s
+        )
+        return stamp_s - track.updated_s > max_age_s
+
+    def _prune(self, stamp_s: float) -> None:
+        expired = [t for t in self._tracks.values() if self._expired(t, stamp_s)]
+        for track in expired:
+            del self._tracks[track.track_id]
+            self._bank.remove(track.slot)
+            self._counters.tracks_deleted += 1
+            if track.confirmed:
+                self._finished.append(track.to_history())
+        if expired:
+            gone = {t.track_id for t in expired}
+            self._local_ids = {k: v for k, v in self._local_ids.items() if v not in gone}

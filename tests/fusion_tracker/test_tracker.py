@@ -1,0 +1,564 @@
+"""Multi-target tracker: two asynchronous sensors on seeded constant-velocity scenes. Exactly
+one confirmed track per vehicle with no id switch and an error below each sensor's noise; an
+overtake in the adjacent lane; a silent sensor (coasting on the other) and silent sensors
+(deletion); the reorder window (out of order = in order, to the bit; late batches dropped);
+clutter from a channel that may not start tracks; the gate; class, size, radar speed, snapshots
+and the history smoothed by RTS."""
+
+from __future__ import annotations
+
+import math
+from collections import defaultdict
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from tests.purity import top_level_imports
+from wz_fusion_tracker import tracker as tracker_module
+from wz_fusion_tracker.kalman import ProcessNoise
+from wz_fusion_tracker.smoothing import rts_smooth
+from wz_fusion_tracker.tracker import (
+    Measurement,
+    MultiTargetTracker,
+    TrackerSettings,
+    TrackState,
+    association_cost,
+    cascade_assign,
+    gnn_assign,
+    mahalanobis_squared,
+)
+
+LIDAR, CAMERA = "lidar-mast", "camera-mast"
+LIDAR_STD_M = 0.2
+# The camera ranges badly along the road (x here) and well across it.
+CAMERA_STD_XY_M = (0.8, 0.3)
+SETTINGS = TrackerSettings()
+
+Batch = tuple[str, float, list[Measurement]]
+
+
+@dataclass(frozen=True)
+class Vehicle:
+    """A constant-velocity vehicle with each sensor's local track id for it."""
+
+    x0_m: float
+    y0_m: float
+    vx_mps: float
+    vy_mps: float = 0.0
+    local_id: int = 0
+    object_class: str = "car"
+
+    def position(self, t_s: float) -> tuple[float, float]:
+        return (self.x0_m + self.vx_mps * t_s, self.y0_m + self.vy_mps * t_s)
+
+
+def sensor_stamps(rate_hz: float, offset_s: float, duration_s: float) -> list[float]:
+    return [round(offset_s + k / rate_hz, 9) for k in range(int(duration_s * rate_hz))]
+
+
+def scene(
+    vehicles: Sequence[Vehicle],
+    duration_s: float,
+    seed: int,
+    silent: Callable[[str, float], bool] = lambda sensor, t: False,
+    start_s: float = 0.0,
+) -> list[Batch]:
+    """Batches of both sensors in stamp order: LiDAR 20 Hz, camera 10 Hz offset by 33 ms.
+
+    ``silent(sensor, t)`` True: the sensor sends nothing at ``t``.
+    """
+    rng = np.random.default_rng(seed)
+    lidar_cov = np.eye(2) * LIDAR_STD_M**2
+    camera_cov = np.diag(np.square(CAMERA_STD_XY_M))
+    timeline = [(t, LIDAR) for t in sensor_stamps(20.0, start_s, duration_s)] + [
+        (t, CAMERA) for t in sensor_stamps(10.0, start_s + 0.033, duration_s)
+    ]
+    batches: list[Batch] = []
+    for t, sensor in sorted(timeline):
+        if silent(sensor, t):
+            continue
+        cov = lidar_cov if sensor == LIDAR else camera_cov
+        measurements = []
+        for vehicle in vehicles:
+            x, y = rng.multivariate_normal(vehicle.position(t), cov)
+            measurements.append(
+                Measurement(
+                    x_m=float(x),
+                    y_m=float(y),
+                    covariance_m2=cov,
+                    object_class=vehicle.object_class,
+                    score=0.9,
+                    local_track_id=vehicle.local_id + (100 if sensor == CAMERA else 0),
+                )
+            )
+        batches.append((sensor, t, measurements))
+    return batches
+
+
+def feed(tracker: MultiTargetTracker, batches: Iterable[Batch]) -> list[list[TrackState]]:
+    """Add the batches one by one; the snapshots after each (each track at its own update)."""
+    snapshots = []
+    for sensor, stamp, measurements in batches:
+        tracker.add(sensor, stamp, measurements)
+        snapshots.append(tracker.tracks())
+    return snapshots
+
+
+def ids_by_vehicle(
+    snapshots: Iterable[list[TrackState]], vehicles: Sequence[Vehicle]
+) -> dict[int, set[int]]:
+    """For each vehicle, the ids of the confirmed tracks nearest to it over the run."""
+    ids: dict[int, set[int]] = defaultdict(set)
+    for snapshot in snapshots:
+        for track in snapshot:
+            if track.status == "tentative":
+                continue
+            distances = [
+                math.dist((track.x_m, track.y_m), v.position(track.stamp_s)) for v in vehicles
+            ]
+            ids[int(np.argmin(distances))].add(track.track_id)
+    return ids
+
+
+def test_core_imports_no_io_library() -> None:
+    assert top_level_imports(tracker_module).isdisjoint(
+        {"zenoh", "fastapi", "uvicorn", "requests", "io", "wz_shared"}
+    )
+
+
+def test_settings_refuse_coasting_after_deletion() -> None:
+    with pytest.raises(ValueError, match="coasting_after_s"):
+        TrackerSettings(coasting_after_s=2.0, max_coast_s=1.5)
+    assert TrackerSettings(track_start_sensor_ids=(LIDAR,)).may_start_tracks(CAMERA) is False
+    assert SETTINGS.may_start_tracks(CAMERA)
+
+
+# ----------------------------------------------------------------------------- association
+
+
+def test_mahalanobis_matches_a_hand_computed_value() -> None:
+    x_pred = np.array([[0.0, 0.0, 0.0, 0.0]])
+    P_pred = np.diag([3.0, 1.0, 1.0, 1.0])[None]
+    z = np.array([[2.0, 1.0], [0.0, 0.0]])
+    R = np.array([np.eye(2), np.eye(2)])
+    # S = diag(4, 2): d^2 = 2^2 / 4 + 1^2 / 2 = 1.5; and 0 for the second.
+    np.testing.assert_allclose(mahalanobis_squared(x_pred, P_pred, z, R), [[1.5, 0.0]])
+    # A full S against the explicit inverse.
+    S = np.array([[2.0, 0.7], [0.7, 1.0]])
+    y = np.array([1.0, -2.0])
+    d2 = mahalanobis_squared(np.zeros((1, 4)), np.zeros((1, 4, 4)), y[None], S[None])
+    assert d2[0, 0] == pytest.approx(y @ np.linalg.inv(S) @ y)
+
+
+def test_gnn_is_globally_optimal_and_gated() -> None:
+    # Greedy would take (0, 0) at 1.0 and leave (1, 1) at 9.0; the optimum is 2.0 + 2.0.
+    cost = np.array([[1.0, 2.0], [2.0, 9.0]])
+    assert gnn_assign(cost, cost <= 13.8) == [(0, 1), (1, 0)]
+    # Forbidding (0, 1): the pairing with the most allowed pairs wins, (0, 0) and (1, 1).
+    allowed = np.array([[True, False], [True, True]])
+    assert gnn_assign(cost, allowed) == [(0, 0), (1, 1)]
+    assert gnn_assign(np.array([[20.0]]), np.array([[False]])) == []
+    assert gnn_assign(np.zeros((0, 3)), np.zeros((0, 3), dtype=bool)) == []
+
+
+def test_cost_penalises_uncertainty_and_the_bonus_only_reorders_allowed_pairs() -> None:
+    # Both tracks see the measurement at d^2 = 1, the second with a 100x larger S.
+    d2 = np.array([[1.0], [1.0]])
+    log_det_S = np.log(np.array([[0.01], [1.0]]))
+    cost = association_cost(d2, log_det_S)
+    assert gnn_assign(cost, d2 <= 13.8) == [(0, 0)]
+    # A local-id bonus flips a near-tie, but never pulls in a pair beyond the gate.
+    tie = np.array([[1.0, 1.2], [1.2, 1.0]])
+    bonus = np.array([[0.0, 4.0], [4.0, 0.0]])
+    assert gnn_assign(association_cost(tie, np.zeros((2, 2)), bonus), tie <= 13.8) == [
+        (0, 1),
+        (1, 0),
+    ]
+    far = np.array([[14.0]])
+    assert (
+        gnn_assign(association_cost(far, np.zeros((1, 1)), np.array([[100.0]])), far <= 13.8) == []
+    )
+
+
+def test_cascade_serves_confirmed_tracks_first() -> None:
+    # The tentative track (row 1) is cheaper for the only measurement, yet the confirmed
+    # track (row 0) gets it; the tentative one takes what is left.
+    cost = np.array([[3.0, 50.0], [1.0, 2.0]])
+    allowed = np.array([[True, False], [True, True]])
+    assert cascade_assign(cost, allowed, np.array([True, False])) == [(0, 0), (1, 1)]
+    assert cascade_assign(cost[:, :1], allowed[:, :1], np.array([True, False])) == [(0, 0)]
+    assert gnn_assign(cost[:, :1], allowed[:, :1]) == [(1, 0)]
+
+
+# ----------------------------------------------------------------------------- scenes
+
+
+def test_two_vehicles_two_asynchronous_sensors_one_track_each_no_switch_low_error() -> None:
+    vehicles = [Vehicle(0.0, 0.0, 25.0, local_id=1), Vehicle(-30.0, 20.0, 30.0, -1.0, local_id=2)]
+    tracker = MultiTargetTracker(SETTINGS)
+    snapshots = feed(tracker, scene(vehicles, duration_s=10.0, seed=1))
+    tracker.flush()
+    final = tracker.tracks()
+    assert [t.status for t in final] == ["confirmed", "confirmed"]
+    ids = ids_by_vehicle(snapshots, vehicles)
+    assert ids == {0: {final[0].track_id}, 1: {final[1].track_id}}
+    # A rare 3-sigma detection may start a tentative track; none is ever confirmed.
+    assert tracker.counters.tracks_confirmed == 2
+    vehicle_of = {track_id: vehicles[v] for v, track_ids in ids.items() for track_id in track_ids}
+    errors = defaultdict(list)
+    for snapshot in snapshots:
+        for track in snapshot:
+            if track.stamp_s < 1.0 or track.track_id not in vehicle_of:
+                continue  # the initial transient, a tentative track from an outlier
+            vehicle = vehicle_of[track.track_id]
+            x, y = vehicle.position(track.stamp_s)
+            errors["x"].append(track.x_m - x)
+            errors["y"].append(track.y_m - y)
+            errors["vx"].append(track.vx_mps - vehicle.vx_mps)
+    rmse = {axis: float(np.sqrt(np.mean(np.square(e)))) for axis, e in errors.items()}
+    assert rmse["x"] < LIDAR_STD_M < CAMERA_STD_XY_M[0]
+    assert rmse["y"] < LIDAR_STD_M and rmse["y"] < CAMERA_STD_XY_M[1]
+    assert rmse["vx"] < 1.0
+    assert {track.sources for track in tracker.tracks(10.0)} == {(CAMERA, LIDAR)}
+    assert all(track.object_class == "car" for track in final)
+
+
+def test_an_overtake_in_the_adjacent_lane_keeps_both_identities() -> None:
+    # The faster car starts 20 m behind in the next lane (3.6 m over) and passes at t = 2 s.
+    vehicles = [Vehicle(-20.0, 0.0, 32.0, local_id=1), Vehicle(0.0, 3.6, 22.0, local_id=2)]
+    for seed in range(3):
+        tracker = MultiTargetTracker(SETTINGS)
+        snapshots = feed(tracker, scene(vehicles, duration_s=5.0, seed=seed))
+        tracker.flush()
+        ids = ids_by_vehicle(snapshots, vehicles)
+        assert len(ids[0]) == 1 and len(ids[1]) == 1 and ids[0] != ids[1]
+        assert tracker.counters.tracks_confirmed == 2
+
+
+def test_a_sensor_silent_for_two_seconds_the_tracks_continue_on_the_other() -> None:
+    vehicles = [Vehicle(0.0, 0.0, 25.0, local_id=1), Vehicle(0.0, 10.0, 20.0, local_id=2)]
+
+    def lidar_down(sensor: str, t: float) -> bool:
+        return sensor == LIDAR and 3.0 <= t < 5.0
+
+    tracker = MultiTargetTracker(SETTINGS)
+    snapshots = feed(tracker, scene(vehicles, duration_s=8.0, seed=2, silent=lidar_down))
+    assert ids_by_vehicle(snapshots, vehicles) == {0: {1}, 1: {2}}
+    during = tracker.tracks()  # at the end, both sensors back
+    assert [t.track_id for t in during] == [1, 2]
+    # Half-way through the outage the tracks are confirmed, updated by the camera alone.
+    tracker = MultiTargetTracker(SETTINGS)
+    feed(tracker, scene(vehicles, duration_s=4.0, seed=2, silent=lidar_down))
+    tracker.flush()
+    mid = tracker.tracks(4.0)
+    assert [(t.track_id, t.status, t.sources) for t in mid] == [
+        (1, "confirmed", (CAMERA,)),
+        (2, "confirmed", (CAMERA,)),
+    ]
+
+
+def test_both_sensors_silent_longer_than_max_coast_deletes_the_tracks() -> None:
+    vehicles = [Vehicle(0.0, 0.0, 25.0, local_id=1), Vehicle(0.0, 10.0, 20.0, local_id=2)]
+
+    def blackout(sensor: str, t: float) -> bool:
+        return 3.0 <= t < 5.0
+
+    # Sensors that still publish, empty batches: time advances, the tracks coast then go.
+    tracker = MultiTargetTracker(SETTINGS)
+    before: list[int] = []
+    for sensor, stamp, measurements in scene(vehicles, duration_s=8.0, seed=3):
+        tracker.add(sensor, stamp, [] if blackout(sensor, stamp) else measurements)
+        if stamp == pytest.approx(3.0):
+            before = [t.track_id for t in tracker.tracks(3.0) if t.status == "confirmed"]
+        if stamp == pytest.approx(3.5):
+            assert [t.status for t in tracker.tracks(3.5)] == ["coasting", "coasting"]
+        if stamp == pytest.approx(4.8):
+            assert tracker.tracks(4.8) == []
+    tracker.flush()
+    assert len(before) == 2
+    assert set(before) <= {h.track_id for h in tracker.pop_finished_histories()}
+    assert tracker.pop_finished_histories() == []
+    after = [t.track_id for t in tracker.tracks() if t.status == "confirmed"]
+    assert len(after) == 2 and min(after) > max(before)  # new ids, never reused
+    # Sensors that publish nothing at all: the node tells the time with advance_to.
+    tracker = MultiTargetTracker(SETTINGS)
+    feed(tracker, scene(vehicles, duration_s=3.0, seed=3))
+    before = [t.track_id for t in tracker.tracks() if t.status == "confirmed"]
+    assert len(before) == 2
+    tracker.advance_to(3.0 + SETTINGS.max_coast_s + SETTINGS.reorder_window_s + 0.1)
+    assert tracker.tracks() == []
+    assert set(before) <= {h.track_id for h in tracker.pop_finished_histories()}
+
+
+def test_out_of_order_batches_within_the_window_give_the_same_tracks() -> None:
+    vehicles = [Vehicle(0.0, 0.0, 25.0, local_id=1), Vehicle(10.0, 3.6, 20.0, local_id=2)]
+    in_order = scene(vehicles, duration_s=4.0, seed=4)
+    # Every camera batch arrives after the LiDAR batch that follows it (up to 67 ms late).
+    shuffled = list(in_order)
+    i = 0
+    while i < len(shuffled) - 1:
+        if shuffled[i][0] == CAMERA:
+            shuffled[i], shuffled[i + 1] = shuffled[i + 1], shuffled[i]
+            i += 1
+        i += 1
+    assert shuffled != in_order
+    reference, reordered = MultiTargetTracker(SETTINGS), MultiTargetTracker(SETTINGS)
+    feed(reference, in_order)
+    feed(reordered, shuffled)
+    reference.flush()
+    reordered.flush()
+    assert reordered.counters.batches_late == 0
+    expected, actual = reference.tracks(4.0), reordered.tracks(4.0)
+    assert [t.track_id for t in actual] == [t.track_id for t in expected] == [1, 2]
+    for a, e in zip(actual, expected, strict=True):
+        np.testing.assert_allclose(
+            [a.x_m, a.y_m, a.vx_mps, a.vy_mps], [e.x_m, e.y_m, e.vx_mps, e.vy_mps], atol=1e-9
+        )
+        np.testing.assert_allclose(a.P, e.P, atol=1e-9)
+
+
+def test_a_batch_older_than_the_window_is_counted_late_and_dropped() -> None:
+    vehicles = [Vehicle(0.0, 0.0, 25.0, local_id=1)]
+    batches = scene(vehicles, duration_s=2.0, seed=5)
+    tracker = MultiTargetTracker(SETTINGS)
+    feed(tracker, batches)
+    assert tracker.pending_batches > 0  # the last 0.15 s wait in the window
+    before = tracker.tracks()
+    processed_before = tracker.counters.batches_processed
+    last_s = tracker.last_processed_stamp_s
+    assert last_s is not None
+    stale_s = last_s - 0.3
+    far = Measurement(x_m=500.0, y_m=500.0, covariance_m2=np.eye(2))
+    assert tracker.add(LIDAR, stale_s, [far]) == 0
+    assert tracker.counters.batches_late == 1
+    assert tracker.counters.batches_processed == processed_before
+    after = tracker.tracks()
+    assert [(t.track_id, t.x_m) for t in after] == [(t.track_id, t.x_m) for t in before]
+    with pytest.raises(ValueError, match="finite"):
+        tracker.add(LIDAR, math.nan, [])
+    with pytest.raises(ValueError, match="before the last processed"):
+        tracker.tracks(0.0)
+
+
+def test_clutter_from_a_channel_that_may_not_start_tracks_creates_no_track() -> None:
+    vehicles = [Vehicle(0.0, 0.0, 25.0, local_id=1)]
+    rng = np.random.default_rng(6)
+    settings = TrackerSettings(track_start_sensor_ids=(LIDAR,))
+    tracker = MultiTargetTracker(settings)
+    for sensor, stamp, measurements in scene(vehicles, duration_s=5.0, seed=6):
+        if sensor == CAMERA:  # 0-5 false detections a frame, away from the car
+            for _ in range(int(rng.integers(0, 6))):
+                x, y = rng.uniform(-50.0, 200.0), rng.uniform(-20.0, 20.0)
+                if math.dist((x, y), vehicles[0].position(stamp)) > 15.0:
+                    measurements.append(
+                        Measurement(x_m=x, y_m=y, covariance_m2=np.eye(2), object_class="car")
+                    )
+        tracker.add(sensor, stamp, measurements)
+    tracker.flush()
+    assert tracker.counters.tracks_started == 1
+    assert [(t.track_id, t.status) for t in tracker.tracks()] == [(1, "confirmed")]
+
+
+def test_a_measurement_far_outside_the_gate_starts_a_tentative_track_and_leaves_the_other() -> None:
+    vehicles = [Vehicle(0.0, 0.0, 25.0, local_id=1)]
+    batches = scene(vehicles, duration_s=2.0, seed=7)
+    with_outlier, without = MultiTargetTracker(SETTINGS), MultiTargetTracker(SETTINGS)
+    feed(with_outlier, batches)
+    feed(without, batches)
+    # 8 m beside the car's lane, with the same sensor as the car's detections.
+    stamp = batches[-1][1] + 0.05
+    car = vehicles[0].position(stamp)
+    lidar_cov = np.eye(2) * LIDAR_STD_M**2
+    batch = [
+        Measurement(x_m=car[0], y_m=car[1], covariance_m2=lidar_cov, local_track_id=1),
+        Measurement(x_m=car[0] + 2.0, y_m=car[1] + 8.0, covariance_m2=lidar_cov),
+    ]
+    with_outlier.add(LIDAR, stamp, batch)
+    without.add(LIDAR, stamp, batch[:1])
+    with_outlier.flush()
+    without.flush()
+    tracks = with_outlier.tracks()
+    assert [(t.track_id, t.status) for t in tracks] == [(1, "confirmed"), (2, "tentative")]
+    np.testing.assert_array_equal(tracks[0].P, without.tracks()[0].P)
+    assert tracks[0].x_m == without.tracks()[0].x_m
+    assert (tracks[1].x_m, tracks[1].y_m) == (car[0] + 2.0, car[1] + 8.0)
+
+
+def test_life_cycle_confirmation_coasting_and_deletion_times() -> None:
+    settings = TrackerSettings(reorder_window_s=0.0)
+    tracker = MultiTargetTracker(settings)
+    cov = np.eye(2) * 0.04
+
+    def detect(t: float) -> None:
+        tracker.add(LIDAR, t, [Measurement(x_m=25.0 * t, y_m=0.0, covariance_m2=cov)])
+
+    for k in range(3):
+        detect(0.05 * k)
+    # three hits within the window, but only 0.1 s old: still tentative
+    assert [t.status for t in tracker.tracks()] == ["tentative"]
+    for k in range(3, 5):
+        detect(0.05 * k)
+    assert [t.status for t in tracker.tracks()] == ["confirmed"]
+    assert tracker.counters.tracks_confirmed == 1
+    last_s = 0.2
+    assert tracker.tracks(last_s + settings.coasting_after_s - 0.01)[0].status == "confirmed"
+    assert tracker.tracks(last_s + settings.coasting_after_s + 0.01)[0].status == "coasting"
+    assert tracker.tracks(last_s + settings.max_coast_s - 0.01) != []
+    assert tracker.tracks(last_s + settings.max_coast_s + 0.01) == []
+    # A tentative track goes after tentative_max_age_s without an update.
+    tracker.add(LIDAR, 0.25, [Measurement(x_m=500.0, y_m=0.0, covariance_m2=cov)])
+    assert [t.status for t in tracker.tracks()] == ["confirmed", "tentative"]
+    tracker.add(LIDAR, 0.25 + settings.tentative_max_age_s + 0.01, [])
+    assert [t.status for t in tracker.tracks()] == ["coasting"]
+    assert tracker.counters.tracks_deleted == 1
+
+
+def test_a_sensors_local_track_id_breaks_a_near_tie_but_not_the_gate() -> None:
+    cov = np.eye(2) * 0.09
+
+    def run(bonus: float) -> list[float]:
+        tracker = MultiTargetTracker(
+            TrackerSettings(reorder_window_s=0.0, local_track_id_bonus=bonus)
+        )
+        tracker.add(
+            LIDAR,
+            0.0,
+            [
+                Measurement(x_m=0.0, y_m=0.0, covariance_m2=cov, local_track_id=1),
+                Measurement(x_m=0.0, y_m=2.0, covariance_m2=cov, local_track_id=2),
+            ],
+        )
+        # Both near the middle; by distance alone track 1 takes y = 0.98 (local id 2).
+        tracker.add(
+            LIDAR,
+            0.0,
+            [
+                Measurement(x_m=0.0, y_m=0.98, covariance_m2=cov, local_track_id=2),
+                Measurement(x_m=0.0, y_m=1.02, covariance_m2=cov, local_track_id=1),
+            ],
+        )
+        return [t.y_m for t in tracker.tracks()]
+
+    by_distance, by_local_id = run(0.0), run(SETTINGS.local_track_id_bonus)
+    assert by_distance[0] < by_local_id[0] and by_distance[1] > by_local_id[1]
+    # A local id far outside the gate starts a new track, whatever the bonus.
+    tracker = MultiTargetTracker(TrackerSettings(reorder_window_s=0.0, local_track_id_bonus=1e6))
+    tracker.add(LIDAR, 0.0, [Measurement(x_m=0.0, y_m=0.0, covariance_m2=cov, local_track_id=1)])
+    tracker.add(LIDAR, 0.05, [Measurement(x_m=0.0, y_m=9.0, covariance_m2=cov, local_track_id=1)])
+    assert [t.y_m for t in tracker.tracks()] == [0.0, 9.0]
+
+
+# ----------------------------------------------------------------------------- per track
+
+
+def test_class_vote_size_median_speed_and_heading() -> None:
+    tracker = MultiTargetTracker(TrackerSettings(reorder_window_s=0.0))
+    votes = [("unknown", 1.0, 4.4), ("truck", 0.4, 12.0), ("unknown", 1.0, None), ("car", 0.3, 4.6)]
+    for k, (object_class, score, length) in enumerate(votes):
+        t = 0.1 * k
+        tracker.add(
+            LIDAR,
+            t,
+            [
+                Measurement(
+                    x_m=3.0 * t,
+                    y_m=4.0 * t,
+                    covariance_m2=np.eye(2) * 0.01,
+                    object_class=object_class,
+                    score=score,
+                    length_m=length,
+                    width_m=1.8,
+                )
+            ],
+        )
+    (track,) = tracker.tracks()
+    # unknown (2.0) never outvotes a known class; truck 0.4 beats car 0.3.
+    assert track.object_class == "truck"
+    assert track.length_m == pytest.approx(4.6)  # median of 4.4, 12.0, 4.6
+    assert track.width_m == pytest.approx(1.8)
+    assert track.hits == 4 and track.age_s == pytest.approx(0.3)
+    assert track.speed_mps == pytest.approx(math.hypot(track.vx_mps, track.vy_mps))
+    assert track.heading_rad == pytest.approx(math.atan2(4.0, 3.0), abs=0.05)
+
+
+def test_snapshots_predicted_to_a_time_leave_the_tracker_unchanged() -> None:
+    vehicles = [Vehicle(0.0, 0.0, 25.0, local_id=1)]
+    tracker = MultiTargetTracker(SETTINGS)
+    feed(tracker, scene(vehicles, duration_s=2.0, seed=8))
+    tracker.flush()
+    (own,) = tracker.tracks()
+    (ahead,) = tracker.tracks(own.stamp_s + 0.5)
+    assert ahead.x_m == pytest.approx(own.x_m + 0.5 * own.vx_mps)
+    assert np.trace(ahead.P) > np.trace(own.P)
+    (again,) = tracker.tracks()
+    assert (again.x_m, again.stamp_s) == (own.x_m, own.stamp_s)
+    np.testing.assert_array_equal(again.P, own.P)
+
+
+def test_radar_speed_along_a_road_heading_sharpens_the_velocity() -> None:
+    heading = math.radians(30.0)
+    speed = 27.0
+    rng = np.random.default_rng(9)
+
+    def run(with_speed: bool) -> TrackState:
+        tracker = MultiTargetTracker(SETTINGS, heading_at=lambda x, y: heading)
+        for k in range(12):
+            t = 0.1 * k
+            x, y = speed * t * math.cos(heading), speed * t * math.sin(heading)
+            noisy = rng.normal([x, y], 0.8)
+            measured = float(rng.normal(speed, 0.3)) if with_speed else None
+            tracker.add(
+                CAMERA,
+                t,
+                [
+                    Measurement(
+                        x_m=noisy[0],
+                        y_m=noisy[1],
+                        covariance_m2=np.eye(2) * 0.64,
+                        speed_mps=measured,
+                    )
+                ],
+            )
+        tracker.flush()
+        (track,) = tracker.tracks()
+        return track
+
+    with_radar, without = run(True), run(False)
+    assert with_radar.speed_mps == pytest.approx(speed, abs=1.0)
+    assert with_radar.heading_rad == pytest.approx(heading, abs=0.05)
+    assert np.trace(with_radar.P[2:, 2:]) < 0.5 * np.trace(without.P[2:, 2:])
+
+
+def test_the_history_is_the_filters_and_rts_smoothing_it_lowers_the_error() -> None:
+    vehicles = [Vehicle(0.0, 0.0, 25.0, local_id=1)]
+    tracker = MultiTargetTracker(SETTINGS)
+    feed(tracker, scene(vehicles, duration_s=6.0, seed=10))
+    tracker.flush()
+    history = tracker.history(1)
+    assert len(history.stamps_s) == tracker.tracks()[0].hits
+    assert np.all(np.diff(history.stamps_s) >= 0.0)
+    x_smooth, _ = rts_smooth(
+        history.stamps_s,
+        history.x_filt,
+        history.P_filt,
+        ProcessNoise(SETTINGS.sigma_along_mps2, SETTINGS.sigma_across_mps2),
+        x_pred=history.x_pred,
+        P_pred=history.P_pred,
+    )
+    truth = np.array([vehicles[0].position(t) for t in history.stamps_s])
+    settled = history.stamps_s >= 1.0
+    filtered_rmse = np.sqrt(np.mean(np.sum((history.x_filt[settled, :2] - truth[settled]) ** 2, 1)))
+    smoothed_rmse = np.sqrt(np.mean(np.sum((x_smooth[settled, :2] - truth[settled]) ** 2, 1)))
+    assert smoothed_rmse < 0.8 * filtered_rmse
+    with pytest.raises(KeyError):
+        tracker.history(99)
+
+
+def test_measurements_of_another_sensor_in_a_batch_are_refused() -> None:
+    tracker = MultiTargetTracker(SETTINGS)
+    with pytest.raises(ValueError, match="radar"):
+        tracker.add(
+            LIDAR, 0.0, [Measurement(x_m=0.0, y_m=0.0, covariance_m2=np.eye(2), sensor_id="radar")]
+        )
