@@ -420,7 +420,7 @@ def test_a_sensors_local_track_id_breaks_a_near_tie_but_not_the_gate() -> None:
 
     def run(bonus: float) -> list[float]:
         tracker = MultiTargetTracker(
-            TrackerSettings(reorder_window_s=0.0, local_track_id_bonus=bonus)
+            TrackerSettings(reorder_window_s=0.0, local_track_id_bonus=bonus, merge_distance_m=0.0)
         )
         tracker.add(
             LIDAR,

@@ -112,10 +112,13 @@ def score_instant(
     estimates: Sequence[tuple[float, float, float | None]],
     vehicles: Sequence[VehicleTruth],
     gate_m: float,
+    time_offsets_s: Sequence[float | None] | None = None,
 ) -> list[tuple[int, VehicleTruth, float, float]]:
     """Match one instant's estimates ``(x, y, speed or None)`` to ``vehicles`` and add the errors.
 
-    Returns ``(estimate index, vehicle, longitudinal error, lateral error)`` per match.
+    ``time_offsets_s``: per estimate, when it was captured after the instant (a LiDAR column's
+    time); its matched vehicle is moved along its heading by that much before the errors are
+    taken. Returns ``(estimate index, vehicle, longitudinal error, lateral error)`` per match.
     """
     est = np.array([(x, y) for x, y, _ in estimates], dtype=np.float64).reshape(-1, 2)
     tru = np.array([(v.x_m, v.y_m) for v in vehicles], dtype=np.float64).reshape(-1, 2)
@@ -124,6 +127,12 @@ def score_instant(
     out = []
     for e, t in pairs:
         vehicle = vehicles[t]
+        offset = time_offsets_s[e] if time_offsets_s is not None else None
+        if offset:
+            vehicle = vehicle.model_copy(update={
+                "x_m": vehicle.x_m + vehicle.speed_mps * math.cos(vehicle.heading_rad) * offset,
+                "y_m": vehicle.y_m + vehicle.speed_mps * math.sin(vehicle.heading_rad) * offset,
+            })  # fmt: skip
         s_est, d_est = road.to_road(est[e, 0], est[e, 1])
         s_true, d_true = road.to_road(vehicle.x_m, vehicle.y_m)  # truth moved to the stamp
         lon = float(s_est) - float(s_true)

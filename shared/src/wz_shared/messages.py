@@ -160,6 +160,10 @@ class Detection(BaseModel):
     # Radar (or image-plane tracking) may give speed; None where the sensor cannot.
     speed_mps: FiniteFloat | None = None
     local_track_id: Annotated[int, Field(ge=0)] | None = None
+    # When the object was captured, after the batch's stamp [s]: a spinning LiDAR's columns
+    # fire across its sweep (50 ms at 20 Hz), so a vehicle's points are up to a sweep later
+    # than the frame's stamp (1.5 m at 30 m/s). None: at the stamp.
+    time_offset_s: Annotated[float, Field(ge=-1.0, le=1.0, allow_inf_nan=False)] | None = None
 
 
 class DetectionBatch(Message):

@@ -147,6 +147,13 @@ class TrackerSettings(BaseModel):
     reorder_window_s: float = Field(default=0.15, ge=0.0)
     #: A sensor is a track's source in a snapshot if it updated it within this before it [s].
     sources_window_s: float = Field(default=0.25, ge=0.0)
+    #: Two tracks closer than this, moving alike, are one vehicle tracked twice (a sensor's
+    #: biased measurement that missed the gate started a second track): the younger is
+    #: deleted [m]. Adjacent lanes are 3.6 m apart and a following car at least ~5 m behind,
+    #: so 2.5 m never merges two vehicles. 0 turns merging off.
+    merge_distance_m: float = Field(default=2.5, ge=0.0)
+    #: ... and their velocities differ by less than this [m/s].
+    merge_velocity_difference_mps: float = Field(default=4.0, gt=0.0)
 
     # --- initialisation ---
     #: Std of a new track's unknown velocity (along the road, with a road prior) [m/s].
@@ -206,6 +213,9 @@ class Measurement:
         Speed along the road (radar) [m/s], None when not measured.
     local_track_id
         The sensor's own track id of the object, None when it has none.
+    time_offset_s
+        When it was captured after its batch's stamp [s] (a spinning LiDAR's column time);
+        the update uses ``H = [I  delta I]``.
     """
 
     x_m: float
@@ -218,6 +228,7 @@ class Measurement:
     width_m: float | None = None
     speed_mps: float | None = None
     local_track_id: int | None = None
+    time_offset_s: float = 0.0
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -308,20 +319,26 @@ class TrackerCounters:
     tracks_started: int = 0
     tracks_confirmed: int = 0
     tracks_deleted: int = 0
+    #: Deleted as the duplicate of an older track (:attr:`TrackerSettings.merge_distance_m`).
+    tracks_merged: int = 0
 
 
 # ----------------------------------------------------------------------------- association
 
 
-def innovation_statistics(x_pred: F64, P_pred: F64, z: F64, R: F64) -> tuple[F64, F64]:
+def innovation_statistics(
+    x_pred: F64, P_pred: F64, z: F64, R: F64, time_offset_s: F64 | None = None
+) -> tuple[F64, F64]:
     """Squared Mahalanobis distance and ``ln det S`` of every (track, measurement) pair.
 
     ::
 
-        y = z_j - H x_i,   S = H P_i H^T + R_j,   d^2_ij = y^T S^-1 y
+        y = z_j - H_j x_i,   S = H_j P_i H_j^T + R_j,   d^2_ij = y^T S^-1 y
 
-    with ``H = [I 0]`` and the 2x2 inverse written out:
-    ``d^2 = (S_11 y_0^2 - (S_01 + S_10) y_0 y_1 + S_00 y_1^2) / det S``.
+    with ``H_j = [I  delta_j I]``: measurement ``j`` was captured ``delta_j`` after the batch's
+    stamp (a spinning LiDAR's column time), so it sees the position ``p + delta_j v`` (process
+    noise over a fraction of a sweep is neglected); ``delta = 0`` gives ``H = [I 0]``. The 2x2
+    inverse is written out: ``d^2 = (S_11 y_0^2 - (S_01 + S_10) y_0 y_1 + S_00 y_1^2) / det S``.
 
     Parameters
     ----------
@@ -329,6 +346,8 @@ def innovation_statistics(x_pred: F64, P_pred: F64, z: F64, R: F64) -> tuple[F64
         Predicted states (T, 4) and covariances (T, 4, 4).
     z, R
         Measured positions (M, 2) [m] and their covariances (M, 2, 2) [m^2].
+    time_offset_s
+        ``delta`` per measurement (M,) [s], or None for all zero.
 
     Returns
     -------
@@ -342,6 +361,15 @@ def innovation_statistics(x_pred: F64, P_pred: F64, z: F64, R: F64) -> tuple[F64
     s01 = P_pred[:, 0, 1, None] + R[None, :, 0, 1]
     s10 = P_pred[:, 1, 0, None] + R[None, :, 1, 0]
     s11 = P_pred[:, 1, 1, None] + R[None, :, 1, 1]
+    if time_offset_s is not None:
+        d = time_offset_s[None, :]
+        y0 = y0 - d * x_pred[:, 2, None]
+        y1 = y1 - d * x_pred[:, 3, None]
+        P = P_pred
+        s00 = s00 + d * (P[:, 0, 2, None] + P[:, 2, 0, None]) + d * d * P[:, 2, 2, None]
+        s11 = s11 + d * (P[:, 1, 3, None] + P[:, 3, 1, None]) + d * d * P[:, 3, 3, None]
+        s01 = s01 + d * (P[:, 0, 3, None] + P[:, 2, 1, None]) + d * d * P[:, 2, 3, None]
+        s10 = s10 + d * (P[:, 1, 2, None] + P[:, 3, 0, None]) + d * d * P[:, 3, 2, None]
     det = s00 * s11 - s01 * s10
     d2: F64 = (s11 * y0 * y0 - (s01 + s10) * y0 * y1 + s00 * y1 * y1) / det
     return d2, np.log(det)
@@ -755,13 +783,15 @@ class MultiTargetTracker:
             return
         z = np.array([[m.x_m, m.y_m] for m in measurements], dtype=np.float64)
         R = np.array([m.covariance_m2 for m in measurements], dtype=np.float64).reshape(-1, 2, 2)
+        offsets = np.array([m.time_offset_s for m in measurements], dtype=np.float64)
+        time_offset_s = offsets if np.any(offsets != 0.0) else None
 
         live = list(self._tracks.values())
         pairs: list[tuple[int, int]] = []
         if live:
             slots = np.array([t.slot for t in live], dtype=np.intp)
             x_pred, P_pred = self._predicted(live, slots, stamp_s)
-            d2, log_det_S = innovation_statistics(x_pred, P_pred, z, R)
+            d2, log_det_S = innovation_statistics(x_pred, P_pred, z, R, time_offset_s)
             cost = association_cost(
                 d2, log_det_S, self._local_id_bonus(live, sensor_id, measurements)
             )
@@ -780,6 +810,7 @@ class MultiTargetTracker:
                     sensor_id,
                     stamp_s,
                     measurements,
+                    time_offset_s,
                 )
 
         if settings.may_start_tracks(sensor_id):
@@ -787,6 +818,7 @@ class MultiTargetTracker:
             for column, measurement in enumerate(measurements):
                 if column not in matched:
                     self._spawn(measurement, R[column], sensor_id, stamp_s)
+        self._merge_duplicates(stamp_s)
 
     def _predicted(self, live: Sequence[_Track], slots: IntP, stamp_s: float) -> tuple[F64, F64]:
         """The states of ``live`` predicted to ``stamp_s`` with each track's process noise."""
@@ -839,13 +871,21 @@ class MultiTargetTracker:
         sensor_id: str,
         stamp_s: float,
         measurements: Sequence[Measurement],
+        time_offset_s: F64 | None = None,
     ) -> None:
         settings = self.settings
         matched_slots = slots[rows]
         # the prior: each matched track predicted to the batch's stamp
         self._bank.set(matched_slots, x_pred[rows], P_pred[rows], stamp_s)
-        # position update, all matched tracks at once
-        self._bank.update(matched_slots, z[columns], R[columns])
+        # position update, all matched tracks at once; a measurement captured delta after
+        # the stamp sees p + delta v: H = [I delta I] (see innovation_statistics)
+        if time_offset_s is None:
+            self._bank.update(matched_slots, z[columns], R[columns])
+        else:
+            H = np.zeros((len(columns), 2, STATE_DIM))
+            H[:, 0, 0] = H[:, 1, 1] = 1.0
+            H[:, 0, 2] = H[:, 1, 3] = time_offset_s[columns]
+            self._bank.update(matched_slots, z[columns], R[columns], H)
 
         road_heading: list[float | None] = [None] * len(tracks)
         if self._heading_at is not None:
@@ -920,6 +960,13 @@ class MultiTargetTracker:
             P[2:, 2:] = speed_std**2 * np.outer(along, along) + (
                 settings.initial_across_velocity_std_mps**2
             ) * np.outer(across, across)
+        delta = measurement.time_offset_s
+        if delta:
+            # captured delta after the stamp: start where it was at the stamp, p = z - delta v0
+            x[:2] -= delta * x[2:]
+            P[:2, :2] += delta**2 * P[2:, 2:]
+            P[:2, 2:] = -delta * P[2:, 2:]
+            P[2:, :2] = P[:2, 2:].T
         track = _Track(
             track_id=self._next_id,
             slot=self._bank.add(x, P, stamp_s),
@@ -956,6 +1003,43 @@ class MultiTargetTracker:
             self.settings.max_coast_s if track.confirmed else self.settings.tentative_max_age_s
         )
         return stamp_s - track.updated_s > max_age_s
+
+    def _merge_duplicates(self, stamp_s: float) -> None:
+        """Delete the younger of two tracks that are one vehicle (``merge_distance_m``).
+
+        The older track (more updates; then the lower id) keeps the identity; the other is
+        removed as if expired, its sensor local ids handed to the survivor.
+        """
+        settings = self.settings
+        if settings.merge_distance_m <= 0.0 or len(self._tracks) < 2:
+            return
+        live = list(self._tracks.values())
+        slots = np.array([t.slot for t in live], dtype=np.intp)
+        x, _ = self._predicted(live, slots, stamp_s)
+        dp = np.hypot(x[:, None, 0] - x[None, :, 0], x[:, None, 1] - x[None, :, 1])
+        dv = np.hypot(x[:, None, 2] - x[None, :, 2], x[:, None, 3] - x[None, :, 3])
+        close = (dp < settings.merge_distance_m) & (dv < settings.merge_velocity_difference_mps)
+        np.fill_diagonal(close, False)
+        if not close.any():
+            return
+        order = sorted(range(len(live)), key=lambda i: (-live[i].hits, live[i].track_id))
+        removed: dict[int, int] = {}  # removed track id -> survivor id
+        for i in order:
+            if live[i].track_id in removed:
+                continue
+            for j in np.flatnonzero(close[i]):
+                other = live[int(j)]
+                if other.track_id not in removed and other.track_id != live[i].track_id:
+                    removed[other.track_id] = live[i].track_id
+        for track_id, survivor in removed.items():
+            track = self._tracks.pop(track_id)
+            self._bank.remove(track.slot)
+            self._counters.tracks_deleted += 1
+            self._counters.tracks_merged += 1
+            if track.confirmed:
+                self._finished.append(track.to_history())
+            self._local_ids = {k: (survivor if v == track_id else v)
+                               for k, v in self._local_ids.items()}  # fmt: skip
 
     def _prune(self, stamp_s: float) -> None:
         expired = [t for t in self._tracks.values() if self._expired(t, stamp_s)]

@@ -41,6 +41,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 from pydantic import ValidationError
 
 from wz_lidar_detector.background import (
@@ -196,6 +197,46 @@ class BackgroundLearner:
             log.info("saved the background to %s", path)
 
 
+FloatArray = npt.NDArray[np.float64]
+
+
+class ColumnClock:
+    """When each column of an organized frame fired, to stamp each detection with its own time.
+
+    A spinning LiDAR's columns fire one after the other across the sweep: column ``j`` at
+    ``stamp + sweep_duration_s * j / columns`` (:class:`LidarFrameMeta`). Which azimuth each
+    column looks at is read from the data, not assumed: the circular mean of the horizontal
+    directions of the column's returns (every column has some: the lower beams hit the road).
+    A detection's capture time is then the time of the column nearest its centre's azimuth.
+    """
+
+    def __init__(self, frame: PointFrame, sweep_duration_s: float) -> None:
+        image = frame.points.reshape(frame.rows, frame.columns, 4)
+        xy = image[:, :, :2].astype(np.float64)
+        norm = np.hypot(xy[..., 0], xy[..., 1])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            unit = xy / norm[..., None]
+        unit = np.where(np.isfinite(unit), unit, 0.0)
+        summed = unit.sum(axis=0)  # (columns, 2)
+        #: Azimuth of each column in the sensor frame [rad]; NaN for a column with no return.
+        self.azimuth_rad = np.where(np.hypot(summed[:, 0], summed[:, 1]) > 0,
+                                    np.arctan2(summed[:, 1], summed[:, 0]), np.nan)  # fmt: skip
+        self.columns = frame.columns
+        self.sweep_duration_s = sweep_duration_s
+        self._known = np.flatnonzero(np.isfinite(self.azimuth_rad))
+
+    def offsets_s(self, x_m: npt.ArrayLike, y_m: npt.ArrayLike) -> FloatArray:
+        """Capture time after the stamp [s] of points at sensor-frame ``(x, y)``."""
+        azimuth = np.arctan2(np.asarray(y_m, np.float64), np.asarray(x_m, np.float64))
+        if len(self._known) == 0:
+            return np.zeros_like(azimuth)
+        known = self.azimuth_rad[self._known]
+        gap = np.abs(np.angle(np.exp(1j * (azimuth[..., None] - known[None, :]))))
+        column = self._known[np.argmin(gap, axis=-1)]
+        offsets: FloatArray = column * (self.sweep_duration_s / self.columns)
+        return offsets
+
+
 class LidarDetector:
     """What the node does with one frame, without the bus: check, learn, detect, move to site.
 
@@ -224,6 +265,7 @@ class LidarDetector:
         )
         self.backgrounds = BackgroundLearner(settings)
         self._layout: Layout | None = None
+        self._clock: ColumnClock | None = None
         self._logged: set[str] = set()
         #: Stamp of the newest frame taken [s] (the node's clock on simulation time).
         self.last_stamp_s = 0.0
@@ -284,7 +326,11 @@ class LidarDetector:
                 describe(layout),
                 extra={"sensor": self.mount.sensor_id},
             )
+        if self._layout != layout:
+            self._clock = None
         self._layout = layout
+        if self._clock is None and meta.organized and meta.sweep_duration_s > 0:
+            self._clock = ColumnClock(frame, meta.sweep_duration_s)
         try:
             result = self._detect(frame, layout)
         except Exception as exc:  # a core that fails on one frame must not stop the node
@@ -346,10 +392,17 @@ class LidarDetector:
         return pipeline.detect(frame)
 
     def _site_detections(self, result: DetectionResult) -> list[Detection]:
+        offsets: list[float | None] = [None] * len(result.detections)
+        if self._clock is not None and result.detections:
+            centres = np.array([box.center_xyz_m[:2] for box in result.detections])
+            offsets = [float(v) for v in self._clock.offsets_s(centres[:, 0], centres[:, 1])]
         detections = []
-        for box in result.detections:
+        for box, offset in zip(result.detections, offsets, strict=True):
             try:
-                detections.append(to_detection(box_to_site(box, self.mount.pose)))
+                detection = to_detection(box_to_site(box, self.mount.pose))
+                if offset is not None:
+                    detection = detection.model_copy(update={"time_offset_s": round(offset, 6)})
+                detections.append(detection)
             except (ValidationError, ValueError) as exc:
                 self.report("bad_detection", f"{box}: {exc}")
         return detections

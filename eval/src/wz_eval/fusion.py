@@ -1,0 +1,447 @@
+"""``wz eval``: the whole pipeline on the simulated work zone, scored against truth.
+
+Usage::
+
+    wz eval [--site FILE] [--duration-s 600] [--seed 7] [--max-range-m 150]
+            [--drop SENSOR@START+SECONDS ...] [--json FILE] [--out DIR]
+
+Runs SUMO, the three sensors and both detectors in one process (:mod:`wz_eval.pipeline`), then
+feeds the detections, in stamp order, to
+
+- the production tracker (:class:`MultiTargetTracker`, as the fusion node runs it), sampled at
+  10 Hz (every camera frame time) after taking every batch up to that time: ``fused``;
+- the paper's method (:func:`run_paper_pipeline`: per-sensor Kalman smoothing, nearest-distance
+  matching, sequential camera-then-LiDAR updates): ``paper_kf``, and its simple average of the
+  matched pair: ``average``. The paper's sensors came with their own object ids; here each
+  detection gets the id of the vehicle it is nearest to (within the gate): an oracle identity,
+  which can only favour the baseline.
+
+and scores, for vehicles within ``--max-range-m`` of the mast, each source at its own times in
+the road frame (:mod:`wz_eval.metrics`): ``camera`` (camera alone: the calibrated pinhole
+position before radar fusion), ``lidar`` (the LiDAR detector's boxes), ``radar`` (radar echo
+points alone), ``camera_radar`` (the camera channel's published detections), ``average``,
+``paper_kf`` and ``fused``.
+
+Multi-object tracking scores of ``fused`` (py-motmetrics: MOTA, IDF1, identity switches) use
+the confirmed and coasting tracks against the vehicles in range, matched within 3 m.
+
+``paper_table`` reproduces the paper's Tables 1-2: for vehicles seen through the whole station
+window (default 40-100 m upstream of the mast, like the paper's short segment), the cumulative
+absolute longitudinal and lateral error over the camera frames in the window where every
+source has the vehicle, per source.
+
+``--drop lidar-mast@300+2`` removes that sensor's batches from 300 s to 302 s after the warm-up
+(a dropout); the report then gives, per dropout, the fused error and identity switches inside
+the window.
+
+Writes ``DIR/eval.json`` (or ``--json``), ``DIR/eval.md`` and PNG plots in ``DIR``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import sys
+import time
+from collections import defaultdict
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wz_camera_detector.settings import camera_mount
+from wz_eval.metrics import AxisErrors, TruthIndex, in_range, match, score_instant
+from wz_eval.pipeline import PipelineOptions, PipelineRecord, run_pipeline
+from wz_fusion_tracker.node import road_heading_hook, to_measurements
+from wz_fusion_tracker.paper import (
+    FusedEstimate,
+    Observation,
+    PaperFusionSettings,
+    run_paper_pipeline,
+)
+from wz_fusion_tracker.tracker import MultiTargetTracker, TrackerSettings, TrackState
+from wz_lidar_detector.settings import lidar_mount
+from wz_shared.logs import configure_logging
+from wz_shared.messages import DetectionBatch, VehicleTruth
+from wz_shared.site import Site, load_site
+from wz_simulator.settings import SimulatorSettings
+
+log = logging.getLogger("wz_eval.fusion")
+
+SOURCES = ("camera", "lidar", "radar", "camera_radar", "average", "paper_kf", "fused")
+#: Gate for matching a source's estimate to a vehicle [m] (the MOT metrics use 3 m).
+SOURCE_GATE_M = 5.0
+MOT_GATE_M = 3.0
+
+
+@dataclass(frozen=True)
+class Dropout:
+    sensor_id: str
+    start_s: float  # after the warm-up
+    duration_s: float
+
+    @classmethod
+    def parse(cls, text: str) -> Dropout:
+        """``SENSOR@START+SECONDS``."""
+        try:
+            sensor, rest = text.split("@")
+            start, duration = rest.split("+")
+            return cls(sensor, float(start), float(duration))
+        except ValueError as exc:
+            raise ValueError(f"--drop {text!r}: expected SENSOR@START+SECONDS") from exc
+
+
+@dataclass(frozen=True)
+class EvalOptions:
+    seed: int = 7
+    duration_s: float = 600.0
+    warmup_s: float = 60.0
+    max_range_m: float = 150.0
+    window_upstream_m: tuple[float, float] = (40.0, 100.0)
+    dropouts: tuple[Dropout, ...] = ()
+    camera_model: Path | None = None
+    vehicles_per_hour: float = 1400.0
+    tracker: TrackerSettings = field(default_factory=TrackerSettings)
+    paper: PaperFusionSettings = field(default_factory=PaperFusionSettings)
+
+
+def _progress(sim_s: float, total_s: float) -> None:
+    """A progress bar on a terminal; a line every 10 % otherwise (logs, CI)."""
+    done = min(1.0, sim_s / total_s) if total_s > 0 else 1.0
+    if sys.stderr.isatty():
+        bar = "#" * int(30 * done)
+        sys.stderr.write(f"\r  simulating [{bar:<30}] {100 * done:5.1f} % "
+                         f"({sim_s:.0f}/{total_s:.0f} s)" + ("\n" if done >= 1.0 else ""))  # fmt: skip
+    elif int(10 * done) != int(10 * min(1.0, (sim_s - 1.0) / total_s)):
+        sys.stderr.write(f"simulating: {100 * done:.0f} % ({sim_s:.0f}/{total_s:.0f} s)\n")
+    sys.stderr.flush()
+
+
+def _dropped(batch: DetectionBatch, dropouts: Sequence[Dropout], warmup_s: float) -> bool:
+    return any(batch.source_id == d.sensor_id
+               and warmup_s + d.start_s <= batch.stamp < warmup_s + d.start_s + d.duration_s
+               for d in dropouts)  # fmt: skip
+
+
+@dataclass
+class Scores:
+    """Per-source errors, per-vehicle samples for the paper table, MOT events."""
+
+    errors: dict[str, AxisErrors] = field(default_factory=lambda: {s: AxisErrors() for s in SOURCES})
+    # vehicle id -> source -> stamp -> (lon error, lat error, true station, true offset)
+    per_vehicle: dict[str, dict[str, dict[float, tuple[float, float, float, float]]]] = field(
+        default_factory=lambda: defaultdict(lambda: defaultdict(dict)))  # fmt: skip
+
+    def add(self, site: Site, source: str, stamp_s: float,
+            estimates: Sequence[tuple[float, float, float | None]],
+            vehicles: Sequence[VehicleTruth],
+            time_offsets_s: Sequence[float | None] | None = None,
+            ) -> list[tuple[int, VehicleTruth, float, float]]:  # fmt: skip
+        matched = score_instant(site, self.errors[source], estimates, vehicles, SOURCE_GATE_M,
+                                time_offsets_s)  # fmt: skip
+        for _, vehicle, lon, lat in matched:
+            station, offset = site.road_frame.to_road(vehicle.x_m, vehicle.y_m)
+            self.per_vehicle[vehicle.vehicle_id][source][round(stamp_s, 4)] = (
+                lon, lat, float(station), float(offset))
+        return matched
+
+
+def _oracle_observations(
+    frames: Sequence[tuple[float, Sequence[tuple[float, float]]]], truth: TruthIndex, site: Site,
+    centre: tuple[float, float], max_range_m: float, ids: dict[str, int],
+) -> list[Observation]:  # fmt: skip
+    """A sensor's positions with the id of the vehicle each is nearest to (see the docstring)."""
+    observations = []
+    for stamp, points in frames:
+        vehicles = truth.at(stamp)
+        if vehicles is None or not points:
+            continue
+        vehicles = in_range(site, vehicles, centre, max_range_m + 20.0)
+        est = np.array(points, dtype=np.float64).reshape(-1, 2)
+        tru = np.array([(v.x_m, v.y_m) for v in vehicles], dtype=np.float64).reshape(-1, 2)
+        for e, t in match(est, tru, SOURCE_GATE_M):
+            number = ids.setdefault(vehicles[t].vehicle_id, len(ids) + 1)
+            observations.append(Observation(stamp, number, float(est[e, 0]), float(est[e, 1])))
+    return observations
+
+
+def camera_id(record: PipelineRecord) -> str:
+    return camera_mount(record.site, None).sensor_id
+
+
+def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = None,
+             plots_dir: Path | None = None) -> dict[str, Any]:  # fmt: skip
+    """Run (or take) the pipeline record and score every source (module docstring)."""
+    if record is None:
+        record = run_pipeline(site, PipelineOptions(
+            seed=options.seed, duration_s=options.duration_s, warmup_s=options.warmup_s,
+            camera_model=options.camera_model, vehicles_per_hour=options.vehicles_per_hour,
+        ), progress=_progress)  # fmt: skip
+    started = time.perf_counter()
+    truth = TruthIndex(record.truth)
+    mast = lidar_mount(site, None).pose
+    centre = (mast.x_m, mast.y_m)
+    cam_id = camera_id(record)
+    lidar_id = lidar_mount(site, None).sensor_id
+    scores = Scores()
+
+    def vehicles_at(stamp_s: float) -> list[VehicleTruth] | None:
+        found = truth.at(stamp_s)
+        return None if found is None else in_range(site, found, centre, options.max_range_m)
+
+    # --- each sensor alone, at its own times
+    for batch in record.batches:
+        if _dropped(batch, options.dropouts, options.warmup_s):
+            continue
+        vehicles = vehicles_at(batch.stamp)
+        if vehicles is None:
+            continue
+        source = "lidar" if batch.source_id == lidar_id else "camera_radar"
+        scores.add(site, source, batch.stamp,
+                   [(d.x_m, d.y_m, d.speed_mps) for d in batch.detections], vehicles,
+                   [d.time_offset_s for d in batch.detections])  # fmt: skip
+    def _silenced(stamp_s: float) -> bool:
+        """The camera is in a dropout at ``stamp_s`` (its camera-only positions go too)."""
+        return any(d.sensor_id == cam_id and options.warmup_s + d.start_s <= stamp_s
+                   < options.warmup_s + d.start_s + d.duration_s for d in options.dropouts)  # fmt: skip
+
+    for stamp, points in record.camera_only:
+        if (vehicles := vehicles_at(stamp)) is not None and not _silenced(stamp):
+            scores.add(site, "camera", stamp, [(p.x_m, p.y_m, None) for p in points], vehicles)
+    for stamp, points in record.radar_only:
+        if (vehicles := vehicles_at(stamp)) is not None:
+            scores.add(site, "radar", stamp, [(p.x_m, p.y_m, None) for p in points], vehicles)
+
+    # --- the production tracker, sampled at every camera frame time
+    tracker = MultiTargetTracker(options.tracker, heading_at=road_heading_hook(site))
+    mot = _MotAccumulator()
+    sample_times = [stamp for stamp, _ in record.camera_only]
+    batches = [b for b in record.batches if not _dropped(b, options.dropouts, options.warmup_s)]
+    position = 0
+    tracker_s = 0.0
+    for sample_s in sample_times:
+        t0 = time.perf_counter()
+        while position < len(batches) and batches[position].stamp <= sample_s + 1e-9:
+            batch = batches[position]
+            tracker.add(batch.source_id, batch.stamp, to_measurements(batch, lambda r, d: None))
+            position += 1
+        tracker.flush()
+        tracker.advance_to(sample_s)
+        # Tracks outside the scored region are ignored (neither matches nor false positives);
+        # the region is grown by the MOT gate so a vehicle at its edge can still be matched.
+        states = [s for s in tracker.tracks(sample_s) if s.status != "tentative"
+                  and math.hypot(s.x_m - centre[0], s.y_m - centre[1])
+                  <= options.max_range_m + MOT_GATE_M]  # fmt: skip
+        tracker_s += time.perf_counter() - t0
+        vehicles = vehicles_at(sample_s)
+        if vehicles is None:
+            continue
+        scores.add(site, "fused", sample_s, [(s.x_m, s.y_m, s.speed_mps) for s in states],
+                   vehicles)  # fmt: skip
+        mot.update(vehicles, states)
+
+    # --- the paper's method, with oracle per-sensor identities
+    ids: dict[str, int] = {}
+    camera_frames = [(stamp, [(p.x_m, p.y_m) for p in points])
+                     for stamp, points in record.camera_only if not _silenced(stamp)]
+    lidar_frames = [(b.stamp, [(d.x_m, d.y_m) for d in b.detections]) for b in batches
+                    if b.source_id == lidar_id]
+    observations = {
+        options.paper.camera_sensor_id: _oracle_observations(
+            camera_frames, truth, site, centre, options.max_range_m, ids),
+        options.paper.lidar_sensor_id: _oracle_observations(
+            lidar_frames, truth, site, centre, options.max_range_m, ids),
+    }  # fmt: skip
+    estimates = run_paper_pipeline(observations, options.paper)
+    by_stamp: dict[float, list[FusedEstimate]] = defaultdict(list)
+    for estimate in estimates:
+        by_stamp[round(estimate.stamp_s, 4)].append(estimate)
+    for stamp in sample_times:
+        frame = by_stamp.get(round(stamp, 4), [])
+        vehicles = vehicles_at(stamp)
+        if vehicles is None or not frame:
+            continue
+        scores.add(site, "paper_kf", stamp,
+                   [(e.x_m, e.y_m, math.hypot(e.vx_mps, e.vy_mps)) for e in frame], vehicles)  # fmt: skip
+        averages = [(e.average_xy_m[0], e.average_xy_m[1], None) for e in frame
+                    if e.average_xy_m is not None]  # fmt: skip
+        scores.add(site, "average", stamp, averages, vehicles)
+
+    report = {
+        "site": site.site_id, "seed": options.seed, "duration_s": options.duration_s,
+        "warmup_s": options.warmup_s, "max_range_m": options.max_range_m,
+        "vehicles": len({v.vehicle_id for _, vs in record.truth for v in vs
+                         if math.hypot(v.x_m - centre[0], v.y_m - centre[1])
+                         <= options.max_range_m}),
+        **{f"rmse_{axis}": {s: scores.errors[s].summary()[f"rmse_{axis}"] for s in SOURCES}
+           for axis in ("longitudinal_m", "lateral_m", "speed_mps")},
+        "sources": {s: scores.errors[s].summary() for s in SOURCES},
+        **mot.summary(len(record.truth)),
+        "paper_table": paper_table(site, scores, centre, options.window_upstream_m),
+        "dropouts": [vars(d) for d in options.dropouts],
+        "pipeline_problems": record.problems,
+        "timing": {"pipeline_wall_s": round(record.wall_s, 1),
+                   "tracker_s": round(tracker_s, 2),
+                   "scoring_wall_s": round(time.perf_counter() - started, 1)},
+    }  # fmt: skip
+    report["paper_table_summary"] = _table_summary(report["paper_table"])
+    if plots_dir is not None:
+        from wz_eval.plots import write_plots
+
+        report["plots"] = write_plots(plots_dir, site, record, scores, report)
+    return report
+
+
+class _MotAccumulator:
+    """py-motmetrics over the sampled confirmed and coasting tracks."""
+
+    def __init__(self) -> None:
+        import motmetrics
+
+        self._mm = motmetrics
+        self.acc = motmetrics.MOTAccumulator(auto_id=True)
+        self._numbers: dict[str, int] = {}  # motmetrics wants numeric object ids
+
+    def update(self, vehicles: Sequence[VehicleTruth], states: Sequence[TrackState]) -> None:
+        gt = np.array([(v.x_m, v.y_m) for v in vehicles], dtype=np.float64).reshape(-1, 2)
+        hyp = np.array([(s.x_m, s.y_m) for s in states], dtype=np.float64).reshape(-1, 2)
+        distances = self._mm.distances.norm2squared_matrix(gt, hyp, max_d2=MOT_GATE_M**2)
+        objects = [self._numbers.setdefault(v.vehicle_id, len(self._numbers) + 1)
+                   for v in vehicles]  # fmt: skip
+        self.acc.update(objects, [s.track_id for s in states], distances)
+
+    def summary(self, _: int) -> dict[str, Any]:
+        metrics = self._mm.metrics.create()
+        frame = metrics.compute(self.acc, metrics=[
+            "mota", "motp", "idf1", "num_switches", "num_unique_objects", "num_false_positives",
+            "num_misses", "num_objects", "mostly_tracked"], name="fused")  # fmt: skip
+        row = frame.loc["fused"]
+        vehicles = int(row["num_unique_objects"])
+        switches = int(row["num_switches"])
+        return {
+            "mota": float(row["mota"]), "idf1": float(row["idf1"]),
+            "id_switches": switches,
+            "id_switches_per_100_vehicles": 100.0 * switches / vehicles if vehicles else 0.0,
+            "mot_detail": {"motp_m": math.sqrt(float(row["motp"])) if row["motp"] == row["motp"]
+                           else None,
+                           "objects": int(row["num_objects"]),
+                           "false_positives": int(row["num_false_positives"]),
+                           "misses": int(row["num_misses"]), "vehicles_scored": vehicles,
+                           "mostly_tracked": int(row["mostly_tracked"])},
+        }  # fmt: skip
+
+
+def paper_table(site: Site, scores: Scores, centre: tuple[float, float],
+                window_upstream_m: tuple[float, float]) -> list[dict[str, Any]]:  # fmt: skip
+    """Per vehicle: cumulative |error| over the window's common times, per source (Tables 1-2)."""
+    mast_station = float(site.road_frame.to_road(*centre)[0])
+    lo, hi = mast_station - window_upstream_m[1], mast_station - window_upstream_m[0]
+    compared = ("camera", "lidar", "average", "paper_kf", "fused")
+    rows = []
+    for vehicle_id, by_source in sorted(scores.per_vehicle.items()):
+        common: set[float] | None = None
+        for source in compared:
+            stamps = {t for t, (_, _, s, _) in by_source.get(source, {}).items() if lo <= s <= hi}
+            common = stamps if common is None else common & stamps
+        if not common or len(common) < 5:
+            continue
+        row: dict[str, Any] = {"vehicle_id": vehicle_id, "samples": len(common)}
+        for source in compared:
+            samples = by_source[source]
+            row[source] = {
+                "longitudinal_m": float(sum(abs(samples[t][0]) for t in common)),
+                "lateral_m": float(sum(abs(samples[t][1]) for t in common)),
+            }
+        rows.append(row)
+    return rows
+
+
+def _table_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """How often the fused track beats each other source, per axis."""
+    out: dict[str, Any] = {"vehicles": len(rows)}
+    for other in ("camera", "lidar", "average", "paper_kf"):
+        for axis in ("longitudinal_m", "lateral_m"):
+            wins = sum(1 for r in rows if r["fused"][axis] < r[other][axis])
+            out[f"fused_below_{other}_{axis}"] = wins
+    out["fused_below_camera_lidar_average_both_axes"] = sum(
+        1 for r in rows
+        if all(r["fused"][a] < r[o][a] for o in ("camera", "lidar", "average")
+               for a in ("longitudinal_m", "lateral_m")))  # fmt: skip
+    return out
+
+
+def markdown(report: dict[str, Any]) -> str:
+    def cell(value: float | None) -> str:
+        return "-" if value is None else f"{value:.2f}"
+
+    lines = [
+        f"# Evaluation: `{report['site']}`, seed {report['seed']}, {report['duration_s']:g} "
+        f"simulated s, vehicles within {report['max_range_m']:g} m of the mast",
+        "",
+        f"{report['vehicles']} vehicles. MOTA **{report['mota']:.3f}**, IDF1 "
+        f"**{report['idf1']:.3f}**, identity switches {report['id_switches']} "
+        f"({report['id_switches_per_100_vehicles']:.2f} per 100 vehicles).",
+        "",
+        "| source | RMSE longitudinal [m] | RMSE lateral [m] | RMSE speed [m/s] | matched | "
+        "missed |",
+        "|---|---|---|---|---|---|",
+    ]
+    for source, row in report["sources"].items():
+        lines.append(f"| {source} | {cell(row['rmse_longitudinal_m'])} | "
+                     f"{cell(row['rmse_lateral_m'])} | {cell(row['rmse_speed_mps'])} | "
+                     f"{row['matched']} | {row['missed_vehicles']} |")  # fmt: skip
+    summary = report["paper_table_summary"]
+    lines += ["", f"Paper-style table ({summary['vehicles']} vehicles through the window; "
+              "cumulative absolute error [m] over the common samples; lon / lat):", "",
+              "| vehicle | samples | camera | LiDAR | average | paper KF | fused |",
+              "|---|---|---|---|---|---|---|"]  # fmt: skip
+    for row in report["paper_table"][:25]:
+        cells = [f"{row[s]['longitudinal_m']:.1f} / {row[s]['lateral_m']:.1f}"
+                 for s in ("camera", "lidar", "average", "paper_kf", "fused")]  # fmt: skip
+        lines.append(f"| {row['vehicle_id']} | {row['samples']} | " + " | ".join(cells) + " |")
+    lines += ["", "Fused below the other sources (vehicles): " + ", ".join(
+        f"{k.removeprefix('fused_below_')} {v}" for k, v in summary.items() if k != "vehicles"),
+        ""]  # fmt: skip
+    for plot in report.get("plots", []):
+        lines.append(f"![{plot}]({plot})")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="wz eval", description=__doc__.split("\n")[0])
+    parser.add_argument("--site", type=Path, default=SimulatorSettings().site_file)
+    parser.add_argument("--duration-s", type=float, default=600.0)
+    parser.add_argument("--warmup-s", type=float, default=60.0)
+    parser.add_argument("--seed", type=int, default=7)
+    parser.add_argument("--max-range-m", type=float, default=150.0)
+    parser.add_argument("--drop", action="append", default=[], metavar="SENSOR@START+SECONDS",
+                        help="silence a sensor (repeatable)")  # fmt: skip
+    parser.add_argument("--model", type=Path, default=None, help="camera model (.onnx)")
+    parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--out", type=Path, default=Path("runs/eval"))
+    args = parser.parse_args(argv)
+    try:
+        dropouts = tuple(Dropout.parse(text) for text in args.drop)
+    except ValueError as exc:
+        parser.error(str(exc))
+    site = load_site(args.site)
+    configure_logging(service="eval", site=site.site_id, level="WARNING")
+    options = EvalOptions(seed=args.seed, duration_s=args.duration_s, warmup_s=args.warmup_s,
+                          max_range_m=args.max_range_m, dropouts=dropouts,
+                          camera_model=args.model)  # fmt: skip
+    args.out.mkdir(parents=True, exist_ok=True)
+    report = evaluate(site, options, plots_dir=args.out)
+    text = json.dumps(report, indent=2, default=str)
+    (args.json or args.out / "eval.json").write_text(text + "\n")
+    summary = markdown(report)
+    (args.out / "eval.md").write_text(summary)
+    sys.stdout.write(summary)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,230 @@
+"""The fusion tracker node: every sensor's detections in, fused tracks out.
+
+Run it as ``python -m wz_fusion_tracker.node`` (settings: ``WZ_FUSION_*``, bus ``WZ_BUS_*``). It
+
+- takes :class:`DetectionBatch` messages from ``wz/<site>/detections/*`` (a FIFO: every batch
+  counts) and gives each to the :class:`MultiTargetTracker` as the sensor's measurements at the
+  batch's stamp (the tracker orders them within its reorder window, so asynchronous sensors
+  and slightly late messages are fine);
+- each cycle (``output_period_s`` of data time, 10 Hz by default) publishes a
+  :class:`TrackBatch` on ``wz/<site>/tracks``: the confirmed and coasting tracks predicted to the
+  cycle's time, with the road frame's station, offset and lane, speed and heading, class and
+  size, contributing sensors, age and status; and answers ``wz/<site>/tracks/latest`` queries
+  with the newest batch;
+- when no detections arrive at all (every sensor silent), moves the tracker's clock on by the
+  wall time elapsed since the last batch, so coasting tracks end rather than hang (data time
+  follows wall time there; with a simulator faster than real time this is conservative).
+
+Bad input never stops it; each problem is counted in the status message's ``invalid_counts``
+under ``<detections key>|<reason>``: ``wrong_site``, ``bad_detection`` (a covariance that is not
+symmetric positive definite), ``late`` (a batch older than the reorder window: dropped by the
+tracker).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Callable
+from typing import Annotated
+
+import numpy as np
+from pydantic import Field, ValidationError
+from pydantic_settings import SettingsConfigDict
+
+from wz_fusion_tracker.tracker import Measurement, MultiTargetTracker, TrackerSettings, TrackState
+from wz_shared.codec import encode_json
+from wz_shared.logs import configure_logging
+from wz_shared.messages import (
+    DetectionBatch,
+    Track,
+    TrackBatch,
+    TrackStatus,
+    VehicleClass,
+)
+from wz_shared.service import ServiceRuntime
+from wz_shared.settings import BusSettings, ServiceSettings
+from wz_shared.site import Site, load_site
+from wz_shared.timebase import SimClock
+
+SERVICE = "fusion-tracker"
+log = logging.getLogger("wz_fusion_tracker.node")
+Report = Callable[[str, str], None]
+
+
+class FusionTrackerSettings(ServiceSettings):
+    """The node's settings; the tracker's own under ``tracker`` (``WZ_FUSION_TRACKER__*``)."""
+
+    model_config = SettingsConfigDict(
+        env_prefix="WZ_FUSION_", extra="ignore", env_nested_delimiter="__"
+    )
+
+    #: Data time between two published track batches [s].
+    output_period_s: Annotated[float, Field(gt=0.0, le=10.0)] = 0.1
+    #: Publish tentative tracks too (default: confirmed and coasting only).
+    publish_tentative: bool = False
+    #: With no batch for this long (wall time), the tracker's clock moves on by itself [s].
+    idle_advance_after_s: Annotated[float, Field(gt=0.0)] = 0.5
+    tracker: TrackerSettings = Field(default_factory=TrackerSettings)
+
+
+def road_heading_hook(site: Site) -> Callable[[float, float], float]:
+    """``heading_at(x, y)``: the direction of travel at the point's station [rad]."""
+    road = site.road_frame
+
+    def heading_at(x_m: float, y_m: float) -> float:
+        station, _ = road.to_road(x_m, y_m)
+        return float(np.asarray(road.heading_at(station)).reshape(-1)[0])
+
+    return heading_at
+
+
+def to_measurements(batch: DetectionBatch, report: Report) -> list[Measurement]:
+    """The batch's detections as tracker measurements; bad covariances reported and dropped."""
+    out = []
+    for index, detection in enumerate(batch.detections):
+        covariance = np.asarray(detection.covariance_m2, dtype=np.float64).reshape(2, 2)
+        symmetric = abs(covariance[0, 1] - covariance[1, 0]) <= 1e-9 * max(1.0, abs(covariance[0, 1]))
+        if not symmetric or covariance[0, 0] <= 0 or np.linalg.det(covariance) <= 0:
+            report("bad_detection",
+                   f"{batch.source_id} frame {batch.frame_index} detection {index}: covariance "
+                   f"{detection.covariance_m2} is not symmetric positive definite")  # fmt: skip
+            continue
+        out.append(Measurement(
+            x_m=detection.x_m, y_m=detection.y_m, covariance_m2=covariance,
+            sensor_id=batch.source_id, object_class=detection.object_class.value,
+            score=detection.score, length_m=detection.length_m, width_m=detection.width_m,
+            speed_mps=detection.speed_mps, local_track_id=detection.local_track_id,
+            time_offset_s=detection.time_offset_s or 0.0,
+        ))  # fmt: skip
+    return out
+
+
+def to_track(site: Site, state: TrackState) -> Track:
+    """A tracker snapshot as a bus message, with its road-frame position and lane."""
+    station, offset = site.road_frame.to_road(state.x_m, state.y_m)
+    lane = int(np.asarray(site.lane_index_at(offset)).reshape(-1)[0])
+    try:
+        object_class = VehicleClass(state.object_class)
+    except ValueError:
+        object_class = VehicleClass.UNKNOWN
+    covariance = 0.5 * (state.P + state.P.T)
+    return Track(
+        track_id=state.track_id, x_m=state.x_m, y_m=state.y_m, vx_mps=state.vx_mps,
+        vy_mps=state.vy_mps, covariance=[float(v) for v in covariance.reshape(-1)],
+        station_m=float(station), offset_m=float(offset), speed_mps=state.speed_mps,
+        heading_rad=state.heading_rad, lane_index=max(lane, -1), object_class=object_class,
+        age_s=max(0.0, state.age_s), hits=state.hits,
+        confirmed=state.status != "tentative", sources=list(state.sources),
+        status=TrackStatus(state.status), length_m=state.length_m or None,
+        width_m=state.width_m or None,
+        last_update_s=state.stamp_s - state.time_since_update_s,
+    )  # fmt: skip
+
+
+class FusionCore:
+    """What the node does without the bus: batches in, a track batch per output cycle out."""
+
+    def __init__(self, site: Site, settings: FusionTrackerSettings, report: Report) -> None:
+        self.site = site
+        self.settings = settings
+        self.report = report
+        self.tracker = MultiTargetTracker(settings.tracker, heading_at=road_heading_hook(site))
+        self._next_output_s: float | None = None
+        self._cycle = 0
+
+    def add(self, batch: DetectionBatch) -> list[TrackBatch]:
+        """Give one batch to the tracker; the track batches of the cycles now complete."""
+        if batch.site != self.site.site_id:
+            self.report("wrong_site", f"batch of site {batch.site} from {batch.source_id}")
+            return []
+        late_before = self.tracker.counters.batches_late
+        self.tracker.add(batch.source_id, batch.stamp, to_measurements(batch, self.report))
+        if self.tracker.counters.batches_late > late_before:
+            self.report("late", f"{batch.source_id} batch at {batch.stamp:.3f} s is too late")
+        return self._outputs()
+
+    def advance_to(self, stamp_s: float) -> list[TrackBatch]:
+        """No batch came: the time is ``stamp_s`` anyway."""
+        self.tracker.advance_to(stamp_s)
+        return self._outputs()
+
+    def _outputs(self) -> list[TrackBatch]:
+        processed_s = self.tracker.last_processed_stamp_s
+        if processed_s is None or not math.isfinite(processed_s):
+            return []
+        period = self.settings.output_period_s
+        if self._next_output_s is None:
+            self._next_output_s = math.ceil(processed_s / period) * period
+        out = []
+        while self._next_output_s <= processed_s + 1e-9:
+            out.append(self.snapshot(self._next_output_s))
+            self._next_output_s += period
+        return out
+
+    def snapshot(self, stamp_s: float) -> TrackBatch:
+        states = self.tracker.tracks(stamp_s)
+        if not self.settings.publish_tentative:
+            states = [s for s in states if s.status != "tentative"]
+        batch = TrackBatch(
+            site=self.site.site_id, source_id=SERVICE, stamp=stamp_s, cycle_index=self._cycle,
+            tracks=[to_track(self.site, s) for s in states],
+        )  # fmt: skip
+        self._cycle += 1
+        return batch
+
+
+def run(runtime: ServiceRuntime, site: Site, settings: FusionTrackerSettings,
+        clock: SimClock) -> int:  # fmt: skip
+    """Track until ``runtime.stop``; the number of track batches published."""
+    bus = runtime.bus
+    detections_key = bus.keys.detections_all
+
+    def report(reason: str, detail: str) -> None:
+        bus.stats.count_invalid(detections_key, reason, detail)
+
+    core = FusionCore(site, settings, report)
+    batches = bus.subscribe(detections_key, DetectionBatch)
+    publisher = bus.publisher(bus.keys.tracks, TrackBatch)
+    latest: list[bytes] = []
+    bus.serve(bus.keys.tracks_latest, lambda: latest[-1] if latest else None)
+    log.info("tracking %s -> %s", detections_key, bus.keys.tracks)
+    published = 0
+    last_batch_wall = time.monotonic()
+    last_data_s: float | None = None
+    while not runtime.stop.is_set():
+        batch = batches.recv(0.1)
+        now = time.monotonic()
+        if batch is not None:
+            outputs = core.add(batch)
+            last_batch_wall, last_data_s = now, max(last_data_s or batch.stamp, batch.stamp)
+        elif last_data_s is not None and now - last_batch_wall > settings.idle_advance_after_s:
+            outputs = core.advance_to(last_data_s + (now - last_batch_wall))
+        else:
+            outputs = []
+        for output in outputs:
+            publisher.put(output)
+            latest[:] = [encode_json(output)]
+            clock.advance_to(output.stamp)
+            published += 1
+    return published
+
+
+def main() -> None:
+    try:
+        settings = FusionTrackerSettings()
+    except ValidationError as exc:
+        raise SystemExit(f"{SERVICE}: invalid settings: {exc}") from exc
+    site = load_site(settings.site_file)
+    configure_logging(service=SERVICE, site=site.site_id, level=settings.log_level)
+    clock = SimClock()
+    with ServiceRuntime(SERVICE, site.site_id, BusSettings(),
+                        status_period_s=settings.status_period_s,
+                        clock_stamp=clock.now) as runtime:  # fmt: skip
+        published = run(runtime, site, settings, clock)
+    log.info("stopped after %d track batches", published)
+
+
+if __name__ == "__main__":
+    main()
