@@ -7,8 +7,9 @@ camera frame of the folders' ``val`` split and scores it against the truth sidec
 range from the camera).
 
 Which vehicles count. A vehicle is *scored* when its ground range is at most ``--max-range-m``
-and at least ``--min-visibility`` of its silhouette is visible (not hidden by another vehicle or
-the frame edge). The other vehicles in view are *ignored*: a detection matching one of them is
+and at least ``--min-visibility`` of it is visible: the renderer's unoccluded share of its
+silhouette times the share of its projected box inside the frame (``visible_fraction`` in the
+sidecar; a car passing under the camera, mostly out of the picture, is not scored). The other vehicles in view are *ignored*: a detection matching one of them is
 neither a true nor a false positive (the usual "don't care" treatment of KITTI and COCO
 crowd regions), and missing one costs nothing.
 
@@ -211,7 +212,9 @@ def read_truth(path: Path) -> list[TruthBox]:
             ),
             class_name=str(v["class"]),
             range_m=float(v["range_m"]),
-            visibility=float(v["visibility"]),
+            # the share one can see: unoccluded and inside the frame (older sidecars: the
+            # renderer's visibility, which ignores the part outside the frame)
+            visibility=float(v.get("visible_fraction", v["visibility"])),
         )
         for v in record["vehicles"]
     ]

@@ -42,6 +42,9 @@ F64 = npt.NDArray[np.float64]
 U8 = npt.NDArray[np.uint8]
 IntP = npt.NDArray[np.intp]
 
+#: A far-field tile's box closer than this to the tile's edge is a cut vehicle [px].
+TILE_EDGE_MARGIN_PX = 2.0
+
 #: Gray level of the letterbox padding (ultralytics' convention).
 PAD_GRAY = 114
 
@@ -340,6 +343,12 @@ class YoloOnnxDetector:
         Region of interest ``(x0, y0, x1, y1)`` [px of the frame]: the frame is cropped to it
         before letterboxing; boxes are returned in the whole frame's pixels. Default: the
         model's ``wz_roi_xyxy_px`` metadata, else the whole frame.
+    tiles_xyxy_px
+        Extra regions, each run through the model on its own (an extra inference each) and
+        merged by NMS with the ROI's detections: a small far-field tile is magnified by the
+        letterbox, so distant vehicles reach the sizes the model finds reliably. A tile's box
+        touching the tile's edge is dropped (a cut vehicle, seen whole in the ROI). Default:
+        the model's ``wz_tiles_xyxy_px`` metadata (``x0,y0,x1,y1;...``), else none.
 
     Raises
     ------
@@ -358,6 +367,7 @@ class YoloOnnxDetector:
         threads: int = 2,
         max_detections: int = 300,
         roi_xyxy_px: tuple[int, int, int, int] | None = None,
+        tiles_xyxy_px: Sequence[tuple[int, int, int, int]] | None = None,
     ) -> None:
         if class_names is not None and not class_names:
             raise ValueError("class_names is empty: give the model's class names in its order")
@@ -380,6 +390,12 @@ class YoloOnnxDetector:
             tuple(class_names) if class_names is not None else self._metadata_class_names()
         )
         self.roi_xyxy_px = roi_xyxy_px if roi_xyxy_px is not None else self._metadata_roi()
+        self.tiles_xyxy_px: tuple[tuple[int, int, int, int], ...] = (
+            tuple(tiles_xyxy_px) if tiles_xyxy_px is not None else self._metadata_tiles()
+        )
+        for tile in self.tiles_xyxy_px:
+            if not (0 <= tile[0] < tile[2] and 0 <= tile[1] < tile[3]):
+                raise ValueError(f"tile {tile} is empty or negative")
         if self.roi_xyxy_px is not None:
             x0, y0, x1, y1 = self.roi_xyxy_px
             if not (0 <= x0 < x1 and 0 <= y0 < y1):
@@ -406,6 +422,19 @@ class YoloOnnxDetector:
             except (ValueError, SyntaxError, TypeError) as error:
                 raise self._fail(f"its metadata names {text!r} cannot be read") from error
         raise self._fail("it has no class names in its metadata: give class_names explicitly")
+
+    def _metadata_tiles(self) -> tuple[tuple[int, int, int, int], ...]:
+        text = self.metadata.get("wz_tiles_xyxy_px")
+        if not text:
+            return ()
+        try:
+            tiles = []
+            for part in text.split(";"):
+                x0, y0, x1, y1 = (int(v) for v in part.split(","))
+                tiles.append((x0, y0, x1, y1))
+        except ValueError as error:
+            raise self._fail(f"its metadata tiles {text!r} are not x0,y0,x1,y1;...") from error
+        return tuple(tiles)
 
     def _metadata_roi(self) -> tuple[int, int, int, int] | None:
         text = self.metadata.get("wz_roi_xyxy_px")
@@ -554,13 +583,43 @@ class YoloOnnxDetector:
         start = time.perf_counter()
         region, (x0, y0) = self.crop(image_bgr)
         tensor, transform = letterbox(region, self.input_size)
-        preprocessed = time.perf_counter()
+        preprocess_s = time.perf_counter() - start
+        started = time.perf_counter()
         output = self._run(tensor)
-        inferred = time.perf_counter()
-
+        inference_s = time.perf_counter() - started
+        started = time.perf_counter()
         boxes, scores, class_ids = decode(output, self.conf_threshold)
-        kept = nms(boxes, scores, self.iou_threshold, class_ids)[: self.max_detections]
-        boxes_px = transform.to_image(boxes[kept]) + np.array([x0, y0, x0, y0], dtype=np.float64)
+        all_boxes = [transform.to_image(boxes) + np.array([x0, y0, x0, y0], dtype=np.float64)]
+        all_scores, all_classes = [scores], [class_ids]
+        postprocess_s = time.perf_counter() - started
+        for tile in self.tiles_xyxy_px:
+            started = time.perf_counter()
+            tx0, ty0, tx1, ty1 = tile
+            if tx1 > image_bgr.shape[1] or ty1 > image_bgr.shape[0]:
+                raise ValueError(f"frame does not contain the detector's tile {tile}")
+            tile_tensor, tile_transform = letterbox(image_bgr[ty0:ty1, tx0:tx1], self.input_size)
+            preprocess_s += time.perf_counter() - started
+            started = time.perf_counter()
+            tile_output = self._run(tile_tensor)
+            inference_s += time.perf_counter() - started
+            started = time.perf_counter()
+            t_boxes, t_scores, t_classes = decode(tile_output, self.conf_threshold)
+            t_px = tile_transform.to_image(t_boxes)
+            # A box touching the tile's edge is a cut vehicle: the main region sees it whole.
+            margin = TILE_EDGE_MARGIN_PX
+            inside = ((t_px[:, 0] > margin) & (t_px[:, 1] > margin)
+                      & (t_px[:, 2] < (tx1 - tx0) - margin)
+                      & (t_px[:, 3] < (ty1 - ty0) - margin))  # fmt: skip
+            all_boxes.append(t_px[inside] + np.array([tx0, ty0, tx0, ty0], dtype=np.float64))
+            all_scores.append(t_scores[inside])
+            all_classes.append(t_classes[inside])
+            postprocess_s += time.perf_counter() - started
+        started = time.perf_counter()
+        boxes_px = np.concatenate(all_boxes)
+        scores = np.concatenate(all_scores)
+        class_ids = np.concatenate(all_classes)
+        kept = nms(boxes_px, scores, self.iou_threshold, class_ids)[: self.max_detections]
+        boxes_px = boxes_px[kept]
         detections = [
             ImageDetection(
                 box_xyxy_px=(float(box[0]), float(box[1]), float(box[2]), float(box[3])),
@@ -569,10 +628,8 @@ class YoloOnnxDetector:
             )
             for box, score, class_id in zip(boxes_px, scores[kept], class_ids[kept], strict=True)
         ]
-        done = time.perf_counter()
+        postprocess_s += time.perf_counter() - started
         timings = DetectionTimings(
-            preprocess_s=preprocessed - start,
-            inference_s=inferred - preprocessed,
-            postprocess_s=done - inferred,
+            preprocess_s=preprocess_s, inference_s=inference_s, postprocess_s=postprocess_s
         )
         return detections, timings

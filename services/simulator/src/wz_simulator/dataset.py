@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wz_shared.camera_geometry import PinholeCamera
 from wz_shared.logs import configure_logging
 from wz_shared.messages import VehicleClass, VehicleTruth
 from wz_shared.site import Site, load_site
@@ -88,14 +89,45 @@ def yolo_lines(
     return lines
 
 
-def truth_records(output: CameraOutput, vehicles: list[VehicleTruth], camera_xy_m: tuple[float, float]) -> list[dict[str, object]]:  # fmt: skip
-    """One record per vehicle that shows in the frame (a visible box), for evaluation."""
+def in_frame_fraction(camera: PinholeCamera, vehicle: VehicleTruth, width_px: int,
+                      height_px: int) -> float:  # fmt: skip
+    """Share of a vehicle's projected box inside the frame: 1 in full view, 0 when a corner is
+    behind the camera. (The renderer's visibility counts only pixels inside the frame, so a
+    car mostly out of the picture would otherwise look fully visible.)"""
+    c, s = math.cos(vehicle.heading_rad), math.sin(vehicle.heading_rad)
+    corners = [
+        (vehicle.x_m + dx * c - dy * s, vehicle.y_m + dx * s + dy * c, z)
+        for dx in (-vehicle.length_m / 2, vehicle.length_m / 2)
+        for dy in (-vehicle.width_m / 2, vehicle.width_m / 2)
+        for z in (vehicle.z_m, vehicle.z_m + vehicle.height_m)
+    ]
+    uv, depth = camera.project(np.array(corners))
+    if np.any(depth <= 0.0) or not np.all(np.isfinite(uv)):
+        return 0.0
+    x0, y0 = uv.min(axis=0)
+    x1, y1 = uv.max(axis=0)
+    area = (x1 - x0) * (y1 - y0)
+    inside = max(0.0, min(x1, width_px) - max(x0, 0.0)) * max(0.0, min(y1, height_px) - max(y0, 0.0))
+    return float(inside / area) if area > 0 else 0.0
+
+
+def truth_records(output: CameraOutput, vehicles: list[VehicleTruth],
+                  camera: PinholeCamera) -> list[dict[str, object]]:  # fmt: skip
+    """One record per vehicle that shows in the frame (a visible box), for evaluation.
+
+    ``visibility`` is the renderer's (unoccluded share of the silhouette inside the frame);
+    ``in_frame`` the share of the projected box inside the frame; ``visible_fraction`` their
+    product, the share of the vehicle one can see.
+    """
+    camera_xy_m = (float(camera.position_m[0]), float(camera.position_m[1]))
+    width_px, height_px = output.meta.width_px, output.meta.height_px
     by_id = {vehicle.vehicle_id: vehicle for vehicle in vehicles}
     records: list[dict[str, object]] = []
     for label in output.frame.labels:
         if label.box_xyxy_px is None:
             continue
         vehicle = by_id[label.vehicle_id]  # the rig culls: the label index is not ours
+        in_frame = in_frame_fraction(camera, vehicle, width_px, height_px)
         records.append({
             "vehicle_id": label.vehicle_id,
             "class": label.vehicle_class.value,
@@ -103,6 +135,8 @@ def truth_records(output: CameraOutput, vehicles: list[VehicleTruth], camera_xy_
             "full_box_xyxy_px": (None if label.full_box_xyxy_px is None
                                  else [round(v, 2) for v in label.full_box_xyxy_px]),
             "visibility": round(label.visibility, 4),
+            "in_frame": round(in_frame, 4),
+            "visible_fraction": round(label.visibility * in_frame, 4),
             "range_m": round(math.hypot(vehicle.x_m - camera_xy_m[0],
                                         vehicle.y_m - camera_xy_m[1]), 3),
             "station_m": round(vehicle.station_m, 3),
@@ -144,6 +178,7 @@ def export(site: Site, options: DatasetOptions, work_dir: Path | None = None) ->
     if not cameras and not lidars:
         raise ValueError(f"site {site.site_id} has no camera or LiDAR to export")
     counts: Counter[str] = Counter()
+    cameras_by_id: dict[str, PinholeCamera] = {}
     class_counts: Counter[str] = Counter()
     samples = max(1, round(options.duration_s / options.every_s))
     train_samples = math.floor(samples * (1.0 - options.val_share))
@@ -181,8 +216,9 @@ def export(site: Site, options: DatasetOptions, work_dir: Path | None = None) ->
                         (out / "labels" / split / f"{stem}.txt").write_text(
                             "".join(line + "\n" for line in lines)
                         )
-                        mount = site.sensor(sensor_id).pose
-                        records = truth_records(output, vehicles, (mount.x_m, mount.y_m))
+                        camera = cameras_by_id.setdefault(
+                            sensor_id, PinholeCamera(site.sensor(sensor_id)))
+                        records = truth_records(output, vehicles, camera)
                         (out / "truth" / split / f"{stem}.json").write_text(json.dumps(
                             {"stamp_s": now_s, "sensor_id": sensor_id, "vehicles": records}))
                         counts[f"images_{split}"] += 1
