@@ -388,3 +388,23 @@ def test_a_frame_smaller_than_the_roi_or_not_bgr_is_refused(tmp_path: Path) -> N
         detector.detect(np.zeros((1000, 1000), dtype=np.uint8))
     with pytest.raises(ValueError, match="empty"):
         YoloOnnxDetector(model_path, CLASS_NAMES, roi_xyxy_px=(10, 10, 10, 20))
+
+
+def test_far_field_tile_adds_magnified_detections_and_drops_cut_ones(tmp_path: Path) -> None:
+    model_path = _with_metadata(
+        _fixed_output_model(tmp_path / "yolo.onnx", _hand_made_output()),
+        wz_class_names="car,truck", wz_roi_xyxy_px="0,0,640,640",
+        wz_tiles_xyxy_px="600,600,760,760",
+    )  # fmt: skip
+    detector = YoloOnnxDetector(model_path)
+    assert detector.tiles_xyxy_px == ((600, 600, 760, 760),)
+    boxes = {d.box_xyxy_px for d in detector.detect(np.zeros((1000, 1000, 3), dtype=np.uint8))}
+    # The ROI gives A, C and E as without a tile; the 160 px tile is magnified 4x into the
+    # input, so A and C come again at a quarter size, shifted by (600, 600); the tile's E
+    # touches the tile's right edge (a cut vehicle) and is dropped.
+    assert boxes == {
+        (80.0, 190.0, 120.0, 210.0), (250.0, 290.0, 350.0, 350.0), (610.0, 140.0, 640.0, 160.0),
+        (620.0, 647.5, 630.0, 652.5), (662.5, 672.5, 687.5, 687.5),
+    }  # fmt: skip
+    with pytest.raises(ValueError, match="tile"):
+        YoloOnnxDetector(model_path, tiles_xyxy_px=[(10, 10, 5, 20)])

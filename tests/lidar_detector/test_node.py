@@ -22,7 +22,7 @@ import numpy.typing as npt
 import pytest
 
 from wz_lidar_detector.detection import BoxDetection, PointFrame
-from wz_lidar_detector.node import LidarDetector
+from wz_lidar_detector.node import ColumnClock, LidarDetector
 from wz_lidar_detector.settings import LidarDetectorSettings, lidar_mount
 from wz_lidar_detector.transform import box_to_site, detections_in_site, to_detection, wrap_angle
 from wz_shared.bus import Bus, Subscription
@@ -392,3 +392,24 @@ def test_node_process_learns_detects_and_survives_bad_frames(port: int) -> None:
         finally:
             node.send_signal(signal.SIGTERM)
             assert node.wait(15.0) == 0
+
+
+def test_column_clock_times_each_detection_by_its_azimuth() -> None:
+    """Columns fire across the sweep; the clock reads each column's azimuth from the returns
+    (here the simulator's convention: column j looks at pi - 2 pi j / N) and gives a point
+    the time of the column nearest its azimuth."""
+    rows, columns, sweep_s = 4, 360, 0.05
+    azimuth = math.pi - 2.0 * math.pi * np.arange(columns) / columns
+    image = np.full((rows, columns, 4), np.nan, dtype=np.float32)
+    image[:, :, 0] = 10.0 * np.cos(azimuth)
+    image[:, :, 1] = 10.0 * np.sin(azimuth)
+    image[:, :, 2] = -1.0
+    image[:, :, 3] = 1.0
+    image[0, 7, :3] = np.nan  # a column with a missing return still has its azimuth
+    frame = PointFrame(points=image.reshape(-1, 4), rows=rows, columns=columns, stamp_s=0.0)
+    clock = ColumnClock(frame, sweep_s)
+    # Straight ahead (+x) is the middle column; behind, just left of the seam, the first ones.
+    ahead, left, behind = clock.offsets_s([5.0, 0.0, -5.0], [0.0, 5.0, 0.1])
+    assert ahead == pytest.approx(0.5 * sweep_s)
+    assert left == pytest.approx(0.25 * sweep_s)
+    assert behind == pytest.approx(1 / columns * sweep_s, abs=1.5 / columns * sweep_s)

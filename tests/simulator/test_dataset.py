@@ -46,6 +46,13 @@ def test_export_writes_yolo_labels_and_lidar_boxes(tmp_path: Path) -> None:
             assert h_ * 1200 >= options.min_box_px - 1e-6
             labelled += 1
     assert labelled >= 10  # vehicles are in view after the warm-up
+    # Truth sidecars: one per image, each vehicle with its range and visible share.
+    records = [json.loads(path.read_text()) for path in sorted((out / "truth").rglob("*.json"))]
+    assert len(records) == 10
+    vehicles = [v for record in records for v in record["vehicles"]]
+    assert vehicles and all(0 <= v["visible_fraction"] <= v["visibility"] <= 1 for v in vehicles)
+    assert all(0 <= v["in_frame"] <= 1 and v["range_m"] > 0 for v in vehicles)
+    assert any(v["in_frame"] == 1.0 for v in vehicles)
     scans = sorted((out / "lidar").rglob("*.npz"))
     assert len(scans) == 10
     with np.load(scans[-1]) as scan:
