@@ -2,8 +2,7 @@
 
 To add a service, append one :class:`ServiceSpec` to :data:`STACK` (in pipeline order, so a
 producer starts before its consumers); ``wz up``, ``wz up --only`` and ``wz demo`` pick it up.
-The services planned next, in that order: ``camera-radar-detector``, ``fusion-tracker``,
-``alert-service``, ``gateway``.
+The services planned next, in that order: ``alert-service``, ``gateway``.
 
 Every child learns where the bus is and which site it serves from the environment:
 
@@ -116,9 +115,15 @@ STACK: tuple[ServiceSpec, ...] = (
     ServiceSpec(
         name="camera-detector",
         module="wz_camera_detector.node",
-        summary="camera frames (+ radar) to vehicle detections (background subtraction until a "
-        "YOLO model ships)",
+        summary="camera frames (+ radar) to vehicle detections (YOLO on ONNX Runtime, radar "
+        "fusion)",
         env_prefix="WZ_CAMERA_",
+    ),
+    ServiceSpec(
+        name="fusion-tracker",
+        module="wz_fusion_tracker.node",
+        summary="every sensor's detections to fused tracks (Kalman, GNN, life cycle)",
+        env_prefix="WZ_FUSION_",
     ),
 )
 

@@ -8,7 +8,8 @@ Run it as ``python -m wz_fusion_tracker.node`` (settings: ``WZ_FUSION_*``, bus `
   and slightly late messages are fine);
 - each cycle (``output_period_s`` of data time, 10 Hz by default) publishes a
   :class:`TrackBatch` on ``wz/<site>/tracks``: the confirmed and coasting tracks predicted to the
-  cycle's time, with the road frame's station, offset and lane, speed and heading, class and
+  stamp of the newest measurement processed (the first one at or after the cycle's time on the
+  period's grid; the tracker never predicts backwards), with the road frame's station, offset and lane, speed and heading, class and
   size, contributing sensors, age and status; and answers ``wz/<site>/tracks/latest`` queries
   with the newest batch;
 - when no detections arrive at all (every sensor silent), moves the tracker's clock on by the
@@ -157,11 +158,12 @@ class FusionCore:
         period = self.settings.output_period_s
         if self._next_output_s is None:
             self._next_output_s = math.ceil(processed_s / period) * period
-        out = []
-        while self._next_output_s <= processed_s + 1e-9:
-            out.append(self.snapshot(self._next_output_s))
-            self._next_output_s += period
-        return out
+        if processed_s + 1e-9 < self._next_output_s:
+            return []
+        # One batch as of the newest processed measurement (the tracker does not predict
+        # backwards), then the next cycle on the period's grid.
+        self._next_output_s = (math.floor(processed_s / period + 1e-9) + 1) * period
+        return [self.snapshot(processed_s)]
 
     def snapshot(self, stamp_s: float) -> TrackBatch:
         states = self.tracker.tracks(stamp_s)

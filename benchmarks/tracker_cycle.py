@@ -1,0 +1,96 @@
+"""Fusion tracker: time per cycle with 200 tracks fed by three asynchronous sensors.
+
+200 vehicles drive at 20-35 m/s in 8 lanes over 1.6 km (so they never leave), seen by three
+sensors with their own rates and noise: a LiDAR at 20 Hz (0.2 m), a camera at 10 Hz (1.0 m along
+its line of sight, 0.3 m across) and a radar at 15 Hz (0.5 m, with speed), each detecting 95 %
+of the vehicles each frame. The tracker (:class:`MultiTargetTracker`, default settings, the road
+heading hook of a straight road) takes the batches in stamp order. After a 5 s warm-up (every
+vehicle has a confirmed track), each batch's ``add`` (predict, gate, assign, update, start,
+merge) is timed, and the 10 Hz snapshot ``tracks(t)`` that the node publishes. The result: the
+median and p99 of a cycle, per sensor and over all.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+from typing import Any
+
+import numpy as np
+
+from wz_fusion_tracker.tracker import Measurement, MultiTargetTracker, TrackerSettings
+
+VEHICLES = 200
+LANES = 8
+SENSORS = {  # id: (rate [Hz], std along x [m], std along y [m], has speed)
+    "lidar": (20.0, 0.2, 0.2, False),
+    "camera": (10.0, 1.0, 0.3, False),
+    "radar": (15.0, 0.5, 0.5, True),
+}
+
+
+def _batches(duration_s: float, seed: int = 1) -> list[tuple[float, str, list[Measurement]]]:
+    rng = np.random.default_rng(seed)
+    lane_y = (np.arange(VEHICLES) % LANES) * 3.6
+    start_x = np.repeat(np.arange(VEHICLES // LANES), LANES) * 60.0 + rng.uniform(0, 20, VEHICLES)
+    speed = rng.uniform(20.0, 35.0, VEHICLES)
+    events = []
+    for sensor, (rate, sx, sy, has_speed) in SENSORS.items():
+        phase = rng.uniform(0, 1.0 / rate)
+        for k in range(int(duration_s * rate)):
+            t = phase + k / rate
+            seen = rng.random(VEHICLES) < 0.95
+            cov = np.diag([sx**2, sy**2])
+            x = start_x + speed * t + rng.normal(0, sx, VEHICLES)
+            y = lane_y + rng.normal(0, sy, VEHICLES)
+            measurements = [
+                Measurement(x_m=float(x[i]), y_m=float(y[i]), covariance_m2=cov,
+                            object_class="car", length_m=4.6, width_m=1.8,
+                            speed_mps=float(speed[i] + rng.normal(0, 0.3)) if has_speed else None)
+                for i in np.flatnonzero(seen)
+            ]  # fmt: skip
+            events.append((t, sensor, measurements))
+    return sorted(events, key=lambda e: e[0])
+
+
+def _stats(values_s: list[float]) -> dict[str, float]:
+    ordered = sorted(values_s)
+    return {"median_ms": 1e3 * statistics.median(ordered),
+            "p99_ms": 1e3 * ordered[int(0.99 * (len(ordered) - 1))],
+            "max_ms": 1e3 * ordered[-1], "samples": len(ordered)}  # fmt: skip
+
+
+def run(quick: bool) -> dict[str, Any]:
+    duration_s = 12.0 if quick else 40.0
+    warmup_s = 5.0
+    events = _batches(duration_s)
+    tracker = MultiTargetTracker(TrackerSettings(), heading_at=lambda x, y: 0.0)
+    per_sensor: dict[str, list[float]] = {sensor: [] for sensor in SENSORS}
+    snapshots: list[float] = []
+    next_snapshot = 0.0
+    confirmed_counts = []
+    for stamp, sensor, measurements in events:
+        started = time.perf_counter()
+        tracker.add(sensor, stamp, measurements)
+        elapsed = time.perf_counter() - started
+        if stamp >= warmup_s:
+            per_sensor[sensor].append(elapsed)
+        while next_snapshot <= stamp - tracker.settings.reorder_window_s:
+            started = time.perf_counter()
+            states = tracker.tracks(max(next_snapshot, tracker.last_processed_stamp_s or 0.0))
+            elapsed = time.perf_counter() - started
+            if stamp >= warmup_s:
+                snapshots.append(elapsed)
+                confirmed_counts.append(sum(1 for s in states if s.status != "tentative"))
+            next_snapshot += 0.1
+    all_cycles = [v for values in per_sensor.values() for v in values]
+    return {
+        "vehicles": VEHICLES,
+        "sensors": {k: {"rate_hz": v[0]} for k, v in SENSORS.items()},
+        "duration_s": duration_s,
+        "confirmed_tracks_median": statistics.median(confirmed_counts) if confirmed_counts else 0,
+        "tracks_started": tracker.counters.tracks_started,
+        "cycle": _stats(all_cycles),
+        "per_sensor": {sensor: _stats(values) for sensor, values in per_sensor.items()},
+        "snapshot": _stats(snapshots),
+    }
