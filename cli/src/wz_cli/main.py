@@ -1,7 +1,7 @@
 """The ``wz`` command: run the local stack, watch it, record and replay the bus.
 
 Subcommands: ``router``, ``up``, ``demo``, ``status``, ``tap``, ``record``, ``replay``, and the
-services' tools ``dataset``, ``pictures``, ``detect-lidar``, ``detect-camera`` and ``eval-camera`` (``wz <command> --help`` for each).
+services' tools ``dataset``, ``pictures``, ``detect-lidar``, ``detect-camera``, ``eval`` and ``eval-camera`` (``wz <command> --help`` for each).
 The command's own logs go to stderr (structured, see :mod:`wz_shared.logs`); stdout carries only
 its output (tables, tapped messages, children's lines), so it can be piped.
 """
@@ -212,6 +212,10 @@ SERVICE_TOOLS = {
     "detect-camera": (
         "wz_camera_detector.cli",
         "detect vehicles in image or video files, one JSON line per frame",
+    ),
+    "eval": (
+        "wz_eval.fusion",
+        "run the pipeline on the simulated work zone and score it against truth (tracks, MOT)",
     ),
     "eval-camera": (
         "wz_eval.camera",

@@ -50,7 +50,8 @@ Inputs: camera objects already ranged onto the road (site-frame ground positions
    ``p_f = p_s + (rho_r + s) u_c``. Its covariance models range and bearing as independent, the
    range error being the radar's and the bearing error the camera's::
 
-       sigma_rho^2   = (sigma_r r / rho_r)^2                       (radar range, horizontal)
+       sigma_rho^2   = (sigma_r r / rho_r)^2 + sigma_extent^2      (radar range, horizontal,
+                                                                    and the echo's setback)
        sigma_theta^2 = n_c^T P_c n_c / rho_c^2                      (camera bearing, rad^2)
        P_f = sigma_rho^2 u_c u_c^T + (rho_r^2 sigma_theta^2) n_c n_c^T
 
@@ -493,7 +494,8 @@ def fuse_pair(
         intrinsics.range_noise_std_m
         * max(radar.slant_range_m, radar_rho_jacobian_m)
         / radar_rho_jacobian_m
-    ) ** 2
+    ) ** 2 + settings.reflection_extent_std_m**2  # where on the near face it echoed, the
+    # setback's guess of length and heading: the centre is that uncertain along the range
     covariance = _polar_covariance(
         camera_bearing, range_variance_m2, radar_rho_jacobian_m**2 * bearing_variance_rad2
     )

@@ -148,6 +148,11 @@ class TrackerSettings(BaseModel):
     reorder_window_s: float = Field(default=0.15, ge=0.0)
     #: A sensor is a track's source in a snapshot if it updated it within this before it [s].
     sources_window_s: float = Field(default=0.25, ge=0.0)
+    #: An unmatched measurement within this squared Mahalanobis distance of a confirmed track
+    #: starts no track: it is that vehicle's outlier (a box fit gone wrong, a biased camera
+    #: range), not a new vehicle. A vehicle alongside, in the next lane 3.6 m away, is far
+    #: beyond it (about 11 sigma for a 0.3 m lateral std).
+    spawn_gate_chi2: float = Field(default=60.0, ge=0.0)
     #: Two tracks closer than this, moving alike, are one vehicle tracked twice (a sensor's
     #: biased measurement that missed the gate started a second track): the younger is
     #: deleted [m]. Adjacent lanes are 3.6 m apart and a following car at least ~5 m behind,
@@ -322,6 +327,9 @@ class TrackerCounters:
     tracks_deleted: int = 0
     #: Deleted as the duplicate of an older track (:attr:`TrackerSettings.merge_distance_m`).
     tracks_merged: int = 0
+    #: Unmatched measurements that started no track, being near a confirmed one
+    #: (:attr:`TrackerSettings.spawn_gate_chi2`).
+    measurements_suppressed: int = 0
 
 
 # ----------------------------------------------------------------------------- association
@@ -930,9 +938,18 @@ class MultiTargetTracker:
 
         if settings.may_start_tracks(sensor_id):
             matched = {column for _, column in pairs}
+            near_confirmed = np.zeros(len(measurements), dtype=bool)
+            if live and settings.spawn_gate_chi2 > 0.0:
+                confirmed_rows = np.array([t.confirmed for t in live], dtype=bool)
+                if confirmed_rows.any():
+                    near_confirmed = np.any(d2[confirmed_rows] < settings.spawn_gate_chi2, axis=0)
             for column, measurement in enumerate(measurements):
-                if column not in matched:
-                    self._spawn(measurement, R[column], sensor_id, stamp_s)
+                if column in matched:
+                    continue
+                if near_confirmed[column]:
+                    self._counters.measurements_suppressed += 1
+                    continue
+                self._spawn(measurement, R[column], sensor_id, stamp_s)
         self._merge_duplicates(stamp_s)
 
     def _predicted(self, live: Sequence[_Track], slots: IntP, stamp_s: float) -> tuple[F64, F64]:
