@@ -47,9 +47,12 @@ def test_images_give_one_line_per_frame_with_boxes_and_world_positions(
     # The ROI is 720 px into a 640 input: scale 8/9, no padding; A's box starts at
     # (480 + 80 * 9/8, 440 + 190 * 9/8).
     assert first[0]["box"] == pytest.approx([570.0, 653.75, 615.0, 676.25], abs=0.06)
-    for detection in first:
+    for detection in first[:2]:
+        assert not detection["cut"]
         assert all(math.isfinite(detection[k]) for k in ("x", "y", "paper_x", "paper_y"))
         assert 0.0 < detection["range"] < 60.0
+    # E reaches the ROI's right edge: cut by the view, so not ranged (as in the node).
+    assert first[2]["cut"] and first[2]["x"] is None
     # The tracker confirms nothing on its own but gives ids; the same boxes keep their ids.
     assert [d["track_id"] for d in lines[2]["detections"]] == [d["track_id"] for d in first]
 

@@ -223,6 +223,8 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
     batches = [b for b in record.batches if not _dropped(b, options.dropouts, options.warmup_s)]
     position = 0
     tracker_s = 0.0
+    fused_samples: list[tuple[float, float, float]] = []
+    mot_times: list[float] = []
     for sample_s in sample_times:
         t0 = time.perf_counter()
         while position < len(batches) and batches[position].stamp <= sample_s + 1e-9:
@@ -240,9 +242,11 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
         vehicles = vehicles_at(sample_s)
         if vehicles is None:
             continue
-        scores.add(site, "fused", sample_s, [(s.x_m, s.y_m, s.speed_mps) for s in states],
-                   vehicles)  # fmt: skip
+        matched = scores.add(site, "fused", sample_s,
+                             [(s.x_m, s.y_m, s.speed_mps) for s in states], vehicles)  # fmt: skip
+        fused_samples.extend((sample_s, lon, lat) for _, _, lon, lat in matched)
         mot.update(vehicles, states)
+        mot_times.append(sample_s)
 
     # --- the paper's method, with oracle per-sensor identities
     ids: dict[str, int] = {}
@@ -282,7 +286,8 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
         "sources": {s: scores.errors[s].summary() for s in SOURCES},
         **mot.summary(len(record.truth)),
         "paper_table": paper_table(site, scores, centre, options.window_upstream_m),
-        "dropouts": [vars(d) for d in options.dropouts],
+        "dropouts": [_dropout_report(d, options.warmup_s, fused_samples, mot, mot_times)
+                     for d in options.dropouts],
         "pipeline_problems": record.problems,
         "timing": {"pipeline_wall_s": round(record.wall_s, 1),
                    "tracker_s": round(tracker_s, 2),
@@ -296,6 +301,26 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
     return report
 
 
+def _dropout_report(dropout: Dropout, warmup_s: float,
+                    fused_samples: Sequence[tuple[float, float, float]],
+                    mot: _MotAccumulator, mot_times: Sequence[float]) -> dict[str, Any]:  # fmt: skip
+    """The fused track during a dropout: its errors, and identity switches from its start to
+    2 s after its end (a track lost in the gap would show as a switch when taken up again)."""
+    start = warmup_s + dropout.start_s
+    end = start + dropout.duration_s
+    inside = [(lon, lat) for t, lon, lat in fused_samples if start <= t < end]
+    lon = np.array([v[0] for v in inside])
+    lat = np.array([v[1] for v in inside])
+    return {
+        **vars(dropout),
+        "fused_samples": len(inside),
+        "fused_rmse_longitudinal_m": float(np.sqrt(np.mean(lon**2))) if len(lon) else None,
+        "fused_rmse_lateral_m": float(np.sqrt(np.mean(lat**2))) if len(lat) else None,
+        "fused_max_abs_error_m": float(np.max(np.hypot(lon, lat))) if len(lon) else None,
+        "id_switches_from_start_to_2s_after": mot.switches_between(mot_times, start, end + 2.0),
+    }
+
+
 class _MotAccumulator:
     """py-motmetrics over the sampled confirmed and coasting tracks."""
 
@@ -305,6 +330,14 @@ class _MotAccumulator:
         self._mm = motmetrics
         self.acc = motmetrics.MOTAccumulator(auto_id=True)
         self._numbers: dict[str, int] = {}  # motmetrics wants numeric object ids
+
+    def switches_between(self, frame_times: Sequence[float], start_s: float,
+                         end_s: float) -> int:  # fmt: skip
+        """Identity switches in frames stamped within ``[start_s, end_s]``."""
+        events = self.acc.mot_events
+        switches = events[events.Type == "SWITCH"]
+        frames = switches.index.get_level_values(0)
+        return int(sum(1 for f in frames if start_s <= frame_times[int(f)] <= end_s))
 
     def update(self, vehicles: Sequence[VehicleTruth], states: Sequence[TrackState]) -> None:
         gt = np.array([(v.x_m, v.y_m) for v in vehicles], dtype=np.float64).reshape(-1, 2)

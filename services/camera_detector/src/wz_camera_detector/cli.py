@@ -21,7 +21,8 @@ centre from the calibrated pinhole model of ``--camera`` in ``--site`` with the 
 correction (:func:`wz_camera_detector.world.box_to_ground`, the class's typical size, the road's
 heading); ``paper_x, paper_y`` is the paper's Eq. 1-2 ground point of the box's bottom centre;
 ``station, offset`` the centre in the road frame; ``range`` its ground distance from the camera.
-Positions are null for a box reaching above the horizon. ``stamp`` is the video's frame time
+Positions are null for a box reaching above the horizon, and for a box cut by the edge of the
+detector's view (``"cut": true``: its bottom is not its ground contact), as in the node. ``stamp`` is the video's frame time
 [s] (``CAP_PROP_POS_MSEC``), for images the position in the sequence divided by the camera's
 rate. ``track_id`` is the image tracker's id (``--no-track``: null, each frame on its own).
 
@@ -48,7 +49,13 @@ import numpy as np
 import numpy.typing as npt
 from pydantic import ValidationError
 
-from wz_camera_detector.node import CLASS_SIZES, ImageBackend, make_backend, road_heading_at
+from wz_camera_detector.node import (
+    CLASS_SIZES,
+    TRUNCATION_MARGIN_PX,
+    ImageBackend,
+    make_backend,
+    road_heading_at,
+)
 from wz_camera_detector.settings import CameraDetectorSettings, camera_mount
 from wz_camera_detector.tracker import ImageTracker
 from wz_camera_detector.world import box_to_ground, paper_box_to_ground
@@ -157,6 +164,17 @@ class FrameProcessor:
             camera = self._cameras[(width_px, height_px)] = PinholeCamera(mount)
         return camera
 
+    def _cut(self, box: tuple[float, float, float, float], camera: PinholeCamera) -> bool:
+        """Whether the box touches the edge of the detector's view (not ranged: the node's
+        rule, see :data:`wz_camera_detector.node.TRUNCATION_MARGIN_PX`)."""
+        intrinsics = camera_intrinsics(camera.mount)
+        width, height = intrinsics.width_px, intrinsics.height_px
+        roi = getattr(self.backend, "roi_xyxy_px", None) or (0, 0, width, height)
+        left, right, bottom = roi[0], min(roi[2], width), min(roi[3], height)
+        margin = TRUNCATION_MARGIN_PX
+        return bool(box[3] >= bottom - margin or box[0] <= left + margin
+                    or box[2] >= right - margin)  # fmt: skip
+
     def process(self, image: U8, stamp_s: float) -> tuple[list[dict[str, Any]], float]:
         """Detections of one frame as JSON-ready dicts, and the detector's time [s]."""
         started = time.perf_counter()
@@ -187,7 +205,8 @@ class FrameProcessor:
         }  # fmt: skip
         contact = box_to_ground(camera, detection.box_xyxy_px, 0.0, 0.0, 0.0)
         keys = ("x", "y", "station", "offset", "range", "paper_x", "paper_y")
-        if not all(math.isfinite(v) for v in contact):
+        record["cut"] = self._cut(detection.box_xyxy_px, camera)
+        if record["cut"] or not all(math.isfinite(v) for v in contact):
             return record | dict.fromkeys(keys)
         heading = road_heading_at(self.site, *contact)
         x_m, y_m = box_to_ground(camera, detection.box_xyxy_px, heading, length_m, width_m)

@@ -41,6 +41,10 @@ under ``<raw camera key>|<reason>`` (the bus's own decode reasons such as ``bad_
 - ``out_of_order``: the stamp is not after the previous frame's (skipped);
 - ``detector_error``: the backend raised (traceback logged once);
 - ``above_horizon``: a box whose bottom is at or above the horizon (dropped);
+
+A box cut by the edge of the detector's view (its region of interest, else the frame) is tracked
+in the image but not ranged: its bottom edge is not where the vehicle meets the road, nor its
+middle column the vehicle's bearing (a vehicle passing under the mast; the LiDAR sees it).
 - ``bad_detection``: a detection with non-finite values (dropped).
 """
 
@@ -93,6 +97,9 @@ U8 = npt.NDArray[np.uint8]
 F64 = npt.NDArray[np.float64]
 #: How a problem is reported: (reason, detail).
 Report = Callable[[str, str], None]
+
+#: A box this close to the edge of the detector's view is cut by it: not ranged [px].
+TRUNCATION_MARGIN_PX = 3.0
 
 #: Image class name -> (bus class, typical length [m], width [m]); other names are ignored.
 CLASS_SIZES: dict[str, tuple[VehicleClass, float, float]] = {
@@ -332,7 +339,14 @@ class CameraDetector:
         camera = self.camera(width_px, height_px)
         camera_xy = (float(camera.position_m[0]), float(camera.position_m[1]))
         objects: list[CameraObject] = []
+        left, top, right, bottom = self._view_edges(width_px, height_px)
+        margin = TRUNCATION_MARGIN_PX
         for track in tracks:
+            x1, _, x2, y2 = track.box_xyxy_px
+            if y2 >= bottom - margin or x1 <= left + margin or x2 >= right - margin:
+                # Cut by the edge of the view: its bottom is not where it meets the road, nor
+                # its middle column the vehicle's bearing. Not ranged (the LiDAR sees it).
+                continue
             object_class, length_m, width_m = CLASS_SIZES[track.class_name]
             # Heading from where the box's contact point lies (the road's direction there).
             x0, y0 = box_to_ground(camera, track.box_xyxy_px, 0.0, 0.0, 0.0)
@@ -358,6 +372,14 @@ class CameraDetector:
                 )
             )
         return objects
+
+    def _view_edges(self, width_px: int, height_px: int) -> tuple[float, float, float, float]:
+        """Left, top, right, bottom of what the detector sees [px]: its ROI, else the frame."""
+        roi = getattr(self.backend, "roi_xyxy_px", None)
+        if roi is None:
+            return 0.0, 0.0, float(width_px), float(height_px)
+        return (float(roi[0]), float(roi[1]), float(min(roi[2], width_px)),
+                float(min(roi[3], height_px)))  # fmt: skip
 
     def _fuse(self, objects: list[CameraObject], stamp_s: float) -> list[FusedObject]:
         scan = self._scan
