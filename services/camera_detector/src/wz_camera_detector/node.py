@@ -339,7 +339,7 @@ class CameraDetector:
         camera = self.camera(width_px, height_px)
         camera_xy = (float(camera.position_m[0]), float(camera.position_m[1]))
         objects: list[CameraObject] = []
-        left, top, right, bottom = self._view_edges(width_px, height_px)
+        left, _top, right, bottom = self._view_edges(width_px, height_px)
         margin = TRUNCATION_MARGIN_PX
         for track in tracks:
             x1, _, x2, y2 = track.box_xyxy_px
