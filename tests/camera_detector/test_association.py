@@ -256,9 +256,18 @@ def test_moving_radar_target_far_from_cameras_becomes_radar_only() -> None:
     assert radar_only.camera_local_id is None
     assert radar_only.radar_target_index == 0
     assert radar_only.score == SETTINGS.radar_only_score
-    assert (radar_only.x_m, radar_only.y_m) == pytest.approx((8.0, 850.0), abs=1e-6)
+    # The echo (8, 850) is a near face: the centre of a car-sized vehicle heading north is
+    # about half a length further from the radar along its line of sight.
+    bearing = bearing_from_radar(8.0, 850.0)
+    setback = max(2.3 * abs(math.cos(bearing - ROAD_HEADING_RAD)),
+                  0.9 * abs(math.sin(bearing - ROAD_HEADING_RAD)))  # fmt: skip
+    assert setback == pytest.approx(2.3, abs=0.01)
+    assert (radar_only.x_m, radar_only.y_m) == pytest.approx(
+        (8.0 + setback * math.cos(bearing), 850.0 + setback * math.sin(bearing)), abs=1e-6)
     assert radar_only.speed_mps is not None and radar_only.speed_mps > 19.0
     assert_spd(radar_only.covariance_m2)
+    along = np.array([math.cos(bearing), math.sin(bearing)])
+    assert along @ radar_only.covariance_m2 @ along > SETTINGS.radar_only_size_std_m**2
 
 
 @pytest.mark.parametrize(

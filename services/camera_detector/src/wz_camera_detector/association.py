@@ -71,6 +71,8 @@ Inputs: camera objects already ranged onto the road (site-frame ground positions
    unmatched radar target becomes ``"radar"`` (class unknown, score ``radar_only_score``) when it
    moves (``|v_r| > min_radar_only_speed_mps``) and is strong enough
    (``rcs_dbsm >= min_radar_only_rcs_dbsm``): a vehicle the camera misses at night or in fog.
+   Its echo is moved to the centre of a car-sized vehicle on the road's heading, and its range
+   variance widened by ``radar_only_size_std_m^2`` (it could be a truck).
    Anything else is clutter (guard rails, signs, rain) and dropped.
 
 Nothing here does I/O: the node decodes the scan and camera objects, calls
@@ -123,10 +125,18 @@ class AssociationSettings(BaseModel):
     min_radar_only_speed_mps: float = Field(default=1.0, ge=0.0)
     #: ... and its RCS is at least this [dBsm] (simulated clutter sits around -10 dBsm).
     min_radar_only_rcs_dbsm: float = Field(default=0.0, allow_inf_nan=False)
+    #: Std of a radar-only object's centre along the line of sight, for not knowing its size
+    #: (the echo is moved by a car's setback; a truck's centre is 6 m further) [m].
+    radar_only_size_std_m: float = Field(default=3.0, ge=0.0)
     #: Score given to a radar-only detection, in [0, 1].
     radar_only_score: float = Field(default=0.5, ge=0.0, le=1.0)
     #: Smallest |cos(line of sight - road heading)| at which a radial speed is converted.
     min_speed_cosine: float = Field(default=0.2, gt=0.0, le=1.0)
+
+
+#: Size assumed for a radar-only object (a car), for its echo's setback [m].
+RADAR_ONLY_LENGTH_M = 4.6
+RADAR_ONLY_WIDTH_M = 1.8
 
 
 @dataclass(frozen=True, slots=True)
@@ -537,11 +547,24 @@ def _radar_only(
     moving = abs(radar.radial_speed_mps) > settings.min_radar_only_speed_mps
     if not moving or radar.rcs_dbsm < settings.min_radar_only_rcs_dbsm:
         return None
+    # The echo is on the vehicle's near face: move it to the centre of a car-sized vehicle on
+    # the road's heading, and widen the range variance by what the size guess cannot know (a
+    # truck's centre is 8 m behind its face, a car's 2.3 m).
+    x_m, y_m, covariance = radar.x_m, radar.y_m, radar.covariance_m2
+    if road_heading_rad is not None:
+        guess = CameraObject(local_id=0, x_m=x_m, y_m=y_m, covariance_m2=covariance,
+                             object_class=VehicleClass.UNKNOWN, score=0.0,
+                             heading_rad=road_heading_rad, length_m=RADAR_ONLY_LENGTH_M,
+                             width_m=RADAR_ONLY_WIDTH_M)  # fmt: skip
+        setback = reflection_setback_m(guess, radar.bearing_rad)
+        along, _ = _unit(radar.bearing_rad)
+        x_m, y_m = x_m + setback * along[0], y_m + setback * along[1]
+        covariance = covariance + settings.radar_only_size_std_m**2 * np.outer(along, along)
     return FusedObject(
         source="radar",
-        x_m=radar.x_m,
-        y_m=radar.y_m,
-        covariance_m2=radar.covariance_m2,
+        x_m=x_m,
+        y_m=y_m,
+        covariance_m2=covariance,
         object_class=VehicleClass.UNKNOWN,
         score=settings.radar_only_score,
         speed_mps=along_road_speed(
