@@ -148,6 +148,18 @@ class TrackerSettings(BaseModel):
     reorder_window_s: float = Field(default=0.15, ge=0.0)
     #: A sensor is a track's source in a snapshot if it updated it within this before it [s].
     sources_window_s: float = Field(default=0.25, ge=0.0)
+    #: A confirmed track not updated for this long [s] may be taken up by an unmatched
+    #: measurement within ``reacquire_along_m`` along its direction and ``reacquire_across_m``
+    #: across it [m] (see ``MultiTargetTracker._reacquire``); 0 m turns it off. A following
+    #: car in the same lane is at least ~6 m behind, the next lane 3.6 m across.
+    reacquire_after_s: float = Field(default=0.2, ge=0.0)
+    reacquire_along_m: float = Field(default=4.0, ge=0.0)
+    reacquire_across_m: float = Field(default=1.2, ge=0.0)
+    #: A track younger than this [s] next to a coasting track, within ``hand_over_along_m``
+    #: along the road [m] (and ``reacquire_across_m`` across), is its vehicle come back: it
+    #: hands its state to the old track (see ``MultiTargetTracker._hand_over``). 0 turns it off.
+    hand_over_age_s: float = Field(default=1.0, ge=0.0)
+    hand_over_along_m: float = Field(default=10.0, ge=0.0)
     #: An unmatched measurement within this squared Mahalanobis distance of a confirmed track
     #: starts no track: it is that vehicle's outlier (a box fit gone wrong, a biased camera
     #: range), not a new vehicle. A vehicle alongside, in the next lane 3.6 m away, is far
@@ -327,6 +339,10 @@ class TrackerCounters:
     tracks_deleted: int = 0
     #: Deleted as the duplicate of an older track (:attr:`TrackerSettings.merge_distance_m`).
     tracks_merged: int = 0
+    #: Measurements that took up a track outside its gate (:meth:`_reacquire`).
+    tracks_reacquired: int = 0
+    #: Young tracks that handed their vehicle back to a coasting track (:meth:`_hand_over`).
+    tracks_handed_over: int = 0
     #: Unmatched measurements that started no track, being near a confirmed one
     #: (:attr:`TrackerSettings.spawn_gate_chi2`).
     measurements_suppressed: int = 0
@@ -936,6 +952,11 @@ class MultiTargetTracker:
                     time_offset_s,
                 )
 
+        if live and settings.reacquire_along_m > 0.0:
+            pairs = pairs + self._reacquire(
+                live, slots, x_pred, P_pred, z, R, pairs, sensor_id, stamp_s, measurements,
+                time_offset_s)  # fmt: skip
+
         if settings.may_start_tracks(sensor_id):
             matched = {column for _, column in pairs}
             near_confirmed = np.zeros(len(measurements), dtype=bool)
@@ -951,6 +972,64 @@ class MultiTargetTracker:
                     continue
                 self._spawn(measurement, R[column], sensor_id, stamp_s)
         self._merge_duplicates(stamp_s)
+
+    def _reacquire(
+        self, live: Sequence[_Track], slots: IntP, x_pred: F64, P_pred: F64, z: F64, R: F64,
+        pairs: Sequence[tuple[int, int]], sensor_id: str, stamp_s: float,
+        measurements: Sequence[Measurement], time_offset_s: F64 | None,
+    ) -> list[tuple[int, int]]:  # fmt: skip
+        """Take up a confirmed track that has missed updates with a measurement near it on the
+        road, outside its (by then overconfident) gate.
+
+        A vehicle lost for a few tenths of a second (the LiDAR's blind spot under the mast, an
+        occlusion) often comes back a couple of metres from its prediction: biased detections
+        before the gap bent its velocity. Rather than start a second track, a measurement left
+        unmatched within ``reacquire_along_m`` along and ``reacquire_across_m`` across the
+        track's direction updates it, its prior widened by the innovation ``y``
+        (``P_pos += y y^T``, ``P_vel += y y^T / gap^2``) so the update can follow.
+        """
+        settings = self.settings
+        matched_rows = {row for row, _ in pairs}
+        matched_columns = {column for _, column in pairs}
+        rows = np.array([i for i, t in enumerate(live) if t.confirmed and i not in matched_rows
+                         and stamp_s - t.updated_s >= settings.reacquire_after_s], dtype=np.intp)  # fmt: skip
+        columns = np.array([c for c in range(len(z)) if c not in matched_columns], dtype=np.intp)
+        if len(rows) == 0 or len(columns) == 0:
+            return []
+        delta = time_offset_s[columns] if time_offset_s is not None else np.zeros(len(columns))
+        xr = x_pred[rows]
+        y = z[columns][None, :, :] - (xr[:, None, :2] + xr[:, None, 2:] * delta[None, :, None])
+        speed = np.hypot(xr[:, 2], xr[:, 3])
+        heading = np.array([t.road_heading_rad if t.road_heading_rad is not None
+                            else math.atan2(x[3], x[2]) for t, x in zip(
+                                [live[i] for i in rows], xr, strict=True)])  # fmt: skip
+        heading = np.where(speed > settings.heading_min_speed_mps,
+                           np.arctan2(xr[:, 3], xr[:, 2]), heading)  # fmt: skip
+        u = np.stack([np.cos(heading), np.sin(heading)], axis=1)
+        along = np.einsum("tmi,ti->tm", y, u)
+        across = y[..., 1] * u[:, None, 0] - y[..., 0] * u[:, None, 1]
+        allowed = (np.abs(along) <= settings.reacquire_along_m) & (
+            np.abs(across) <= settings.reacquire_across_m)  # fmt: skip
+        if not allowed.any():
+            return []
+        found = gnn_assign(np.hypot(along, across), allowed)
+        if not found:
+            return []
+        new_pairs = [(int(rows[r]), int(columns[c])) for r, c in found]
+        P_wide = P_pred.copy()
+        for (row, column), (r, c) in zip(new_pairs, found, strict=True):
+            gap_s = max(stamp_s - live[row].updated_s, 0.1)
+            outer = np.outer(y[r, c], y[r, c])
+            P_wide[row, :2, :2] += outer
+            P_wide[row, 2:, 2:] += outer / gap_s**2
+        self._counters.tracks_reacquired += len(new_pairs)
+        self._update_matched(
+            [live[row] for row, _ in new_pairs],
+            np.array([row for row, _ in new_pairs], dtype=np.intp),
+            np.array([column for _, column in new_pairs], dtype=np.intp),
+            slots, x_pred, P_wide, z, R, sensor_id, stamp_s, measurements, time_offset_s,
+        )  # fmt: skip
+        return new_pairs
 
     def _predicted(self, live: Sequence[_Track], slots: IntP, stamp_s: float) -> tuple[F64, F64]:
         """The states of ``live`` predicted to ``stamp_s`` with each track's process noise."""
@@ -1132,6 +1211,66 @@ class MultiTargetTracker:
         )
         return stamp_s - track.updated_s > max_age_s
 
+    def _hand_over(self, stamp_s: float) -> None:
+        """A young track that took up a coasting track's vehicle hands its state to it.
+
+        When a vehicle comes back too far from its coasting track's prediction even for
+        :meth:`_reacquire` (a long gap, a bent velocity), a new track starts on it. While the
+        new track is young (``hand_over_age_s``) and the old one coasts just behind or ahead of
+        it in the same lane (``hand_over_along_m``, ``reacquire_across_m``), moving alike, they
+        are one vehicle: the old track takes the new one's state and the new one goes, so the
+        vehicle keeps its identity.
+        """
+        settings = self.settings
+        if settings.hand_over_along_m <= 0.0 or len(self._tracks) < 2:
+            return
+        live = list(self._tracks.values())
+        coasting = [t for t in live if t.confirmed
+                    and stamp_s - t.updated_s >= settings.reacquire_after_s]  # fmt: skip
+        young = [t for t in live if stamp_s - t.born_s <= settings.hand_over_age_s
+                 and t.updated_s > t.born_s]  # fmt: skip
+        if not coasting or not young:
+            return
+        old_slots = np.array([t.slot for t in coasting], dtype=np.intp)
+        new_slots = np.array([t.slot for t in young], dtype=np.intp)
+        x_old = self._bank.states(old_slots)
+        x_old[:, :2] += x_old[:, 2:] * (stamp_s - self._bank.stamps_s(old_slots))[:, None]
+        x_new = self._bank.states(new_slots)
+        x_new[:, :2] += x_new[:, 2:] * (stamp_s - self._bank.stamps_s(new_slots))[:, None]
+        d = x_new[None, :, :2] - x_old[:, None, :2]  # (old, new, 2)
+        speed = np.hypot(x_old[:, 2], x_old[:, 3])
+        heading = np.array([t.road_heading_rad if t.road_heading_rad is not None
+                            else math.atan2(x[3], x[2]) for t, x in zip(coasting, x_old,
+                                                                       strict=True)])  # fmt: skip
+        u = np.stack([np.cos(heading), np.sin(heading)], axis=1)
+        along = np.einsum("onk,ok->on", d, u)
+        across = d[..., 1] * u[:, None, 0] - d[..., 0] * u[:, None, 1]
+        dv = np.hypot(x_new[None, :, 2] - x_old[:, None, 2], x_new[None, :, 3] - x_old[:, None, 3])
+        allowed = ((np.abs(along) <= settings.hand_over_along_m)
+                   & (np.abs(across) <= settings.reacquire_across_m)
+                   & (dv < settings.merge_velocity_difference_mps)
+                   & (speed[:, None] >= 0.0))  # fmt: skip
+        if not allowed.any():
+            return
+        for row, column in gnn_assign(np.abs(along) + np.abs(across), allowed):
+            old, new = coasting[row], young[column]
+            if old.track_id not in self._tracks or new.track_id not in self._tracks:
+                continue
+            self._bank.set(np.array([old.slot]), self._bank.states(np.array([new.slot])),
+                           self._bank.covariances(np.array([new.slot])),
+                           float(self._bank.stamps_s(np.array([new.slot]))[0]))  # fmt: skip
+            old.updated_s = new.updated_s
+            old.hits += new.hits
+            old.road_heading_rad = new.road_heading_rad
+            old.last_update_s_by_sensor.update(new.last_update_s_by_sensor)
+            old.history.extend(new.history)
+            del self._tracks[new.track_id]
+            self._bank.remove(new.slot)
+            self._counters.tracks_deleted += 1
+            self._counters.tracks_handed_over += 1
+            self._local_ids = {k: (old.track_id if v == new.track_id else v)
+                               for k, v in self._local_ids.items()}  # fmt: skip
+
     def _merge_duplicates(self, stamp_s: float) -> None:
         """Delete the younger of two tracks that are one vehicle (``merge_distance_m``).
 
@@ -1144,6 +1283,9 @@ class MultiTargetTracker:
         if stamp_s < self._next_merge_s:
             return
         self._next_merge_s = stamp_s + _MERGE_PERIOD_S
+        self._hand_over(stamp_s)
+        if len(self._tracks) < 2:
+            return
         live = list(self._tracks.values())
         slots = np.array([t.slot for t in live], dtype=np.intp)
         x = self._bank.states(slots)

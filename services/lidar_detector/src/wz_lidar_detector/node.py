@@ -32,6 +32,7 @@ under ``<raw key>|<reason>`` and logged once per reason:
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
@@ -52,7 +53,7 @@ from wz_lidar_detector.background import (
     learn_background_from_frames,
     load_background,
 )
-from wz_lidar_detector.detection import DetectionResult, Float32Array, PointFrame
+from wz_lidar_detector.detection import BoxDetection, DetectionResult, Float32Array, PointFrame
 from wz_lidar_detector.fast import FastPipeline
 from wz_lidar_detector.reference import ReferencePipeline
 from wz_lidar_detector.settings import LidarDetectorSettings, lidar_mount
@@ -62,7 +63,7 @@ from wz_shared.logs import configure_logging
 from wz_shared.messages import Detection, DetectionBatch, LidarFrameMeta, ServiceState
 from wz_shared.service import ServiceRuntime
 from wz_shared.settings import BusSettings
-from wz_shared.site import SensorMount, Site, load_site
+from wz_shared.site import LidarIntrinsics, SensorMount, Site, load_site
 from wz_shared.timebase import SimClock
 
 SERVICE = "lidar-detector"
@@ -391,6 +392,31 @@ class LidarDetector:
             return None
         return pipeline.detect(frame)
 
+    def _near_field(self, box: BoxDetection) -> BoxDetection:
+        """Widen the covariance along the box's length when the vehicle is too near for the
+        beams to see it whole.
+
+        Under a mast the lowest beam meets a vehicle's top only beyond ``h / tan(-e_min)`` (6 m
+        and -30 deg: 10.4 m); nearer, the returns are a slice of its roof and side and the box
+        completed from them slides along the vehicle: a metre and more, measured. Within that
+        reach plus the box's half length, the std along the length grows to
+        ``settings.near_field_std_m``.
+        """
+        intrinsics = self.mount.intrinsics
+        if not isinstance(intrinsics, LidarIntrinsics) or intrinsics.vertical_min_deg >= 0:
+            return box
+        height_m = self.mount.pose.z_m
+        reach_m = height_m / math.tan(math.radians(-intrinsics.vertical_min_deg))
+        distance_m = math.hypot(box.center_xyz_m[0], box.center_xyz_m[1])
+        if distance_m > reach_m + 0.5 * box.size_lwh_m[0]:
+            return box
+        along = np.array([math.cos(box.heading_rad), math.sin(box.heading_rad)])
+        covariance = np.asarray(box.covariance_xy_m2, dtype=np.float64) + (
+            self.settings.near_field_std_m**2) * np.outer(along, along)  # fmt: skip
+        return dataclasses.replace(box, covariance_xy_m2=(
+            (float(covariance[0, 0]), float(covariance[0, 1])),
+            (float(covariance[1, 0]), float(covariance[1, 1]))))  # fmt: skip
+
     def _site_detections(self, result: DetectionResult) -> list[Detection]:
         offsets: list[float | None] = [None] * len(result.detections)
         if self._clock is not None and result.detections:
@@ -399,6 +425,7 @@ class LidarDetector:
         detections = []
         for box, offset in zip(result.detections, offsets, strict=True):
             try:
+                box = self._near_field(box)
                 detection = to_detection(box_to_site(box, self.mount.pose))
                 if offset is not None:
                     detection = detection.model_copy(update={"time_offset_s": round(offset, 6)})

@@ -50,6 +50,9 @@ class LidarDetectorSettings(ServiceSettings):
     #: A point farther than this from the sensor on any axis is a corrupt return [m]; it is
     #: dropped (set to no return) and the frame counted under ``absurd_coordinates``.
     max_abs_coordinate_m: Annotated[float, Field(gt=0.0)] = 1.0e4
+    #: Std added along a box's length when the vehicle is nearer than the lowest beam can see
+    #: it whole (under the mast: the box slides along the vehicle) [m].
+    near_field_std_m: Annotated[float, Field(ge=0.0)] = 1.5
     reference: ReferenceSettings = Field(default_factory=ReferenceSettings)
     fast: FastSettings = Field(default_factory=FastSettings)
 
