@@ -1017,7 +1017,7 @@ class MultiTargetTracker:
             return []
         new_pairs = [(int(rows[r]), int(columns[c])) for r, c in found]
         P_wide = P_pred.copy()
-        for (row, column), (r, c) in zip(new_pairs, found, strict=True):
+        for (row, _column), (r, c) in zip(new_pairs, found, strict=True):
             gap_s = max(stamp_s - live[row].updated_s, 0.1)
             outer = np.outer(y[r, c], y[r, c])
             P_wide[row, :2, :2] += outer
