@@ -20,9 +20,9 @@ from wz_fusion_tracker import tracker as tracker_module
 from wz_fusion_tracker.kalman import ProcessNoise
 from wz_fusion_tracker.smoothing import rts_smooth
 from wz_fusion_tracker.tracker import (
-    TrackerCounters,
     Measurement,
     MultiTargetTracker,
+    TrackerCounters,
     TrackerSettings,
     TrackState,
     association_cost,
