@@ -60,6 +60,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--name", default="wz-vehicles-pico")
     parser.add_argument("--time-h", type=float, default=None,
                         help="stop training after this many hours (ultralytics' time=)")  # fmt: skip
+    parser.add_argument("--weights", type=Path, default=None,
+                        help="start from these weights (.pt of an earlier run): a fine-tune")  # fmt: skip
+    parser.add_argument("--lr0", type=float, default=None, help="initial learning rate")
+    parser.add_argument("--close-mosaic", type=int, default=None,
+                        help="epochs at the end without mosaic (default: a fifth)")  # fmt: skip
+    parser.add_argument("--tiles", default="540,440,780,560",
+                        help="far-field tiles x0,y0,x1,y1;... written to the model's metadata "
+                        "('' for none)")  # fmt: skip
     args = parser.parse_args(argv)
 
     from wz_camera_detector.train_data import Roi, prepare_roi_dataset
@@ -76,14 +84,21 @@ def main(argv: list[str] | None = None) -> int:
     from ultralytics import YOLO
 
     started = time.time()
-    model = YOLO(str(args.model))
+    model = YOLO(str(args.weights if args.weights is not None else args.model))
     train_args = {
         "data": str(roi_data / "data.yaml"), "epochs": args.epochs, "imgsz": args.imgsz,
         "batch": args.batch, "workers": args.workers, "device": "cpu", "seed": args.seed,
         "deterministic": True, "pretrained": False, "amp": False, "cache": "ram",
         "project": str(args.out / "runs"), "name": args.name, "exist_ok": True,
-        "close_mosaic": max(1, args.epochs // 5), "patience": args.epochs, "plots": True,
+        "close_mosaic": (args.close_mosaic if args.close_mosaic is not None
+                         else max(1, args.epochs // 5)),
+        "patience": args.epochs, "plots": True,
     }  # fmt: skip
+    if args.weights is not None:
+        train_args["pretrained"] = True
+    if args.lr0 is not None:
+        train_args["lr0"] = args.lr0
+        train_args["optimizer"] = "SGD"  # 'auto' would pick its own rate
     if args.time_h is not None:
         train_args["time"] = args.time_h
     model.train(**train_args)
@@ -105,8 +120,11 @@ def main(argv: list[str] | None = None) -> int:
         "wz_roi_xyxy_px": ",".join(str(v) for v in roi.as_tuple()),
         "wz_class_names": ",".join(names),
         "wz_input_size": f"{args.imgsz},{args.imgsz}",
+        "wz_tiles_xyxy_px": args.tiles,
         "wz_recipe": "services/camera_detector/training/README.md",
     }
+    if not args.tiles:
+        del extra["wz_tiles_xyxy_px"]
     kept = [p for p in proto.metadata_props if p.key not in extra]
     del proto.metadata_props[:]
     proto.metadata_props.extend(kept)
@@ -118,6 +136,8 @@ def main(argv: list[str] | None = None) -> int:
     record = {
         "model": final.name,
         "architecture": args.model.name,
+        "started_from": str(args.weights) if args.weights is not None else "scratch",
+        "tiles_xyxy_px": args.tiles,
         "input_size_px": [args.imgsz, args.imgsz],
         "roi_xyxy_px": list(roi.as_tuple()),
         "class_names": names,
