@@ -63,6 +63,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--weights", type=Path, default=None,
                         help="start from these weights (.pt of an earlier run): a fine-tune")  # fmt: skip
     parser.add_argument("--lr0", type=float, default=None, help="initial learning rate")
+    parser.add_argument("--train-tiles", action="store_true",
+                        help="also train on the far-field tile crops of every frame")  # fmt: skip
     parser.add_argument("--close-mosaic", type=int, default=None,
                         help="epochs at the end without mosaic (default: a fifth)")  # fmt: skip
     parser.add_argument("--tiles", default="540,440,780,560",
@@ -78,7 +80,9 @@ def main(argv: list[str] | None = None) -> int:
     roi_data = args.out / "roi-dataset"
     if roi_data.exists():
         shutil.rmtree(roi_data)
-    counts = prepare_roi_dataset(list(args.data), roi_data, roi)
+    tiles = tuple(Roi.parse(t) for t in args.tiles.split(";") if t.strip())
+    counts = prepare_roi_dataset(list(args.data), roi_data, roi,
+                                 tiles if args.train_tiles else ())  # fmt: skip
     sys.stdout.write(f"ROI dataset {roi.as_tuple()}: {counts}\n")
 
     from ultralytics import YOLO
@@ -96,9 +100,10 @@ def main(argv: list[str] | None = None) -> int:
     }  # fmt: skip
     if args.weights is not None:
         train_args["pretrained"] = True
+        train_args["warmup_epochs"] = 1
     if args.lr0 is not None:
         train_args["lr0"] = args.lr0
-        train_args["optimizer"] = "SGD"  # 'auto' would pick its own rate
+        train_args["optimizer"] = "AdamW"  # 'auto' would pick its own rate
     if args.time_h is not None:
         train_args["time"] = args.time_h
     model.train(**train_args)

@@ -111,12 +111,16 @@ def crop_label_lines(
     return out
 
 
-def prepare_roi_dataset(sources: list[Path], dest: Path, roi: Roi) -> dict[str, int]:
+def prepare_roi_dataset(
+    sources: list[Path], dest: Path, roi: Roi, tiles: tuple[Roi, ...] = ()
+) -> dict[str, int]:
     """Write the ROI-cropped union of the ``wz dataset`` folders ``sources`` to ``dest``.
 
-    Returns counts of images and labels per split. The class names of the first source's
-    ``data.yaml`` are kept (all sources must have the same); the manifests are gathered in
-    ``dest/manifest.json`` with the ROI.
+    Each frame gives its ROI crop and, for each of ``tiles`` (the detector's far-field tiles),
+    that crop too (``<stem>-tile<i>.jpg``), so the model also learns the magnified far field it
+    sees through a tile. Returns counts of images and labels per split. The class names of the
+    first source's ``data.yaml`` are kept (all sources must have the same); the manifests are
+    gathered in ``dest/manifest.json`` with the ROI and tiles.
     """
     if not sources:
         raise ValueError("no source dataset")
@@ -140,17 +144,23 @@ def prepare_roi_dataset(sources: list[Path], dest: Path, roi: Roi) -> dict[str, 
             height, width = image.shape[:2]
             if not roi.fits(width, height):
                 raise ValueError(f"{image_path}: ROI {roi.as_tuple()} exceeds {width}x{height}")
-            crop = np.ascontiguousarray(image[roi.y0 : roi.y1, roi.x0 : roi.x1])
-            cv2.imwrite(str(dest / "images" / split / image_path.name), crop,
-                        [cv2.IMWRITE_JPEG_QUALITY, 95])  # fmt: skip
             label_path = source / "labels" / split / f"{image_path.stem}.txt"
             lines = label_path.read_text().splitlines() if label_path.exists() else []
-            cropped = crop_label_lines(lines, (width, height), roi)
-            n_labels += len(cropped)
-            (dest / "labels" / split / f"{image_path.stem}.txt").write_text(
-                "".join(f"{line}\n" for line in cropped)
-            )
-        counts[f"images_{split}"] = len(images)
+            for suffix, region in [("", roi)] + [(f"-tile{i}", t) for i, t in enumerate(tiles)]:
+                if not region.fits(width, height):
+                    raise ValueError(f"{image_path}: region {region.as_tuple()} exceeds "
+                                     f"{width}x{height}")  # fmt: skip
+                crop = np.ascontiguousarray(
+                    image[region.y0 : region.y1, region.x0 : region.x1])  # fmt: skip
+                stem = f"{image_path.stem}{suffix}"
+                cv2.imwrite(str(dest / "images" / split / f"{stem}.jpg"), crop,
+                            [cv2.IMWRITE_JPEG_QUALITY, 95])  # fmt: skip
+                cropped = crop_label_lines(lines, (width, height), region)
+                n_labels += len(cropped)
+                (dest / "labels" / split / f"{stem}.txt").write_text(
+                    "".join(f"{line}\n" for line in cropped)
+                )
+        counts[f"images_{split}"] = len(images) * (1 + len(tiles))
         counts[f"labels_{split}"] = n_labels
         for source in sources:
             truth = source / "truth" / split
@@ -165,7 +175,9 @@ def prepare_roi_dataset(sources: list[Path], dest: Path, roi: Roi) -> dict[str, 
         for s in sources
         if (s / "manifest.json").exists()
     ]
-    manifest = {"roi_xyxy_px": list(roi.as_tuple()), "counts": counts, "sources": manifests}
+    manifest = {"roi_xyxy_px": list(roi.as_tuple()),
+                "tiles_xyxy_px": [list(t.as_tuple()) for t in tiles],
+                "counts": counts, "sources": manifests}  # fmt: skip
     (dest / "manifest.json").write_text(json.dumps(manifest, indent=2))
     return counts
 
