@@ -35,6 +35,7 @@ from benchmarks import (
     report,
     sensors,
     sumo_step,
+    tracker_cycle,
 )
 from benchmarks.common import ROOT
 
@@ -47,6 +48,7 @@ BENCHMARKS: dict[str, Callable[[bool], dict[str, Any]]] = {
     "sensors": sensors.run,
     "lidar_detection": lidar_detection.run,
     "camera_detection": camera_detection.run,
+    "tracker_cycle": tracker_cycle.run,
 }
 RESULTS_PATH = ROOT / "benchmarks" / "results.json"
 MARKDOWN_PATH = ROOT / "BENCHMARKS.md"
