@@ -181,6 +181,25 @@ def _summary(benchmarks: dict[str, Any]) -> list[str]:
             f"{detection['one_core']['frames_per_s']['fast']:.0f} frames/s (fast) and "
             f"{detection['one_core']['frames_per_s']['reference']:.1f} frames/s (reference)."
         )
+    camera = benchmarks.get("camera_detection", {}).get("result")
+    if camera:
+        inference, service = camera["inference"], camera["service"]
+        lines.append(
+            f"- Camera detector: YOLO (shipped model, {inference['input_size_px'][1]} px, ROI and "
+            f"far-field tile) **{_ms(inference['steps']['total']['p50_ms'])}** per frame "
+            f"(median); the whole per-frame work {_ms(camera['per_frame']['p50_ms'])}; the node "
+            f"process fed 10 fps camera and 15 Hz radar returned "
+            f"**{service['batches_received']} of {service['frames_sent']}** frames, end-to-end "
+            f"p99 {_ms(service['end_to_end_latency']['p99_ms'])}."
+        )
+    tracker = benchmarks.get("tracker_cycle", {}).get("result")
+    if tracker:
+        lines.append(
+            f"- Fusion tracker, {tracker['vehicles']} tracks and three sensors: a cycle "
+            f"**{_ms(tracker['cycle']['median_ms'])}** median, p99 "
+            f"{_ms(tracker['cycle']['p99_ms'])}; the 10 Hz snapshot "
+            f"{_ms(tracker['snapshot']['median_ms'])}."
+        )
     return ["## Summary", "", *lines, ""] if lines else []
 
 
