@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 import pytest
 
-from tests.camera_detector.test_node import VEHICLES, vehicle
+from tests.camera_detector.test_node import vehicle
 from wz_camera_detector.settings import camera_mount, radar_mount
 from wz_shared.bus import Bus, Subscription
 from wz_shared.codec import encode_camera_frame
@@ -39,6 +39,12 @@ SITE = load_site(DEFAULT_SITE_PATH)
 CAMERA = camera_mount(SITE, None)
 RADAR = radar_mount(SITE, None)
 PERIOD_S = 0.1
+# Upstream of the mast (7.5, 980), looking south: 40-75 m out, whole in the picture.
+VEHICLES = (
+    vehicle("car-left", -1.83, 925.0, (4.6, 1.8, 1.5)),
+    vehicle("truck-right", 1.83, 895.0, (16.5, 2.6, 4.0)),
+    vehicle("car-right", 1.83, 935.0, (4.6, 1.8, 1.5)),
+)
 
 
 def traffic_at(stamp_s: float) -> list[VehicleTruth]:
@@ -88,7 +94,7 @@ def test_node_process_detects_fuses_and_survives_bad_input(port: int) -> None:
             def send(stamp_s: float, jpeg: bytes | None = None, size: int = 1200) -> None:
                 nonlocal index
                 truth = traffic_at(stamp_s)
-                scans.put(radar.scan(truth, stamp_s - 0.02, index).scan)
+                scans.put(radar.scan(truth, stamp_s, index).scan)
                 if jpeg is None:
                     image = camera.render(vehicle_boxes(truth), [v.vehicle_id for v in truth],
                                           stamp_s).image  # fmt: skip
