@@ -586,14 +586,12 @@ def cascade_assign(
     pairs: list[tuple[int, int]] = []
     free_columns = np.ones(cost.shape[1], dtype=bool)
     for stage_rows in (first_rows, ~first_rows):
-        rows = np.flatnonzero(stage_rows)
-        columns = np.flatnonzero(free_columns)
-        if len(rows) == 0 or len(columns) == 0:
-            continue
-        block = np.ix_(rows, columns)
-        for row, column in gnn_assign(cost[block], allowed[block]):
-            pairs.append((int(rows[row]), int(columns[column])))
-            free_columns[columns[column]] = False
+        # gnn_assign works on the rows and columns with an allowed pair only, so masking the
+        # stage's rows and the taken columns out of `allowed` costs no copy of `cost`.
+        stage_allowed = allowed & stage_rows[:, None] & free_columns[None, :]
+        for row, column in gnn_assign(cost, stage_allowed):
+            pairs.append((row, column))
+            free_columns[column] = False
     return sorted(pairs)
 
 
