@@ -93,3 +93,11 @@ def test_threshold_counts_and_recall_by_range_group() -> None:
         "75-100 m": {"vehicles": 1, "recall": 0.0},
     }
     assert range_bin(130.0) == ">100 m"
+
+
+def test_a_small_far_vehicle_detected_a_pixel_off_is_ignored_not_false() -> None:
+    far = TruthBox((100.0, 100.0, 106.0, 105.0), "car", 300.0, 1.0)  # ignored: beyond 100 m
+    off = PredBox((101.0, 101.0, 108.0, 107.0), "car", 0.8)  # IoU 0.4, 80 % of the truth covered
+    assert match_frame([far], [off], [False]).scores == []
+    elsewhere = PredBox((200.0, 100.0, 206.0, 105.0), "car", 0.8)
+    assert match_frame([far], [elsewhere], [False]).true == [False]

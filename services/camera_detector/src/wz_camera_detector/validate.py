@@ -15,7 +15,8 @@ crowd regions), and missing one costs nothing.
 
 Matching. Per frame, detections by decreasing score each take the unmatched scored vehicle of
 highest IoU (at least ``--iou``, 0.5); a detection left over that overlaps an ignored vehicle
-at that IoU is dropped; any other is a false positive. ``vehicles`` scores are class-agnostic
+(IoU at least ``--iou``, or half of the smaller box covered: a vehicle 300 m out is a 5 px box,
+where one pixel of error costs half the IoU) is dropped; any other is a false positive. ``vehicles`` scores are class-agnostic
 (a car found as a truck still counts); per-class scores ask for the class too.
 
 AP is the area under the precision envelope over all recall points (VOC 2010+ / ultralytics
@@ -85,6 +86,24 @@ class Outcome:
         self.hit_scores += other.hit_scores
 
 
+#: A detection overlapping an ignored vehicle by this share of the smaller box is ignored.
+IGNORE_OVERLAP = 0.5
+
+
+def _overlap_of_smaller(box: tuple[float, float, float, float], boxes: F64) -> F64:
+    """Intersection over the smaller box's area, of ``box`` with each of ``boxes`` (K, 4)."""
+    x0 = np.maximum(box[0], boxes[:, 0])
+    y0 = np.maximum(box[1], boxes[:, 1])
+    x1 = np.minimum(box[2], boxes[:, 2])
+    y1 = np.minimum(box[3], boxes[:, 3])
+    inter = np.clip(x1 - x0, 0, None) * np.clip(y1 - y0, 0, None)
+    area = (box[2] - box[0]) * (box[3] - box[1])
+    areas = (boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1])
+    smaller = np.maximum(np.minimum(area, areas), 1e-9)
+    result: F64 = inter / smaller
+    return result
+
+
 def match_frame(
     truths: Sequence[TruthBox],
     preds: Sequence[PredBox],
@@ -135,7 +154,9 @@ def match_frame(
             outcome.true.append(True)
             continue
         ignored = np.array([not s for s in scored], dtype=bool)
-        if len(ious) and np.any(ignored & (ious >= iou_threshold)):
+        if len(ious) and np.any(ignored & ((ious >= iou_threshold)
+                                           | (_overlap_of_smaller(pred.box_xyxy_px, truth_boxes)
+                                              >= IGNORE_OVERLAP))):  # fmt: skip
             continue  # a "don't care" vehicle: neither true nor false
         outcome.scores.append(pred.score)
         outcome.true.append(False)
