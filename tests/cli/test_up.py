@@ -95,10 +95,17 @@ def test_up_status_tap_restart_and_stop(tmp_path: Path) -> None:
         first_pid = pids[0]
         assert first_pid is not None
 
-        table = run_wz("status", "--connect", endpoint)
-        assert table.returncode == 0, table.stderr
-        assert re.search(rf"\nsimulator +yes +running +{first_pid} ", table.stdout), table.stdout
-        assert "wz/us75-lincoln/truth/vehicles" in table.stdout
+        tables: list[str] = []
+
+        def truth_rate_shown() -> bool:
+            # The first status may come before the first truth message (a loaded machine).
+            table = run_wz("status", "--connect", endpoint)
+            assert table.returncode == 0, table.stderr
+            tables[:] = [table.stdout]
+            return "wz/us75-lincoln/truth/vehicles" in table.stdout
+
+        wait_for(truth_rate_shown, 60.0, "the truth key in `wz status`")
+        assert re.search(rf"\nsimulator +yes +running +{first_pid} ", tables[0]), tables[0]
 
         lines: list[str] = []
 
