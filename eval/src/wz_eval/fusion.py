@@ -121,10 +121,15 @@ def _progress(sim_s: float, total_s: float) -> None:
     sys.stderr.flush()
 
 
-def _dropped(batch: DetectionBatch, dropouts: Sequence[Dropout], warmup_s: float) -> bool:
-    return any(batch.source_id == d.sensor_id
-               and warmup_s + d.start_s <= batch.stamp < warmup_s + d.start_s + d.duration_s
+def _silent(sensor_id: str, stamp_s: float, dropouts: Sequence[Dropout], warmup_s: float) -> bool:
+    """Whether ``sensor_id`` is in one of the dropouts at ``stamp_s``."""
+    return any(sensor_id == d.sensor_id
+               and warmup_s + d.start_s <= stamp_s < warmup_s + d.start_s + d.duration_s
                for d in dropouts)  # fmt: skip
+
+
+def _dropped(batch: DetectionBatch, dropouts: Sequence[Dropout], warmup_s: float) -> bool:
+    return _silent(batch.source_id, batch.stamp, dropouts, warmup_s)
 
 
 @dataclass
@@ -206,8 +211,7 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
                    [d.time_offset_s for d in batch.detections])  # fmt: skip
     def _silenced(stamp_s: float) -> bool:
         """The camera is in a dropout at ``stamp_s`` (its camera-only positions go too)."""
-        return any(d.sensor_id == cam_id and options.warmup_s + d.start_s <= stamp_s
-                   < options.warmup_s + d.start_s + d.duration_s for d in options.dropouts)  # fmt: skip
+        return _silent(cam_id, stamp_s, options.dropouts, options.warmup_s)
 
     for stamp, points in record.camera_only:
         if (vehicles := vehicles_at(stamp)) is not None and not _silenced(stamp):

@@ -23,6 +23,7 @@ from scipy.optimize import linear_sum_assignment
 
 from wz_shared.messages import VehicleTruth
 from wz_shared.site import Site
+from wz_simulator.sensors.rig import moved
 
 F64 = npt.NDArray[np.float64]
 
@@ -49,15 +50,7 @@ class TruthIndex:
         dt = stamp_s - self._stamps[j]
         if abs(dt) > max_gap_s:
             return None
-        if dt == 0.0:
-            return self._vehicles[j]
-        return [
-            v.model_copy(update={
-                "x_m": v.x_m + v.speed_mps * math.cos(v.heading_rad) * dt,
-                "y_m": v.y_m + v.speed_mps * math.sin(v.heading_rad) * dt,
-            })
-            for v in self._vehicles[j]
-        ]  # fmt: skip
+        return moved(self._vehicles[j], dt)
 
 
 def match(
@@ -129,10 +122,7 @@ def score_instant(
         vehicle = vehicles[t]
         offset = time_offsets_s[e] if time_offsets_s is not None else None
         if offset:
-            vehicle = vehicle.model_copy(update={
-                "x_m": vehicle.x_m + vehicle.speed_mps * math.cos(vehicle.heading_rad) * offset,
-                "y_m": vehicle.y_m + vehicle.speed_mps * math.sin(vehicle.heading_rad) * offset,
-            })  # fmt: skip
+            (vehicle,) = moved([vehicle], offset)
         s_est, d_est = road.to_road(est[e, 0], est[e, 1])
         s_true, d_true = road.to_road(vehicle.x_m, vehicle.y_m)  # truth moved to the stamp
         lon = float(s_est) - float(s_true)

@@ -205,6 +205,11 @@ class RoadFrame:
         normal = self.normal_at(station_m)
         return np.stack([normal[..., 1], -normal[..., 0]], axis=-1)
 
+    def heading_at_point(self, x_m: float, y_m: float) -> float:
+        """Heading of the direction of travel [rad] at the station of the site point (x, y)."""
+        station, _ = self.to_road(x_m, y_m)
+        return float(np.asarray(self.heading_at(station)).reshape(-1)[0])
+
     def heading_at(self, station_m: npt.ArrayLike) -> FloatArray:
         """Heading of the direction of travel at each station.
 

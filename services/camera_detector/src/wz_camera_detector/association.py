@@ -344,9 +344,14 @@ def reflection_setback_m(camera: CameraObject, bearing_rad: float) -> float:
     """
     if camera.heading_rad is None:
         return 0.0
-    along = abs(math.cos(bearing_rad - camera.heading_rad))
-    across = abs(math.sin(bearing_rad - camera.heading_rad))
-    return max(0.5 * camera.length_m * along, 0.5 * camera.width_m * across)
+    return setback_m(bearing_rad, camera.heading_rad, camera.length_m, camera.width_m)
+
+
+def setback_m(bearing_rad: float, heading_rad: float, length_m: float, width_m: float) -> float:
+    """``max((L / 2) |u . e_psi|, (W / 2) |u . n_psi|)`` for a line of sight at ``bearing_rad``."""
+    along = abs(math.cos(bearing_rad - heading_rad))
+    across = abs(math.sin(bearing_rad - heading_rad))
+    return max(0.5 * length_m * along, 0.5 * width_m * across)
 
 
 def expected_echo(camera: CameraObject, radar_xy_m: tuple[float, float]) -> CameraObject:
@@ -552,11 +557,8 @@ def _radar_only(
     # truck's centre is 8 m behind its face, a car's 2.3 m).
     x_m, y_m, covariance = radar.x_m, radar.y_m, radar.covariance_m2
     if road_heading_rad is not None:
-        guess = CameraObject(local_id=0, x_m=x_m, y_m=y_m, covariance_m2=covariance,
-                             object_class=VehicleClass.UNKNOWN, score=0.0,
-                             heading_rad=road_heading_rad, length_m=RADAR_ONLY_LENGTH_M,
-                             width_m=RADAR_ONLY_WIDTH_M)  # fmt: skip
-        setback = reflection_setback_m(guess, radar.bearing_rad)
+        setback = setback_m(radar.bearing_rad, road_heading_rad, RADAR_ONLY_LENGTH_M,
+                            RADAR_ONLY_WIDTH_M)  # fmt: skip
         along, _ = _unit(radar.bearing_rad)
         x_m, y_m = x_m + setback * along[0], y_m + setback * along[1]
         covariance = covariance + settings.radar_only_size_std_m**2 * np.outer(along, along)

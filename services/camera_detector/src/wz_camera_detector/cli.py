@@ -51,8 +51,9 @@ from pydantic import ValidationError
 
 from wz_camera_detector.node import (
     CLASS_SIZES,
-    TRUNCATION_MARGIN_PX,
     ImageBackend,
+    camera_at_size,
+    cut_by_view,
     make_backend,
     road_heading_at,
 )
@@ -158,22 +159,9 @@ class FrameProcessor:
     def camera(self, width_px: int, height_px: int) -> PinholeCamera:
         camera = self._cameras.get((width_px, height_px))
         if camera is None:
-            intrinsics = camera_intrinsics(self.mount)
-            mount = self.mount.model_copy(update={"intrinsics": intrinsics.model_copy(
-                update={"width_px": width_px, "height_px": height_px})})  # fmt: skip
-            camera = self._cameras[(width_px, height_px)] = PinholeCamera(mount)
+            camera = self._cameras[(width_px, height_px)] = camera_at_size(
+                self.mount, width_px, height_px)  # fmt: skip
         return camera
-
-    def _cut(self, box: tuple[float, float, float, float], camera: PinholeCamera) -> bool:
-        """Whether the box touches the edge of the detector's view (not ranged: the node's
-        rule, see :data:`wz_camera_detector.node.TRUNCATION_MARGIN_PX`)."""
-        intrinsics = camera_intrinsics(camera.mount)
-        width, height = intrinsics.width_px, intrinsics.height_px
-        roi = getattr(self.backend, "roi_xyxy_px", None) or (0, 0, width, height)
-        left, right, bottom = roi[0], min(roi[2], width), min(roi[3], height)
-        margin = TRUNCATION_MARGIN_PX
-        return bool(box[3] >= bottom - margin or box[0] <= left + margin
-                    or box[2] >= right - margin)  # fmt: skip
 
     def process(self, image: U8, stamp_s: float) -> tuple[list[dict[str, Any]], float]:
         """Detections of one frame as JSON-ready dicts, and the detector's time [s]."""
@@ -205,7 +193,9 @@ class FrameProcessor:
         }  # fmt: skip
         contact = box_to_ground(camera, detection.box_xyxy_px, 0.0, 0.0, 0.0)
         keys = ("x", "y", "station", "offset", "range", "paper_x", "paper_y")
-        record["cut"] = self._cut(detection.box_xyxy_px, camera)
+        intrinsics = camera_intrinsics(camera.mount)
+        record["cut"] = cut_by_view(detection.box_xyxy_px, self.backend, intrinsics.width_px,
+                                    intrinsics.height_px)  # fmt: skip
         if record["cut"] or not all(math.isfinite(v) for v in contact):
             return record | dict.fromkeys(keys)
         heading = road_heading_at(self.site, *contact)

@@ -147,10 +147,29 @@ def make_backend(settings: CameraDetectorSettings) -> ImageBackend:
     )
 
 
+def camera_at_size(mount: SensorMount, width_px: int, height_px: int) -> PinholeCamera:
+    """The mount's pinhole model for frames of another size (same pose and field of view)."""
+    intrinsics = camera_intrinsics(mount)
+    if (intrinsics.width_px, intrinsics.height_px) != (width_px, height_px):
+        mount = mount.model_copy(update={"intrinsics": intrinsics.model_copy(
+            update={"width_px": width_px, "height_px": height_px})})  # fmt: skip
+    return PinholeCamera(mount)
+
+
+def cut_by_view(box_xyxy_px: tuple[float, float, float, float], backend: ImageBackend,
+                width_px: int, height_px: int) -> bool:  # fmt: skip
+    """Whether a box touches the left, right or bottom edge of what the detector sees (its
+    ROI, else the frame), within :data:`TRUNCATION_MARGIN_PX`: a vehicle cut by the view."""
+    roi = getattr(backend, "roi_xyxy_px", None) or (0, 0, width_px, height_px)
+    left, right, bottom = roi[0], min(roi[2], width_px), min(roi[3], height_px)
+    x1, _, x2, y2 = box_xyxy_px
+    margin = TRUNCATION_MARGIN_PX
+    return bool(y2 >= bottom - margin or x1 <= left + margin or x2 >= right - margin)
+
+
 def road_heading_at(site: Site, x_m: float, y_m: float) -> float:
     """The site road's heading at the point's station [rad], CCW from east."""
-    station, _ = site.road_frame.to_road(x_m, y_m)
-    return float(np.asarray(site.road_frame.heading_at(station)).reshape(-1)[0])
+    return site.road_frame.heading_at_point(x_m, y_m)
 
 
 def camera_covariance(
@@ -235,17 +254,8 @@ class CameraDetector:
         """The pinhole model at a frame's size (same pose and field of view as the mount)."""
         camera = self._cameras.get((width_px, height_px))
         if camera is None:
-            intrinsics = camera_intrinsics(self.camera_mount)
-            mount = self.camera_mount
-            if (intrinsics.width_px, intrinsics.height_px) != (width_px, height_px):
-                mount = mount.model_copy(
-                    update={
-                        "intrinsics": intrinsics.model_copy(
-                            update={"width_px": width_px, "height_px": height_px}
-                        )
-                    }
-                )
-            camera = self._cameras[(width_px, height_px)] = PinholeCamera(mount)
+            camera = self._cameras[(width_px, height_px)] = camera_at_size(
+                self.camera_mount, width_px, height_px)  # fmt: skip
         return camera
 
     def handle(
@@ -339,13 +349,10 @@ class CameraDetector:
         camera = self.camera(width_px, height_px)
         camera_xy = (float(camera.position_m[0]), float(camera.position_m[1]))
         objects: list[CameraObject] = []
-        left, _top, right, bottom = self._view_edges(width_px, height_px)
-        margin = TRUNCATION_MARGIN_PX
         for track in tracks:
-            x1, _, x2, y2 = track.box_xyxy_px
-            if y2 >= bottom - margin or x1 <= left + margin or x2 >= right - margin:
-                # Cut by the edge of the view: its bottom is not where it meets the road, nor
-                # its middle column the vehicle's bearing. Not ranged (the LiDAR sees it).
+            if cut_by_view(track.box_xyxy_px, self.backend, width_px, height_px):
+                # Its bottom is not where it meets the road, nor its middle column the
+                # vehicle's bearing. Not ranged (the LiDAR sees it).
                 continue
             object_class, length_m, width_m = CLASS_SIZES[track.class_name]
             # Heading from where the box's contact point lies (the road's direction there).
@@ -373,13 +380,6 @@ class CameraDetector:
             )
         return objects
 
-    def _view_edges(self, width_px: int, height_px: int) -> tuple[float, float, float, float]:
-        """Left, top, right, bottom of what the detector sees [px]: its ROI, else the frame."""
-        roi = getattr(self.backend, "roi_xyxy_px", None)
-        if roi is None:
-            return 0.0, 0.0, float(width_px), float(height_px)
-        return (float(roi[0]), float(roi[1]), float(min(roi[2], width_px)),
-                float(min(roi[3], height_px)))  # fmt: skip
 
     def _fuse(self, objects: list[CameraObject], stamp_s: float) -> list[FusedObject]:
         scan = self._scan

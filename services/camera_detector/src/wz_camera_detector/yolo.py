@@ -580,39 +580,38 @@ class YoloOnnxDetector:
         ValueError
             The frame is not an (H, W, 3) image or does not contain the ROI.
         """
-        start = time.perf_counter()
-        region, (x0, y0) = self.crop(image_bgr)
-        tensor, transform = letterbox(region, self.input_size)
-        preprocess_s = time.perf_counter() - start
-        started = time.perf_counter()
-        output = self._run(tensor)
-        inference_s = time.perf_counter() - started
-        started = time.perf_counter()
-        boxes, scores, class_ids = decode(output, self.conf_threshold)
-        all_boxes = [transform.to_image(boxes) + np.array([x0, y0, x0, y0], dtype=np.float64)]
-        all_scores, all_classes = [scores], [class_ids]
-        postprocess_s = time.perf_counter() - started
+        region, origin = self.crop(image_bgr)  # checks the frame's shape
+        height, width = image_bgr.shape[:2]
         for tile in self.tiles_xyxy_px:
-            started = time.perf_counter()
-            tx0, ty0, tx1, ty1 = tile
-            if tx1 > image_bgr.shape[1] or ty1 > image_bgr.shape[0]:
+            if tile[2] > width or tile[3] > height:
                 raise ValueError(f"frame does not contain the detector's tile {tile}")
-            tile_tensor, tile_transform = letterbox(image_bgr[ty0:ty1, tx0:tx1], self.input_size)
+        # The ROI, then each far-field tile: each letterboxed and run on its own.
+        regions = [(region, origin, False)] + [
+            (image_bgr[ty0:ty1, tx0:tx1], (tx0, ty0), True)
+            for tx0, ty0, tx1, ty1 in self.tiles_xyxy_px
+        ]
+        preprocess_s = inference_s = postprocess_s = 0.0
+        all_boxes, all_scores, all_classes = [], [], []
+        for pixels, (x0, y0), is_tile in regions:
+            started = time.perf_counter()
+            tensor, transform = letterbox(pixels, self.input_size)
             preprocess_s += time.perf_counter() - started
             started = time.perf_counter()
-            tile_output = self._run(tile_tensor)
+            output = self._run(tensor)
             inference_s += time.perf_counter() - started
             started = time.perf_counter()
-            t_boxes, t_scores, t_classes = decode(tile_output, self.conf_threshold)
-            t_px = tile_transform.to_image(t_boxes)
-            # A box touching the tile's edge is a cut vehicle: the main region sees it whole.
-            margin = TILE_EDGE_MARGIN_PX
-            inside = ((t_px[:, 0] > margin) & (t_px[:, 1] > margin)
-                      & (t_px[:, 2] < (tx1 - tx0) - margin)
-                      & (t_px[:, 3] < (ty1 - ty0) - margin))  # fmt: skip
-            all_boxes.append(t_px[inside] + np.array([tx0, ty0, tx0, ty0], dtype=np.float64))
-            all_scores.append(t_scores[inside])
-            all_classes.append(t_classes[inside])
+            input_boxes, scores, class_ids = decode(output, self.conf_threshold)
+            boxes = transform.to_image(input_boxes)
+            if is_tile:
+                # A box touching the tile's edge is a cut vehicle: the ROI sees it whole.
+                margin = TILE_EDGE_MARGIN_PX
+                tile_h, tile_w = pixels.shape[:2]
+                inside = ((boxes[:, 0] > margin) & (boxes[:, 1] > margin)
+                          & (boxes[:, 2] < tile_w - margin) & (boxes[:, 3] < tile_h - margin))  # fmt: skip
+                boxes, scores, class_ids = boxes[inside], scores[inside], class_ids[inside]
+            all_boxes.append(boxes + np.array([x0, y0, x0, y0], dtype=np.float64))
+            all_scores.append(scores)
+            all_classes.append(class_ids)
             postprocess_s += time.perf_counter() - started
         started = time.perf_counter()
         boxes_px = np.concatenate(all_boxes)

@@ -72,13 +72,7 @@ class FusionTrackerSettings(ServiceSettings):
 
 def road_heading_hook(site: Site) -> Callable[[float, float], float]:
     """``heading_at(x, y)``: the direction of travel at the point's station [rad]."""
-    road = site.road_frame
-
-    def heading_at(x_m: float, y_m: float) -> float:
-        station, _ = road.to_road(x_m, y_m)
-        return float(np.asarray(road.heading_at(station)).reshape(-1)[0])
-
-    return heading_at
+    return site.road_frame.heading_at_point
 
 
 def to_measurements(batch: DetectionBatch, report: Report) -> list[Measurement]:
