@@ -237,7 +237,7 @@ def test_fused_covariance_takes_radar_range_and_camera_bearing() -> None:
     )
     bearing, rho = bearing_from_radar(x_m, y_m), horizontal_range(x_m, y_m)
     slant = math.hypot(rho, RADAR.pose.z_m - TARGET_HEIGHT_M)
-    range_std = math.hypot(RANGE_STD_M * slant / rho, SETTINGS.reflection_extent_std_m)
+    range_std = math.hypot(RANGE_STD_M * slant / rho, SETTINGS.centre_std_m)
     expected = polar_covariance(bearing, range_std, CAMERA_LATERAL_STD_M)
     np.testing.assert_allclose(obj.covariance_m2, expected, rtol=1e-9, atol=1e-12)
     # Without a road heading, the speed is the radial speed's magnitude.

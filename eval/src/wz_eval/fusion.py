@@ -76,6 +76,8 @@ SOURCES = ("camera", "lidar", "radar", "camera_radar", "average", "paper_kf", "f
 #: Gate for matching a source's estimate to a vehicle [m] (the MOT metrics use 3 m).
 SOURCE_GATE_M = 5.0
 MOT_GATE_M = 3.0
+#: Width of the "don't care" band at the scored region's edge [m] (see :func:`scored_region`).
+EDGE_MARGIN_M = 10.0
 
 
 @dataclass(frozen=True)
@@ -237,15 +239,15 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
             position += 1
         tracker.flush()
         tracker.advance_to(sample_s)
-        # Tracks outside the scored region are ignored (neither matches nor false positives);
-        # the region is grown by the MOT gate so a vehicle at its edge can still be matched.
         states = [s for s in tracker.tracks(sample_s) if s.status != "tentative"
                   and math.hypot(s.x_m - centre[0], s.y_m - centre[1])
-                  <= options.max_range_m + MOT_GATE_M]  # fmt: skip
+                  <= options.max_range_m + EDGE_MARGIN_M]  # fmt: skip
         tracker_s += time.perf_counter() - t0
-        vehicles = vehicles_at(sample_s)
-        if vehicles is None:
+        found = truth.at(sample_s)
+        if found is None:
             continue
+        nearby = in_range(site, found, centre, options.max_range_m + EDGE_MARGIN_M)
+        vehicles, states = scored_region(nearby, states, centre, options.max_range_m)
         matched = scores.add(site, "fused", sample_s,
                              [(s.x_m, s.y_m, s.speed_mps) for s in states], vehicles)  # fmt: skip
         fused_samples.extend((sample_s, lon, lat) for _, _, lon, lat in matched)
@@ -303,6 +305,33 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
 
         report["plots"] = write_plots(plots_dir, site, record, scores, report)
     return report
+
+
+def scored_region(vehicles: Sequence[VehicleTruth], states: Sequence[TrackState],
+                  centre: tuple[float, float], max_range_m: float,
+                  ) -> tuple[list[VehicleTruth], list[TrackState]]:  # fmt: skip
+    """The vehicles and tracks scored at one instant: those within ``max_range_m``.
+
+    The region's edge is a "don't care" band, as in KITTI's and MOTChallenge's ignore regions:
+    a track just inside the edge whose vehicle is just outside is neither a match nor a false
+    positive, and a track just outside whose vehicle is inside still matches it. So the
+    vehicles and tracks within ``max_range_m + EDGE_MARGIN_M`` are paired (nearest first,
+    within the MOT gate); a track paired with a vehicle outside the region is left out, as is
+    an unpaired track outside it.
+    """
+
+    def inside(x_m: float, y_m: float) -> bool:
+        return math.hypot(x_m - centre[0], y_m - centre[1]) <= max_range_m
+
+    est = np.array([(s.x_m, s.y_m) for s in states], dtype=np.float64).reshape(-1, 2)
+    tru = np.array([(v.x_m, v.y_m) for v in vehicles], dtype=np.float64).reshape(-1, 2)
+    partner = {e: t for e, t in match(est, tru, MOT_GATE_M)}
+    kept_states = [
+        s for e, s in enumerate(states)
+        if (inside(vehicles[partner[e]].x_m, vehicles[partner[e]].y_m) if e in partner
+            else inside(s.x_m, s.y_m))
+    ]  # fmt: skip
+    return [v for v in vehicles if inside(v.x_m, v.y_m)], kept_states
 
 
 def _dropout_report(dropout: Dropout, warmup_s: float,

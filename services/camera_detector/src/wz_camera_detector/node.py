@@ -26,7 +26,8 @@ road, pitch, the assumed vehicle size), so the covariance is built in the camera
 sight ``u`` (horizontal, camera to object) and its normal ``n``, with ``r`` the horizontal
 range [m]::
 
-    sigma_lat = lateral_std_m + lateral_std_per_m * r      (0.3 m + 0.005 r)
+    sigma_lat = lateral_std_m + lateral_std_per_m * r      (0.15 m + 0.0025 r)
+                + near_lateral_std_m * max(0, 1 - r / near_range_m)   (1.3 m, 25 m)
     sigma_los = range_std_m + range_std_per_m * r          (1.0 m + 0.03 r)
     P = sigma_los^2 u u^T + sigma_lat^2 n n^T              [m^2]
 
@@ -182,7 +183,8 @@ def camera_covariance(
     bearing = math.atan2(dy, dx)
     u = np.array([math.cos(bearing), math.sin(bearing)])
     n = np.array([-u[1], u[0]])
-    lateral = settings.lateral_std_m + settings.lateral_std_per_m * range_m
+    lateral = (settings.lateral_std_m + settings.lateral_std_per_m * range_m
+               + settings.near_lateral_std_m * max(0.0, 1.0 - range_m / settings.near_range_m))  # fmt: skip
     along = settings.range_std_m + settings.range_std_per_m * range_m
     covariance: F64 = along**2 * np.outer(u, u) + lateral**2 * np.outer(n, n)
     return covariance

@@ -122,6 +122,10 @@ class TrackerSettings(BaseModel):
     #: Cost reduction of a pair whose (sensor, local_track_id) last updated that track, in
     #: units of the cost, ``-2 ln likelihood`` (4: a likelihood ratio of e^2 = 7.4) [-].
     local_track_id_bonus: float = Field(default=4.0, ge=0.0)
+    #: Huber's threshold on the Mahalanobis distance ``d`` of a matched pair [sigmas]: beyond
+    #: it the measurement's covariance is scaled by ``d / huber_k`` (a heavy-tailed outlier
+    #: moves the track by about ``huber_k`` sigmas); 0 turns it off.
+    huber_k: float = Field(default=0.0, ge=0.0)
 
     # --- channels ---
     #: Sensor ids whose unmatched detections start tracks; None: every sensor.
@@ -160,6 +164,10 @@ class TrackerSettings(BaseModel):
     #: hands its state to the old track (see ``MultiTargetTracker._hand_over``). 0 turns it off.
     hand_over_age_s: float = Field(default=1.0, ge=0.0)
     hand_over_along_m: float = Field(default=10.0, ge=0.0)
+    #: ... and within this across it [m]: a vehicle that changed lanes while unseen (the
+    #: merge at the taper starts under the mast, in the LiDAR's blind spot) comes back one
+    #: lane (3.6 m) over. A vehicle alongside that was there all along has its own track.
+    hand_over_across_m: float = Field(default=4.5, ge=0.0)
     #: An unmatched measurement within this squared Mahalanobis distance of a confirmed track
     #: starts no track: it is that vehicle's outlier (a box fit gone wrong, a biased camera
     #: range), not a new vehicle. A vehicle alongside, in the next lane 3.6 m away, is far
@@ -595,6 +603,36 @@ def cascade_assign(
     return sorted(pairs)
 
 
+def _huber_inflated(
+    R: F64, pairs: Sequence[tuple[int, int]], d2: F64, huber_k: float
+) -> F64:
+    """Measurement covariances of the matched pairs, widened where the innovation is large.
+
+    A detector's errors have heavy tails (a box fitted to half a vehicle, an echo off the wrong
+    face): inside the gate but far from the prediction, a plain Kalman update follows them all
+    the way. Huber's M-estimator weights a residual beyond ``k`` sigmas by ``k / d``; in a
+    Kalman update that is ``R <- R d / k`` for ``d = sqrt(d^2) > k`` (``d^2`` the pair's squared
+    Mahalanobis distance), so an outlier moves the track by about ``k`` sigmas and no more,
+    while ordinary measurements are untouched. ``huber_k = 0`` turns it off.
+
+    Returns
+    -------
+    R_used
+        ``R`` (M, 2, 2) with the matched columns' covariances scaled (a copy when any is).
+    """
+    if huber_k <= 0.0 or not pairs:
+        return R
+    rows = np.array([row for row, _ in pairs], dtype=np.intp)
+    columns = np.array([column for _, column in pairs], dtype=np.intp)
+    d = np.sqrt(np.maximum(d2[rows, columns], 0.0))
+    scale = np.maximum(1.0, d / huber_k)
+    if not np.any(scale > 1.0):
+        return R
+    R_used = R.copy()
+    R_used[columns] *= scale[:, None, None]
+    return R_used
+
+
 # ----------------------------------------------------------------------------- tracks
 
 
@@ -935,6 +973,7 @@ class MultiTargetTracker:
             confirmed = np.array([t.confirmed for t in live], dtype=bool)
             pairs = cascade_assign(cost, d2 <= settings.gate_chi2, confirmed)
             if pairs:
+                R_used = _huber_inflated(R, pairs, d2, settings.huber_k)
                 self._update_matched(
                     [live[row] for row, _ in pairs],
                     np.array([row for row, _ in pairs], dtype=np.intp),
@@ -943,7 +982,7 @@ class MultiTargetTracker:
                     x_pred,
                     P_pred,
                     z,
-                    R,
+                    R_used,
                     sensor_id,
                     stamp_s,
                     measurements,
@@ -1215,7 +1254,7 @@ class MultiTargetTracker:
         When a vehicle comes back too far from its coasting track's prediction even for
         :meth:`_reacquire` (a long gap, a bent velocity), a new track starts on it. While the
         new track is young (``hand_over_age_s``) and the old one coasts just behind or ahead of
-        it in the same lane (``hand_over_along_m``, ``reacquire_across_m``), moving alike, they
+        it (``hand_over_along_m``, ``hand_over_across_m``: the same lane or the next), moving alike, they
         are one vehicle: the old track takes the new one's state and the new one goes, so the
         vehicle keeps its identity.
         """
@@ -1245,7 +1284,7 @@ class MultiTargetTracker:
         across = d[..., 1] * u[:, None, 0] - d[..., 0] * u[:, None, 1]
         dv = np.hypot(x_new[None, :, 2] - x_old[:, None, 2], x_new[None, :, 3] - x_old[:, None, 3])
         allowed = ((np.abs(along) <= settings.hand_over_along_m)
-                   & (np.abs(across) <= settings.reacquire_across_m)
+                   & (np.abs(across) <= settings.hand_over_across_m)
                    & (dv < settings.merge_velocity_difference_mps)
                    & (speed[:, None] >= 0.0))  # fmt: skip
         if not allowed.any():

@@ -53,7 +53,10 @@ than the vehicle's centre. This module fits the box instead:
    - the shape's part, in the box frame: along an axis completed from one end,
      ``(sigma_dim / 2)^2`` (the centre moves by half the error of the assumed dimension); grown at
      both ends, ``+ ((dim - visible) / 2)^2 / 3`` as well; seen whole, 0 (but the length of a
-     heavy vehicle seen end-on is always uncertain: ``(heavy_length_std_m / 2)^2``).
+     heavy vehicle seen end-on is always uncertain: ``(heavy_length_std_m / 2)^2``); a car
+     completed from its near face at a range where the beams cannot rule out a heavy
+     vehicle's height (``height + range * beam_spacing >= 2.6 m``) gets
+     ``((heavy_length - car_length) / 2)^2``: its centre may be a semitrailer's.
 
    So one face seen gives a covariance long along the unseen dimension; an L gives a small one.
 """
@@ -105,6 +108,10 @@ class BoxFitSettings(BaseModel):
     range_noise_m: float = Field(default=0.05, gt=0.0)
     #: Angle between neighbouring beams or columns, the coarser of the two [deg].
     angular_resolution_deg: float = Field(default=0.2, gt=0.0)
+    #: Vertical angle between neighbouring beams [deg] (64 beams over 41 deg: 0.65). A far
+    #: vehicle's top can lie up to ``range * beam_spacing`` above its highest return: a
+    #: tractor-semitrailer seen end-on at 120 m shows 2.2 m of its 4 m.
+    beam_spacing_deg: float = Field(default=0.65, ge=0.0)
     #: Length a heavy vehicle is completed to when less of it is visible [m]. On a freeway most
     #: heavy vehicles are tractor-semitrailers (16-22 m; the simulator's are 16.5 m); lower it
     #: where box trucks and buses dominate. Its spread is ``heavy_length_std_m``.
@@ -440,9 +447,22 @@ def fit_box(
     variance_length = shape_variance(how_l, shape.length_std_m, visible_length, shape.length_m)
     if length_open:
         variance_length = max(variance_length, (0.5 * shape.length_std_m) ** 2)
+    range_m = math.hypot(centre_x, centre_y)
+    # Completed as a car from its near face, but too far for the beams to rule out a heavy
+    # vehicle's height: the centre lies anywhere from a car's half-length to a heavy
+    # vehicle's behind that face, and its variance along the length says so.
+    possibly_heavy = (
+        completion is not VehicleClass.TRUCK
+        and how_l == "one_end"
+        and not side_in_view
+        and height + range_m * math.radians(settings.beam_spacing_deg) >= HEAVY_MIN_HEIGHT_M
+    )
+    if possibly_heavy:
+        variance_length = max(
+            variance_length, (0.5 * (settings.heavy_length_m - shape.length_m)) ** 2
+        )
     variance_width = shape_variance(how_w, shape.width_std_m, visible_width, shape.width_m)
     # Sensor part, in the bearing frame of the centre: along the ray and across it.
-    range_m = math.hypot(centre_x, centre_y)
     sigma_across = max(range_m, 1.0) * math.radians(settings.angular_resolution_deg)
     covariance = _rotated_covariance(variance_length, variance_width, heading)
     covariance += _rotated_covariance(

@@ -53,6 +53,8 @@ class LidarDetectorSettings(ServiceSettings):
     #: Std added along a box's length when the vehicle is nearer than the lowest beam can see
     #: it whole (under the mast: the box slides along the vehicle) [m].
     near_field_std_m: Annotated[float, Field(ge=0.0)] = 1.5
+    #: ... and across it [m].
+    near_field_across_std_m: Annotated[float, Field(ge=0.0)] = 1.0
     reference: ReferenceSettings = Field(default_factory=ReferenceSettings)
     fast: FastSettings = Field(default_factory=FastSettings)
 
