@@ -194,6 +194,9 @@ class TrackerSettings(BaseModel):
     use_speed_measurements: bool = True
     #: Std of a radar speed along the road [m/s].
     speed_std_mps: float = Field(default=0.5, gt=0.0)
+    #: A radar speed whose squared normalised innovation exceeds this is not used (10.8: the
+    #: 99.9 % quantile of chi-square with 1 degree of freedom) [-].
+    speed_gate_chi2: float = Field(default=10.8, gt=0.0)
 
     # --- bookkeeping ---
     #: Measured lengths and widths kept per track for their running median.
@@ -354,6 +357,8 @@ class TrackerCounters:
     #: Unmatched measurements that started no track, being near a confirmed one
     #: (:attr:`TrackerSettings.spawn_gate_chi2`).
     measurements_suppressed: int = 0
+    #: Radar speeds outside their gate (:attr:`TrackerSettings.speed_gate_chi2`), not used.
+    speeds_rejected: int = 0
 
 
 # ----------------------------------------------------------------------------- association
@@ -1155,7 +1160,17 @@ class MultiTargetTracker:
                     [[measurements[columns[i]].speed_mps] for i in speed_rows], dtype=np.float64
                 )
                 R_speed = np.full((len(speed_rows), 1, 1), settings.speed_std_mps**2)
-                self._bank.update(matched_slots[speed_rows], speeds, R_speed, H)
+                # Gate: a radar speed paired with the wrong echo (the car in the next lane)
+                # would drag the velocity by metres per second in one update.
+                # y = s - H x,  S = H P H^T + R,  kept when y^2 / S <= speed_gate_chi2.
+                speed_slots = matched_slots[speed_rows]
+                x_now, P_now = self._bank.states(speed_slots), self._bank.covariances(speed_slots)
+                y = speeds[:, 0] - np.einsum("mj,mj->m", H[:, 0, :], x_now)
+                S = np.einsum("mi,mij,mj->m", H[:, 0, :], P_now, H[:, 0, :]) + R_speed[:, 0, 0]
+                keep = y * y <= settings.speed_gate_chi2 * S
+                self._counters.speeds_rejected += int(np.count_nonzero(~keep))
+                if keep.any():
+                    self._bank.update(speed_slots[keep], speeds[keep], R_speed[keep], H[keep])
 
         # The batch's priors and posteriors, copied once (fancy indexing copies); each track's
         # history entry holds views of its rows.

@@ -298,6 +298,15 @@ def _completion_class(
     return VehicleClass.CAR
 
 
+def _column_step_rad(xy: FloatArray, resolution_deg: float) -> float:
+    """The azimuth step between the cluster's columns [rad]: the median gap between distinct
+    azimuths, at most the sensor's resolution (dense or synthetic points: smaller)."""
+    azimuths = np.unique(np.round(np.arctan2(xy[:, 1], xy[:, 0]), 7))
+    gaps = np.diff(azimuths)
+    limit = math.radians(resolution_deg)
+    return min(float(np.median(gaps)), limit) if len(gaps) else limit
+
+
 def _complete(low: float, high: float, dimension: float) -> tuple[float, float, str]:
     """Grow ``[low, high]`` (coordinates along an axis; the sensor at 0) to ``dimension``.
 
@@ -428,8 +437,20 @@ def fit_box(
             length_m=settings.heavy_length_m if length_open else 0.0,
             length_std_m=settings.heavy_length_std_m,
         )
-    low_l, high_l, how_l = _complete(along_min, along_max, shape.length_m)
-    low_w, high_w, how_w = _complete(across_min, across_max, shape.width_m)
+    # The outermost columns fall on average half a column step inside a face's edges (the
+    # edge lies anywhere between two columns): across the line of sight a far vehicle looks
+    # narrower on both sides, and completing only the far side would shift its centre away
+    # from the sensor (0.1-0.17 m at 60-120 m, measured). Both ends get that half step back.
+    sight_range_m = math.hypot(mean_x, mean_y)
+    half_step_m = 0.5 * sight_range_m * _column_step_rad(xy, settings.angular_resolution_deg)
+    along_edge = half_step_m * abs(math.sin(sight_rad - heading))
+    across_edge = half_step_m * abs(math.cos(sight_rad - heading))
+    low_l, high_l, how_l = _complete(
+        along_min - along_edge, along_max + along_edge, shape.length_m
+    )
+    low_w, high_w, how_w = _complete(
+        across_min - across_edge, across_max + across_edge, shape.width_m
+    )
     length, width = high_l - low_l, high_w - low_w
     mid_l, mid_w = 0.5 * (low_l + high_l), 0.5 * (low_w + high_w)
     centre_x = mid_l * cos_h - mid_w * sin_h
