@@ -56,7 +56,7 @@ import numpy as np
 from wz_camera_detector.settings import camera_mount
 from wz_eval.metrics import AxisErrors, TruthIndex, in_range, match, score_instant
 from wz_eval.pipeline import PipelineOptions, PipelineRecord, run_pipeline
-from wz_fusion_tracker.node import road_heading_hook, to_measurements
+from wz_fusion_tracker.node import road_heading_hook, sensor_positions, to_measurements
 from wz_fusion_tracker.paper import (
     FusedEstimate,
     Observation,
@@ -223,7 +223,8 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
             scores.add(site, "radar", stamp, [(p.x_m, p.y_m, None) for p in points], vehicles)
 
     # --- the production tracker, sampled at every camera frame time
-    tracker = MultiTargetTracker(options.tracker, heading_at=road_heading_hook(site))
+    tracker = MultiTargetTracker(options.tracker, heading_at=road_heading_hook(site),
+                                 sensor_positions=sensor_positions(site))  # fmt: skip
     mot = _MotAccumulator()
     sample_times = [stamp for stamp, _ in record.camera_only]
     batches = [b for b in record.batches if not _dropped(b, options.dropouts, options.warmup_s)]

@@ -75,6 +75,11 @@ def road_heading_hook(site: Site) -> Callable[[float, float], float]:
     return site.road_frame.heading_at_point
 
 
+def sensor_positions(site: Site) -> dict[str, tuple[float, float]]:
+    """Each sensor's site position ``(x_m, y_m)``, for the tracker's reference points."""
+    return {mount.sensor_id: (mount.pose.x_m, mount.pose.y_m) for mount in site.sensors}
+
+
 def to_measurements(batch: DetectionBatch, report: Report) -> list[Measurement]:
     """The batch's detections as tracker measurements; bad covariances reported and dropped."""
     out = []
@@ -125,7 +130,8 @@ class FusionCore:
         self.site = site
         self.settings = settings
         self.report = report
-        self.tracker = MultiTargetTracker(settings.tracker, heading_at=road_heading_hook(site))
+        self.tracker = MultiTargetTracker(settings.tracker, heading_at=road_heading_hook(site),
+                                          sensor_positions=sensor_positions(site))  # fmt: skip
         self._next_output_s: float | None = None
         self._cycle = 0
 

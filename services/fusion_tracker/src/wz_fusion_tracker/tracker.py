@@ -168,6 +168,10 @@ class TrackerSettings(BaseModel):
     #: merge at the taper starts under the mast, in the LiDAR's blind spot) comes back one
     #: lane (3.6 m) over. A vehicle alongside that was there all along has its own track.
     hand_over_across_m: float = Field(default=4.5, ge=0.0)
+    #: A box whose length differs from the track's by at least this is re-centred with the
+    #: track's length, when the sensor's position is known (``MultiTargetTracker._reference_point``)
+    #: [m]; 0 turns it off.
+    reference_point_min_m: float = Field(default=1.5, ge=0.0)
     #: An unmatched measurement within this squared Mahalanobis distance of a confirmed track
     #: starts no track: it is that vehicle's outlier (a box fit gone wrong, a biased camera
     #: range), not a new vehicle. A vehicle alongside, in the next lane 3.6 m away, is far
@@ -678,6 +682,12 @@ class _Track:
         self.widths_m = deque(maxlen=self.size_window)
         self.history = deque(maxlen=self.max_history)
 
+    def length_quantile(self) -> float | None:
+        """Upper quartile of the measured lengths [m] (partial views only shorten a box)."""
+        if len(self.lengths_m) < 3:
+            return None
+        return float(np.quantile(np.fromiter(self.lengths_m, dtype=np.float64), 0.75))
+
     def sizes(self) -> tuple[float | None, float | None]:
         """Median length and width [m] (cached until the next measured size)."""
         if self._sizes_cache is None:
@@ -751,11 +761,20 @@ class MultiTargetTracker:
         Road heading [rad, counter-clockwise from east] at a site position ``(x_m, y_m)``;
         None: no road prior (process noise follows each track's own velocity, radar speeds are
         ignored). A non-finite return means "no road here".
+    sensor_positions
+        Site position of each sensor ``(x_m, y_m)``; with it, a box completed from the face a
+        sensor sees is re-centred with the track's own length (:meth:`_reference_point`).
     """
 
-    def __init__(self, settings: TrackerSettings, heading_at: HeadingAt | None = None) -> None:
+    def __init__(
+        self,
+        settings: TrackerSettings,
+        heading_at: HeadingAt | None = None,
+        sensor_positions: Mapping[str, tuple[float, float]] | None = None,
+    ) -> None:
         self.settings = settings
         self._heading_at = heading_at
+        self._sensor_positions = dict(sensor_positions or {})
         self._bank = TrackStateBank()
         self._tracks: dict[int, _Track] = {}  # by track id, in creation (= id) order
         self._next_id = 1
@@ -979,6 +998,7 @@ class MultiTargetTracker:
             pairs = cascade_assign(cost, d2 <= settings.gate_chi2, confirmed)
             if pairs:
                 R_used = _huber_inflated(R, pairs, d2, settings.huber_k)
+                z_used = self._reference_point(live, pairs, z, sensor_id, measurements)
                 self._update_matched(
                     [live[row] for row, _ in pairs],
                     np.array([row for row, _ in pairs], dtype=np.intp),
@@ -986,7 +1006,7 @@ class MultiTargetTracker:
                     slots,
                     x_pred,
                     P_pred,
-                    z,
+                    z_used,
                     R_used,
                     sensor_id,
                     stamp_s,
@@ -1014,6 +1034,43 @@ class MultiTargetTracker:
                     continue
                 self._spawn(measurement, R[column], sensor_id, stamp_s)
         self._merge_duplicates(stamp_s)
+
+    def _reference_point(
+        self, live: Sequence[_Track], pairs: Sequence[tuple[int, int]], z: F64, sensor_id: str,
+        measurements: Sequence[Measurement],
+    ) -> F64:  # fmt: skip
+        """Matched positions re-centred with the track's length where a sensor saw one end.
+
+        A LiDAR sees the face of a vehicle turned to it and completes the box away from the
+        sensor with the length of the class it can tell (a semitrailer seen end-on at 130 m
+        shows a car's height: completed as a 4.5 m car, its centre 6 m short). The track knows
+        better: its length ``L_t`` (the upper quartile of the measured lengths, since a partial
+        view only shortens) against the box's ``L_d`` moves the centre by ``(L_t - L_d) / 2``
+        along the track's direction, away from the sensor. Differences below
+        ``reference_point_min_m`` are left alone (a car's own spread).
+        """
+        threshold = self.settings.reference_point_min_m
+        sensor = self._sensor_positions.get(sensor_id)
+        if sensor is None or threshold <= 0.0:
+            return z
+        z_used = z
+        for row, column in pairs:
+            measured = measurements[column].length_m
+            track_length = live[row].length_quantile()
+            if measured is None or track_length is None:
+                continue
+            difference = track_length - measured
+            if abs(difference) < threshold:
+                continue
+            heading = live[row].road_heading_rad
+            if heading is None:
+                continue
+            axis = np.array([math.cos(heading), math.sin(heading)])
+            away = 1.0 if float(np.dot(z[column] - np.asarray(sensor), axis)) >= 0.0 else -1.0
+            if z_used is z:
+                z_used = z.copy()
+            z_used[column] = z[column] + 0.5 * difference * away * axis
+        return z_used
 
     def _reacquire(
         self, live: Sequence[_Track], slots: IntP, x_pred: F64, P_pred: F64, z: F64, R: F64,
