@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks import (
+    alert_latency,
     bus_latency,
     bus_throughput,
     camera_detection,
@@ -49,6 +50,7 @@ BENCHMARKS: dict[str, Callable[[bool], dict[str, Any]]] = {
     "lidar_detection": lidar_detection.run,
     "camera_detection": camera_detection.run,
     "tracker_cycle": tracker_cycle.run,
+    "alert_latency": alert_latency.run,
 }
 RESULTS_PATH = ROOT / "benchmarks" / "results.json"
 MARKDOWN_PATH = ROOT / "BENCHMARKS.md"

@@ -47,6 +47,8 @@ def _key_of(message: Message) -> str:
         "detection_batch": KEYS.detections("lidar-mast"),
         "track_batch": KEYS.tracks,
         "alert": KEYS.alerts("speeding"),
+        "roadside_devices": KEYS.devices_state,
+        "active_alerts": f"{KEYS.prefix}/test/active_alerts",
         "service_status": KEYS.status("tracker"),
     }[getattr(message, "kind")]  # noqa: B009 (kind is declared on subclasses only)
 

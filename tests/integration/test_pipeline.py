@@ -1,6 +1,6 @@
-"""The whole stack as `wz up` runs it: router, simulator, LiDAR and camera-radar detectors and
-the fusion tracker, each its own process on real Zenoh; fused tracks of the simulated vehicles
-come out on `wz/<site>/tracks`, fed by both detectors, near the truth."""
+"""The whole stack as `wz up` runs it: router, simulator, LiDAR and camera-radar detectors, the
+fusion tracker and the alert service, each its own process on real Zenoh; fused tracks of the
+simulated vehicles come out on `wz/<site>/tracks`, fed by both detectors, near the truth."""
 
 from __future__ import annotations
 
@@ -53,6 +53,7 @@ def test_wz_up_runs_the_pipeline_from_sensors_to_fused_tracks(tmp_path: Path) ->
     # Within a few metres of a true vehicle (the truth message is up to a step apart and
     # the pipeline's latency moves vehicles on: 30 m/s x 0.1 s).
     assert sorted(errors)[len(errors) // 2] < 4.0, errors
-    for service in ("simulator", "lidar-detector", "camera-detector", "fusion-tracker"):
+    for service in ("simulator", "lidar-detector", "camera-detector", "fusion-tracker",
+                    "alert-service"):  # fmt: skip
         assert f"{service} " in text or f"{service}|" in text.replace(" |", "|")
     assert "Traceback" not in text, text[-3000:]

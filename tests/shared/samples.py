@@ -6,6 +6,7 @@ import numpy as np
 
 from wz_shared import codec
 from wz_shared.messages import (
+    ActiveAlerts,
     Alert,
     CameraFrameMeta,
     Detection,
@@ -15,6 +16,7 @@ from wz_shared.messages import (
     Message,
     RadarScan,
     RadarTarget,
+    RoadsideDeviceState,
     ServiceState,
     ServiceStatus,
     Track,
@@ -64,6 +66,35 @@ def json_samples(i: int = 0) -> list[Message]:
         confirmed=True,
         sources=["lidar-mast"],
     )
+    alert = Alert(
+        site=SITE,
+        source_id="alerts",
+        stamp=stamp,
+        alert_id=f"al{i}",
+        alert_type="speeding",
+        severity="warning",
+        track_id=i,
+        station_m=500.0,
+        offset_m=-1.8,
+        speed_mps=33.0,
+        measured_value=33.0,
+        threshold_value=29.0,
+        description="speeding 74 mph in a 55 mph zone",
+        phase="start",
+        episode_id=f"speeding-{i}-1",
+        onset_stamp=stamp - 1.0,
+        value_unit="m/s",
+        evidence={"speed_limit_mps": 24.5872, "excess_mps": 8.4128},
+        track=track,
+    )
+    devices = RoadsideDeviceState(
+        site=SITE,
+        source_id="alert-service",
+        stamp=stamp,
+        beacon_on=True,
+        sign_text="SLOW DOWN",
+        cause="speeding",
+    )
     return [
         RadarScan(
             site=SITE,
@@ -81,20 +112,10 @@ def json_samples(i: int = 0) -> list[Message]:
             site=SITE, source_id="lidar-mast", stamp=stamp, frame_index=i, detections=[detection]
         ),
         TrackBatch(site=SITE, source_id="tracker", stamp=stamp, cycle_index=i, tracks=[track]),
-        Alert(
-            site=SITE,
-            source_id="alerts",
-            stamp=stamp,
-            alert_id=f"al{i}",
-            alert_type="speeding",
-            severity="warning",
-            track_id=i,
-            station_m=500.0,
-            offset_m=-1.8,
-            speed_mps=33.0,
-            measured_value=33.0,
-            threshold_value=29.0,
-            description="speeding 74 mph in a 55 mph zone",
+        alert,
+        devices,
+        ActiveAlerts(
+            site=SITE, source_id="alert-service", stamp=stamp, alerts=[alert], devices=devices
         ),
         ServiceStatus(
             site=SITE,

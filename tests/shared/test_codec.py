@@ -48,6 +48,8 @@ def _strategy_for(cls: type[BaseModel]) -> st.SearchStrategy[BaseModel]:
             continue
         if any(getattr(meta, "pattern", None) for meta in field.metadata):
             overrides[name] = IDENT
+        elif isinstance(field.annotation, type) and issubclass(field.annotation, BaseModel):
+            overrides[name] = _strategy_for(field.annotation)
         elif get_origin(field.annotation) is list:
             (item,) = get_args(field.annotation)
             if isinstance(item, type) and issubclass(item, BaseModel):

@@ -115,6 +115,8 @@ def test_keys_follow_the_architecture() -> None:
     assert keys.tracks == "wz/us75-lincoln/tracks"
     assert keys.tracks_latest == "wz/us75-lincoln/tracks/latest"
     assert keys.alerts("late_merge") == "wz/us75-lincoln/alerts/late_merge"
+    assert keys.alerts_active == "wz/us75-lincoln/alerts/active"
+    assert keys.devices_state == "wz/us75-lincoln/devices/state"
     assert keys.status("simulator") == "wz/us75-lincoln/status/simulator"
     assert keys.config_site == "wz/us75-lincoln/config/site"
     assert Keys.all_sites("alerts/*") == "wz/*/alerts/*"

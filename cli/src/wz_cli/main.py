@@ -1,6 +1,6 @@
 """The ``wz`` command: run the local stack, watch it, record and replay the bus.
 
-Subcommands: ``router``, ``up``, ``demo``, ``status``, ``tap``, ``record``, ``replay``, and the
+Subcommands: ``router``, ``up``, ``demo``, ``status``, ``tap``, ``alerts``, ``record``, ``replay``, and the
 services' tools ``dataset``, ``pictures``, ``detect-lidar``, ``detect-camera``, ``eval`` and ``eval-camera`` (``wz <command> --help`` for each).
 The command's own logs go to stderr (structured, see :mod:`wz_shared.logs`); stdout carries only
 its output (tables, tapped messages, children's lines), so it can be piped.
@@ -125,6 +125,7 @@ def _demo_banner(site_id: str, endpoint: str) -> None:
         f"  wz status{connect}                  services alive, rates, drops",
         f"  wz tap{connect} 'wz/*/truth/**'     the simulated vehicles, live",
         f"  wz tap{connect} 'wz/*/detections/**' the LiDAR detector's vehicles (site frame)",
+        f"  wz alerts{connect}                  open alerts, then each alert as it comes",
         f"  wz tap{connect} 'wz/*/raw/**'       the sensors' frames (LiDAR, camera, radar)",
         f"  wz record{connect} demo.mcap        record the bus (opens in Foxglove); "
         "then wz replay demo.mcap",
@@ -162,6 +163,22 @@ def cmd_tap(args: argparse.Namespace) -> int:
             timeout_s=args.timeout,
             full_json=args.json,
             width=width,
+            stop=stop,
+        )
+
+
+def cmd_alerts(args: argparse.Namespace) -> int:
+    from wz_cli.alerts import run_alerts
+
+    site = args.site or default_site_id()
+    stop = stop_on_signals()
+    with open_bus(args.connect, site=site, service="wz-alerts") as bus:
+        return run_alerts(
+            bus,
+            active_only=args.active,
+            count=args.count,
+            timeout_s=args.timeout,
+            full_json=args.json,
             stop=stop,
         )
 
@@ -331,6 +348,23 @@ def build_parser() -> argparse.ArgumentParser:
     tap.add_argument("--json", action="store_true", help="the full JSON of each message")
     _add_connect(tap)
     tap.set_defaults(handler=cmd_tap)
+
+    alerts = commands.add_parser(
+        "alerts",
+        help="the open alerts of a site, then each alert event as it comes",
+        description="Ask the alert service for the open episodes (wz/<site>/alerts/active), "
+        "print them as `open`, then print `stamp  phase  type  severity  track  description` "
+        "for each event on wz/<site>/alerts/*.",
+        epilog="Exit code: 1 if --active got no answer, or --timeout ran out before --count "
+        "events; else 0.",
+    )
+    alerts.add_argument("--site", help="site id (default: the site of WZ_SITE_FILE / default)")
+    alerts.add_argument("--active", action="store_true", help="print the open alerts and stop")
+    alerts.add_argument("--count", type=_positive_int, metavar="N", help="stop after N events")
+    alerts.add_argument("--timeout", type=_positive_float, metavar="S", help="stop after S s")
+    alerts.add_argument("--json", action="store_true", help="the full JSON of each alert")
+    _add_connect(alerts)
+    alerts.set_defaults(handler=cmd_alerts)
 
     record = commands.add_parser(
         "record",

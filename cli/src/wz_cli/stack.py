@@ -2,7 +2,7 @@
 
 To add a service, append one :class:`ServiceSpec` to :data:`STACK` (in pipeline order, so a
 producer starts before its consumers); ``wz up``, ``wz up --only`` and ``wz demo`` pick it up.
-The services planned next, in that order: ``alert-service``, ``gateway``.
+The service planned next: ``gateway``.
 
 Every child learns where the bus is and which site it serves from the environment:
 
@@ -124,6 +124,13 @@ STACK: tuple[ServiceSpec, ...] = (
         module="wz_fusion_tracker.node",
         summary="every sensor's detections to fused tracks (Kalman, GNN, life cycle)",
         env_prefix="WZ_FUSION_",
+    ),
+    ServiceSpec(
+        name="alert-service",
+        module="wz_alert_service.node",
+        summary="fused tracks to alerts (speeding, hard braking, late merge, TTC, queue, "
+        "intrusion) and the beacon and sign",
+        env_prefix="WZ_ALERT_",
     ),
 )
 

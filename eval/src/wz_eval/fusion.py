@@ -54,28 +54,40 @@ from typing import Any
 import numpy as np
 
 from wz_camera_detector.settings import camera_mount
+from wz_eval.alerts import run_alert_engine, score_alerts
 from wz_eval.metrics import AxisErrors, TruthIndex, in_range, match, score_instant
 from wz_eval.pipeline import PipelineOptions, PipelineRecord, run_pipeline
-from wz_fusion_tracker.node import road_heading_hook, sensor_positions, to_measurements
+from wz_fusion_tracker.kalman import F64
+from wz_fusion_tracker.node import road_heading_hook, sensor_positions, to_measurements, to_track
 from wz_fusion_tracker.paper import (
     FusedEstimate,
     Observation,
     PaperFusionSettings,
     run_paper_pipeline,
 )
-from wz_fusion_tracker.tracker import MultiTargetTracker, TrackerSettings, TrackState
+from wz_fusion_tracker.smoothing import rts_smooth
+from wz_fusion_tracker.tracker import (
+    MultiTargetTracker,
+    TrackerSettings,
+    TrackHistory,
+    TrackState,
+)
 from wz_lidar_detector.settings import lidar_mount
 from wz_shared.logs import configure_logging
-from wz_shared.messages import DetectionBatch, VehicleTruth
+from wz_shared.messages import DetectionBatch, TrackBatch, VehicleTruth
 from wz_shared.site import Site, load_site
 from wz_simulator.settings import SimulatorSettings
 
 log = logging.getLogger("wz_eval.fusion")
 
-SOURCES = ("camera", "lidar", "radar", "camera_radar", "average", "paper_kf", "fused")
+SOURCES = ("camera", "lidar", "radar", "camera_radar", "average", "paper_kf", "fused",
+           "fused_smoothed")
 #: Gate for matching a source's estimate to a vehicle [m] (the MOT metrics use 3 m).
 SOURCE_GATE_M = 5.0
 MOT_GATE_M = 3.0
+#: Alerts are scored against the truth of the vehicles within this of the mast [m]: the
+#: radar's reach, where the first tracks start (the fused tracks run beyond ``max_range_m``).
+ALERT_TRUTH_RANGE_M = 200.0
 #: Width of the "don't care" band at the scored region's edge [m] (see :func:`scored_region`).
 EDGE_MARGIN_M = 10.0
 
@@ -232,6 +244,9 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
     tracker_s = 0.0
     fused_samples: list[tuple[float, float, float]] = []
     mot_times: list[float] = []
+    scored_ids: list[tuple[float, list[int], list[VehicleTruth]]] = []
+    alert_batches: list[TrackBatch] = []
+    histories: list[TrackHistory] = []
     for sample_s in sample_times:
         t0 = time.perf_counter()
         while position < len(batches) and batches[position].stamp <= sample_s + 1e-9:
@@ -240,10 +255,14 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
             position += 1
         tracker.flush()
         tracker.advance_to(sample_s)
-        states = [s for s in tracker.tracks(sample_s) if s.status != "tentative"
-                  and math.hypot(s.x_m - centre[0], s.y_m - centre[1])
-                  <= options.max_range_m + EDGE_MARGIN_M]  # fmt: skip
+        published = [s for s in tracker.tracks(sample_s) if s.status != "tentative"]
         tracker_s += time.perf_counter() - t0
+        # what the node would publish, for the alert service
+        alert_batches.append(TrackBatch(
+            site=site.site_id, source_id="fusion-tracker", stamp=sample_s,
+            cycle_index=len(alert_batches), tracks=[to_track(site, s) for s in published]))  # fmt: skip
+        states = [s for s in published if math.hypot(s.x_m - centre[0], s.y_m - centre[1])
+                  <= options.max_range_m + EDGE_MARGIN_M]  # fmt: skip
         found = truth.at(sample_s)
         if found is None:
             continue
@@ -254,6 +273,17 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
         fused_samples.extend((sample_s, lon, lat) for _, _, lon, lat in matched)
         mot.update(vehicles, states)
         mot_times.append(sample_s)
+        scored_ids.append((sample_s, [s.track_id for s in states], vehicles))
+        histories.extend(tracker.pop_finished_histories())
+
+    # --- the same tracks, RTS-smoothed over their whole history (the stored trajectories)
+    histories.extend(tracker.pop_finished_histories())
+    histories.extend(tracker.history(s.track_id) for s in tracker.tracks())
+    smoothed = smoothed_positions(histories)
+    for sample_s, track_ids, scored_vehicles in scored_ids:
+        smoothed_estimates = [xy for track_id in track_ids
+                              if (xy := smoothed_at(smoothed, track_id, sample_s)) is not None]  # fmt: skip
+        scores.add(site, "fused_smoothed", sample_s, smoothed_estimates, scored_vehicles)
 
     # --- the paper's method, with oracle per-sensor identities
     ids: dict[str, int] = {}
@@ -282,6 +312,11 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
                     if e.average_xy_m is not None]  # fmt: skip
         scores.add(site, "average", stamp, averages, vehicles)
 
+    # --- the alert service on the fused tracks, scored against the same rules on the truth
+    alert_truth = [(stamp, in_range(site, vehicles, centre, ALERT_TRUTH_RANGE_M))
+                   for stamp, vehicles in record.truth]  # fmt: skip
+    alerts = score_alerts(site, alert_truth, run_alert_engine(site, alert_batches))
+
     report = {
         "site": site.site_id, "seed": options.seed, "duration_s": options.duration_s,
         "warmup_s": options.warmup_s, "max_range_m": options.max_range_m,
@@ -293,6 +328,7 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
         "sources": {s: scores.errors[s].summary() for s in SOURCES},
         **mot.summary(len(record.truth)),
         "paper_table": paper_table(site, scores, centre, options.window_upstream_m),
+        "alerts": alerts,
         "dropouts": [_dropout_report(d, options.warmup_s, fused_samples, mot, mot_times)
                      for d in options.dropouts],
         "pipeline_problems": record.problems,
@@ -306,6 +342,35 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
 
         report["plots"] = write_plots(plots_dir, site, record, scores, report)
     return report
+
+
+def smoothed_positions(histories: Sequence[TrackHistory]) -> dict[int, tuple[F64, F64]]:
+    """Per track id: its update stamps and RTS-smoothed states (``rts_smooth`` with the
+    priors the tracker stored)."""
+    out: dict[int, tuple[F64, F64]] = {}
+    for history in histories:
+        if len(history.stamps_s) == 0 or np.any(np.diff(history.stamps_s) < 0.0):
+            continue
+        x_smooth, _ = rts_smooth(history.stamps_s, history.x_filt, history.P_filt, None,
+                                 x_pred=history.x_pred, P_pred=history.P_pred)  # fmt: skip
+        out[history.track_id] = (history.stamps_s, x_smooth)
+    return out
+
+
+def smoothed_at(smoothed: dict[int, tuple[F64, F64]], track_id: int,
+                stamp_s: float) -> tuple[float, float, float | None] | None:  # fmt: skip
+    """Track ``track_id``'s smoothed position at ``stamp_s`` (its latest smoothed state
+    before, carried at constant velocity) and speed, or None."""
+    found = smoothed.get(track_id)
+    if found is None:
+        return None
+    stamps, states = found
+    index = int(np.searchsorted(stamps, stamp_s + 1e-9, side="right")) - 1
+    if index < 0:
+        return None
+    x = states[index]
+    dt = stamp_s - float(stamps[index])
+    return (float(x[0] + x[2] * dt), float(x[1] + x[3] * dt), float(math.hypot(x[2], x[3])))
 
 
 def scored_region(vehicles: Sequence[VehicleTruth], states: Sequence[TrackState],
@@ -407,7 +472,7 @@ def paper_table(site: Site, scores: Scores, centre: tuple[float, float],
     """Per vehicle: cumulative |error| over the window's common times, per source (Tables 1-2)."""
     mast_station = float(site.road_frame.to_road(*centre)[0])
     lo, hi = mast_station - window_upstream_m[1], mast_station - window_upstream_m[0]
-    compared = ("camera", "lidar", "average", "paper_kf", "fused")
+    compared = ("camera", "lidar", "average", "paper_kf", "fused", "fused_smoothed")
     rows = []
     for vehicle_id, by_source in sorted(scores.per_vehicle.items()):
         common: set[float] | None = None
@@ -434,10 +499,11 @@ def _table_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
         for axis in ("longitudinal_m", "lateral_m"):
             wins = sum(1 for r in rows if r["fused"][axis] < r[other][axis])
             out[f"fused_below_{other}_{axis}"] = wins
-    out["fused_below_camera_lidar_average_both_axes"] = sum(
-        1 for r in rows
-        if all(r["fused"][a] < r[o][a] for o in ("camera", "lidar", "average")
-               for a in ("longitudinal_m", "lateral_m")))  # fmt: skip
+    for fused in ("fused", "fused_smoothed"):
+        out[f"{fused}_below_camera_lidar_average_both_axes"] = sum(
+            1 for r in rows
+            if all(r[fused][a] < r[o][a] for o in ("camera", "lidar", "average")
+                   for a in ("longitudinal_m", "lateral_m")))  # fmt: skip
     return out
 
 
@@ -464,15 +530,23 @@ def markdown(report: dict[str, Any]) -> str:
     summary = report["paper_table_summary"]
     lines += ["", f"Paper-style table ({summary['vehicles']} vehicles through the window; "
               "cumulative absolute error [m] over the common samples; lon / lat):", "",
-              "| vehicle | samples | camera | LiDAR | average | paper KF | fused |",
-              "|---|---|---|---|---|---|---|"]  # fmt: skip
+              "| vehicle | samples | camera | LiDAR | average | paper KF | fused | fused, smoothed |",
+              "|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for row in report["paper_table"][:25]:
         cells = [f"{row[s]['longitudinal_m']:.1f} / {row[s]['lateral_m']:.1f}"
-                 for s in ("camera", "lidar", "average", "paper_kf", "fused")]  # fmt: skip
+                 for s in ("camera", "lidar", "average", "paper_kf", "fused", "fused_smoothed")]  # fmt: skip
         lines.append(f"| {row['vehicle_id']} | {row['samples']} | " + " | ".join(cells) + " |")
     lines += ["", "Fused below the other sources (vehicles): " + ", ".join(
         f"{k.removeprefix('fused_below_')} {v}" for k, v in summary.items() if k != "vehicles"),
         ""]  # fmt: skip
+    lines += ["", "Alerts (the alert service on the fused tracks against the same rules on the "
+              "truth):", "", "| alert | precision | recall | TP | FP | FN | median lead time [s] |",
+              "|---|---|---|---|---|---|---|"]  # fmt: skip
+    for alert_type, row in report.get("alerts", {}).items():
+        lines.append(f"| {alert_type} | {cell(row.get('precision'))} | {cell(row.get('recall'))} | "
+                     f"{row.get('true_positives')} | {row.get('false_positives')} | "
+                     f"{row.get('false_negatives')} | {cell(row.get('lead_time_s'))} |")  # fmt: skip
+    lines.append("")
     for plot in report.get("plots", []):
         lines.append(f"![{plot}]({plot})")
     return "\n".join(lines) + "\n"

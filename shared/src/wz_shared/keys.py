@@ -10,9 +10,14 @@ ARCHITECTURE.md::
     wz/<site>/detections/<sensor>     detections             (FIFO)
     wz/<site>/tracks                  fused tracks           (FIFO)
     wz/<site>/alerts/<type>           alerts                 (FIFO, reliable)
+    wz/<site>/devices/state           roadside beacon + sign (FIFO, reliable; on change)
     wz/<site>/status/<service>        liveliness token + periodic health
     wz/<site>/config/site             queryable: the site description
     wz/<site>/tracks/latest           queryable: the newest track batch
+    wz/<site>/alerts/active           queryable: the open alert episodes and the devices
+
+``active`` is not an alert type, so ``alerts/*`` subscribers never see it (nothing is put there);
+a query on ``alerts/*`` reaches the queryable, a subscription does not.
 """
 
 from __future__ import annotations
@@ -88,6 +93,15 @@ class Keys:
     @property
     def alerts_all(self) -> str:
         return f"{self.prefix}/alerts/*"
+
+    @property
+    def alerts_active(self) -> str:
+        return f"{self.prefix}/alerts/active"
+
+    # roadside devices driven by the alerts
+    @property
+    def devices_state(self) -> str:
+        return f"{self.prefix}/devices/state"
 
     # health and configuration
     def status(self, service: str) -> str:

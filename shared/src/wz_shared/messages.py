@@ -224,6 +224,7 @@ class TrackBatch(Message):
 
 class AlertType(StrEnum):
     SPEEDING = "speeding"
+    AGGRESSIVE_APPROACH = "aggressive_approach"
     HARD_BRAKING = "hard_braking"
     LATE_MERGE = "late_merge"
     SHORT_TTC = "short_ttc"
@@ -237,8 +238,25 @@ class AlertSeverity(StrEnum):
     CRITICAL = "critical"
 
 
+#: Where an alert stands in its episode: the condition started (after its hold time), rose in
+#: severity, or has been false for its clear time (or the track was lost).
+AlertPhase = Literal["start", "update", "clear"]
+
+
 class Alert(Message):
-    """One aggressive-approach event; published once when it starts (reliable, never dropped)."""
+    """One event of an alert episode: its start, an update (severity rose) or its clear.
+
+    An episode is one stretch of time over which one rule's condition held for one track (or,
+    for a queue, for the site: ``track_id`` None). Its messages share ``episode_id``; each has
+    its own ``alert_id``. ``stamp`` is the capture time of the track batch that decided this
+    event; ``onset_stamp`` the capture time at which the condition first held (a start comes
+    the rule's hold time after it). Published reliably, never dropped.
+
+    ``measured_value`` and ``threshold_value`` are in ``value_unit`` (m/s, m/s^2, s, m or
+    vehicles); ``evidence`` holds the rule's other numbers, each key ending in its unit
+    (``speed_limit_mps``, ``gap_m``...); ``track`` is a snapshot of the track at ``stamp``.
+    A clear carries the episode's peak severity and its last measurements.
+    """
 
     kind: Literal["alert"] = "alert"
     alert_id: Identifier
@@ -251,6 +269,49 @@ class Alert(Message):
     measured_value: FiniteFloat  # in the unit of the rule (m/s, m/s^2, s, m, vehicles)
     threshold_value: FiniteFloat
     description: Annotated[str, Field(max_length=500)]
+    phase: AlertPhase = "start"
+    episode_id: Identifier | None = None
+    onset_stamp: NonNegFloat | None = None
+    value_unit: Annotated[str, Field(max_length=16)] = ""
+    evidence: dict[Annotated[str, Field(max_length=64)], FiniteFloat] = Field(default_factory=dict)
+    track: Track | None = None
+
+
+class RoadsideDeviceState(Message):
+    """What the flashing beacon and the dynamic message sign upstream of the taper show.
+
+    Published by the alert service on ``wz/<site>/devices/state`` whenever it changes (the
+    gateway puts it in its WZDx device feed). ``stamp`` is the capture time of the track batch
+    that decided it. The beacon flashes while an alert that concerns approaching drivers is
+    open upstream of the end of the activity area; ``sign_text`` is the sign's one message
+    (upper case, empty when blank) and ``cause`` the alert type behind it.
+    """
+
+    kind: Literal["roadside_devices"] = "roadside_devices"
+    beacon_on: bool
+    sign_text: Annotated[str, Field(max_length=64)]
+    cause: AlertType | None = None
+    #: The queue's tail [m] when the sign shows a queue.
+    queue_tail_station_m: FiniteFloat | None = None
+
+    def shows_same_as(self, other: RoadsideDeviceState | None) -> bool:
+        """Whether ``other`` shows the same to drivers (every field but the stamp)."""
+        return other is not None and self.model_dump(exclude={"stamp"}) == other.model_dump(
+            exclude={"stamp"}
+        )
+
+
+class ActiveAlerts(Message):
+    """The open alert episodes and the roadside devices now: the answer to a query on
+    ``wz/<site>/alerts/active``, for a consumer that joins late.
+
+    ``alerts`` holds, per open episode, its newest published event (a start or an update), in
+    the alert service's order (by rule, then track).
+    """
+
+    kind: Literal["active_alerts"] = "active_alerts"
+    alerts: list[Alert]
+    devices: RoadsideDeviceState
 
 
 # --- service health -------------------------------------------------------------------------
@@ -288,7 +349,16 @@ def kind_of(cls: type[Message]) -> str:
 #: Every JSON message type, by kind.
 JSON_MESSAGES: dict[str, type[Message]] = {
     kind_of(cls): cls
-    for cls in (RadarScan, GroundTruth, DetectionBatch, TrackBatch, Alert, ServiceStatus)
+    for cls in (
+        RadarScan,
+        GroundTruth,
+        DetectionBatch,
+        TrackBatch,
+        Alert,
+        RoadsideDeviceState,
+        ActiveAlerts,
+        ServiceStatus,
+    )
 }
 #: Frame metadata types that travel in the binary envelope, by kind.
 FRAME_MESSAGES: dict[str, type[Message]] = {

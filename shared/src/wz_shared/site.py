@@ -1,9 +1,9 @@
 """Site description: one YAML file per deployment, validated by pydantic.
 
 A site file describes the road (a centerline polyline in the site frame), its lanes, the
-work-zone areas by station, the speed limits and every sensor mount. The simulator builds its
-SUMO network and sensor models from it; detectors, tracker, alerts and gateway read the same
-file, so simulation and deployment share one description.
+work-zone areas by station, the speed limits, every sensor mount and the alert thresholds. The
+simulator builds its SUMO network and sensor models from it; detectors, tracker, alerts and
+gateway read the same file, so simulation and deployment share one description.
 
 Frames of reference
 -------------------
@@ -190,6 +190,238 @@ class SensorMount(_Strict):
         return self.intrinsics.kind
 
 
+# --- alert thresholds -----------------------------------------------------------------------
+
+
+class EpisodeTiming(_Strict):
+    """How long a rule's condition must hold before an alert starts, and how it ends.
+
+    An episode starts once the condition has held for ``hold_s`` without a break, stays open
+    while the (looser) exit condition holds, clears after the exit condition has failed for
+    ``clear_s``, and the same track cannot open another episode of the same type for
+    ``cooldown_s`` after a clear. ``enabled: false`` switches the rule off at this site.
+    """
+
+    enabled: bool = True
+    hold_s: Annotated[float, Field(ge=0.0, le=60.0)] = 1.0
+    clear_s: Annotated[float, Field(ge=0.0, le=600.0)] = 2.0
+    cooldown_s: Annotated[float, Field(ge=0.0, le=3600.0)] = 10.0
+
+
+class SpeedingRule(EpisodeTiming):
+    """Speed over the posted limit at the vehicle's station, within the approach.
+
+    Starts at ``excess >= margin_mph``, stays open while ``excess >= margin_mph -
+    hysteresis_mph``; critical from ``critical_excess_mph``. Margins are in mph, like the posted
+    limits they are added to.
+    """
+
+    #: 5 mph: the usual enforcement tolerance; far above the tracker's speed error (< 1 mph).
+    margin_mph: Annotated[float, Field(ge=0.0, le=50.0)] = 5.0
+    #: 2 mph: a driver hovering at 5 over must drop to 3 over before the episode can end.
+    hysteresis_mph: Annotated[float, Field(ge=0.0, le=20.0)] = 2.0
+    #: 15 mph over a work-zone limit: the band many states treat as reckless or excessive.
+    critical_excess_mph: Annotated[float, Field(gt=0.0, le=60.0)] = 15.0
+    #: 1 s: 20 tracker cycles, so one noisy cycle or a new track's speed settling cannot alert.
+    hold_s: Annotated[float, Field(ge=0.0, le=60.0)] = 1.0
+
+    @model_validator(mode="after")
+    def _bands(self) -> SpeedingRule:
+        if self.critical_excess_mph < self.margin_mph:
+            raise ValueError(
+                f"speeding: critical_excess_mph {self.critical_excess_mph} must be at least "
+                f"margin_mph {self.margin_mph}"
+            )
+        return self
+
+
+class AggressiveApproachRule(EpisodeTiming):
+    """Too fast, too close to the taper: the deceleration still needed, or not slowing at all.
+
+    Required deceleration to reach the zone limit ``v_zone`` by the taper start, ``D`` metres
+    ahead: ``a = (v^2 - v_zone^2) / (2 D)`` [m/s^2]. Starts at ``a >= comfortable_decel_mps2``
+    (stays open down to ``comfortable_decel_mps2 - hysteresis_mps2``), critical from
+    ``critical_decel_mps2``; or, past the advance-warning point, when the speed is above the
+    zone limit by ``speed_margin_mph`` and its trend over ``trend_window_s`` is above
+    ``-not_slowing_decel_mps2`` (the driver has not lifted off).
+    """
+
+    #: AASHTO's (Green Book) comfortable deceleration, 11.2 ft/s^2, used for sight distance.
+    comfortable_decel_mps2: Annotated[float, Field(gt=0.0, le=15.0)] = 3.4
+    #: Half a g: harder than most drivers ever brake on purpose.
+    critical_decel_mps2: Annotated[float, Field(gt=0.0, le=15.0)] = 4.9
+    hysteresis_mps2: Annotated[float, Field(ge=0.0, le=5.0)] = 0.4
+    #: Speed over the zone limit that counts (both conditions), as for speeding.
+    speed_margin_mph: Annotated[float, Field(ge=0.0, le=50.0)] = 5.0
+    #: Drag and rolling resistance alone slow a car at highway speed by 0.3-0.5 m/s^2, so a
+    #: trend above -0.3 m/s^2 means the driver has not even lifted off the accelerator.
+    not_slowing_decel_mps2: Annotated[float, Field(ge=0.0, le=5.0)] = 0.3
+    #: Least-squares speed trend window: 20 samples at 20 Hz average the speed noise down.
+    trend_window_s: Annotated[float, Field(gt=0.0, le=10.0)] = 1.0
+    #: Where "past the advance warning" begins [m]; None: the advance-warning area's start.
+    advance_warning_station_m: Annotated[float, Field(ge=0.0)] | None = None
+
+    @model_validator(mode="after")
+    def _bands(self) -> AggressiveApproachRule:
+        if self.critical_decel_mps2 < self.comfortable_decel_mps2:
+            raise ValueError(
+                f"aggressive_approach: critical_decel_mps2 {self.critical_decel_mps2} must be "
+                f"at least comfortable_decel_mps2 {self.comfortable_decel_mps2}"
+            )
+        return self
+
+
+class HardBrakingRule(EpisodeTiming):
+    """Deceleration from the least-squares slope of the track's speed over ``window_s``.
+
+    Starts at ``-dv/dt >= decel_g * g``, stays open down to ``(decel_g - hysteresis_g) * g``;
+    critical from ``critical_decel_g * g`` (g = 9.80665 m/s^2).
+    """
+
+    #: 0.4 g: the hard-braking trigger of naturalistic-driving and telematics studies.
+    decel_g: Annotated[float, Field(gt=0.0, le=1.5)] = 0.4
+    #: 0.6 g: emergency braking, near the limit of a car on wet pavement.
+    critical_decel_g: Annotated[float, Field(gt=0.0, le=1.5)] = 0.6
+    hysteresis_g: Annotated[float, Field(ge=0.0, le=0.5)] = 0.05
+    #: 0.8 s at 20 Hz: 16 speeds, so 0.3 m/s speed noise gives a slope error of ~0.3 m/s^2.
+    window_s: Annotated[float, Field(gt=0.0, le=5.0)] = 0.8
+    #: Fewest speeds in the window for a slope (and they must span half the window).
+    min_samples: Annotated[int, Field(ge=3, le=1000)] = 5
+    #: 0.3 s: braking is brief; the window already smooths it.
+    hold_s: Annotated[float, Field(ge=0.0, le=60.0)] = 0.3
+    clear_s: Annotated[float, Field(ge=0.0, le=600.0)] = 1.0
+    cooldown_s: Annotated[float, Field(ge=0.0, le=3600.0)] = 5.0
+
+    @model_validator(mode="after")
+    def _bands(self) -> HardBrakingRule:
+        if self.critical_decel_g < self.decel_g:
+            raise ValueError(
+                f"hard_braking: critical_decel_g {self.critical_decel_g} must be at least "
+                f"decel_g {self.decel_g}"
+            )
+        if self.hysteresis_g >= self.decel_g:
+            raise ValueError("hard_braking: hysteresis_g must be below decel_g")
+        return self
+
+
+class LateMergeRule(EpisodeTiming):
+    """Still in the closed lane within ``distance_m`` of the taper start (or in the taper).
+
+    Starts when the track's lane is the closed one (or its offset is in the closed lane's band)
+    at ``speed >= min_speed_mps``; stays open while the offset is within the band widened by
+    ``lateral_hysteresis_m`` and ``speed >= min_speed_mps - speed_hysteresis_mps``. Warning
+    before the taper, critical inside it.
+    """
+
+    #: 150 m: under 6 s to the taper at 55 mph.
+    distance_m: Annotated[float, Field(gt=0.0, le=2000.0)] = 150.0
+    #: 30 mph: below it, in congestion, the late ("zipper") merge is what DOTs ask for.
+    min_speed_mps: Annotated[float, Field(ge=0.0, le=60.0)] = 13.4
+    speed_hysteresis_mps: Annotated[float, Field(ge=0.0, le=10.0)] = 1.0
+    #: A centre hovering on the lane line must move 0.3 m into the open lane to end it.
+    lateral_hysteresis_m: Annotated[float, Field(ge=0.0, le=2.0)] = 0.3
+    hold_s: Annotated[float, Field(ge=0.0, le=60.0)] = 0.5
+    clear_s: Annotated[float, Field(ge=0.0, le=600.0)] = 1.0
+
+
+class ShortTtcRule(EpisodeTiming):
+    """Time to collision with the nearest vehicle ahead in the same lane.
+
+    ``TTC = gap / (v_follower - v_leader)``, ``gap = s_leader - s_follower - (L_f + L_l) / 2``.
+    Bins after SSAM (whose default conflict threshold is 1.5 s): info at ``TTC <= max_ttc_s``,
+    warning at ``<= warning_ttc_s``, critical at ``<= critical_ttc_s``. Stays open while
+    ``TTC <= max_ttc_s + hysteresis_s``.
+    """
+
+    max_ttc_s: Annotated[float, Field(gt=0.0, le=10.0)] = 1.5
+    warning_ttc_s: Annotated[float, Field(gt=0.0, le=10.0)] = 1.0
+    critical_ttc_s: Annotated[float, Field(gt=0.0, le=10.0)] = 0.5
+    hysteresis_s: Annotated[float, Field(ge=0.0, le=5.0)] = 0.3
+    #: Two tracks' speeds differ by a few tenths of a m/s from noise alone.
+    min_closing_speed_mps: Annotated[float, Field(ge=0.0, le=10.0)] = 0.5
+    #: Length used when the tracker has no estimate: a passenger car.
+    default_vehicle_length_m: Annotated[float, Field(gt=0.0, le=30.0)] = 4.5
+    hold_s: Annotated[float, Field(ge=0.0, le=60.0)] = 0.2
+    clear_s: Annotated[float, Field(ge=0.0, le=600.0)] = 1.0
+    cooldown_s: Annotated[float, Field(ge=0.0, le=3600.0)] = 5.0
+
+    @model_validator(mode="after")
+    def _bins(self) -> ShortTtcRule:
+        if not self.critical_ttc_s <= self.warning_ttc_s <= self.max_ttc_s:
+            raise ValueError(
+                "short_ttc: need critical_ttc_s <= warning_ttc_s <= max_ttc_s, got "
+                f"{self.critical_ttc_s}, {self.warning_ttc_s}, {self.max_ttc_s}"
+            )
+        return self
+
+
+class QueueRule(EpisodeTiming):
+    """Slow or stopped traffic: ``min_vehicles`` slow vehicles within ``span_m`` of station.
+
+    A vehicle is slow below ``slow_speed_mps`` (below ``slow_speed_mps + speed_hysteresis_mps``
+    while a queue is open). One site-level episode, reported at the queue's tail (its most
+    upstream slow vehicle); critical when the tail is ``critical_backup_m`` or more upstream of
+    the taper start.
+    """
+
+    #: About 20 mph: stop-and-go on a 55 mph road, not free flow.
+    slow_speed_mps: Annotated[float, Field(gt=0.0, le=40.0)] = 8.9
+    speed_hysteresis_mps: Annotated[float, Field(ge=0.0, le=10.0)] = 2.0
+    #: Three slow vehicles within 100 m: more than one slow truck, fewer than a full jam.
+    min_vehicles: Annotated[int, Field(ge=1, le=100)] = 3
+    span_m: Annotated[float, Field(gt=0.0, le=2000.0)] = 100.0
+    #: A tail this far upstream of the taper meets drivers still at approach speed.
+    critical_backup_m: Annotated[float, Field(ge=0.0, le=10000.0)] = 300.0
+    #: A queue is a state of traffic: 3 s filters a platoon braking briefly.
+    hold_s: Annotated[float, Field(ge=0.0, le=60.0)] = 3.0
+    #: Stop-and-go waves lift a queue's speeds above the threshold for seconds at a time.
+    clear_s: Annotated[float, Field(ge=0.0, le=600.0)] = 10.0
+    cooldown_s: Annotated[float, Field(ge=0.0, le=3600.0)] = 30.0
+
+
+class IntrusionRule(EpisodeTiming):
+    """A vehicle in the closed lane inside the buffer or activity area.
+
+    Starts when the track's offset is in the closed lane's band (or its lane is the closed one)
+    between the buffer's start and the activity area's end at ``speed >= min_speed_mps``; stays
+    open while the offset is in the band widened by ``lateral_hysteresis_m``. Warning in the
+    buffer, critical in the activity area.
+    """
+
+    #: About 10 mph: work vehicles creep in the closed lane; errant traffic does not.
+    min_speed_mps: Annotated[float, Field(ge=0.0, le=60.0)] = 4.5
+    lateral_hysteresis_m: Annotated[float, Field(ge=0.0, le=2.0)] = 0.3
+    hold_s: Annotated[float, Field(ge=0.0, le=60.0)] = 0.3
+    clear_s: Annotated[float, Field(ge=0.0, le=600.0)] = 1.0
+
+
+class DeviceRules(_Strict):
+    """Roadside devices driven by the alerts: a flashing beacon and a message sign."""
+
+    #: Station of the dynamic message sign [m]; None: the advance-warning area's start.
+    sign_station_m: Annotated[float, Field(ge=0.0)] | None = None
+
+
+class AlertRules(_Strict):
+    """Thresholds of the alert service, with units; every rule works in the road frame.
+
+    The approach is the station window ``[activity end - approach_length_m, activity end)``:
+    speeding, aggressive approach, hard braking, late merge, short TTC and queue look only
+    there. Each rule has its own :class:`EpisodeTiming` (hold, clear, cool-down).
+    """
+
+    #: MUTCD advance-warning sign spacing on a freeway adds up to ~1.5 km before the taper.
+    approach_length_m: Annotated[float, Field(gt=0.0, le=20000.0)] = 1500.0
+    speeding: SpeedingRule = Field(default_factory=SpeedingRule)
+    aggressive_approach: AggressiveApproachRule = Field(default_factory=AggressiveApproachRule)
+    hard_braking: HardBrakingRule = Field(default_factory=HardBrakingRule)
+    late_merge: LateMergeRule = Field(default_factory=LateMergeRule)
+    short_ttc: ShortTtcRule = Field(default_factory=ShortTtcRule)
+    queue: QueueRule = Field(default_factory=QueueRule)
+    intrusion: IntrusionRule = Field(default_factory=IntrusionRule)
+    devices: DeviceRules = Field(default_factory=DeviceRules)
+
+
 class Site(_Strict):
     """One deployment: geometry, work zone, limits and sensors."""
 
@@ -203,6 +435,8 @@ class Site(_Strict):
     work_zone: Annotated[list[WorkZoneArea], Field(min_length=1)]
     speed_limits: Annotated[list[SpeedLimit], Field(min_length=1)]
     sensors: list[SensorMount] = Field(default_factory=list)
+    #: Alert thresholds; a site file without an ``alerts:`` section gets the defaults.
+    alerts: AlertRules = Field(default_factory=AlertRules)
 
     @field_validator("centerline_xy_m")
     @classmethod

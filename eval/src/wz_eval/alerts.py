@@ -1,0 +1,348 @@
+"""Scoring the alert service against simulation truth: precision, recall and lead time per type.
+
+Ground truth is what a perfect perception chain would give: the same :class:`AlertEngine`, with
+the site's thresholds, hold, clear and cool-down times, run on the *true* kinematics (each
+simulated vehicle as a confirmed track with its true station, offset, lane, speed and length).
+So speeding truth is "the true speed was above limit + margin for the hold time within the
+approach", late-merge truth "the true vehicle was in the closed lane within the taper distance
+at speed", and so on; the scores then measure the perception chain (sensors, detectors,
+tracker), not the rules.
+
+Matching, per alert type
+------------------------
+- An alert episode (its start event; updates and the clear only end it) is tied to a vehicle:
+  the truth vehicle nearest its position at its start stamp, within ``tie_gate_m`` (3 m) in
+  the road frame, ``sqrt(ds^2 + dd^2)`` (truth moved to the stamp from the nearest step, see
+  :class:`wz_eval.metrics.TruthIndex`). Site-level alerts (the queue) need no vehicle.
+- Each episode spans ``[onset, clear]`` (to the end of the data when it never cleared). An
+  alert episode matches a truth episode of the same type and vehicle when their spans,
+  widened by ``slack_s`` on each side, overlap. Alert episodes are taken in start order; each
+  truth episode takes at most one (the first): a true positive.
+- A false positive is an alert episode tied to no vehicle, to a vehicle with no such truth
+  episode, or to a truth episode already matched (a duplicate: "one alert per event" broken,
+  e.g. by a track that split); ``duplicates`` counts the last kind. A false negative is a
+  truth episode no alert matched.
+- ``precision = TP / (TP + FP)``, ``recall = TP / (TP + FN)``; None where undefined.
+
+Lead time: for each true positive whose vehicle reaches the taper's start station in the
+truth (crossing it between two steps, interpolated), ``t_taper - t_alert_start`` [s]; negative
+when the alert came after the vehicle was at the taper. ``lead_time_s`` is their median;
+``truth_lead_time_s`` the same for the truth episodes (what a perfect chain would give); for
+speeding, ``lead_time_aggressive_s`` restricts the median to aggressive drivers.
+
+The truth covers the whole simulated road; to score the chain within its sensors' coverage,
+pass truth frames cut to the covered stretch (a vehicle never seen cannot be alerted on).
+Pure: no I/O; :func:`run_alert_engine` and :func:`score_alerts` are what ``wz eval`` calls.
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from wz_alert_service.engine import AlertEngine, AlertEvent
+from wz_alert_service.zone import ZoneGeometry
+from wz_eval.metrics import TruthIndex
+from wz_shared.messages import (
+    Alert,
+    AlertType,
+    DriverProfile,
+    Track,
+    TrackBatch,
+    TrackStatus,
+    VehicleTruth,
+)
+from wz_shared.site import Site
+
+TruthFrames = Sequence[tuple[float, Sequence[VehicleTruth]]]
+#: Largest distance from an alert's position to the vehicle it is tied to [m].
+TIE_GATE_M = 3.0
+#: How far apart in time an alert's and a truth episode's spans may be and still match [s].
+MATCH_SLACK_S = 1.0
+#: Largest gap between an alert's stamp and the nearest truth step [s].
+MAX_TRUTH_GAP_S = 0.06
+TRUTH_SOURCE = "truth"
+
+
+@dataclass(frozen=True)
+class Episode:
+    """One alert episode, from the perception chain or from the truth.
+
+    Attributes
+    ----------
+    episode_id : str
+        The engine's id.
+    alert_type : AlertType
+        The rule.
+    vehicle_id : str or None
+        The truth vehicle it is tied to (None: a site-level alert, or tied to no vehicle).
+    start_s, onset_s, end_s : float
+        When it started, when its condition first held, when it cleared (``inf``: never) [s].
+    site_level : bool
+        A queue: no vehicle to tie.
+    """
+
+    episode_id: str
+    alert_type: AlertType
+    vehicle_id: str | None
+    start_s: float
+    onset_s: float
+    end_s: float
+    site_level: bool = False
+
+    def overlaps(self, other: Episode, slack_s: float) -> bool:
+        """Whether the spans ``[onset, end]`` widened by ``slack_s`` a side overlap."""
+        return self.onset_s - slack_s <= other.end_s and other.onset_s - slack_s <= self.end_s
+
+
+@dataclass(frozen=True)
+class _Event:
+    """An AlertEvent or an Alert message, reduced to what scoring needs."""
+
+    episode_id: str
+    alert_type: AlertType
+    phase: str
+    stamp_s: float
+    onset_s: float
+    station_m: float
+    offset_m: float
+    site_level: bool
+
+
+def _as_event(event: AlertEvent | Alert) -> _Event:
+    if isinstance(event, AlertEvent):
+        return _Event(event.episode_id, event.alert_type, event.phase, event.stamp,
+                      event.onset_stamp, event.finding.station_m, event.finding.offset_m,
+                      event.track_id is None)  # fmt: skip
+    onset = event.stamp if event.onset_stamp is None else event.onset_stamp
+    return _Event(event.episode_id or event.alert_id, event.alert_type, event.phase,
+                  event.stamp, onset, event.station_m, event.offset_m,
+                  event.track_id is None)  # fmt: skip
+
+
+def run_alert_engine(site: Site, track_batches: Iterable[TrackBatch]) -> list[AlertEvent]:
+    """The events of a fresh :class:`AlertEngine` (the site's thresholds) fed ``track_batches``
+    in the order given (as the node would be; batches older than the last are ignored)."""
+    engine = AlertEngine(site)
+    events: list[AlertEvent] = []
+    for batch in track_batches:
+        events += engine.update(batch)
+    return events
+
+
+def truth_batches(site: Site, truth_frames: TruthFrames) -> tuple[list[TrackBatch], dict[int, str]]:
+    """Each truth frame as a track batch: every vehicle a confirmed track with its true state.
+
+    Returns
+    -------
+    batches : list of TrackBatch
+        One per frame, in the frames' order.
+    vehicle_of : dict
+        ``{track_id: vehicle_id}`` (track ids given in order of first appearance).
+    """
+    track_of: dict[str, int] = {}
+    first_seen_s: dict[str, float] = {}
+    batches = []
+    for index, (stamp_s, vehicles) in enumerate(truth_frames):
+        tracks = []
+        for v in vehicles:
+            track_id = track_of.setdefault(v.vehicle_id, len(track_of))
+            age_s = stamp_s - first_seen_s.setdefault(v.vehicle_id, stamp_s)
+            tracks.append(Track(
+                track_id=track_id, x_m=v.x_m, y_m=v.y_m,
+                vx_mps=v.speed_mps * math.cos(v.heading_rad),
+                vy_mps=v.speed_mps * math.sin(v.heading_rad), covariance=[0.0] * 16,
+                station_m=v.station_m, offset_m=v.offset_m, speed_mps=v.speed_mps,
+                heading_rad=v.heading_rad, lane_index=v.lane_index, object_class=v.vehicle_class,
+                age_s=max(0.0, age_s), hits=1, confirmed=True, sources=[TRUTH_SOURCE],
+                status=TrackStatus.CONFIRMED, length_m=v.length_m, width_m=v.width_m,
+                last_update_s=stamp_s,
+            ))  # fmt: skip
+        batches.append(TrackBatch(site=site.site_id, source_id=TRUTH_SOURCE, stamp=stamp_s,
+                                  cycle_index=index, tracks=tracks))  # fmt: skip
+    return batches, {track_id: vehicle_id for vehicle_id, track_id in track_of.items()}
+
+
+def _episodes(events: Iterable[_Event], vehicle_of_start: dict[str, str | None]) -> list[Episode]:
+    """Episodes from their events: spans from the starts and clears."""
+    starts: dict[str, _Event] = {}
+    ends: dict[str, float] = {}
+    for event in events:
+        if event.phase == "start":
+            starts.setdefault(event.episode_id, event)
+        elif event.phase == "clear":
+            ends[event.episode_id] = event.stamp_s
+    ordered = sorted(starts.items(), key=lambda item: item[1].stamp_s)
+    return [
+        Episode(
+            episode_id,
+            start.alert_type,
+            vehicle_of_start.get(episode_id),
+            start.stamp_s,
+            start.onset_s,
+            ends.get(episode_id, math.inf),
+            start.site_level,
+        )
+        for episode_id, start in ordered
+    ]
+
+
+def truth_episodes(site: Site, truth_frames: TruthFrames) -> list[Episode]:
+    """The episodes the engine finds on the true kinematics, each with its vehicle."""
+    batches, vehicle_of = truth_batches(site, truth_frames)
+    events = run_alert_engine(site, batches)
+    vehicles = {e.episode_id: None if e.track_id is None else vehicle_of[e.track_id]
+                for e in events if e.phase == "start"}  # fmt: skip
+    return _episodes(map(_as_event, events), vehicles)
+
+
+def tie_to_vehicle(truth: TruthIndex, stamp_s: float, station_m: float, offset_m: float,
+                   gate_m: float = TIE_GATE_M) -> str | None:  # fmt: skip
+    """The truth vehicle nearest ``(station, offset)`` at ``stamp_s`` within ``gate_m``."""
+    vehicles = truth.at(stamp_s, MAX_TRUTH_GAP_S)
+    if not vehicles:
+        return None
+    nearest = min(
+        vehicles, key=lambda v: math.hypot(v.station_m - station_m, v.offset_m - offset_m)
+    )
+    distance_m = math.hypot(nearest.station_m - station_m, nearest.offset_m - offset_m)
+    return nearest.vehicle_id if distance_m <= gate_m else None
+
+
+def taper_arrivals(truth_frames: TruthFrames, taper_start_m: float) -> dict[str, float]:
+    """When each vehicle's centre crosses the taper's start station [s], interpolated between
+    steps; vehicles first seen at or past it, or never reaching it, are left out."""
+    last: dict[str, tuple[float, float]] = {}
+    arrivals: dict[str, float] = {}
+    for stamp_s, vehicles in truth_frames:
+        for v in vehicles:
+            before = last.get(v.vehicle_id)
+            last[v.vehicle_id] = (stamp_s, v.station_m)
+            if v.vehicle_id in arrivals or before is None or v.station_m < taper_start_m:
+                continue
+            t0, s0 = before
+            if s0 >= taper_start_m:
+                continue
+            arrivals[v.vehicle_id] = t0 + (taper_start_m - s0) / (v.station_m - s0) * (stamp_s - t0)
+    return arrivals
+
+
+def _median(values: Sequence[float]) -> float | None:
+    return statistics.median(values) if values else None
+
+
+def _ratio(numerator: int, denominator: int) -> float | None:
+    return numerator / denominator if denominator else None
+
+
+def score_alerts(
+    site: Site,
+    truth_frames: TruthFrames,
+    events: Iterable[AlertEvent | Alert],
+    *,
+    tie_gate_m: float = TIE_GATE_M,
+    slack_s: float = MATCH_SLACK_S,
+) -> dict[str, dict[str, Any]]:
+    """Precision, recall and lead time of the alerts per type, against the truth.
+
+    Parameters
+    ----------
+    site : Site
+        The site the alerts and the truth belong to (its thresholds define the truth).
+    truth_frames : sequence of (float, sequence of VehicleTruth)
+        The simulation's truth, ``(stamp [s], vehicles)`` per step, in stamp order.
+    events : iterable of AlertEvent or Alert
+        What the alert engine produced on the fused tracks (e.g. :func:`run_alert_engine`),
+        or the alert messages from the bus; every phase may be given (starts, updates, clears).
+    tie_gate_m : float
+        Largest distance from an alert's position to its vehicle [m].
+    slack_s : float
+        Slack on each side of the episodes' spans when matching [s].
+
+    Returns
+    -------
+    dict
+        Keyed by alert type (``"speeding"``...), each: ``precision``, ``recall`` (None when
+        undefined), ``true_positives``, ``false_positives``, ``false_negatives``,
+        ``duplicates``, ``alerts`` (alert episodes), ``truth_episodes``, ``lead_time_s`` and
+        ``truth_lead_time_s`` (medians [s], None without samples), ``lead_time_samples``; for
+        speeding also ``lead_time_aggressive_s``.
+    """
+    index = TruthIndex([(stamp, list(vehicles)) for stamp, vehicles in truth_frames])
+    profile = {v.vehicle_id: v.driver_profile for _, vehicles in truth_frames for v in vehicles}
+    reduced = [_as_event(e) for e in events]
+    tied = {
+        e.episode_id: None if e.site_level else tie_to_vehicle(index, e.stamp_s, e.station_m,
+                                                               e.offset_m, tie_gate_m)
+        for e in reduced if e.phase == "start"
+    }  # fmt: skip
+    alert_episodes = _episodes(reduced, tied)
+    truths = truth_episodes(site, truth_frames)
+    arrivals = taper_arrivals(truth_frames, ZoneGeometry.from_site(site).taper_start_m)
+
+    def lead(episode: Episode) -> float | None:
+        if episode.vehicle_id is None or episode.vehicle_id not in arrivals:
+            return None
+        return arrivals[episode.vehicle_id] - episode.start_s
+
+    report: dict[str, dict[str, Any]] = {}
+    for alert_type in AlertType:
+        candidates = [t for t in truths if t.alert_type is alert_type]
+        matched: set[str] = set()
+        true_positives: list[Episode] = []
+        false_positives = duplicates = 0
+        for alert in (a for a in alert_episodes if a.alert_type is alert_type):
+            overlapping = [
+                t for t in candidates
+                if (alert.site_level or (alert.vehicle_id is not None
+                                         and t.vehicle_id == alert.vehicle_id))
+                and alert.overlaps(t, slack_s)
+            ]  # fmt: skip
+            free = [t for t in overlapping if t.episode_id not in matched]
+            if free:
+                matched.add(min(free, key=lambda t: t.onset_s).episode_id)
+                true_positives.append(alert)
+            else:
+                false_positives += 1
+                duplicates += bool(overlapping)
+        tp, fn = len(true_positives), len(candidates) - len(matched)
+        leads = [x for x in map(lead, true_positives) if x is not None]
+        entry: dict[str, Any] = {
+            "precision": _ratio(tp, tp + false_positives),
+            "recall": _ratio(tp, tp + fn),
+            "true_positives": tp,
+            "false_positives": false_positives,
+            "false_negatives": fn,
+            "duplicates": duplicates,
+            "alerts": tp + false_positives,
+            "truth_episodes": len(candidates),
+            "lead_time_s": _median(leads),
+            "lead_time_samples": len(leads),
+            "truth_lead_time_s": _median([x for x in map(lead, candidates) if x is not None]),
+        }
+        if alert_type is AlertType.SPEEDING:
+            aggressive = [
+                x for a in true_positives
+                if a.vehicle_id is not None and profile.get(a.vehicle_id) is DriverProfile.AGGRESSIVE
+                and (x := lead(a)) is not None
+            ]  # fmt: skip
+            entry["lead_time_aggressive_s"] = _median(aggressive)
+        report[alert_type.value] = entry
+    return report
+
+
+def summary_lines(report: dict[str, dict[str, Any]]) -> list[str]:
+    """One line per alert type: ``type  P  R  TP/FP/FN  lead``, for a log or a report."""
+
+    def cell(value: float | None, fmt: str) -> str:
+        return "-" if value is None else format(value, fmt)
+
+    return [
+        f"{name}: precision {cell(e['precision'], '.2f')}, recall {cell(e['recall'], '.2f')}, "
+        f"TP {e['true_positives']}, FP {e['false_positives']}, FN {e['false_negatives']}, "
+        f"lead {cell(e['lead_time_s'], '.1f')} s"
+        for name, e in report.items()
+    ]

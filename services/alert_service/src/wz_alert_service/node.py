@@ -1,0 +1,230 @@
+"""The alert service node: fused tracks in, alerts and the roadside devices' state out.
+
+Run it as ``python -m wz_alert_service.node`` (settings: ``WZ_ALERT_*``, bus ``WZ_BUS_*``; the
+rules' thresholds are the ``alerts:`` section of the site file). It
+
+- takes :class:`TrackBatch` messages from ``wz/<site>/tracks`` (a FIFO: every batch counts, in
+  the order the tracker published them) and gives each to the :class:`AlertEngine`;
+- publishes each event the engine decides (an episode's start, a rise in severity, its clear)
+  as an :class:`Alert` on ``wz/<site>/alerts/<type>``, reliably (congestion control blocks: an
+  alert is never dropped), before anything else is done with the batch;
+- publishes the flashing beacon's and the message sign's state
+  (:class:`RoadsideDeviceState`) on ``wz/<site>/devices/state`` whenever what they show
+  changes (and once, for the first batch, so a listener knows the starting state);
+- answers queries on ``wz/<site>/alerts/active`` with :class:`ActiveAlerts`: per open
+  episode its newest published event, and the devices' state, for a consumer that joins late.
+
+Time is the batches' stamps (capture time); the node never reads the wall clock for its logic.
+A tracker with no vehicles still publishes (empty) batches, which clear what is open.
+
+Bad input never stops it; each problem is counted in the status message's ``invalid_counts``
+under ``wz/<site>/tracks|<reason>``: the bus's own decode reasons (``bad_json``,
+``wrong_kind``, ``schema_version``, ``invalid``...), ``wrong_site`` (a batch of another site)
+and ``out_of_order`` (a batch older than the last one: the engine moves forward in time only).
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Annotated
+
+from pydantic import Field, ValidationError, field_validator
+from pydantic_settings import SettingsConfigDict
+
+from wz_alert_service.devices import roadside_devices
+from wz_alert_service.engine import AlertEngine
+from wz_shared.codec import encode_json
+from wz_shared.logs import configure_logging
+from wz_shared.messages import ActiveAlerts, Alert, AlertType, RoadsideDeviceState, TrackBatch
+from wz_shared.service import ServiceRuntime
+from wz_shared.settings import BusSettings, ServiceSettings
+from wz_shared.site import Site, load_site
+from wz_shared.timebase import SimClock
+
+SERVICE = "alert-service"
+log = logging.getLogger("wz_alert_service.node")
+Report = Callable[[str, str], None]
+_PREFIX = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.:-]{0,63}$")
+
+
+class AlertServiceSettings(ServiceSettings):
+    """The node's settings (``WZ_ALERT_*``); the rules' thresholds live in the site file."""
+
+    model_config = SettingsConfigDict(env_prefix="WZ_ALERT_", extra="ignore")
+
+    #: Put before every episode id so ids stay unique across restarts; None: the service's
+    #: start time, UTC, ``YYYYmmddTHHMMSS``.
+    episode_id_prefix: str | None = None
+    #: Track batches queued for the engine; beyond it the tracker's publisher waits.
+    queue_capacity: Annotated[int, Field(ge=1, le=1_000_000)] = 1024
+
+    @field_validator("episode_id_prefix")
+    @classmethod
+    def _prefix(cls, value: str | None) -> str | None:
+        if value is not None and not _PREFIX.match(value):
+            raise ValueError(
+                f"{value!r}: use letters, digits and '_', '.', ':', '-' (64 characters at most, "
+                "starting with a letter or digit)"
+            )
+        return value
+
+
+@dataclass(frozen=True)
+class AlertOutputs:
+    """What one track batch produced.
+
+    Attributes
+    ----------
+    accepted : bool
+        False when the batch was refused (another site, or older than the last one).
+    alerts : list of Alert
+        The engine's events as messages, in the engine's order.
+    devices : RoadsideDeviceState or None
+        The devices' new state, when what they show changed; None otherwise.
+    """
+
+    accepted: bool
+    alerts: list[Alert] = field(default_factory=list)
+    devices: RoadsideDeviceState | None = None
+
+
+class AlertCore:
+    """What the node does without the bus: track batches in, alert messages and devices out.
+
+    Parameters
+    ----------
+    site : Site
+        The site: geometry, limits and the ``alerts:`` thresholds.
+    report : callable
+        ``report(reason, detail)`` for each refused batch.
+    id_prefix : str
+        Put before every episode id (see :class:`AlertEngine`).
+    source_id : str
+        The ``source_id`` of every message.
+    """
+
+    def __init__(
+        self, site: Site, report: Report, *, id_prefix: str = "", source_id: str = SERVICE
+    ) -> None:
+        self.site = site
+        self.report = report
+        self.source_id = source_id
+        self.engine = AlertEngine(site, id_prefix=id_prefix)
+        self.devices: RoadsideDeviceState | None = None
+        self._newest: dict[str, Alert] = {}  # episode id -> its newest start or update
+        self._stamp_s = 0.0
+
+    def add(self, batch: TrackBatch) -> AlertOutputs:
+        """Evaluate one track batch."""
+        if batch.site != self.site.site_id:
+            self.report("wrong_site", f"track batch of site {batch.site} from {batch.source_id}")
+            return AlertOutputs(accepted=False)
+        out_of_order = self.engine.counters.batches_out_of_order
+        events = self.engine.update(batch)
+        if self.engine.counters.batches_out_of_order > out_of_order:
+            self.report("out_of_order", f"track batch at {batch.stamp:.3f} s after "
+                        f"{self._stamp_s:.3f} s: ignored")  # fmt: skip
+            return AlertOutputs(accepted=False)
+        self._stamp_s = batch.stamp
+        alerts = [event.to_message(self.site.site_id, self.source_id) for event in events]
+        for alert in alerts:
+            assert alert.episode_id is not None  # the engine names every episode
+            if alert.phase == "clear":
+                self._newest.pop(alert.episode_id, None)
+            else:
+                self._newest[alert.episode_id] = alert
+        devices = roadside_devices(
+            self.engine.active(), self.engine.zone, batch.stamp, source_id=self.source_id
+        )
+        if devices.shows_same_as(self.devices):
+            return AlertOutputs(accepted=True, alerts=alerts)
+        self.devices = devices
+        return AlertOutputs(accepted=True, alerts=alerts, devices=devices)
+
+    def active(self) -> ActiveAlerts:
+        """The open episodes (their newest events) and the devices, as of the last batch."""
+        devices = self.devices or roadside_devices(
+            [], self.engine.zone, self._stamp_s, source_id=self.source_id
+        )
+        alerts = [
+            self._newest[a.episode_id] for a in self.engine.active() if a.episode_id in self._newest
+        ]
+        return ActiveAlerts(site=self.site.site_id, source_id=self.source_id,
+                            stamp=self._stamp_s, alerts=alerts, devices=devices)  # fmt: skip
+
+
+def _log_alert(alert: Alert) -> None:
+    subject = "site" if alert.track_id is None else f"track {alert.track_id}"
+    log.info(
+        "%s %s %s (%s): %s",
+        alert.alert_type.value,
+        alert.phase,
+        subject,
+        alert.severity.value,
+        alert.description,
+        extra={"alert_type": alert.alert_type.value, "phase": alert.phase,
+               "episode_id": alert.episode_id, "stamp": alert.stamp},
+    )  # fmt: skip
+
+
+def run(runtime: ServiceRuntime, site: Site, settings: AlertServiceSettings,
+        clock: SimClock, id_prefix: str) -> int:  # fmt: skip
+    """Evaluate track batches until ``runtime.stop``; the number of alerts published."""
+    bus = runtime.bus
+    tracks_key = bus.keys.tracks
+
+    def report(reason: str, detail: str) -> None:
+        bus.stats.count_invalid(tracks_key, reason, detail)
+
+    core = AlertCore(site, report, id_prefix=id_prefix)
+    publishers = {t: bus.publisher(bus.keys.alerts(t.value), Alert) for t in AlertType}
+    devices_publisher = bus.publisher(bus.keys.devices_state, RoadsideDeviceState)
+    snapshot = [encode_json(core.active())]
+    bus.serve(bus.keys.alerts_active, lambda: snapshot[-1])
+    batches = bus.subscribe(tracks_key, TrackBatch, capacity=settings.queue_capacity)
+    log.info("alerting on %s -> %s", tracks_key, bus.keys.alerts_all)
+    published = 0
+    while not runtime.stop.is_set():
+        batch = batches.recv(0.1)
+        if batch is None:
+            continue
+        outputs = core.add(batch)
+        if not outputs.accepted:
+            continue
+        for alert in outputs.alerts:
+            publishers[alert.alert_type].put(alert)
+            published += 1
+        for alert in outputs.alerts:
+            _log_alert(alert)
+        if outputs.devices is not None:
+            devices_publisher.put(outputs.devices)
+            log.info("devices: beacon %s, sign %r", "on" if outputs.devices.beacon_on else "off",
+                     outputs.devices.sign_text)  # fmt: skip
+        snapshot[:] = [encode_json(core.active())]
+        if batch.stamp >= clock.now():
+            clock.advance_to(batch.stamp)
+    return published
+
+
+def main() -> None:
+    try:
+        settings = AlertServiceSettings()
+    except ValidationError as exc:
+        raise SystemExit(f"{SERVICE}: invalid settings: {exc}") from exc
+    site = load_site(settings.site_file)
+    configure_logging(service=SERVICE, site=site.site_id, level=settings.log_level)
+    id_prefix = settings.episode_id_prefix or time.strftime("%Y%m%dT%H%M%S", time.gmtime())
+    clock = SimClock()
+    with ServiceRuntime(SERVICE, site.site_id, BusSettings(),
+                        status_period_s=settings.status_period_s,
+                        clock_stamp=clock.now) as runtime:  # fmt: skip
+        published = run(runtime, site, settings, clock, id_prefix)
+    log.info("stopped after %d alerts", published)
+
+
+if __name__ == "__main__":
+    main()

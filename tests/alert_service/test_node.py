@@ -1,0 +1,79 @@
+"""The node's core without the bus: refused batches reported, alert messages and the devices'
+state published only when it changes, the active episodes for the queryable."""
+
+from __future__ import annotations
+
+import pytest
+
+from tests.alert_service.helpers import SITE, batch, make_track, stamps
+from wz_alert_service.node import AlertCore, AlertOutputs, AlertServiceSettings
+from wz_shared import codec
+from wz_shared.messages import ActiveAlerts, AlertType, TrackBatch
+from wz_shared.site import MPH_TO_MPS
+
+FAST_MPS = 55.0 * MPH_TO_MPS + 8.0 * MPH_TO_MPS  # 8 mph over the 55 mph limit
+
+
+def core_and_reports() -> tuple[AlertCore, list[tuple[str, str]]]:
+    reports: list[tuple[str, str]] = []
+    core = AlertCore(SITE, lambda reason, detail: reports.append((reason, detail)), id_prefix="t")
+    return core, reports
+
+
+def test_a_speeder_gives_one_start_then_a_clear_and_the_devices_follow() -> None:
+    core, reports = core_and_reports()
+    starts, clears, device_states = [], [], []
+    for k, t in enumerate(stamps(3.0, rate_hz=10.0)):
+        tracks = [make_track(1, 500.0 + 27.0 * t, FAST_MPS)] if t < 2.0 else []
+        outputs = core.add(batch(t, tracks, k))
+        assert outputs.accepted
+        starts += [a for a in outputs.alerts if a.alert_type is AlertType.SPEEDING and a.phase == "start"]  # fmt: skip
+        clears += [a for a in outputs.alerts if a.alert_type is AlertType.SPEEDING and a.phase == "clear"]  # fmt: skip
+        if outputs.devices is not None:
+            device_states.append(outputs.devices)
+        if t == pytest.approx(1.5):
+            active = core.active()
+            assert [a.alert_type for a in active.alerts] == [
+                AlertType.SPEEDING,
+                AlertType.AGGRESSIVE_APPROACH,
+            ]
+            assert active.alerts[0] == starts[0]
+            assert active.devices.beacon_on and active.stamp == pytest.approx(1.5)
+            assert codec.decode_json(codec.encode_json(active), ActiveAlerts) == active
+    assert reports == []
+    (start,) = starts
+    (clear,) = clears
+    assert start.stamp == pytest.approx(1.0) and start.onset_stamp == pytest.approx(0.0)
+    assert start.episode_id == clear.episode_id and start.episode_id.startswith("t-speeding-1-")
+    assert (start.site, start.source_id) == (SITE.site_id, "alert-service")
+    assert clear.stamp == pytest.approx(2.0)  # the track is gone: cleared at once
+    # Off at the first batch, on with the first start, off again once both episodes cleared.
+    assert [(d.beacon_on, d.sign_text, round(d.stamp, 6)) for d in device_states] == [
+        (False, "", 0.0),
+        (True, "SLOW DOWN", 1.0),
+        (False, "", 2.0),
+    ]
+    assert core.active().alerts == [] and not core.active().devices.beacon_on
+
+
+def test_batches_of_another_site_or_from_the_past_are_reported_and_ignored() -> None:
+    core, reports = core_and_reports()
+    assert core.add(batch(1.0, [make_track(1, 500.0, FAST_MPS)])).accepted
+    other = TrackBatch(site="elsewhere", source_id="tracker", stamp=2.0, cycle_index=0, tracks=[])
+    assert core.add(other) == AlertOutputs(accepted=False)
+    assert not core.add(batch(0.5, [])).accepted
+    assert [reason for reason, _ in reports] == ["wrong_site", "out_of_order"]
+    assert "elsewhere" in reports[0][1] and "0.500 s" in reports[1][1]
+    assert core.engine.counters.batches == 1
+
+
+def test_settings_refuse_an_episode_prefix_that_cannot_be_an_identifier(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setenv("WZ_ALERT_EPISODE_ID_PREFIX", "has space")
+    with pytest.raises(ValueError, match="letters, digits"):
+        AlertServiceSettings()
+    monkeypatch.setenv("WZ_ALERT_EPISODE_ID_PREFIX", "edge-1")
+    monkeypatch.setenv("WZ_ALERT_QUEUE_CAPACITY", "16")
+    settings = AlertServiceSettings()
+    assert (settings.episode_id_prefix, settings.queue_capacity) == ("edge-1", 16)

@@ -1,0 +1,139 @@
+"""Scoring alerts against truth on hand-made truth and alerts: a true positive, false positives
+(a legal driver, a ghost, a duplicate), a false negative, and the lead time to the taper exactly.
+
+The default site: approach [300, 1700) m, taper start 1000 m, 55 mph (24.59 m/s) from 300 m;
+speeding from 60 mph (26.82 m/s) held 1 s. Truth at 20 Hz for 21 s, every vehicle in lane 0:
+
+- ``A`` (aggressive), 29 m/s from 400 m: speeding from 0 s (start 1.0 s); at the taper start at
+  600 / 29 = 20.69 s;
+- ``B`` (normal), 30 m/s from 300 m: speeding from 0 s, never alerted (a false negative);
+  reaches 930 m by 21 s, not the taper;
+- ``C`` (normal), 24 m/s from 600 m: legal; at the taper start at 16.67 s.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from tests.alert_service.helpers import SITE
+from wz_alert_service.engine import AlertEvent
+from wz_alert_service.rules import Finding
+from wz_eval.alerts import (
+    run_alert_engine,
+    score_alerts,
+    summary_lines,
+    taper_arrivals,
+    truth_batches,
+    truth_episodes,
+)
+from wz_shared.messages import (
+    Alert,
+    AlertPhase,
+    AlertSeverity,
+    AlertType,
+    DriverProfile,
+    VehicleClass,
+    VehicleTruth,
+)
+
+VEHICLES = {  # id: (start station [m], speed [m/s], profile)
+    "A": (400.0, 29.0, DriverProfile.AGGRESSIVE),
+    "B": (300.0, 30.0, DriverProfile.NORMAL),
+    "C": (600.0, 24.0, DriverProfile.NORMAL),
+}
+OFFSET_M = -1.83
+A_AT_TAPER_S = (1000.0 - 400.0) / 29.0
+
+
+def truth_at(t: float) -> list[VehicleTruth]:
+    return [
+        VehicleTruth(vehicle_id=vehicle_id, vehicle_class=VehicleClass.CAR, x_m=-OFFSET_M,
+                     y_m=s0 + v * t, heading_rad=math.pi / 2, speed_mps=v, accel_mps2=0.0,
+                     length_m=4.5, width_m=1.8, height_m=1.5, lane_index=0,
+                     station_m=s0 + v * t, offset_m=OFFSET_M, driver_profile=profile)
+        for vehicle_id, (s0, v, profile) in VEHICLES.items()
+    ]  # fmt: skip
+
+
+TRUTH = [(k / 20.0, truth_at(k / 20.0)) for k in range(21 * 20 + 1)]
+
+
+def station(vehicle_id: str, t: float) -> float:
+    s0, v, _ = VEHICLES[vehicle_id]
+    return s0 + v * t
+
+
+def alert(episode: str, stamp: float, station_m: float, phase: AlertPhase = "start",
+          alert_type: AlertType = AlertType.SPEEDING) -> Alert:  # fmt: skip
+    return Alert(site=SITE.site_id, source_id="alert-service", stamp=stamp,
+                 alert_id=f"{episode}-{phase}", alert_type=alert_type,
+                 severity=AlertSeverity.WARNING, track_id=7, station_m=station_m,
+                 offset_m=OFFSET_M + 0.3, speed_mps=29.0, measured_value=29.0,
+                 threshold_value=26.8, description="test", phase=phase, episode_id=episode,
+                 onset_stamp=stamp - 1.0)  # fmt: skip
+
+
+def test_truth_episodes_are_the_rules_on_the_true_kinematics() -> None:
+    speeding = [e for e in truth_episodes(SITE, TRUTH) if e.alert_type is AlertType.SPEEDING]
+    assert sorted((e.vehicle_id, e.onset_s, e.start_s, e.end_s) for e in speeding) == [
+        ("A", 0.0, pytest.approx(1.0), math.inf),
+        ("B", 0.0, pytest.approx(1.0), math.inf),
+    ]
+    assert taper_arrivals(TRUTH, 1000.0) == {
+        "A": pytest.approx(A_AT_TAPER_S, abs=1e-9),  # between two steps: interpolated
+        "C": pytest.approx(400.0 / 24.0, abs=1e-9),
+    }
+    batches, vehicle_of = truth_batches(SITE, TRUTH)
+    assert len(batches) == len(TRUTH) and sorted(vehicle_of.values()) == ["A", "B", "C"]
+
+
+def test_a_true_positive_false_positives_and_a_false_negative() -> None:
+    events = [
+        alert("ep-a", 1.5, station("A", 1.5) + 0.5),  # A, 0.58 m off: a true positive
+        alert("ep-c", 5.0, station("C", 5.0) - 1.0),  # C drives legally: a false positive
+        alert("ep-ghost", 6.0, 2000.0),  # no vehicle within 3 m: a false positive
+        alert("ep-a2", 10.0, station("A", 10.0)),  # A again, same truth episode: a duplicate
+        alert("ep-a2", 12.0, station("A", 12.0), phase="clear"),
+    ]
+    report = score_alerts(SITE, TRUTH, events)
+    speeding = report["speeding"]
+    assert {k: speeding[k] for k in ("true_positives", "false_positives", "false_negatives",
+                                      "duplicates", "alerts", "truth_episodes")} == {
+        "true_positives": 1, "false_positives": 3, "false_negatives": 1, "duplicates": 1,
+        "alerts": 4, "truth_episodes": 2}  # fmt: skip
+    assert speeding["precision"] == pytest.approx(1 / 4)
+    assert speeding["recall"] == pytest.approx(1 / 2)
+    # A reaches the taper start (1000 m) at 600 / 29 s; its alert started at 1.5 s.
+    assert speeding["lead_time_s"] == pytest.approx(A_AT_TAPER_S - 1.5, abs=1e-9)
+    assert speeding["lead_time_aggressive_s"] == pytest.approx(A_AT_TAPER_S - 1.5, abs=1e-9)
+    assert speeding["lead_time_samples"] == 1
+    assert speeding["truth_lead_time_s"] == pytest.approx(A_AT_TAPER_S - 1.0, abs=1e-9)
+    # No late-merge truth and no late-merge alert: nothing to score.
+    assert report["late_merge"]["precision"] is None and report["late_merge"]["recall"] is None
+    assert set(report) == {t.value for t in AlertType}
+    assert summary_lines(report)[0].startswith("speeding: precision 0.25, recall 0.50, TP 1")
+
+
+def test_an_alert_outside_the_slack_of_the_truth_episode_does_not_match() -> None:
+    # B's truth episode is open from 0 s to the end; a hard-braking alert on B has no truth.
+    events = [alert("ep-b", 3.0, station("B", 3.0), alert_type=AlertType.HARD_BRAKING)]
+    braking = score_alerts(SITE, TRUTH, events)["hard_braking"]
+    assert (braking["true_positives"], braking["false_positives"]) == (0, 1)
+    assert braking["precision"] == 0.0 and braking["recall"] is None
+
+
+def test_the_engine_on_perfect_tracks_scores_perfectly() -> None:
+    batches, _ = truth_batches(SITE, TRUTH)
+    events = run_alert_engine(SITE, batches)
+    assert all(isinstance(e, AlertEvent) for e in events)
+    report = score_alerts(SITE, TRUTH, events)
+    scored = {name: e for name, e in report.items() if e["truth_episodes"]}
+    assert {"speeding", "aggressive_approach"} <= set(scored)
+    for entry in scored.values():
+        assert (entry["precision"], entry["recall"], entry["duplicates"]) == (1.0, 1.0, 0)
+    # AlertEvents and their messages score alike.
+    messages = [e.to_message(SITE.site_id, "alert-service") for e in events]
+    assert score_alerts(SITE, TRUTH, messages) == report
+    assert isinstance(events[0].finding, Finding)
