@@ -283,12 +283,15 @@ def test_both_sensors_silent_longer_than_max_coast_deletes_the_tracks() -> None:
     assert tracker.pop_finished_histories() == []
     after = [t.track_id for t in tracker.tracks() if t.status == "confirmed"]
     assert len(after) == 2 and min(after) > max(before)  # new ids, never reused
-    # Sensors that publish nothing at all: the node tells the time with advance_to.
+    # Sensors that publish nothing at all (an outage): the node tells the time with
+    # advance_to; the tracks coast through max_outage_coast_s, not max_coast_s, then go.
     tracker = MultiTargetTracker(SETTINGS)
     feed(tracker, scene(vehicles, duration_s=3.0, seed=3))
     before = [t.track_id for t in tracker.tracks() if t.status == "confirmed"]
     assert len(before) == 2
     tracker.advance_to(3.0 + SETTINGS.max_coast_s + SETTINGS.reorder_window_s + 0.1)
+    assert [t.status for t in tracker.tracks()] == ["coasting", "coasting"]
+    tracker.advance_to(3.0 + SETTINGS.max_outage_coast_s + SETTINGS.reorder_window_s + 0.1)
     assert tracker.tracks() == []
     assert set(before) <= {h.track_id for h in tracker.pop_finished_histories()}
 
@@ -388,7 +391,9 @@ def test_a_measurement_far_outside_the_gate_starts_a_tentative_track_and_leaves_
 
 
 def test_life_cycle_confirmation_coasting_and_deletion_times() -> None:
-    settings = TrackerSettings(reorder_window_s=0.0)
+    # The sensor sends nothing after its last detection; that an outage does not end a
+    # track sooner than max_outage_coast_s is the test of the silent sensors above.
+    settings = TrackerSettings(reorder_window_s=0.0, max_outage_coast_s=1.5)
     tracker = MultiTargetTracker(settings)
     cov = np.eye(2) * 0.04
 

@@ -58,7 +58,13 @@ from wz_eval.alerts import run_alert_engine, score_alerts
 from wz_eval.metrics import AxisErrors, TruthIndex, in_range, match, score_instant
 from wz_eval.pipeline import PipelineOptions, PipelineRecord, run_pipeline
 from wz_fusion_tracker.kalman import F64
-from wz_fusion_tracker.node import road_heading_hook, sensor_positions, to_measurements, to_track
+from wz_fusion_tracker.node import (
+    road_heading_hook,
+    road_headings_hook,
+    sensor_positions,
+    to_measurements,
+    to_track,
+)
 from wz_fusion_tracker.paper import (
     FusedEstimate,
     Observation,
@@ -236,7 +242,8 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
 
     # --- the production tracker, sampled at every camera frame time
     tracker = MultiTargetTracker(options.tracker, heading_at=road_heading_hook(site),
-                                 sensor_positions=sensor_positions(site))  # fmt: skip
+                                 sensor_positions=sensor_positions(site),
+                                 headings_at=road_headings_hook(site))  # fmt: skip
     mot = _MotAccumulator()
     sample_times = [stamp for stamp, _ in record.camera_only]
     batches = [b for b in record.batches if not _dropped(b, options.dropouts, options.warmup_s)]

@@ -34,6 +34,7 @@ import numpy as np
 from pydantic import Field, ValidationError
 from pydantic_settings import SettingsConfigDict
 
+from wz_fusion_tracker.kalman import F64
 from wz_fusion_tracker.tracker import Measurement, MultiTargetTracker, TrackerSettings, TrackState
 from wz_shared.codec import encode_json
 from wz_shared.logs import configure_logging
@@ -73,6 +74,17 @@ class FusionTrackerSettings(ServiceSettings):
 def road_heading_hook(site: Site) -> Callable[[float, float], float]:
     """``heading_at(x, y)``: the direction of travel at the point's station [rad]."""
     return site.road_frame.heading_at_point
+
+
+def road_headings_hook(site: Site) -> Callable[[F64, F64], F64]:
+    """``headings_at(xs, ys)``: :func:`road_heading_hook` for arrays of site points [rad]."""
+    frame = site.road_frame
+
+    def headings_at(x_m: F64, y_m: F64) -> F64:
+        stations, _ = frame.to_road(x_m, y_m)
+        return np.asarray(frame.heading_at(stations), dtype=np.float64).reshape(-1)
+
+    return headings_at
 
 
 def sensor_positions(site: Site) -> dict[str, tuple[float, float]]:
@@ -131,7 +143,8 @@ class FusionCore:
         self.settings = settings
         self.report = report
         self.tracker = MultiTargetTracker(settings.tracker, heading_at=road_heading_hook(site),
-                                          sensor_positions=sensor_positions(site))  # fmt: skip
+                                          sensor_positions=sensor_positions(site),
+                                          headings_at=road_headings_hook(site))  # fmt: skip
         self._next_output_s: float | None = None
         self._cycle = 0
 
