@@ -17,7 +17,13 @@ from wz_camera_detector.background import BackgroundSubtractionSettings
 from wz_camera_detector.node import CameraDetector, build_detector
 from wz_camera_detector.settings import CameraDetectorSettings, camera_mount, radar_mount
 from wz_camera_detector.yolo import ModelLoadError
-from wz_shared.messages import CameraFrameMeta, DetectionBatch, ServiceState, VehicleTruth
+from wz_shared.messages import (
+    CameraFrameMeta,
+    DetectionBatch,
+    ServiceState,
+    VehicleClass,
+    VehicleTruth,
+)
 from wz_shared.site import DEFAULT_SITE_PATH, CameraIntrinsics, SensorMount, load_site
 from wz_simulator.sensors.camera import CameraModel, encode_jpeg
 from wz_simulator.sensors.radar import RadarModel
@@ -208,3 +214,25 @@ def test_sensor_selection() -> None:
     assert radar_mount(SITE, "none") is None
     with pytest.raises(ValueError, match="not a radar"):
         radar_mount(SITE, camera_mount(SITE, None).sensor_id)
+
+
+def test_camera_only_objects_ranged_beyond_max_range_are_not_published() -> None:
+    from wz_camera_detector.association import FusedObject
+
+    detector, _ = make_detector(camera_mount(SITE, None), with_radar=True)
+    mount = camera_mount(SITE, None).pose
+    limit = detector.settings.max_range_m
+    heading = math.radians(-90.0)  # down the road, towards approaching traffic
+
+    def at(range_m: float, source: str) -> FusedObject:
+        return FusedObject(
+            source=source,  # type: ignore[arg-type]
+            x_m=mount.x_m + range_m * math.cos(heading), y_m=mount.y_m + range_m * math.sin(heading),
+            covariance_m2=np.eye(2), object_class=VehicleClass.CAR, score=0.9, speed_mps=None,
+            camera_local_id=1, radar_target_index=None,
+        )  # fmt: skip
+
+    fused = [at(limit - 1.0, "camera"), at(limit + 1.0, "camera"), at(limit + 1.0, "camera+radar")]
+    kept = detector._within_range(fused)
+    assert [(o.source, round(math.hypot(o.x_m - mount.x_m, o.y_m - mount.y_m))) for o in kept] == [
+        ("camera", round(limit - 1.0)), ("camera+radar", round(limit + 1.0))]  # fmt: skip

@@ -343,7 +343,20 @@ class CameraDetector:
         if self.settings.confirmed_only:
             tracks = [track for track in tracks if track.confirmed]
         objects = self._camera_objects(tracks, image.shape[1], image.shape[0], frame_index)
-        return FrameResult(tracks, objects, self._fuse(objects, stamp_s))
+        return FrameResult(tracks, objects, self._within_range(self._fuse(objects, stamp_s)))
+
+    def _within_range(self, fused: list[FusedObject]) -> list[FusedObject]:
+        """The fused objects without the camera-only ones ranged beyond ``max_range_m``.
+
+        A box's bottom row ranges a vehicle only while the road is seen well below the horizon:
+        near it a pixel is tens of metres (a far box or a false one was ranged at 320 m, where
+        no sensor of the site can confirm it, and started tracks the alerts then fired on). A
+        radar-paired object keeps the radar's range and is kept.
+        """
+        limit_m = self.settings.max_range_m
+        camera_x, camera_y = self.camera_mount.pose.x_m, self.camera_mount.pose.y_m
+        return [obj for obj in fused if obj.source != "camera"
+                or math.hypot(obj.x_m - camera_x, obj.y_m - camera_y) <= limit_m]  # fmt: skip
 
     def _camera_objects(
         self, tracks: list[ImageTrack], width_px: int, height_px: int, frame_index: int

@@ -73,6 +73,9 @@ class CameraDetectorSettings(ServiceSettings):
     #: 25 m): ``near_lateral_std_m * max(0, 1 - range / near_range_m)`` is added [m].
     near_lateral_std_m: Annotated[float, Field(ge=0.0)] = 1.3
     near_range_m: Annotated[float, Field(gt=0.0)] = 25.0
+    #: Camera-only objects ranged beyond this are not published [m]: ranging by the box's
+    #: bottom row is meaningless near the horizon (radar-paired objects keep the radar's range).
+    max_range_m: Annotated[float, Field(gt=0.0)] = 200.0
     #: ... and along it: ``range_std_m + range_std_per_m * range`` [m] (flat-road ranging from
     #: a pixel row: road slope, pitch and the assumed vehicle size grow with range).
     range_std_m: Annotated[float, Field(gt=0.0)] = 1.0
