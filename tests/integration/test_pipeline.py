@@ -1,6 +1,7 @@
 """The whole stack as `wz up` runs it: router, simulator, LiDAR and camera-radar detectors, the
-fusion tracker and the alert service, each its own process on real Zenoh; fused tracks of the
-simulated vehicles come out on `wz/<site>/tracks`, fed by both detectors, near the truth."""
+fusion tracker, the alert service and the gateway, each its own process on real Zenoh; fused
+tracks of the simulated vehicles come out on `wz/<site>/tracks`, fed by both detectors, near
+the truth, and the gateway serves them over HTTP."""
 
 from __future__ import annotations
 
@@ -8,6 +9,8 @@ import math
 import subprocess
 import time
 from pathlib import Path
+
+import httpx
 
 from tests.cli.procs import ROOT, free_port, running, wz_argv, wz_env
 from wz_shared.bus import Bus
@@ -21,10 +24,12 @@ SITE = load_site(DEFAULT_SITE_PATH)
 def test_wz_up_runs_the_pipeline_from_sensors_to_fused_tracks(tmp_path: Path) -> None:
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
+    http_port = free_port()
     log = (tmp_path / "up.log").open("wb")
     up = subprocess.Popen(
         wz_argv("up", "--listen", endpoint, "--seed", "3"), cwd=ROOT,
-        env=wz_env(WZ_SIM_WORK_DIR=str(tmp_path / "sim"), WZ_STATUS_PERIOD_S="1.0"),
+        env=wz_env(WZ_SIM_WORK_DIR=str(tmp_path / "sim"), WZ_STATUS_PERIOD_S="1.0",
+                   WZ_GATEWAY_PORT=str(http_port), WZ_GATEWAY_DATA_DIR=str(tmp_path / "gw")),
         stdout=log, stderr=subprocess.STDOUT,
     )  # fmt: skip
     settings = BusSettings(mode="client", connect_endpoints=[endpoint], listen_endpoints=[])
@@ -47,13 +52,17 @@ def test_wz_up_runs_the_pipeline_from_sensors_to_fused_tracks(tmp_path: Path) ->
                     nearest = min((math.hypot(v.x_m - track.x_m, v.y_m - track.y_m)
                                    for v in latest.vehicles), default=math.inf)  # fmt: skip
                     errors.append(nearest)
+            # The gateway stored the tracks and serves them (reads are open in `wz up`).
+            stored = httpx.get(f"http://127.0.0.1:{http_port}/v1/trajectories",
+                               params={"limit": 10}, timeout=10.0)  # fmt: skip
     text = (tmp_path / "up.log").read_text()
     assert sources >= {"lidar-mast", "camera-mast"}, (sources, text[-3000:])
     assert len(errors) >= 20
     # Within a few metres of a true vehicle (the truth message is up to a step apart and
     # the pipeline's latency moves vehicles on: 30 m/s x 0.1 s).
     assert sorted(errors)[len(errors) // 2] < 4.0, errors
+    assert stored.status_code == 200 and stored.json()["count"] == 10, stored.text
     for service in ("simulator", "lidar-detector", "camera-detector", "fusion-tracker",
-                    "alert-service"):  # fmt: skip
+                    "alert-service", "gateway"):  # fmt: skip
         assert f"{service} " in text or f"{service}|" in text.replace(" |", "|")
     assert "Traceback" not in text, text[-3000:]

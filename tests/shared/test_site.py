@@ -91,6 +91,17 @@ def test_unknown_field(tmp_path: Path) -> None:
         load_site(write_site(tmp_path, raw))
 
 
+def test_road_names_and_direction_for_feeds(tmp_path: Path, site: Site) -> None:
+    assert (site.road_names, site.road_direction) == (["US-75"], "northbound")
+    raw = default_raw()
+    del raw["road_names"], raw["road_direction"]
+    bare = load_site(write_site(tmp_path, raw))  # optional: older site files still load
+    assert (bare.road_names, bare.road_direction) == ([], "unknown")
+    raw["road_direction"] = "north"
+    with pytest.raises(SiteFileError, match=r"(?s)road_direction.*'northbound'"):
+        load_site(write_site(tmp_path, raw))
+
+
 def test_nan(tmp_path: Path) -> None:
     raw = default_raw()
     raw["centerline_xy_m"][3][0] = float("nan")

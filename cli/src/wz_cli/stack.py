@@ -2,7 +2,6 @@
 
 To add a service, append one :class:`ServiceSpec` to :data:`STACK` (in pipeline order, so a
 producer starts before its consumers); ``wz up``, ``wz up --only`` and ``wz demo`` pick it up.
-The service planned next: ``gateway``.
 
 Every child learns where the bus is and which site it serves from the environment:
 
@@ -131,6 +130,15 @@ STACK: tuple[ServiceSpec, ...] = (
         summary="fused tracks to alerts (speeding, hard braking, late merge, TTC, queue, "
         "intrusion) and the beacon and sign",
         env_prefix="WZ_ALERT_",
+    ),
+    ServiceSpec(
+        name="gateway",
+        module="wz_gateway.node",
+        summary="trajectories, alerts and devices into SQLite; REST API and WZDx device feed on "
+        "http://127.0.0.1:8000 (dev mode: reads need no key, an admin key is logged)",
+        env_prefix="WZ_GATEWAY_",
+        # The local stack is a development machine: loopback only, reads open.
+        env={"WZ_GATEWAY_DEV_MODE": "true"},
     ),
 )
 

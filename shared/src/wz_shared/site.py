@@ -422,12 +422,25 @@ class AlertRules(_Strict):
     devices: DeviceRules = Field(default_factory=DeviceRules)
 
 
+#: The direction of traffic as the road is signed (WZDx ``Direction``), not a compass heading:
+#: a northbound route stays northbound through its curves.
+RoadDirection = Literal[
+    "northbound", "eastbound", "southbound", "westbound", "inner-loop", "outer-loop",
+    "undefined", "unknown",
+]  # fmt: skip
+
+
 class Site(_Strict):
     """One deployment: geometry, work zone, limits and sensors."""
 
     schema_version: Literal[1] = 1
     site_id: SiteId
     name: str
+    #: Public names of the road (``US-75``, ``I-80``) for feeds such as WZDx; empty: ``name``.
+    road_names: list[Annotated[str, Field(min_length=1, max_length=100)]] = Field(
+        default_factory=list
+    )
+    road_direction: RoadDirection = "unknown"
     origin: GeoOrigin
     centerline_xy_m: Annotated[list[tuple[FiniteFloat, FiniteFloat]], Field(min_length=2)]
     lanes: Annotated[list[Lane], Field(min_length=1)]

@@ -1,0 +1,77 @@
+"""Track points as CSV and GeoJSON: pure, no I/O.
+
+CSV: one row per point, the columns of :data:`~wz_gateway.models.TRACK_POINT_FIELDS` (units in
+the names), an empty cell for a missing value. GeoJSON (RFC 7946): positions are
+``[longitude, latitude]`` in WGS84; a page of points is a FeatureCollection of Point features
+whose properties are the other columns; one track's trajectory is a LineString feature.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from collections.abc import Sequence
+from typing import Any
+
+from wz_gateway.models import TRACK_POINT_FIELDS, TrackPoint
+
+_PROPERTY_FIELDS = tuple(f for f in TRACK_POINT_FIELDS if f not in ("latitude_deg", "longitude_deg"))
+
+
+def points_csv(points: Sequence[TrackPoint]) -> str:
+    """A header line, then one line per point (``\\r\\n`` line ends, as RFC 4180 asks)."""
+    out = io.StringIO()
+    writer = csv.writer(out)
+    writer.writerow(TRACK_POINT_FIELDS)
+    for point in points:
+        row = point.model_dump(mode="json")
+        writer.writerow("" if row[name] is None else row[name] for name in TRACK_POINT_FIELDS)
+    return out.getvalue()
+
+
+def _position(point: TrackPoint) -> list[float]:
+    return [point.longitude_deg, point.latitude_deg]
+
+
+def points_geojson(points: Sequence[TrackPoint], *, next_cursor: str | None = None) -> dict[
+    str, Any
+]:
+    """A FeatureCollection of Point features; ``next_cursor`` as a foreign member."""
+    features = []
+    for point in points:
+        row = point.model_dump(mode="json")
+        features.append({
+            "type": "Feature",
+            "geometry": {"type": "Point", "coordinates": _position(point)},
+            "properties": {name: row[name] for name in _PROPERTY_FIELDS},
+        })  # fmt: skip
+    return {"type": "FeatureCollection", "features": features, "next_cursor": next_cursor}
+
+
+def trajectory_geojson(site: str, track_id: int, points: Sequence[TrackPoint], *,
+                       next_cursor: str | None = None) -> dict[str, Any]:  # fmt: skip
+    """A FeatureCollection of one feature: the track's path (a LineString, or a Point when
+    the page has a single point; no feature when it has none), with per-vertex stamps and
+    speeds as properties."""
+    features = []
+    if points:
+        coordinates = [_position(p) for p in points]
+        geometry = (
+            {"type": "LineString", "coordinates": coordinates}
+            if len(coordinates) > 1
+            else {"type": "Point", "coordinates": coordinates[0]}
+        )
+        features.append({
+            "type": "Feature",
+            "geometry": geometry,
+            "properties": {
+                "site": site,
+                "track_id": track_id,
+                "start_stamp": points[0].stamp,
+                "end_stamp": points[-1].stamp,
+                "stamps": [p.stamp for p in points],
+                "speeds_mps": [p.speed_mps for p in points],
+                "smoothed": [p.smoothed for p in points],
+            },
+        })  # fmt: skip
+    return {"type": "FeatureCollection", "features": features, "next_cursor": next_cursor}

@@ -1,0 +1,267 @@
+"""The gateway node: the bus into the database, the database out over HTTP, in one process.
+
+Run it as ``python -m wz_gateway.node`` (settings ``WZ_GATEWAY_*``, bus ``WZ_BUS_*``). It
+
+- subscribes to ``wz/<site>/tracks`` (:class:`TrackBatch`), ``wz/<site>/alerts/*``
+  (:class:`Alert`), ``wz/<site>/devices/state`` (:class:`RoadsideDeviceState`) and
+  ``wz/<site>/status/*`` (:class:`ServiceStatus`, for the WZDx devices' status). Zenoh's
+  callbacks only queue the decoded messages; one writer thread (the main one) stores them, a
+  group per transaction. A full queue holds the callbacks (back-pressure, as a FIFO
+  subscription does): nothing is dropped for being slow;
+- serves the API (:func:`wz_gateway.app.create_app`) with uvicorn in a thread of the same
+  process, on ``WZ_GATEWAY_HOST:WZ_GATEWAY_PORT`` (127.0.0.1:8000 by default);
+- deletes what is older than the retention, at start and every ``retention_period_s``.
+
+Bad input never stops it: an undecodable message, or one of another site, is counted in the
+status message's ``invalid_counts`` (``<key>|<reason>``) and on ``/metrics``, and dropped. A
+group the database refuses is retried, then logged and counted (``wz_gateway_write_errors``).
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import uvicorn
+from pydantic import ValidationError
+
+from wz_gateway.app import create_app
+from wz_gateway.auth import new_secret, parse_configured_key
+from wz_gateway.metrics import GatewayMetrics
+from wz_gateway.settings import GatewaySettings
+from wz_gateway.storage import Storage, StorageError
+from wz_shared.logs import configure_logging
+from wz_shared.messages import Alert, Message, RoadsideDeviceState, ServiceStatus, TrackBatch
+from wz_shared.service import ServiceRuntime
+from wz_shared.settings import BusSettings
+from wz_shared.site import Site, SiteFileError, load_site
+
+SERVICE = "gateway"
+log = logging.getLogger("wz_gateway.node")
+Report = Callable[[str, str, str], None]  # key, reason, detail
+
+#: Most messages stored in one transaction.
+MAX_GROUP = 256
+_WRITE_ATTEMPTS = 3
+
+
+@dataclass
+class Writer:
+    """Queue of bus messages and the loop that stores them (no bus: tests feed it directly).
+
+    Parameters
+    ----------
+    storage : Storage
+    site : Site
+        Messages of another site are refused (``report(key, "wrong_site", ...)``).
+    settings : GatewaySettings
+        Queue capacity and retention.
+    metrics : GatewayMetrics
+    report : callable
+        ``report(key, reason, detail)`` for each refused message.
+    clock : callable
+        Wall clock [Unix s] stamped on rows as ``received_at``.
+    """
+
+    storage: Storage
+    site: Site
+    settings: GatewaySettings
+    metrics: GatewayMetrics
+    report: Report
+    clock: Callable[[], float] = time.time
+    stop: threading.Event = field(default_factory=threading.Event)
+    written: int = 0
+    last_error: str | None = None
+
+    def __post_init__(self) -> None:
+        self.queue: queue.Queue[Message] = queue.Queue(self.settings.queue_capacity)
+        self._next_purge = 0.0
+
+    def offer(self, key: str, message: Message) -> None:
+        """Queue a decoded message (Zenoh's thread); waits while the queue is full."""
+        if message.site != self.site.site_id:
+            self.report(key, "wrong_site", f"{type(message).__name__} of site {message.site}")
+            return
+        while not self.stop.is_set():
+            try:
+                self.queue.put(message, timeout=0.1)
+                return
+            except queue.Full:
+                continue
+
+    def _group(self, timeout_s: float) -> list[Message]:
+        try:
+            group = [self.queue.get(timeout=timeout_s)]
+        except queue.Empty:
+            return []
+        while len(group) < MAX_GROUP:
+            try:
+                group.append(self.queue.get_nowait())
+            except queue.Empty:
+                break
+        return group
+
+    def write(self, group: list[Message]) -> bool:
+        """Store one group, retrying a refused transaction; False if it was given up."""
+        for attempt in range(1, _WRITE_ATTEMPTS + 1):
+            started = time.perf_counter()
+            try:
+                result = self.storage.ingest(group, geo=self.site.geo_frame,
+                                             received_at=self.clock())  # fmt: skip
+            except Exception as exc:  # the database refused: retry, then give the group up
+                self.last_error = f"{type(exc).__name__}: {exc}"
+                if attempt == _WRITE_ATTEMPTS:
+                    self.metrics.write_errors.inc()
+                    log.exception("could not store %d messages after %d attempts; dropped",
+                                  len(group), attempt)  # fmt: skip
+                    return False
+                log.warning("storing %d messages failed (%s); retrying", len(group), exc)
+                self.stop.wait(0.2 * attempt)
+                continue
+            self.metrics.write_seconds.observe(time.perf_counter() - started)
+            self.last_error = None
+            self.written += len(group)
+            m = self.metrics
+            m.ingested.labels("track_batch").inc(result.track_batches)
+            m.ingested.labels("alert").inc(result.alerts)
+            m.ingested.labels("roadside_devices").inc(result.device_states)
+            m.ingested.labels("service_status").inc(result.statuses)
+            m.ingested_points.inc(result.points)
+            m.duplicate_alerts.inc(result.duplicate_alerts)
+            return True
+        return False
+
+    def purge_if_due(self) -> None:
+        now = self.clock()
+        if now < self._next_purge:
+            return
+        self._next_purge = now + self.settings.retention_period_s
+        try:
+            deleted = self.storage.purge(now, retention_days=self.settings.retention_days,
+                                         alert_retention_days=self.settings.alert_retention_days)  # fmt: skip
+        except Exception:  # retention failing must not stop ingestion; next period tries again
+            log.exception("retention failed")
+            return
+        for table, n in deleted.items():
+            self.metrics.retention_deleted.labels(table).inc(n)
+        if any(deleted.values()):
+            log.info("retention deleted %s", ", ".join(f"{n} {t}" for t, n in deleted.items()
+                                                      if n))  # fmt: skip
+
+    def run(self, keep_going: Callable[[], bool] = lambda: True) -> None:
+        """Store messages until ``stop`` (or ``keep_going()`` is False), then what is queued."""
+        while not self.stop.is_set() and keep_going():
+            self.purge_if_due()
+            group = self._group(0.1)
+            if group:
+                self.write(group)
+        while group := self._group(0.0):  # what the bus delivered before the stop
+            self.write(group)
+
+
+def prepare_keys(storage: Storage, settings: GatewaySettings, now: float) -> str | None:
+    """Make the stored ``settings`` keys match the configuration; in dev mode without an
+    admin key, make one for this run. The dev key's secret, or None."""
+    configured = [parse_configured_key(entry) for entry in settings.api_keys]
+    added, revoked = storage.sync_configured_keys(configured, now)
+    if added or revoked:
+        log.info("API keys from the settings: %d added, %d revoked", added, revoked)
+    for info in storage.api_keys():
+        if info.origin == "dev":
+            storage.revoke_api_key(info.key_id, now)
+    if settings.dev_mode and not any(scope == "admin" for scope, _ in configured):
+        secret = new_secret()
+        storage.add_api_key("admin", secret, name="dev mode admin key", origin="dev", now=now)
+        return secret
+    return None
+
+
+class _PlainUvicorn(logging.Filter):
+    """Drop uvicorn's ANSI-coloured copy of each message from our (JSON) log lines."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        record.__dict__.pop("color_message", None)
+        return True
+
+
+def serve(app_server: uvicorn.Server) -> threading.Thread:
+    thread = threading.Thread(target=app_server.run, name="http", daemon=True)
+    thread.start()
+    return thread
+
+
+def run(runtime: ServiceRuntime, site: Site, settings: GatewaySettings, storage: Storage,
+        metrics: GatewayMetrics) -> int:  # fmt: skip
+    """Store the bus and serve HTTP until ``runtime.stop``; the messages stored."""
+    bus = runtime.bus
+    writer = Writer(storage, site, settings, metrics,
+                    report=lambda key, reason, detail: bus.stats.count_invalid(key, reason, detail),
+                    stop=runtime.stop)  # fmt: skip
+    bus.on(bus.keys.tracks, TrackBatch, writer.offer)
+    bus.on(bus.keys.alerts_all, Alert, writer.offer)
+    bus.on(bus.keys.devices_state, RoadsideDeviceState, writer.offer)
+    bus.on(bus.keys.status_all, ServiceStatus, writer.offer)
+    metrics.watch_bus(bus.stats.snapshot)
+    metrics.watch_queue(writer.queue.qsize)
+
+    def readiness() -> dict[str, str]:
+        checks = {"bus": "closed" if bus.closed else "ok",
+                  "writer": "ok" if writer.last_error is None else writer.last_error}  # fmt: skip
+        if writer.queue.qsize() >= 0.9 * settings.queue_capacity:
+            checks["queue"] = f"{writer.queue.qsize()} of {settings.queue_capacity} waiting"
+        return checks
+
+    app = create_app(settings, storage, site=site, metrics=metrics, readiness=readiness)
+    server = uvicorn.Server(
+        uvicorn.Config(app, host=settings.host, port=settings.port, log_config=None,
+                       access_log=False, lifespan="off", server_header=False)
+    )  # fmt: skip
+    http = serve(server)
+    log.info("storing %s, %s, %s; API on http://%s:%d", bus.keys.tracks, bus.keys.alerts_all,
+             bus.keys.devices_state, settings.host, settings.port)  # fmt: skip
+    writer.run(keep_going=http.is_alive)
+    server.should_exit = True
+    http.join(timeout=10.0)
+    if not server.started or not runtime.stop.is_set():
+        runtime.stop.set()
+        raise SystemExit(
+            f"{SERVICE}: the HTTP server on {settings.host}:{settings.port} stopped (is the "
+            "port in use?)"
+        )
+    return writer.written
+
+
+def main() -> None:
+    try:
+        settings = GatewaySettings()
+    except ValidationError as exc:
+        raise SystemExit(f"{SERVICE}: invalid settings: {exc}") from exc
+    try:
+        site = load_site(settings.site_file)
+    except SiteFileError as exc:
+        raise SystemExit(f"{SERVICE}: {exc}") from exc
+    configure_logging(service=SERVICE, site=site.site_id, level=settings.log_level)
+    for name in ("uvicorn", "uvicorn.error"):
+        logging.getLogger(name).addFilter(_PlainUvicorn())
+    try:
+        storage = Storage.open(settings.resolved_database_url())
+    except StorageError as exc:
+        raise SystemExit(f"{SERVICE}: {exc}") from exc
+    try:
+        dev_secret = prepare_keys(storage, settings, time.time())
+        if dev_secret is not None:
+            log.warning("dev mode: reads need no key; admin key for this run: %s", dev_secret)
+        with ServiceRuntime(SERVICE, site.site_id, BusSettings(),
+                            status_period_s=settings.status_period_s) as runtime:  # fmt: skip
+            written = run(runtime, site, settings, storage, GatewayMetrics())
+        log.info("stopped after storing %d messages", written)
+    finally:
+        storage.close()
+
+
+if __name__ == "__main__":
+    main()

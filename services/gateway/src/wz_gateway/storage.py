@@ -1,0 +1,793 @@
+"""The gateway's one data layer: SQLAlchemy Core over SQLite (default) or PostgreSQL.
+
+SQLite runs in WAL mode (readers never wait for the writer) with foreign keys on and
+``synchronous=NORMAL`` (a power cut may lose the last transactions, never corrupt the file).
+Everything is written through :meth:`Storage.ingest`: one transaction per group of messages,
+each track batch as one multi-row insert. Reads page by keyset (``stamp``, ``id``) cursors, so a
+page never shifts when rows arrive or retention deletes old ones.
+
+Usage::
+
+    storage = Storage.open("sqlite:////var/lib/wz/gateway/gateway.sqlite3")  # migrates
+    storage.ingest([batch, alert], geo=site.geo_frame, received_at=time.time())
+    page = storage.points(PointQuery(site="us75-lincoln", start_stamp=10.0, limit=500))
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import logging
+import math
+import time
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from sqlalchemy import (
+    ColumnElement,
+    Connection,
+    Engine,
+    Insert,
+    Select,
+    and_,
+    create_engine,
+    delete,
+    event,
+    func,
+    insert,
+    or_,
+    select,
+    text,
+    tuple_,
+    update,
+)
+from sqlalchemy.dialects import postgresql, sqlite
+from sqlalchemy.engine import make_url
+from sqlalchemy.exc import ArgumentError
+
+from wz_gateway import auth
+from wz_gateway.models import ApiKeyInfo, KeyOrigin, TrackPoint
+from wz_gateway.tables import (
+    MIGRATIONS,
+    SCHEMA_VERSION,
+    alerts,
+    api_keys,
+    device_states,
+    latest,
+    schema_version,
+    track_points,
+    webhook_deliveries,
+    webhook_outbox,
+)
+from wz_shared.geometry import GeoFrame
+from wz_shared.messages import (
+    Alert,
+    Message,
+    RoadsideDeviceState,
+    ServiceStatus,
+    Track,
+    TrackBatch,
+)
+
+log = logging.getLogger(__name__)
+
+_DIALECTS = ("sqlite", "postgresql")
+#: A track batch this much older than the newest one starts a new run [s] (see ``run_start``).
+RESTART_TOLERANCE_S = 1.0
+_DAY_S = 86400.0
+
+
+class StorageError(RuntimeError):
+    """The database cannot be used as configured (wrong URL, newer schema, unreachable)."""
+
+
+class CursorError(ValueError):
+    """A page cursor that this API did not give out (or from another query order)."""
+
+
+# --- cursors ------------------------------------------------------------------------------
+
+
+def encode_cursor(stamp: float, row_id: int) -> str:
+    """An opaque cursor for the row after (``stamp``, ``row_id``)."""
+    raw = json.dumps([stamp, row_id], separators=(",", ":")).encode()
+    return base64.urlsafe_b64encode(raw).decode().rstrip("=")
+
+
+def decode_cursor(cursor: str) -> tuple[float, int]:
+    """The (stamp, id) of a cursor; :class:`CursorError` if it is not one of ours."""
+    try:
+        padded = cursor + "=" * (-len(cursor) % 4)
+        stamp, row_id = json.loads(base64.urlsafe_b64decode(padded.encode("ascii")))
+    except (ValueError, TypeError, UnicodeError) as exc:
+        raise CursorError("not a cursor this API gave out; use the next_cursor of a page") from exc
+    if (
+        not isinstance(stamp, int | float)
+        or isinstance(stamp, bool)
+        or not math.isfinite(stamp)
+        or not isinstance(row_id, int)
+        or isinstance(row_id, bool)
+        or not 0 <= row_id < 2**63
+    ):
+        raise CursorError("not a cursor this API gave out; use the next_cursor of a page")
+    return float(stamp), row_id
+
+
+# --- queries and results ------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class PointQuery:
+    """Track points wanted: every filter is optional and they combine with AND.
+
+    ``bbox_deg`` is (min longitude, min latitude, max longitude, max latitude) [deg]; stations
+    and stamps are inclusive bounds. ``smoothed`` None returns both kinds of point.
+    """
+
+    site: str
+    start_stamp: float | None = None
+    end_stamp: float | None = None
+    track_id: int | None = None
+    station_min_m: float | None = None
+    station_max_m: float | None = None
+    bbox_deg: tuple[float, float, float, float] | None = None
+    lane_index: int | None = None
+    min_speed_mps: float | None = None
+    max_speed_mps: float | None = None
+    smoothed: bool | None = None
+    limit: int = 1000
+    cursor: str | None = None
+
+
+@dataclass(frozen=True)
+class AlertQuery:
+    """Alert events wanted; empty tuples mean any type, severity or phase."""
+
+    site: str
+    alert_types: tuple[str, ...] = ()
+    severities: tuple[str, ...] = ()
+    phases: tuple[str, ...] = ()
+    start_stamp: float | None = None
+    end_stamp: float | None = None
+    track_id: int | None = None
+    episode_id: str | None = None
+    newest_first: bool = True
+    limit: int = 100
+    cursor: str | None = None
+
+
+@dataclass(frozen=True)
+class Page:
+    """Rows of one page and the cursor of the next (None on the last page)."""
+
+    items: list[Any]
+    next_cursor: str | None
+
+
+@dataclass(frozen=True)
+class LatestRow:
+    """The newest message of one kind: its JSON, capture stamp and arrival (wall clock)."""
+
+    name: str
+    stamp: float
+    received_at: float
+    body: str
+
+
+@dataclass
+class IngestResult:
+    """What one :meth:`Storage.ingest` wrote."""
+
+    track_batches: int = 0
+    points: int = 0
+    alerts: int = 0
+    duplicate_alerts: int = 0
+    device_states: int = 0
+    statuses: int = 0
+
+
+@dataclass(frozen=True)
+class TrafficPoints:
+    """Track points near a station over a window, as arrays of one length N."""
+
+    track_id: npt.NDArray[np.int64]
+    stamp: npt.NDArray[np.float64]
+    station_m: npt.NDArray[np.float64]
+    lane_index: npt.NDArray[np.int64]
+    speed_mps: npt.NDArray[np.float64]
+    length_m: npt.NDArray[np.float64]  # NaN where the tracker gave no length
+
+
+# --- the storage --------------------------------------------------------------------------
+
+
+def _sqlite_pragmas(dbapi_connection: Any, _record: Any) -> None:
+    cursor = dbapi_connection.cursor()
+    try:
+        cursor.execute("PRAGMA journal_mode=WAL")
+        cursor.execute("PRAGMA synchronous=NORMAL")
+        cursor.execute("PRAGMA foreign_keys=ON")
+        cursor.execute("PRAGMA busy_timeout=10000")
+    finally:
+        cursor.close()
+
+
+class Storage:
+    """Trajectories, alerts, device states, API keys (and the webhook tables) in one database.
+
+    Thread-safe: every call takes its own connection from the engine's pool. Build it with
+    :meth:`open`, which checks the URL and applies the migrations.
+    """
+
+    def __init__(self, engine: Engine) -> None:
+        self.engine = engine
+        self.dialect = engine.dialect.name
+        if self.dialect not in _DIALECTS:
+            raise StorageError(
+                f"database {self.dialect!r} is not supported: use SQLite (the default) or "
+                "PostgreSQL (postgresql+psycopg://user:password@host/db)"
+            )
+
+    @classmethod
+    def open(cls, url: str, *, migrate: bool = True) -> Storage:
+        """Connect to ``url``, create the SQLite file's folder, apply missing migrations.
+
+        Raises
+        ------
+        StorageError
+            For a URL that is not SQLite or PostgreSQL, a file that cannot be created, a
+            database at a newer schema than this gateway knows, or one that cannot be reached.
+        """
+        try:
+            parsed = make_url(url)
+        except ArgumentError as exc:
+            raise StorageError(f"database URL {url!r} is not a valid SQLAlchemy URL") from exc
+        backend = parsed.get_backend_name()
+        if backend not in _DIALECTS:
+            raise StorageError(
+                f"database {backend!r} is not supported: use sqlite:///path/to/file or "
+                "postgresql+psycopg://user:password@host/db"
+            )
+        if backend == "sqlite":
+            database = parsed.database or ""
+            if database in ("", ":memory:") or database.startswith("file:"):
+                raise StorageError(
+                    "an in-memory SQLite database would lose everything at exit; give a file: "
+                    "sqlite:////var/lib/wz/gateway/gateway.sqlite3"
+                )
+            try:
+                Path(database).parent.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise StorageError(f"cannot create the folder of {database}: {exc}") from exc
+        try:
+            engine = create_engine(url, pool_pre_ping=backend == "postgresql")
+        except Exception as exc:  # a missing driver (psycopg) surfaces here
+            raise StorageError(f"cannot use database {parsed!r}: {exc}") from exc
+        if backend == "sqlite":
+            event.listen(engine, "connect", _sqlite_pragmas)
+        storage = cls(engine)
+        if migrate:
+            storage.migrate()
+        return storage
+
+    def close(self) -> None:
+        self.engine.dispose()
+
+    # --- schema ---------------------------------------------------------------------------
+
+    def migrate(self) -> list[int]:
+        """Apply the migrations not yet recorded; the versions applied."""
+        try:
+            with self.engine.begin() as connection:
+                schema_version.create(connection, checkfirst=True)
+                done = set(connection.scalars(select(schema_version.c.version)))
+        except Exception as exc:
+            raise StorageError(f"cannot open the database {self.engine.url!r}: {exc}") from exc
+        newest = max(done, default=0)
+        if newest > SCHEMA_VERSION:
+            raise StorageError(
+                f"the database is at schema version {newest}, this gateway knows up to "
+                f"{SCHEMA_VERSION}: run a newer gateway (nothing was changed)"
+            )
+        applied: list[int] = []
+        for migration in MIGRATIONS:
+            if migration.version in done:
+                continue
+            with self.engine.begin() as connection:
+                migration.apply(connection)
+                connection.execute(
+                    insert(schema_version).values(
+                        version=migration.version,
+                        description=migration.description,
+                        applied_at=time.time(),
+                    )
+                )
+            log.info("database migrated to version %d: %s", migration.version,
+                     migration.description)  # fmt: skip
+            applied.append(migration.version)
+        return applied
+
+    def current_schema_version(self) -> int:
+        with self.engine.connect() as connection:
+            version = connection.scalar(select(func.max(schema_version.c.version)))
+        return int(version or 0)
+
+    def ping(self) -> None:
+        """Raise if the database cannot answer a trivial query."""
+        with self.engine.connect() as connection:
+            connection.execute(text("SELECT 1"))
+
+    # --- writing --------------------------------------------------------------------------
+
+    def _insert(self, table: Any) -> Insert:
+        module = sqlite if self.dialect == "sqlite" else postgresql
+        stmt: Insert = module.insert(table)
+        return stmt
+
+    def _upsert_latest(
+        self, connection: Connection, site: str, name: str, message: Message, received_at: float
+    ) -> None:
+        stmt: Any = self._insert(latest).values(
+            site=site,
+            name=name,
+            stamp=message.stamp,
+            received_at=received_at,
+            body=message.model_dump_json(),
+        )
+        stmt = stmt.on_conflict_do_update(
+            index_elements=[latest.c.site, latest.c.name],
+            set_={"stamp": stmt.excluded.stamp, "received_at": stmt.excluded.received_at,
+                  "body": stmt.excluded.body},
+        )  # fmt: skip
+        connection.execute(stmt)
+
+    def ingest(
+        self, messages: Iterable[Message], *, geo: GeoFrame, received_at: float
+    ) -> IngestResult:
+        """Write messages from the bus in one transaction.
+
+        A :class:`TrackBatch` adds one point per track and becomes the live view; an
+        :class:`Alert` is added once (a repeated ``alert_id`` is counted, not written twice);
+        a :class:`RoadsideDeviceState` is added to the history and becomes the devices' state;
+        a :class:`ServiceStatus` becomes that service's latest status. Other messages are
+        refused with ``TypeError`` before anything is written.
+
+        Parameters
+        ----------
+        messages : iterable of Message
+            In arrival order.
+        geo : GeoFrame
+            The site's WGS84 frame, for the points' latitude and longitude.
+        received_at : float
+            The gateway's wall clock [s since the epoch] for every row.
+        """
+        items = list(messages)
+        for message in items:
+            if not isinstance(message, TrackBatch | Alert | RoadsideDeviceState | ServiceStatus):
+                raise TypeError(f"cannot store a {type(message).__name__}")
+        result = IngestResult()
+        with self.engine.begin() as connection:
+            for message in items:
+                if isinstance(message, TrackBatch):
+                    result.points += self._write_batch(connection, message, geo, received_at)
+                    result.track_batches += 1
+                elif isinstance(message, Alert):
+                    if self._write_alert(connection, message, received_at):
+                        result.alerts += 1
+                    else:
+                        result.duplicate_alerts += 1
+                elif isinstance(message, RoadsideDeviceState):
+                    connection.execute(
+                        insert(device_states).values(
+                            site=message.site,
+                            source_id=message.source_id,
+                            stamp=message.stamp,
+                            beacon_on=message.beacon_on,
+                            sign_text=message.sign_text,
+                            cause=None if message.cause is None else message.cause.value,
+                            queue_tail_station_m=message.queue_tail_station_m,
+                            received_at=received_at,
+                        )
+                    )
+                    self._upsert_latest(connection, message.site, "devices", message, received_at)
+                    result.device_states += 1
+                elif isinstance(message, ServiceStatus):
+                    self._upsert_latest(connection, message.site, f"status/{message.service}",
+                                        message, received_at)  # fmt: skip
+                    result.statuses += 1
+        return result
+
+    def _write_batch(
+        self, connection: Connection, batch: TrackBatch, geo: GeoFrame, received_at: float
+    ) -> int:
+        previous = connection.scalar(
+            select(latest.c.stamp).where(latest.c.site == batch.site, latest.c.name == "tracks")
+        )
+        if previous is not None and batch.stamp < previous - RESTART_TOLERANCE_S:
+            # Stamps went back: a new run (a restarted simulation counts from 0 again).
+            log.warning("track stamps went back from %.3f s to %.3f s: a new run starts",
+                        previous, batch.stamp)  # fmt: skip
+            self._upsert_latest(connection, batch.site, "run_start", batch, received_at)
+        self._upsert_latest(connection, batch.site, "tracks", batch, received_at)
+        if not batch.tracks:
+            return 0
+        x = np.array([t.x_m for t in batch.tracks])
+        y = np.array([t.y_m for t in batch.tracks])
+        latitude, longitude, _ = geo.to_wgs84(x, y)
+        rows = [
+            _point_row(batch, track, float(lat), float(lon), received_at)
+            for track, lat, lon in zip(batch.tracks, latitude, longitude, strict=True)
+        ]
+        connection.execute(insert(track_points), rows)
+        return len(rows)
+
+    def _write_alert(self, connection: Connection, alert: Alert, received_at: float) -> bool:
+        stmt: Any = self._insert(alerts).values(
+            alert_id=alert.alert_id,
+            site=alert.site,
+            source_id=alert.source_id,
+            episode_id=alert.episode_id,
+            phase=alert.phase,
+            alert_type=alert.alert_type.value,
+            severity=alert.severity.value,
+            stamp=alert.stamp,
+            onset_stamp=alert.onset_stamp,
+            track_id=alert.track_id,
+            station_m=alert.station_m,
+            offset_m=alert.offset_m,
+            speed_mps=alert.speed_mps,
+            measured_value=alert.measured_value,
+            threshold_value=alert.threshold_value,
+            value_unit=alert.value_unit,
+            description=alert.description,
+            evidence=dict(alert.evidence),
+            track=None if alert.track is None else alert.track.model_dump(mode="json"),
+            received_at=received_at,
+        )
+        # RETURNING says whether a row went in (rowcount is not reliable across drivers here).
+        outcome = connection.execute(
+            stmt.on_conflict_do_nothing(index_elements=[alerts.c.alert_id]).returning(alerts.c.id)
+        )
+        return outcome.first() is not None
+
+    # --- reading: live --------------------------------------------------------------------
+
+    def latest(self, site: str, name: str) -> LatestRow | None:
+        """The newest message stored under ``name``: ``tracks``, ``devices``, ``status/<service>``,
+        or ``run_start`` (the first batch of the current run, when stamps went back)."""
+        with self.engine.connect() as connection:
+            row = connection.execute(
+                select(latest).where(latest.c.site == site, latest.c.name == name)
+            ).first()
+        if row is None:
+            return None
+        return LatestRow(row.name, row.stamp, row.received_at, row.body)
+
+    def latest_statuses(self, site: str) -> dict[str, LatestRow]:
+        """Every service's newest status at ``site``, by service name."""
+        with self.engine.connect() as connection:
+            rows = connection.execute(
+                select(latest).where(latest.c.site == site, latest.c.name.startswith("status/"))
+            ).all()
+        return {
+            row.name.removeprefix("status/"): LatestRow(row.name, row.stamp, row.received_at,
+                                                        row.body)
+            for row in rows
+        }  # fmt: skip
+
+    # --- reading: history -----------------------------------------------------------------
+
+    @staticmethod
+    def _page_order(stmt: Select[Any], table: Any, cursor: str | None, limit: int,
+                    newest_first: bool) -> Select[Any]:  # fmt: skip
+        key = tuple_(table.c.stamp, table.c.id)
+        if cursor is not None:
+            after = tuple_(*decode_cursor(cursor))
+            stmt = stmt.where(key < after if newest_first else key > after)
+        if newest_first:
+            return stmt.order_by(table.c.stamp.desc(), table.c.id.desc()).limit(limit + 1)
+        return stmt.order_by(table.c.stamp, table.c.id).limit(limit + 1)
+
+    def points(self, query: PointQuery) -> Page:
+        """A page of track points (oldest first), items :class:`TrackPoint`."""
+        c = track_points.c
+        conditions: list[ColumnElement[bool]] = [c.site == query.site]
+        if query.start_stamp is not None:
+            conditions.append(c.stamp >= query.start_stamp)
+        if query.end_stamp is not None:
+            conditions.append(c.stamp <= query.end_stamp)
+        if query.track_id is not None:
+            conditions.append(c.track_id == query.track_id)
+        if query.station_min_m is not None:
+            conditions.append(c.station_m >= query.station_min_m)
+        if query.station_max_m is not None:
+            conditions.append(c.station_m <= query.station_max_m)
+        if query.bbox_deg is not None:
+            lon_min, lat_min, lon_max, lat_max = query.bbox_deg
+            conditions += [c.longitude_deg.between(lon_min, lon_max),
+                           c.latitude_deg.between(lat_min, lat_max)]  # fmt: skip
+        if query.lane_index is not None:
+            conditions.append(c.lane_index == query.lane_index)
+        if query.min_speed_mps is not None:
+            conditions.append(c.speed_mps >= query.min_speed_mps)
+        if query.max_speed_mps is not None:
+            conditions.append(c.speed_mps <= query.max_speed_mps)
+        if query.smoothed is not None:
+            conditions.append(c.smoothed == query.smoothed)
+        stmt = self._page_order(select(track_points).where(and_(*conditions)), track_points,
+                                query.cursor, query.limit, newest_first=False)  # fmt: skip
+        with self.engine.connect() as connection:
+            rows = connection.execute(stmt).all()
+        more = len(rows) > query.limit
+        rows = rows[: query.limit]
+        items = [_track_point(row) for row in rows]
+        next_cursor = encode_cursor(rows[-1].stamp, rows[-1].id) if more else None
+        return Page(items, next_cursor)
+
+    def alerts(self, query: AlertQuery) -> Page:
+        """A page of alert events, items :class:`Alert`."""
+        c = alerts.c
+        conditions: list[ColumnElement[bool]] = [c.site == query.site]
+        if query.alert_types:
+            conditions.append(c.alert_type.in_(query.alert_types))
+        if query.severities:
+            conditions.append(c.severity.in_(query.severities))
+        if query.phases:
+            conditions.append(c.phase.in_(query.phases))
+        if query.start_stamp is not None:
+            conditions.append(c.stamp >= query.start_stamp)
+        if query.end_stamp is not None:
+            conditions.append(c.stamp <= query.end_stamp)
+        if query.track_id is not None:
+            conditions.append(c.track_id == query.track_id)
+        if query.episode_id is not None:
+            conditions.append(c.episode_id == query.episode_id)
+        stmt = self._page_order(select(alerts).where(and_(*conditions)), alerts, query.cursor,
+                                query.limit, newest_first=query.newest_first)  # fmt: skip
+        with self.engine.connect() as connection:
+            rows = connection.execute(stmt).all()
+        more = len(rows) > query.limit
+        rows = rows[: query.limit]
+        items = [_alert(row) for row in rows]
+        next_cursor = encode_cursor(rows[-1].stamp, rows[-1].id) if more else None
+        return Page(items, next_cursor)
+
+    def traffic_points(
+        self, site: str, start_stamp: float, end_stamp: float, station_min_m: float,
+        station_max_m: float, received_since: float | None = None,
+    ) -> TrafficPoints:  # fmt: skip
+        """Fused (not smoothed) points in a stamp window and a station range, as arrays;
+        ``received_since`` (wall clock) leaves out earlier runs that used the same stamps."""
+        c = track_points.c
+        conditions = [c.site == site, c.stamp >= start_stamp, c.stamp <= end_stamp,
+                      c.station_m >= station_min_m, c.station_m <= station_max_m,
+                      c.smoothed.is_(False)]  # fmt: skip
+        if received_since is not None:
+            conditions.append(c.received_at >= received_since)
+        stmt = (
+            select(c.track_id, c.stamp, c.station_m, c.lane_index, c.speed_mps, c.length_m)
+            .where(*conditions)
+            .order_by(c.track_id, c.stamp)
+        )
+        with self.engine.connect() as connection:
+            rows = connection.execute(stmt).all()
+        return TrafficPoints(
+            track_id=np.array([r.track_id for r in rows], dtype=np.int64),
+            stamp=np.array([r.stamp for r in rows], dtype=np.float64),
+            station_m=np.array([r.station_m for r in rows], dtype=np.float64),
+            lane_index=np.array([r.lane_index for r in rows], dtype=np.int64),
+            speed_mps=np.array([r.speed_mps for r in rows], dtype=np.float64),
+            length_m=np.array([math.nan if r.length_m is None else r.length_m for r in rows],
+                              dtype=np.float64),
+        )
+
+    def count(self, table_name: str) -> int:
+        """Rows in one of the gateway's tables (for tests and metrics)."""
+        table = {t.name: t for t in (track_points, alerts, device_states, latest, api_keys)}[
+            table_name
+        ]
+        with self.engine.connect() as connection:
+            return int(connection.scalar(select(func.count()).select_from(table)) or 0)
+
+    # --- API keys -------------------------------------------------------------------------
+
+    def add_api_key(self, scope: auth.Scope, secret: str, *, name: str, origin: KeyOrigin,
+                    now: float) -> ApiKeyInfo:  # fmt: skip
+        """Store a key's hash; the secret itself is not kept."""
+        salt = auth.new_salt()
+        info = ApiKeyInfo(key_id=auth.new_key_id(), scope=scope, name=name,
+                          origin=origin, created_at=now)  # fmt: skip
+        with self.engine.begin() as connection:
+            connection.execute(
+                insert(api_keys).values(
+                    key_id=info.key_id,
+                    fingerprint=auth.fingerprint(secret),
+                    salt=salt,
+                    secret_hash=auth.hash_secret(secret, salt),
+                    scope=scope,
+                    name=name,
+                    origin=origin,
+                    created_at=now,
+                )
+            )
+        return info
+
+    def find_api_key(self, secret: str) -> ApiKeyInfo | None:
+        """The live (not revoked) key whose secret this is, or None."""
+        c = api_keys.c
+        with self.engine.connect() as connection:
+            rows = connection.execute(
+                select(api_keys).where(c.fingerprint == auth.fingerprint(secret),
+                                       c.revoked_at.is_(None))
+            ).all()
+        for row in rows:
+            if auth.verify_secret(secret, row.salt, row.secret_hash):
+                return _key_info(row)
+        return None
+
+    def api_keys(self, *, include_revoked: bool = False) -> list[ApiKeyInfo]:
+        stmt = select(api_keys).order_by(api_keys.c.id)
+        if not include_revoked:
+            stmt = stmt.where(api_keys.c.revoked_at.is_(None))
+        with self.engine.connect() as connection:
+            return [_key_info(row) for row in connection.execute(stmt)]
+
+    def revoke_api_key(self, key_id: str, now: float) -> bool:
+        """Revoke a key (its row stays, marked); False if there is no such live key."""
+        c = api_keys.c
+        with self.engine.begin() as connection:
+            outcome = connection.execute(
+                update(api_keys).where(c.key_id == key_id, c.revoked_at.is_(None))
+                .values(revoked_at=now)
+            )  # fmt: skip
+        return bool(outcome.rowcount)
+
+    def sync_configured_keys(self, configured: Sequence[tuple[auth.Scope, str]],
+                             now: float) -> tuple[int, int]:  # fmt: skip
+        """Make the ``settings`` keys those configured: add the new, revoke the dropped.
+
+        Returns
+        -------
+        added, revoked : int
+        """
+        c = api_keys.c
+        with self.engine.connect() as connection:
+            rows = connection.execute(
+                select(api_keys).where(c.origin == "settings", c.revoked_at.is_(None))
+            ).all()
+        kept: set[str] = set()
+        added = 0
+        for number, (scope, secret) in enumerate(configured, start=1):
+            match = next(
+                (row for row in rows
+                 if row.key_id not in kept and row.scope == scope
+                 and row.fingerprint == auth.fingerprint(secret)
+                 and auth.verify_secret(secret, row.salt, row.secret_hash)),
+                None,
+            )  # fmt: skip
+            if match is not None:
+                kept.add(match.key_id)
+                continue
+            info = self.add_api_key(scope, secret, name=f"settings key {number}",
+                                    origin="settings", now=now)  # fmt: skip
+            kept.add(info.key_id)
+            added += 1
+        revoked = sum(self.revoke_api_key(row.key_id, now) for row in rows
+                      if row.key_id not in kept)  # fmt: skip
+        return added, revoked
+
+    # --- retention ------------------------------------------------------------------------
+
+    def purge(self, now: float, *, retention_days: float, alert_retention_days: float) -> dict[
+        str, int
+    ]:
+        """Delete what arrived longer ago than the retention; rows deleted per table.
+
+        Track points and device states go after ``retention_days``; alerts and webhook
+        deliveries (and delivered or failed outbox entries) after ``alert_retention_days``.
+        """
+        cutoff = now - retention_days * _DAY_S
+        alert_cutoff = now - alert_retention_days * _DAY_S
+        deleted: dict[str, int] = {}
+        with self.engine.begin() as connection:
+            for table, limit in ((track_points, cutoff), (device_states, cutoff),
+                                 (alerts, alert_cutoff)):  # fmt: skip
+                outcome = connection.execute(delete(table).where(table.c.received_at < limit))
+                deleted[table.name] = outcome.rowcount
+            outcome = connection.execute(
+                delete(webhook_deliveries).where(webhook_deliveries.c.attempted_at < alert_cutoff)
+            )
+            deleted[webhook_deliveries.name] = outcome.rowcount
+            outcome = connection.execute(
+                delete(webhook_outbox).where(
+                    webhook_outbox.c.created_at < alert_cutoff,
+                    or_(webhook_outbox.c.state == "delivered", webhook_outbox.c.state == "failed"),
+                )
+            )
+            deleted[webhook_outbox.name] = outcome.rowcount
+        return deleted
+
+
+# --- rows <-> models ----------------------------------------------------------------------
+
+
+def _point_row(batch: TrackBatch, track: Track, latitude_deg: float, longitude_deg: float,
+               received_at: float) -> dict[str, Any]:  # fmt: skip
+    return {
+        "site": batch.site,
+        "track_id": track.track_id,
+        "stamp": batch.stamp,
+        "x_m": track.x_m,
+        "y_m": track.y_m,
+        "latitude_deg": latitude_deg,
+        "longitude_deg": longitude_deg,
+        "station_m": track.station_m,
+        "offset_m": track.offset_m,
+        "lane_index": track.lane_index,
+        "speed_mps": track.speed_mps,
+        "heading_rad": track.heading_rad,
+        "vx_mps": track.vx_mps,
+        "vy_mps": track.vy_mps,
+        "object_class": track.object_class.value,
+        "status": track.status.value,
+        "length_m": track.length_m,
+        "width_m": track.width_m,
+        "smoothed": False,
+        "received_at": received_at,
+    }
+
+
+def _track_point(row: Any) -> TrackPoint:
+    return TrackPoint(
+        track_id=row.track_id,
+        stamp=row.stamp,
+        x_m=row.x_m,
+        y_m=row.y_m,
+        latitude_deg=row.latitude_deg,
+        longitude_deg=row.longitude_deg,
+        station_m=row.station_m,
+        offset_m=row.offset_m,
+        lane_index=row.lane_index,
+        speed_mps=row.speed_mps,
+        heading_rad=row.heading_rad,
+        vx_mps=row.vx_mps,
+        vy_mps=row.vy_mps,
+        object_class=row.object_class,
+        status=row.status,
+        length_m=row.length_m,
+        width_m=row.width_m,
+        smoothed=bool(row.smoothed),
+    )
+
+
+def _alert(row: Any) -> Alert:
+    return Alert(
+        site=row.site,
+        source_id=row.source_id,
+        stamp=row.stamp,
+        alert_id=row.alert_id,
+        alert_type=row.alert_type,
+        severity=row.severity,
+        track_id=row.track_id,
+        station_m=row.station_m,
+        offset_m=row.offset_m,
+        speed_mps=row.speed_mps,
+        measured_value=row.measured_value,
+        threshold_value=row.threshold_value,
+        description=row.description,
+        phase=row.phase,
+        episode_id=row.episode_id,
+        onset_stamp=row.onset_stamp,
+        value_unit=row.value_unit,
+        evidence=row.evidence,
+        track=None if row.track is None else Track.model_validate(row.track),
+    )
+
+
+def _key_info(row: Any) -> ApiKeyInfo:
+    return ApiKeyInfo(key_id=row.key_id, scope=row.scope, name=row.name, origin=row.origin,
+                      created_at=row.created_at, revoked_at=row.revoked_at)  # fmt: skip

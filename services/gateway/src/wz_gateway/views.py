@@ -1,0 +1,148 @@
+"""What the API shows that is assembled from several stored things: the live tracks and the
+WZDx device feed. Reads storage, calls the pure cores (:mod:`wz_gateway.traffic`,
+:mod:`wz_gateway.wzdx`), returns values.
+
+Time: stamps are capture times; in simulation they count from the start of the run, so the
+feed dates them by the newest track batch's arrival: ``unix = stamp + (received_at - stamp)``
+of that batch (:func:`stamp_offset_s`); stamps already in Unix time (after 2001) are kept.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+import numpy as np
+from pydantic import ValidationError
+
+from wz_gateway.models import LiveTrack, LiveTracks
+from wz_gateway.storage import LatestRow, Storage
+from wz_gateway.traffic import TrafficSummary, find_crossings, summarize
+from wz_gateway.wzdx import (
+    DeviceHealth,
+    FeedInputs,
+    combine,
+    detector_station_m,
+    device_feed,
+    frames_health,
+    freshness,
+    service_health,
+    traffic_mast,
+)
+from wz_shared.keys import Keys
+from wz_shared.messages import RoadsideDeviceState, ServiceStatus, TrackBatch
+from wz_shared.site import Site
+
+log = logging.getLogger(__name__)
+
+#: Stamps at or above this are Unix time (2001-09-09), below it simulation time.
+UNIX_STAMP_MIN = 1e9
+#: Services whose status the feed reads (their names in ``wz up`` and on the bus).
+LIDAR_SERVICE = "lidar-detector"
+CAMERA_SERVICE = "camera-detector"
+ALERT_SERVICE = "alert-service"
+#: Points this far either side of the detector are read to find crossings [m].
+_CROSSING_REACH_M = 60.0
+
+
+def stamp_offset_s(tracks: LatestRow | None) -> float:
+    """Unix time minus capture stamp, from the newest track batch (0 for Unix stamps)."""
+    if tracks is None or tracks.stamp >= UNIX_STAMP_MIN:
+        return 0.0
+    return tracks.received_at - tracks.stamp
+
+
+def live_tracks(storage: Storage, site: Site, now: float) -> LiveTracks:
+    """The newest track batch, with WGS84 positions; empty before the first."""
+    row = storage.latest(site.site_id, "tracks")
+    if row is None:
+        return LiveTracks(site=site.site_id, stamp=None, cycle_index=None, age_s=None, tracks=[])
+    batch = TrackBatch.model_validate_json(row.body)
+    tracks: list[LiveTrack] = []
+    if batch.tracks:
+        latitude, longitude, _ = site.geo_frame.to_wgs84(
+            np.array([t.x_m for t in batch.tracks]), np.array([t.y_m for t in batch.tracks])
+        )
+        tracks = [
+            LiveTrack(**t.model_dump(), latitude_deg=float(lat), longitude_deg=float(lon))
+            for t, lat, lon in zip(batch.tracks, latitude, longitude, strict=True)
+        ]
+    return LiveTracks(site=site.site_id, stamp=batch.stamp, cycle_index=batch.cycle_index,
+                      age_s=max(0.0, now - row.received_at), tracks=tracks)  # fmt: skip
+
+
+def _statuses(storage: Storage, site: Site) -> dict[str, tuple[ServiceStatus, float]]:
+    found: dict[str, tuple[ServiceStatus, float]] = {}
+    for service, row in storage.latest_statuses(site.site_id).items():
+        try:
+            found[service] = (ServiceStatus.model_validate_json(row.body), row.received_at)
+        except ValidationError:  # written by an older gateway: not worth failing the feed
+            log.warning("stored status of %s is unreadable; ignored", service)
+    return found
+
+
+def traffic_summary(storage: Storage, site: Site, tracks: LatestRow | None, interval_s: float,
+                    detector_override_m: float | None) -> TrafficSummary | None:  # fmt: skip
+    """Counts over the newest ``interval_s`` of stamps (shorter at the start of a run)."""
+    if tracks is None:
+        return None
+    end = tracks.stamp
+    start = max(end - interval_s, 0.0)
+    run_start = storage.latest(site.site_id, "run_start")
+    if run_start is not None and run_start.stamp <= end:
+        start = max(start, run_start.stamp)  # the current run only
+    if end - start < 1.0:
+        return None
+    station = detector_station_m(site, detector_override_m)
+    points = storage.traffic_points(
+        site.site_id, start - 5.0, end, station - _CROSSING_REACH_M, station + _CROSSING_REACH_M,
+        received_since=None if run_start is None else run_start.received_at,
+    )
+    crossings = find_crossings(points.track_id, points.stamp, points.station_m,
+                               points.lane_index, points.speed_mps, points.length_m, station)  # fmt: skip
+    lanes = sorted(lane.index for lane in site.lanes)
+    return summarize(crossings, start, end, lanes, station)
+
+
+def device_feed_of(storage: Storage, site: Site, *, now: float, publisher: str,
+                   stale_after_s: float, traffic_interval_s: float,
+                   detector_station_override_m: float | None = None,
+                   contact_email: str | None = None) -> dict[str, Any]:  # fmt: skip
+    """The site's WZDx 4.2 DeviceFeed as of ``now`` (wall clock, Unix s)."""
+    keys = Keys(site.site_id)
+    tracks = storage.latest(site.site_id, "tracks")
+    statuses = _statuses(storage, site)
+    devices_row = storage.latest(site.site_id, "devices")
+    devices = (
+        None if devices_row is None else RoadsideDeviceState.model_validate_json(devices_row.body)
+    )
+    mast = traffic_mast(site)
+    traffic_parts: list[DeviceHealth] = [
+        freshness("track batches", None if tracks is None else tracks.received_at, now,
+                  stale_after_s),
+    ]  # fmt: skip
+    if mast is not None and mast.kind == "lidar":
+        traffic_parts.append(frames_health(LIDAR_SERVICE, statuses.get(LIDAR_SERVICE),
+                                           keys.raw_lidar(mast.sensor_id), now, stale_after_s,
+                                           missing="warning"))  # fmt: skip
+    cameras = {
+        sensor.sensor_id: frames_health(CAMERA_SERVICE, statuses.get(CAMERA_SERVICE),
+                                        keys.raw_camera(sensor.sensor_id), now, stale_after_s)
+        for sensor in site.sensors if sensor.kind == "camera"
+    }  # fmt: skip
+    inputs = FeedInputs(
+        site=site,
+        now=now,
+        publisher=publisher,
+        traffic=traffic_summary(storage, site, tracks, traffic_interval_s,
+                                detector_station_override_m),
+        traffic_health=combine(*traffic_parts),
+        cameras=cameras,
+        devices=devices,
+        devices_health=service_health(ALERT_SERVICE, statuses.get(ALERT_SERVICE), now,
+                                      stale_after_s),
+        stamp_offset_s=stamp_offset_s(tracks),
+        traffic_interval_s=traffic_interval_s,
+        contact_email=contact_email,
+    )  # fmt: skip
+    return device_feed(inputs)

@@ -1,0 +1,320 @@
+"""The WZDx 4.2 DeviceFeed of a site: pure, no I/O.
+
+A DeviceFeed is a GeoJSON FeatureCollection of FieldDevice features. This site's are:
+
+- a **traffic sensor** at the LiDAR mast: volume, average speed and occupancy per lane over
+  the newest collection interval, counted at a virtual detector from the fused trajectories
+  (:mod:`wz_gateway.traffic`);
+- each **camera** on the mast;
+- the **flashing beacon** and the **dynamic message sign** that the alert service drives,
+  at the sign's station on the right shoulder.
+
+Each device's ``device_status`` comes from how fresh its data is (:func:`freshness`): ``ok``,
+``error`` when its data or its service's status stopped arriving (``status_messages`` says
+which and for how long), ``warning`` when part of it is missing (a LiDAR with no frames behind
+a tracker that still runs), ``unknown`` before anything arrived. Units are WZDx's: km/h,
+vehicles per hour, percent; dates are RFC 3339 UTC.
+"""
+
+from __future__ import annotations
+
+import uuid
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from typing import Any, Literal
+
+from wz_gateway.traffic import TrafficSummary
+from wz_shared.messages import AlertType, RoadsideDeviceState, ServiceStatus
+from wz_shared.site import AreaKind, SensorMount, Site
+
+WZDX_VERSION = "4.2"
+CC0_LICENSE = "https://creativecommons.org/publicdomain/zero/1.0/"
+#: How often the feed's content changes [s] (it is computed on each request; the traffic
+#: sensor's interval moves with every tracker cycle).
+UPDATE_FREQUENCY_S = 1
+MPS_TO_KPH = 3.6
+#: The sign and beacon stand this far right of the right lane's edge [m].
+SHOULDER_OFFSET_M = 3.0
+_NAMESPACE = uuid.UUID("6f0f3a3e-5b7e-4c55-9d0a-2a7f4f1c9b21")
+
+DeviceStatus = Literal["ok", "warning", "error", "unknown"]
+_RANK: dict[DeviceStatus, int] = {"ok": 0, "unknown": 1, "warning": 2, "error": 3}
+
+
+@dataclass(frozen=True)
+class DeviceHealth:
+    """A device's status, why, and when its information was last confirmed (Unix s)."""
+
+    status: DeviceStatus
+    messages: tuple[str, ...] = ()
+    updated_at: float = 0.0
+
+
+def freshness(what: str, received_at: float | None, now: float, stale_after_s: float,
+              *, stale: DeviceStatus = "error") -> DeviceHealth:  # fmt: skip
+    """``ok`` if ``what`` arrived within ``stale_after_s`` of ``now`` (wall clock [s])."""
+    if received_at is None:
+        return DeviceHealth("unknown", (f"no {what} received yet",), now)
+    age_s = now - received_at
+    if age_s > stale_after_s:
+        return DeviceHealth(stale, (f"no {what} for {age_s:.0f} s",), received_at)
+    return DeviceHealth("ok", (), received_at)
+
+
+def combine(*healths: DeviceHealth) -> DeviceHealth:
+    """The worst status of several, with every message; dated by the oldest confirmation."""
+    worst = max(healths, key=lambda h: _RANK[h.status])
+    messages = tuple(m for h in healths for m in h.messages)
+    return DeviceHealth(worst.status, messages, min(h.updated_at for h in healths))
+
+
+def service_health(service: str, status: tuple[ServiceStatus, float] | None, now: float,
+                   stale_after_s: float) -> DeviceHealth:  # fmt: skip
+    """Whether ``service`` reports its status (``status`` is the newest and its arrival)."""
+    return freshness(f"status from {service}", None if status is None else status[1], now,
+                     stale_after_s)  # fmt: skip
+
+
+def frames_health(service: str, status: tuple[ServiceStatus, float] | None, key: str,
+                  now: float, stale_after_s: float,
+                  *, missing: DeviceStatus = "error") -> DeviceHealth:  # fmt: skip
+    """Whether ``service`` is alive and receives frames on ``key`` (from its status)."""
+    alive = service_health(service, status, now, stale_after_s)
+    if alive.status != "ok" or status is None:
+        return DeviceHealth(missing if alive.status == "error" else alive.status,
+                            alive.messages, alive.updated_at)  # fmt: skip
+    if status[0].received_hz.get(key, 0.0) <= 0.0:
+        return DeviceHealth(missing, (f"{service} receives no frames on {key}",), status[1])
+    return alive
+
+
+@dataclass(frozen=True)
+class FeedInputs:
+    """Everything the feed shows, gathered by the caller.
+
+    ``stamp_to_unix`` maps a capture stamp to Unix time (in simulation the stamps count from
+    the start of the run); ``now`` is the wall clock [Unix s].
+    """
+
+    site: Site
+    now: float
+    publisher: str
+    traffic: TrafficSummary | None
+    traffic_health: DeviceHealth
+    cameras: dict[str, DeviceHealth]
+    devices: RoadsideDeviceState | None
+    devices_health: DeviceHealth
+    stamp_offset_s: float = 0.0
+    traffic_interval_s: float = 300.0
+    contact_email: str | None = None
+
+
+def rfc3339(unix_s: float) -> str:
+    """``2025-06-12T14:03:07Z`` (UTC, whole seconds)."""
+    return datetime.fromtimestamp(unix_s, UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+def device_id(site: Site, name: str) -> str:
+    """A stable UUID for a device of a site (RFC 4122 version 5)."""
+    return str(uuid.uuid5(_NAMESPACE, f"{site.site_id}/{name}"))
+
+
+def data_source_id(site: Site) -> str:
+    return str(uuid.uuid5(_NAMESPACE, f"{site.site_id}/gateway"))
+
+
+def _point(site: Site, x_m: float, y_m: float) -> dict[str, Any]:
+    latitude, longitude, _ = site.geo_frame.to_wgs84(x_m, y_m)
+    return {"type": "Point", "coordinates": [round(float(longitude), 7), round(float(latitude), 7)]}
+
+
+def _core(site: Site, device_type: str, name: str, health: DeviceHealth,
+          description: str) -> dict[str, Any]:  # fmt: skip
+    core: dict[str, Any] = {
+        "device_type": device_type,
+        "data_source_id": data_source_id(site),
+        "device_status": health.status,
+        "update_date": rfc3339(health.updated_at),
+        "has_automatic_location": False,
+        "road_direction": site.road_direction,
+        "road_names": list(site.road_names) or [site.name],
+        "name": name,
+        "description": description,
+        "is_moving": False,
+    }
+    if health.messages:
+        core["status_messages"] = list(health.messages)
+    return core
+
+
+def traffic_mast(site: Site) -> SensorMount | None:
+    """The mount the traffic sensor is reported at: the first LiDAR, else the first sensor."""
+    lidars = [s for s in site.sensors if s.kind == "lidar"]
+    candidates = lidars or site.sensors
+    return candidates[0] if candidates else None
+
+
+def detector_station_m(site: Site, override_m: float | None = None) -> float:
+    """Station of the virtual traffic detector: 30 m upstream of the traffic mast by default."""
+    if override_m is not None:
+        return override_m
+    mast = traffic_mast(site)
+    if mast is None:
+        return site.area(AreaKind.ADVANCE_WARNING).start_station_m
+    station, _ = site.road_frame.to_road(mast.pose.x_m, mast.pose.y_m)
+    return max(0.0, float(station) - 30.0)
+
+
+def _lane_order(site: Site, lane_index: int) -> int:
+    """WZDx numbers lanes from 1 at the left; the site from 0 at the right."""
+    return len(site.lanes) - lane_index
+
+
+def _round(value: float) -> float:
+    return round(value, 1)
+
+
+def traffic_sensor_feature(inputs: FeedInputs) -> dict[str, Any] | None:
+    site = inputs.site
+    mast = traffic_mast(site)
+    if mast is None:
+        return None
+    summary = inputs.traffic
+    if summary is not None:
+        start = summary.start_stamp + inputs.stamp_offset_s
+        end = summary.end_stamp + inputs.stamp_offset_s
+    else:
+        start, end = inputs.now - inputs.traffic_interval_s, inputs.now
+    properties: dict[str, Any] = {
+        "core_details": _core(
+            site, "traffic-sensor", f"Traffic sensor at {mast.sensor_id}", inputs.traffic_health,
+            "Volumes, speeds and occupancy per lane, counted at a virtual loop detector from "
+            "the fused LiDAR, camera and radar trajectories"
+            + ("" if summary is None else f" (station {summary.detector_station_m:.0f} m)"),
+        ),
+        "collection_interval_start_date": rfc3339(start),
+        "collection_interval_end_date": rfc3339(end),
+    }  # fmt: skip
+    if summary is not None:
+        if summary.average_speed_mps is not None:
+            properties["average_speed_kph"] = _round(summary.average_speed_mps * MPS_TO_KPH)
+        properties["volume_vph"] = _round(summary.volume_vph)
+        properties["occupancy_percent"] = _round(summary.occupancy_percent)
+        lane_data = []
+        for lane in sorted(summary.lanes, key=lambda lane: _lane_order(site, lane.lane_index)):
+            entry: dict[str, Any] = {
+                "lane_order": _lane_order(site, lane.lane_index),
+                "volume_vph": _round(lane.volume_vph),
+                "occupancy_percent": _round(lane.occupancy_percent),
+            }
+            if lane.average_speed_mps is not None:
+                entry["average_speed_kph"] = _round(lane.average_speed_mps * MPS_TO_KPH)
+            lane_data.append(entry)
+        properties["lane_data"] = lane_data
+    return {
+        "id": device_id(site, f"traffic-sensor/{mast.sensor_id}"),
+        "type": "Feature",
+        "properties": properties,
+        "geometry": _point(site, mast.pose.x_m, mast.pose.y_m),
+    }
+
+
+def camera_features(inputs: FeedInputs) -> list[dict[str, Any]]:
+    site = inputs.site
+    features = []
+    for camera in (s for s in site.sensors if s.kind == "camera"):
+        health = inputs.cameras.get(camera.sensor_id, DeviceHealth("unknown", (), inputs.now))
+        features.append({
+            "id": device_id(site, f"camera/{camera.sensor_id}"),
+            "type": "Feature",
+            "properties": {
+                "core_details": _core(site, "camera", f"Camera {camera.sensor_id}", health,
+                                      "Mast camera watching the approach to the work zone"),
+            },
+            "geometry": _point(site, camera.pose.x_m, camera.pose.y_m),
+        })  # fmt: skip
+    return features
+
+
+def sign_position(site: Site) -> tuple[float, float]:
+    """Site-frame position [m] of the sign and beacon: on the right shoulder at their station."""
+    station = site.alerts.devices.sign_station_m
+    if station is None:
+        station = site.area(AreaKind.ADVANCE_WARNING).start_station_m
+    right = min(site.lanes, key=lambda lane: lane.index)
+    offset = right.center_offset_m - right.width_m / 2.0 - SHOULDER_OFFSET_M
+    x, y = site.road_frame.to_site(station, offset)
+    return float(x), float(y)
+
+
+def _beacon_function(devices: RoadsideDeviceState | None) -> str:
+    if devices is not None and devices.cause is AlertType.QUEUE:
+        return "queue-warning"
+    return "reduced-speed"
+
+
+def multi(text: str) -> str:
+    """Sign text as a MULTI string (NTCIP 1203): lines joined with ``[nl]``, brackets doubled."""
+    escaped = text.replace("[", "[[").replace("]", "]]")
+    return "[nl]".join(line.strip() for line in escaped.splitlines())
+
+
+def roadside_features(inputs: FeedInputs) -> list[dict[str, Any]]:
+    site = inputs.site
+    geometry = _point(site, *sign_position(site))
+    devices = inputs.devices
+    health = inputs.devices_health
+    if devices is None and health.status == "ok":
+        health = DeviceHealth("unknown", ("no device state received yet",), health.updated_at)
+    beacon = {
+        "id": device_id(site, "flashing-beacon"),
+        "type": "Feature",
+        "properties": {
+            "core_details": _core(site, "flashing-beacon", "Flashing beacon", health,
+                                  "Flashes while an alert concerns drivers approaching the "
+                                  "work zone"),
+            "function": _beacon_function(devices),
+            "is_flashing": bool(devices is not None and devices.beacon_on),
+        },
+        "geometry": geometry,
+    }  # fmt: skip
+    sign = {
+        "id": device_id(site, "dynamic-message-sign"),
+        "type": "Feature",
+        "properties": {
+            "core_details": _core(site, "dynamic-message-sign", "Portable message sign", health,
+                                  "Shows the warning of the highest-priority open alert"),
+            "message_multi_string": multi(devices.sign_text) if devices is not None else "",
+        },
+        "geometry": geometry,
+    }  # fmt: skip
+    return [beacon, sign]
+
+
+def device_feed(inputs: FeedInputs) -> dict[str, Any]:
+    """The WZDx 4.2 DeviceFeed (a JSON-ready dict)."""
+    site = inputs.site
+    features: list[dict[str, Any]] = []
+    traffic = traffic_sensor_feature(inputs)
+    if traffic is not None:
+        features.append(traffic)
+    features += camera_features(inputs)
+    features += roadside_features(inputs)
+    source: dict[str, Any] = {
+        "data_source_id": data_source_id(site),
+        "organization_name": inputs.publisher,
+        "update_date": rfc3339(inputs.now),
+        "update_frequency": UPDATE_FREQUENCY_S,
+    }
+    feed_info: dict[str, Any] = {
+        "publisher": inputs.publisher,
+        "version": WZDX_VERSION,
+        "license": CC0_LICENSE,
+        "update_date": rfc3339(inputs.now),
+        "update_frequency": UPDATE_FREQUENCY_S,
+        "data_sources": [source],
+    }
+    if inputs.contact_email:
+        feed_info["contact_email"] = inputs.contact_email
+        source["contact_email"] = inputs.contact_email
+    return {"feed_info": feed_info, "type": "FeatureCollection", "features": features}

@@ -1,0 +1,114 @@
+"""What the gateway's tests share: keys, settings, sample data and a live uvicorn server."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import uvicorn
+
+from tests.alert_service.helpers import SITE, batch, make_track
+from tests.conftest import free_port
+from wz_gateway.app import create_app
+from wz_gateway.metrics import GatewayMetrics
+from wz_gateway.node import prepare_keys
+from wz_gateway.settings import GatewaySettings
+from wz_gateway.storage import Storage
+from wz_shared.messages import (
+    Alert,
+    AlertPhase,
+    AlertSeverity,
+    AlertType,
+    RoadsideDeviceState,
+    ServiceState,
+    ServiceStatus,
+    Track,
+    TrackBatch,
+)
+
+__all__ = ["SITE", "batch", "make_track"]
+
+READ_KEY = "rk-4f9Qz7Lm2Xv8Tb3Nc6Wd1Ys5"
+ADMIN_KEY = "ak-8Hj2Kp5Rt9Uw3Ye6Za1Bc4Dq7"
+SPEC_DIR = Path(__file__).resolve().parents[3] / "shared" / "specs" / "wzdx-4.2"
+
+
+def gateway_settings(tmp_path: Path, **overrides: Any) -> GatewaySettings:
+    """Settings on a database under ``tmp_path`` with one read and one admin key."""
+    values: dict[str, Any] = {
+        "data_dir": tmp_path / "data",
+        "api_keys": [f"read:{READ_KEY}", f"admin:{ADMIN_KEY}"],
+        "port": 0,
+        **overrides,
+    }
+    return GatewaySettings(**values)
+
+
+def open_storage(settings: GatewaySettings) -> Storage:
+    storage = Storage.open(settings.resolved_database_url())
+    prepare_keys(storage, settings, time.time())
+    return storage
+
+
+def car_batches(track_id: int, station0_m: float, speed_mps: float, start_s: float, count: int,
+                *, offset_m: float = -1.83, period_s: float = 0.1,
+                first_cycle: int = 0) -> list[TrackBatch]:  # fmt: skip
+    """One car driving at a constant speed: a batch every ``period_s``."""
+    return [
+        batch(start_s + k * period_s,
+              [make_track(track_id, station0_m + speed_mps * k * period_s, speed_mps,
+                          offset_m=offset_m)],
+              first_cycle + k)
+        for k in range(count)
+    ]  # fmt: skip
+
+
+def sample_alert(alert_id: str, stamp: float, *, alert_type: AlertType = AlertType.SPEEDING,
+                 severity: AlertSeverity = AlertSeverity.WARNING, phase: AlertPhase = "start",
+                 track: Track | None = None, track_id: int | None = 1) -> Alert:  # fmt: skip
+    return Alert(
+        site=SITE.site_id, source_id="alert-service", stamp=stamp, alert_id=alert_id,
+        alert_type=alert_type, severity=severity, track_id=track_id, station_m=700.0,
+        offset_m=-1.83, speed_mps=29.0, measured_value=29.0, threshold_value=26.8,
+        description="speeding: 65 mph in the 55 mph zone", phase=phase,
+        episode_id=f"ep-{alert_id}", onset_stamp=max(0.0, stamp - 1.0), value_unit="m/s",
+        evidence={"speed_limit_mps": 24.587}, track=track,
+    )  # fmt: skip
+
+
+def devices_state(stamp: float, *, beacon_on: bool, sign_text: str,
+                  cause: AlertType | None) -> RoadsideDeviceState:  # fmt: skip
+    return RoadsideDeviceState(site=SITE.site_id, source_id="alert-service", stamp=stamp,
+                               beacon_on=beacon_on, sign_text=sign_text, cause=cause)  # fmt: skip
+
+
+def service_status(service: str, stamp: float, received_hz: dict[str, float]) -> ServiceStatus:
+    return ServiceStatus(site=SITE.site_id, source_id=service, stamp=stamp, service=service,
+                         state=ServiceState.RUNNING, uptime_s=10.0, pid=1234,
+                         received_hz=received_hz)  # fmt: skip
+
+
+@contextmanager
+def live_server(settings: GatewaySettings, storage: Storage,
+                metrics: GatewayMetrics | None = None) -> Iterator[str]:  # fmt: skip
+    """The app on uvicorn on a free loopback port, in a thread; yields its base URL."""
+    port = free_port()
+    app = create_app(settings, storage, site=SITE, metrics=metrics)
+    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_config=None,
+                                           access_log=False, lifespan="off"))  # fmt: skip
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    deadline = time.monotonic() + 10.0
+    while not server.started:
+        if time.monotonic() > deadline or not thread.is_alive():
+            raise RuntimeError("uvicorn did not start")
+        time.sleep(0.01)
+    try:
+        yield f"http://127.0.0.1:{port}"
+    finally:
+        server.should_exit = True
+        thread.join(10.0)

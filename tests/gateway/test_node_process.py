@@ -1,0 +1,145 @@
+"""The gateway node as its own process on real Zenoh (two peers on loopback, multicast off):
+track batches, an alert and the devices' state in, the same out over HTTP; bad input counted
+and the node alive; stopped and started again on the same file, nothing lost."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, TypeVar
+
+import httpx
+import pytest
+
+from tests.conftest import free_port
+from tests.gateway.helpers import (
+    ADMIN_KEY,
+    READ_KEY,
+    SITE,
+    car_batches,
+    devices_state,
+    sample_alert,
+)
+from wz_shared.bus import Bus, Subscription
+from wz_shared.messages import Alert, AlertType, RoadsideDeviceState, ServiceStatus, TrackBatch
+from wz_shared.settings import BusSettings
+
+ROOT = Path(__file__).resolve().parents[2]
+READ = {"X-API-Key": READ_KEY}
+T = TypeVar("T")
+
+
+def eventually(probe: Callable[[], T | None], what: str, timeout_s: float = 20.0) -> T:
+    """Ask ``probe`` until it returns something (the HTTP side has no event to wait on)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        try:
+            value = probe()
+        except httpx.TransportError:  # the server is not listening yet
+            value = None
+        if value is not None:
+            return value
+        time.sleep(0.05)
+    pytest.fail(f"timed out after {timeout_s:.0f} s waiting for {what}")
+
+
+def wait_for(subscription: Subscription[T], condition: Callable[[T], bool], what: str,
+             timeout_s: float = 20.0) -> T:  # fmt: skip
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        message = subscription.recv(0.5)
+        if message is not None and condition(message):
+            return message
+    pytest.fail(f"timed out after {timeout_s:.0f} s waiting for {what}")
+
+
+@contextmanager
+def gateway_process(bus_port: int, http_port: int, data_dir: Path) -> Iterator[subprocess.Popen[bytes]]:  # fmt: skip
+    env = {k: v for k, v in os.environ.items() if not k.startswith("WZ_")}
+    env.update(WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{bus_port}", WZ_BUS_LISTEN_ENDPOINTS="",
+               WZ_STATUS_PERIOD_S="0.2", WZ_LOG_FORMAT="json",
+               WZ_GATEWAY_PORT=str(http_port), WZ_GATEWAY_DATA_DIR=str(data_dir),
+               WZ_GATEWAY_API_KEYS=f"read:{READ_KEY},admin:{ADMIN_KEY}")  # fmt: skip
+    node = subprocess.Popen([sys.executable, "-m", "wz_gateway.node"], cwd=ROOT, env=env)
+    try:
+        yield node
+    finally:
+        if node.poll() is None:
+            node.send_signal(signal.SIGTERM)
+        assert node.wait(15.0) == 0
+
+
+def points_count(http: httpx.Client) -> int:
+    return len(http.get("/v1/trajectories", headers=READ, params={"limit": 10_000}).json()[
+        "points"])
+
+
+def test_node_stores_the_bus_serves_it_and_keeps_it_across_restarts(port: int,
+                                                                    tmp_path: Path) -> None:  # fmt: skip
+    settings = BusSettings(listen_endpoints=[f"tcp/127.0.0.1:{port}"], connect_endpoints=[])
+    http_port = free_port()
+    http = httpx.Client(base_url=f"http://127.0.0.1:{http_port}", timeout=5.0)
+    batches = car_batches(7, 900.0, 28.0, 0.0, 30)
+    alert = sample_alert("proc-1", 1.5, track=batches[15].tracks[0], track_id=7)
+    with Bus.open(settings, site=SITE.site_id, service="gateway-test") as bus:
+        tracks = bus.publisher(bus.keys.tracks, TrackBatch)
+        alerts = bus.publisher(bus.keys.alerts(AlertType.SPEEDING.value), Alert)
+        devices = bus.publisher(bus.keys.devices_state, RoadsideDeviceState)
+        status = bus.subscribe(bus.keys.status("gateway"), ServiceStatus, mode="ring",
+                               capacity=1)  # fmt: skip
+        with gateway_process(port, http_port, tmp_path / "data") as node:
+            assert tracks.wait_for_subscribers(30.0), "the gateway never subscribed to tracks"
+            assert alerts.wait_for_subscribers(10.0) and devices.wait_for_subscribers(10.0)
+            for message in batches:
+                tracks.put(message)
+            alerts.put(alert)
+            devices.put(devices_state(1.5, beacon_on=True, sign_text="SLOW DOWN",
+                                      cause=AlertType.SPEEDING))  # fmt: skip
+
+            eventually(lambda: points_count(http) == 30 or None, "30 stored track points")
+            live = http.get("/v1/tracks/live", headers=READ).json()
+            assert live["cycle_index"] == 29 and live["tracks"][0]["track_id"] == 7
+            stored = eventually(
+                lambda: http.get("/v1/alerts", headers=READ).json()["alerts"] or None,
+                "the alert over HTTP",
+            )
+            assert [Alert.model_validate(a) for a in stored] == [alert]
+            feed = http.get("/v1/wzdx/device-feed", headers=READ).json()
+            beacon = next(f for f in feed["features"]
+                          if f["properties"]["core_details"]["device_type"] == "flashing-beacon")
+            assert beacon["properties"]["is_flashing"] is True  # fmt: skip
+            trajectory = http.get("/v1/tracks/7", headers=READ, params={"format": "csv"})
+            assert trajectory.text.count("\n") == 31  # header and 30 rows
+
+            # Bad input: counted, dropped, and the node carries on.
+            tracks.put_bytes(b"\x00 not a track batch")
+            tracks.put(TrackBatch(site="elsewhere", source_id="tracker", stamp=9.0,
+                                  cycle_index=90, tracks=[]))  # fmt: skip
+            key = bus.keys.tracks
+            counted = wait_for(status, lambda s: all(
+                s.invalid_counts.get(f"{key}|{reason}", 0) == 1
+                for reason in ("bad_json", "wrong_site")), "bad_json and wrong_site counted")  # fmt: skip
+            assert counted.state.value == "running" and node.poll() is None
+            metrics = http.get("/metrics").text
+            assert f'wz_gateway_bus_invalid_total{{key="{key}",reason="bad_json"}} 1.0' in metrics
+            assert "wz_gateway_ingested_track_points_total 30.0" in metrics
+            assert http.get("/readyz").json()["checks"] == {"database": "ok", "bus": "ok",
+                                                            "writer": "ok"}  # fmt: skip
+            assert points_count(http) == 30
+
+        # Stopped (SIGTERM, exit 0) and started again on the same file: all of it is there.
+        with gateway_process(port, http_port, tmp_path / "data"):
+            eventually(lambda: http.get("/readyz").status_code == 200 or None, "ready again")
+            assert points_count(http) == 30
+            again = http.get("/v1/alerts", headers=READ).json()["alerts"]
+            assert [Alert.model_validate(a) for a in again] == [alert]
+            keys: list[dict[str, Any]] = http.get("/v1/admin/api-keys",
+                                                  headers={"X-API-Key": ADMIN_KEY}).json()  # fmt: skip
+            assert sorted(k["scope"] for k in keys) == ["admin", "read"]  # not added twice
+    http.close()

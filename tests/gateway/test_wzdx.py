@@ -1,0 +1,233 @@
+"""The WZDx 4.2 DeviceFeed: valid against the published schema (offline, every $ref resolved
+from the spec folder, date-time formats checked), and its numbers and states right."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import pytest
+from jsonschema import Draft7Validator
+from referencing import Registry, Resource
+from referencing.exceptions import Unresolvable
+from referencing.jsonschema import DRAFT7
+
+from tests.gateway.helpers import (
+    SITE,
+    SPEC_DIR,
+    batch,
+    car_batches,
+    devices_state,
+    gateway_settings,
+    open_storage,
+    service_status,
+)
+from wz_gateway import views, wzdx
+from wz_gateway.storage import Storage
+from wz_shared.keys import Keys
+from wz_shared.messages import AlertType, Message
+
+KEYS = Keys(SITE.site_id)
+T0_UNIX = 1_750_000_000.0  # wall clock at stamp 0 in these tests
+
+
+def wzdx_validator(schema_file: str = "DeviceFeed.json") -> Draft7Validator:
+    """A draft-07 validator whose registry holds every schema of the spec folder by its $id;
+    it has no way to fetch anything, so an unresolved $ref fails instead of going online."""
+    resources = []
+    for path in sorted(SPEC_DIR.glob("*.json")):
+        contents = json.loads(path.read_text(encoding="utf-8"))
+        resources.append((contents["$id"], Resource.from_contents(contents, DRAFT7)))
+    registry: Registry[Any] = Registry().with_resources(resources)
+    schema = json.loads((SPEC_DIR / schema_file).read_text(encoding="utf-8"))
+    return Draft7Validator(schema, registry=registry, format_checker=Draft7Validator.FORMAT_CHECKER)
+
+
+def assert_valid(feed: dict[str, Any]) -> None:
+    errors = sorted(wzdx_validator().iter_errors(feed), key=lambda e: list(e.absolute_path))
+    assert not errors, "\n".join(f"{list(e.absolute_path)}: {e.message}" for e in errors[:10])
+
+
+def features_by_type(feed: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    return {f["properties"]["core_details"]["device_type"]: f for f in feed["features"]}
+
+
+@pytest.fixture
+def storage(tmp_path: Path) -> Iterator[Storage]:
+    store = open_storage(gateway_settings(tmp_path))
+    yield store
+    store.close()
+
+
+def store(storage: Storage, messages: list[Message], received_at: float) -> None:
+    storage.ingest(messages, geo=SITE.geo_frame, received_at=received_at)
+
+
+def traffic_day(storage: Storage) -> None:
+    """300 s of traffic: 10 cars at 25 m/s in lane 0 (the right lane), 5 at 20 m/s in lane 1,
+    each crossing the detector (950 m, 30 m before the mast) once, then an empty road at
+    300 s. Each batch arrives when it was captured (T0_UNIX + stamp)."""
+    messages: list[Message] = []
+    for k in range(10):
+        messages += car_batches(100 + k, 900.0, 25.0, 30.0 * k, 40, first_cycle=1000 * k)
+    for k in range(5):
+        messages += car_batches(200 + k, 910.0, 20.0, 30.0 * k + 10.0, 40, offset_m=1.83,
+                                first_cycle=1000 * k + 500)  # fmt: skip
+    messages.sort(key=lambda m: m.stamp)
+    for message in messages:
+        store(storage, [message], T0_UNIX + message.stamp)
+    store(storage, [batch(300.0, [], 99_999)], T0_UNIX + 300.0)
+
+
+def feed_of(storage: Storage, now: float) -> dict[str, Any]:
+    return views.device_feed_of(storage, SITE, now=now, publisher="Test DOT", stale_after_s=10.0,
+                                traffic_interval_s=300.0, contact_email="ops@example.org")  # fmt: skip
+
+
+def test_the_validator_resolves_refs_offline_and_checks_formats() -> None:
+    validator = wzdx_validator()
+    for example in sorted((SPEC_DIR / "examples").glob("*.geojson")):
+        validator.validate(json.loads(example.read_text(encoding="utf-8")))
+    assert "date-time" in Draft7Validator.FORMAT_CHECKER.checkers  # rfc3339-validator present
+    example = json.loads((SPEC_DIR / "examples" / "camera_error_example.geojson").read_text())
+    example["feed_info"]["update_date"] = "yesterday"
+    example["features"][0]["properties"]["core_details"]["device_status"] = "fine"
+    messages = {e.message for e in validator.iter_errors(example)}
+    assert any("date-time" in m for m in messages) and len(messages) >= 2
+    # A $ref outside the folder cannot be fetched: the registry has no retriever.
+    with pytest.raises(Unresolvable):
+        validator.evolve(schema={"$ref": "https://example.org/elsewhere.json"}).validate({})
+
+
+def test_feed_before_any_data_is_valid_and_unknown(storage: Storage) -> None:
+    now = T0_UNIX
+    feed = feed_of(storage, now)
+    assert_valid(feed)
+    devices = features_by_type(feed)
+    assert set(devices) == {"traffic-sensor", "camera", "flashing-beacon", "dynamic-message-sign"}
+    for feature in feed["features"]:
+        assert feature["properties"]["core_details"]["device_status"] == "unknown"
+        assert feature["properties"]["core_details"]["status_messages"]
+    sensor = devices["traffic-sensor"]["properties"]
+    assert "volume_vph" not in sensor and "lane_data" not in sensor
+    assert feed["feed_info"]["version"] == "4.2"
+    assert feed["feed_info"]["contact_email"] == "ops@example.org"
+
+
+def test_feed_counts_traffic_per_lane_in_wzdx_units(storage: Storage) -> None:
+    traffic_day(storage)
+    now = T0_UNIX + 301.0
+    for service, hz in (("lidar-detector", {KEYS.raw_lidar("lidar-mast"): 20.0}),
+                        ("camera-detector", {KEYS.raw_camera("camera-mast"): 10.0}),
+                        ("alert-service", {KEYS.tracks: 20.0})):  # fmt: skip
+        store(storage, [service_status(service, 300.0, hz)], now - 1.0)
+    store(storage, [devices_state(250.0, beacon_on=True, sign_text="SLOW DOWN",
+                                  cause=AlertType.SPEEDING)], now - 50.0)  # fmt: skip
+    feed = feed_of(storage, now)
+    assert_valid(feed)
+    devices = features_by_type(feed)
+    for feature in feed["features"]:
+        core = feature["properties"]["core_details"]
+        assert core["device_status"] == "ok", core
+        assert core["road_names"] == ["US-75"] and core["road_direction"] == "northbound"
+
+    sensor = devices["traffic-sensor"]["properties"]
+    # The interval is the run's first 300 s of stamps, dated by the newest batch's arrival.
+    assert sensor["collection_interval_start_date"] == "2025-06-15T15:06:40Z"
+    assert datetime.fromtimestamp(T0_UNIX, UTC).strftime("%Y-%m-%dT%H:%M:%SZ") == (
+        sensor["collection_interval_start_date"]
+    )
+    assert sensor["collection_interval_end_date"] == "2025-06-15T15:11:40Z"
+    # Lane 1 (the left, WZDx lane_order 1): 5 cars at 20 m/s; lane 0 (order 2): 10 at 25 m/s.
+    # volume = 3600 n / 300 s; occupancy = 100 n (4.5 m + 1.83 m) / v / 300 s.
+    left, right = sensor["lane_data"]
+    assert left == {"lane_order": 1, "volume_vph": 60.0, "average_speed_kph": 72.0,
+                    "occupancy_percent": pytest.approx(round(100 * 5 * 6.33 / 20 / 300, 1))}  # fmt: skip
+    assert right == {"lane_order": 2, "volume_vph": 120.0, "average_speed_kph": 90.0,
+                     "occupancy_percent": pytest.approx(round(100 * 10 * 6.33 / 25 / 300, 1))}  # fmt: skip
+    assert sensor["volume_vph"] == 180.0
+    assert sensor["average_speed_kph"] == pytest.approx(round((10 * 90 + 5 * 72) / 15, 1))
+    occupancy = (100 * 5 * 6.33 / 20 / 300 + 100 * 10 * 6.33 / 25 / 300) / 2
+    assert sensor["occupancy_percent"] == pytest.approx(round(occupancy, 1))
+
+    beacon = devices["flashing-beacon"]["properties"]
+    assert beacon["is_flashing"] is True and beacon["function"] == "reduced-speed"
+    assert devices["dynamic-message-sign"]["properties"]["message_multi_string"] == "SLOW DOWN"
+
+    # Positions: [longitude, latitude], the mast 980 m north and 7.5 m east of the origin.
+    longitude, latitude = devices["traffic-sensor"]["geometry"]["coordinates"]
+    assert latitude == pytest.approx(40.75 + 980.0 / 111_035.0, abs=2e-5)
+    assert longitude == pytest.approx(-96.688 + 7.5 / 84_400.0, abs=2e-5)
+    # Stable ids: the same device has the same id in every feed.
+    assert feed_of(storage, now)["features"][0]["id"] == devices["traffic-sensor"]["id"]
+
+
+def test_a_restarted_simulation_counts_only_its_own_run(storage: Storage) -> None:
+    traffic_day(storage)  # run 1: 15 vehicles over stamps 0-300 s
+    second = T0_UNIX + 1000.0  # run 2 starts from stamp 0 again, later on the wall clock
+    for message in sorted((m for k in range(3)
+                           for m in car_batches(300 + k, 900.0, 25.0, 30.0 * k, 40)),
+                          key=lambda m: m.stamp):  # fmt: skip
+        store(storage, [message], second + message.stamp)
+    store(storage, [batch(120.0, [], 5000)], second + 120.0)
+    run_start = storage.latest(SITE.site_id, "run_start")
+    assert run_start is not None and run_start.stamp == 0.0
+    feed = feed_of(storage, second + 121.0)
+    assert_valid(feed)
+    sensor = features_by_type(feed)["traffic-sensor"]["properties"]
+    left, right = sensor["lane_data"]
+    assert (left["volume_vph"], right["volume_vph"]) == (0.0, 90.0)  # 3 cars in 120 s
+    assert sensor["collection_interval_start_date"] == wzdx.rfc3339(second)
+
+
+def test_stale_data_and_silent_services_are_errors(storage: Storage) -> None:
+    traffic_day(storage)
+    store(storage, [service_status("lidar-detector", 300.0, {}),
+                    service_status("camera-detector", 300.0, {}),
+                    service_status("alert-service", 300.0, {})], T0_UNIX + 300.0)  # fmt: skip
+    # Alive but without frames: the camera is in error, the traffic sensor (tracks still
+    # arriving) only warns about its LiDAR.
+    feed = feed_of(storage, T0_UNIX + 302.0)
+    assert_valid(feed)
+    devices = features_by_type(feed)
+    camera = devices["camera"]["properties"]["core_details"]
+    assert camera["device_status"] == "error"
+    assert camera["status_messages"] == [
+        f"camera-detector receives no frames on {KEYS.raw_camera('camera-mast')}"
+    ]
+    assert devices["traffic-sensor"]["properties"]["core_details"]["device_status"] == "warning"
+    # A minute later nothing has arrived: every device is in error and says for how long.
+    feed = feed_of(storage, T0_UNIX + 360.0)
+    assert_valid(feed)
+    for feature in feed["features"]:
+        core = feature["properties"]["core_details"]
+        assert core["device_status"] == "error", core
+        assert any("for 60 s" in m for m in core["status_messages"]), core
+
+
+def test_queue_sign_and_its_beacon(storage: Storage) -> None:
+    store(storage, [devices_state(5.0, beacon_on=True, sign_text="QUEUE AHEAD 0.3 MI",
+                                  cause=AlertType.QUEUE),
+                    service_status("alert-service", 5.0, {})], T0_UNIX)  # fmt: skip
+    feed = feed_of(storage, T0_UNIX + 1.0)
+    assert_valid(feed)
+    devices = features_by_type(feed)
+    assert devices["flashing-beacon"]["properties"]["function"] == "queue-warning"
+    sign = devices["dynamic-message-sign"]["properties"]
+    assert sign["message_multi_string"] == "QUEUE AHEAD 0.3 MI"
+    assert sign["core_details"]["device_status"] == "ok"
+    # The sign stands on the right shoulder at its station (500 m), not on the road.
+    longitude, latitude = devices["dynamic-message-sign"]["geometry"]["coordinates"]
+    x, y, _ = SITE.geo_frame.to_site(latitude, longitude)
+    station, offset = SITE.road_frame.to_road(x, y)
+    assert float(station) == pytest.approx(500.0, abs=0.05)
+    assert float(offset) == pytest.approx(-3.66 - wzdx.SHOULDER_OFFSET_M, abs=0.05)
+
+
+def test_multi_strings() -> None:
+    assert wzdx.multi("MERGE\nRIGHT NOW") == "MERGE[nl]RIGHT NOW"
+    assert wzdx.multi("[X]") == "[[X]]"
+    assert wzdx.multi("") == ""
