@@ -365,6 +365,28 @@ def test_clutter_from_a_channel_that_may_not_start_tracks_creates_no_track() -> 
     assert [(t.track_id, t.status) for t in tracker.tracks()] == [(1, "confirmed")]
 
 
+@pytest.mark.parametrize(("range_std_m", "starts"), [(3.9, True), (4.1, False)])
+def test_a_measurement_too_uncertain_to_locate_a_vehicle_starts_no_track(
+    range_std_m: float, starts: bool
+) -> None:
+    """A camera-only box ranged near the horizon (std along the line of sight beyond
+    ``spawn_max_std_m``, 4 m) updates tracks but starts none; just under the limit it does."""
+    tracker = MultiTargetTracker(TrackerSettings(spawn_max_std_m=4.0))
+    # std 0.3 m across, ``range_std_m`` along a line of sight at 30 degrees to x
+    u = np.array([math.cos(math.pi / 6), math.sin(math.pi / 6)])
+    n = np.array([-u[1], u[0]])
+    covariance = range_std_m**2 * np.outer(u, u) + 0.3**2 * np.outer(n, n)
+    for k in range(12):
+        stamp = k * 0.1
+        tracker.add(CAMERA, stamp, [Measurement(x_m=150.0 - 25.0 * stamp, y_m=1.8,
+                                                covariance_m2=covariance, object_class="car")])
+    tracker.flush()
+    assert (tracker.counters.tracks_started > 0) is starts
+    assert (tracker.counters.measurements_unlocated > 0) is not starts
+    if starts:
+        assert [t.status for t in tracker.tracks()] == ["confirmed"]
+
+
 def test_a_measurement_far_outside_the_gate_starts_a_tentative_track_and_leaves_the_other() -> None:
     vehicles = [Vehicle(0.0, 0.0, 25.0, local_id=1)]
     batches = scene(vehicles, duration_s=2.0, seed=7)

@@ -189,6 +189,13 @@ class TrackerSettings(BaseModel):
     #: range), not a new vehicle. A vehicle alongside, in the next lane 3.6 m away, is far
     #: beyond it (about 11 sigma for a 0.3 m lateral std).
     spawn_gate_chi2: float = Field(default=60.0, ge=0.0)
+    #: An unmatched measurement whose position is this uncertain (largest std of its R) starts
+    #: no track [m]; it may still update one. A camera alone ranges a vehicle by its box's
+    #: bottom row, good to a metre or two within 100 m and off by tens of metres near the
+    #: horizon: a vehicle at 250 m was ranged at 197 m and, closing in, gave a ghost track
+    #: that drifted onto the real vehicle at a third of its speed. Radar-paired and LiDAR
+    #: positions are well under it. 0 turns it off.
+    spawn_max_std_m: float = Field(default=4.0, ge=0.0)
     #: Two tracks closer than this, moving alike, are one vehicle tracked twice (a sensor's
     #: biased measurement that missed the gate started a second track): the younger is
     #: deleted [m]. Adjacent lanes are 3.6 m apart and a following car at least ~5 m behind,
@@ -373,6 +380,9 @@ class TrackerCounters:
     #: Unmatched measurements that started no track, being near a confirmed one
     #: (:attr:`TrackerSettings.spawn_gate_chi2`).
     measurements_suppressed: int = 0
+    #: Unmatched measurements that started no track, their position too uncertain
+    #: (:attr:`TrackerSettings.spawn_max_std_m`).
+    measurements_unlocated: int = 0
     #: Radar speeds outside their gate (:attr:`TrackerSettings.speed_gate_chi2`), not used.
     speeds_rejected: int = 0
 
@@ -1099,6 +1109,13 @@ class MultiTargetTracker:
                 near_confirmed = near[[row for row in near_rows if live[row].confirmed]].any(axis=0)
                 self._counters.measurements_suppressed += int(np.count_nonzero(near_confirmed))
                 candidates = candidates[~near_confirmed]
+            if settings.spawn_max_std_m > 0.0 and len(candidates):
+                # largest eigenvalue of each 2x2 R: (a + c) / 2 + sqrt(((a - c) / 2)^2 + b^2)
+                a, b, c = R[candidates, 0, 0], R[candidates, 0, 1], R[candidates, 1, 1]
+                largest = 0.5 * (a + c) + np.sqrt((0.5 * (a - c)) ** 2 + b * b)
+                located = largest <= settings.spawn_max_std_m**2
+                self._counters.measurements_unlocated += int(np.count_nonzero(~located))
+                candidates = candidates[located]
             for column in candidates.tolist():
                 self._spawn(measurements[column], R[column], sensor_id, stamp_s)
         self._merge_duplicates(stamp_s)
