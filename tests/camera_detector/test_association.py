@@ -178,6 +178,23 @@ def test_global_nearest_neighbour_beats_greedy() -> None:
     assert associate(distances, gate_chi2=13.82) == [(0, 1), (1, 0)]
 
 
+@pytest.mark.parametrize(("rival_d2", "paired"), [(7.1, True), (6.9, False)])
+def test_a_pair_with_an_unpaired_rival_within_the_margin_is_dropped(
+    rival_d2: float, paired: bool
+) -> None:
+    # One box, two echoes (two cars side by side, one hidden from the camera): the box fits
+    # echo 0 at d^2 = 1; echo 1, left unpaired, at ``rival_d2``; margin 6.
+    distances = np.array([[1.0, rival_d2]])
+    assert associate(distances, 13.82, ambiguity_margin_chi2=6.0) == ([(0, 0)] if paired else [])
+    assert associate(distances, 13.82) == [(0, 0)]  # no check: the nearest, as before
+    # The same from the echo's side: two boxes, one echo.
+    assert associate(distances.T, 13.82, ambiguity_margin_chi2=6.0) == (
+        [(0, 0)] if paired else [])
+    # A rival the assignment paired elsewhere is no rival (two cars one after the other).
+    both = np.array([[1.0, 2.0], [2.0, 1.0]])
+    assert associate(both, 13.82, ambiguity_margin_chi2=6.0) == [(0, 0), (1, 1)]
+
+
 def test_gate_forbids_pairs_beyond_it() -> None:
     distances = np.array([[1.0, 20.0], [20.0, 30.0]])
     assert associate(distances, gate_chi2=13.82) == [(0, 0)]

@@ -41,7 +41,15 @@ Inputs: camera objects already ranged onto the road (site-frame ground positions
 
 3. **Global nearest neighbour** (:func:`associate`): the assignment minimising the sum of
    ``d^2`` over admissible pairs (``scipy.optimize.linear_sum_assignment``); pairs beyond the
-   gate are forbidden, never forced.
+   gate are forbidden, never forced. A pair is then dropped as *ambiguous* when a partner
+   left over by the assignment fits almost as well: an unpaired echo within
+   ``ambiguity_margin_chi2`` of the pair's ``d^2`` for its camera object, or an unpaired
+   camera object as close to its echo. Two cars side by side at 180 m, the nearer hiding the
+   other from the camera, give one box and two echoes 1.1 degrees apart (the radar's azimuth
+   std is 0.5 degrees) at ranges the camera cannot tell apart: pairing the box with either
+   makes a vehicle from one car's lane and the other's speed, which the tracker then follows
+   between the two. Dropped pairs leave a camera-only object and radar-only ones, each with
+   its own, honest uncertainty.
 
 4. **Fuse** each pair (:func:`fuse_pair`): range and radial speed from the radar, bearing and
    class from the camera. The fused point is built in the radar's polar frame: the radar's
@@ -114,6 +122,9 @@ class AssociationSettings(BaseModel):
 
     #: Gate on the squared Mahalanobis distance (chi-square, 2 dof; 13.82 keeps 99.9 %).
     gate_chi2: float = Field(default=13.82, gt=0.0)
+    #: A pair is ambiguous when an unpaired echo (or camera object) is within this of its
+    #: ``d^2`` (6: the alternative at least 1/20 as likely); 0 turns the check off.
+    ambiguity_margin_chi2: float = Field(default=6.0, ge=0.0)
     #: Std of the offset between the radar's reflection point and the camera's ground point
     #: along the radar's line of sight [m] (about half a car length seen end-on).
     reflection_extent_std_m: float = Field(default=1.0, ge=0.0)
@@ -416,7 +427,9 @@ def gate_distances(
     return distances
 
 
-def associate(distances_sq: F64, gate_chi2: float) -> list[tuple[int, int]]:
+def associate(
+    distances_sq: F64, gate_chi2: float, ambiguity_margin_chi2: float = 0.0
+) -> list[tuple[int, int]]:
     """Global nearest neighbour on gated squared distances (module step 3).
 
     Parameters
@@ -425,22 +438,40 @@ def associate(distances_sq: F64, gate_chi2: float) -> list[tuple[int, int]]:
         Squared Mahalanobis distances from :func:`gate_distances`.
     gate_chi2 : float
         Pairs with ``d^2 >= gate_chi2`` are never matched.
+    ambiguity_margin_chi2 : float
+        A pair is dropped when an admissible camera object or echo the assignment left
+        unpaired is within this of its ``d^2``; 0: no check.
 
     Returns
     -------
     list of (int, int)
-        ``(camera index, radar index)`` pairs minimising the summed ``d^2``, by camera index.
+        ``(camera index, radar index)`` pairs minimising the summed ``d^2``, by camera index,
+        less the ambiguous ones.
     """
     if distances_sq.size == 0:
         return []
     admissible = distances_sq < gate_chi2
     cost = np.where(admissible, distances_sq, _FORBIDDEN_COST)
     rows, columns = linear_sum_assignment(cost)
-    return [
+    pairs = [
         (int(row), int(column))
         for row, column in zip(rows.tolist(), columns.tolist(), strict=True)
         if admissible[row, column]
     ]
+    if ambiguity_margin_chi2 <= 0.0 or not pairs:
+        return pairs
+    free_rows = np.ones(distances_sq.shape[0], dtype=bool)
+    free_columns = np.ones(distances_sq.shape[1], dtype=bool)
+    for row, column in pairs:
+        free_rows[row] = free_columns[column] = False
+    clear = []
+    for row, column in pairs:
+        limit = distances_sq[row, column] + ambiguity_margin_chi2
+        rival_echo = free_columns & admissible[row] & (distances_sq[row] < limit)
+        rival_camera = free_rows & admissible[:, column] & (distances_sq[:, column] < limit)
+        if not (rival_echo.any() or rival_camera.any()):
+            clear.append((row, column))
+    return clear
 
 
 def along_road_speed(
@@ -635,7 +666,7 @@ def fuse_camera_radar(
     echoes = [expected_echo(camera, radar_xy) for camera in camera_objects]
     distances_sq = gate_distances(echoes, radar_points, settings.reflection_extent_std_m,
                                   settings.reflection_width_std_m)  # fmt: skip
-    pairs = associate(distances_sq, settings.gate_chi2)
+    pairs = associate(distances_sq, settings.gate_chi2, settings.ambiguity_margin_chi2)
     fused = [
         fuse_pair(camera_objects[c], radar_points[r], mount, settings, road_heading_rad, dt_s)
         for c, r in pairs
