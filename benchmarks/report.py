@@ -210,6 +210,30 @@ def _summary(benchmarks: dict[str, Any]) -> list[str]:
             f"{busy['tracks_per_batch']} tracks a batch {_ms(busy['latency_ms']['p50'])} "
             f"median, p99 {_ms(busy['latency_ms']['p99'])}."
         )
+    hooks = benchmarks.get("webhook_latency", {}).get("result")
+    if hooks:
+        one, four = hooks["variants"]["one_subscription"], hooks["variants"]["four_subscriptions"]
+        lines.append(
+            f"- Gateway webhooks (the node process on Zenoh, SQLite): alert published to its "
+            f"signed POST at the receiver **{_ms(one['latency_ms']['p50'])}** median, p99 "
+            f"{_ms(one['latency_ms']['p99'])}; to four subscribers, the last of them "
+            f"{_ms(four['latency_ms']['p50'])} median, p99 {_ms(four['latency_ms']['p99'])}."
+        )
+    gateway = benchmarks.get("gateway_live", {}).get("result")
+    if gateway:
+        run = gateway["variants"]["smoothing"]
+        live, loaded = run["loaded"]["live"], run["loaded"]
+        lines.append(
+            f"- Gateway under load (the node process, SQLite; {run['tracks_per_batch']} tracks "
+            f"at {run['rate_hz']:.0f} Hz, five ending and smoothed a second): "
+            f"`GET /v1/tracks/live` **{live['requests_per_s']:,.0f} requests/s** from "
+            f"{run['live_clients']} clients, {_ms(live['latency_ms']['p50'])} median, p99 "
+            f"{_ms(live['latency_ms']['p99'])}; batch published to stored "
+            f"**{_ms(run['ingest_only']['ingest_lag_ms']['p50'])}** median alone (p99 "
+            f"{_ms(run['ingest_only']['ingest_lag_ms']['p99'])}), "
+            f"{_ms(loaded['ingest_lag_ms']['p50'])} (p99 {_ms(loaded['ingest_lag_ms']['p99'])}) "
+            f"under that load."
+        )
     return ["## Summary", "", *lines, ""] if lines else []
 
 
@@ -824,6 +848,65 @@ def _alert_latency(result: dict[str, Any]) -> list[str]:
     return [*lines, ""]
 
 
+def _webhook_latency(result: dict[str, Any]) -> list[str]:
+    lines = [
+        "The gateway node as its own process (SQLite, default site), a Zenoh peer of this one "
+        "on `tcp/127.0.0.1`; the receiver an `http.server` (HTTP/1.1, keep-alive) in this "
+        "process on loopback, subscribed through the API. Each sample is one new alert "
+        "(encoded beforehand): from its `put_bytes` to the receiver having read the POST "
+        "with that alert's `webhook-id` (bus, writer queue, the transaction storing the alert "
+        "and its outbox rows, the delivery's claim, signing, HTTP); with four subscriptions, "
+        f"to the last of the four. One alert at a time, after {result['warmup']} unmeasured; "
+        f"every signature checked. {result['samples']} samples per variant, "
+        f"{result['delivered']} events delivered in all.",
+        "",
+    ]
+    rows = [[f"{v['subscriptions']} subscription(s)", _ms(v["latency_ms"]["p50"]),
+             _ms(v["latency_ms"]["p90"]), _ms(v["latency_ms"]["p99"]),
+             _ms(v["latency_ms"]["max"])]
+            for v in result["variants"].values()]  # fmt: skip
+    lines += _table(["Subscribers", "p50", "p90", "p99", "max"], rows)
+    return [*lines, ""]
+
+
+def _gateway_live(result: dict[str, Any]) -> list[str]:
+    first = next(iter(result["variants"].values()))
+    lines = [
+        "The gateway node as its own process (SQLite in WAL mode, default site, rate limits "
+        "off), a Zenoh peer of this one on `tcp/127.0.0.1`. This process publishes a "
+        f"`TrackBatch` of {first['tracks_per_batch']} tracks ({first['batch_bytes']:,} B) at "
+        f"{first['rate_hz']:.0f} Hz; each track lives {first['track_life_s']:.0f} s, so "
+        f"{first['tracks_per_batch'] / first['track_life_s']:.0f} tracks end a second and "
+        "(with smoothing) are RTS-smoothed and stored by the writer thread between groups. "
+        "After a warm-up, ingestion alone, then with "
+        f"{first['live_clients']} threads asking `GET /v1/tracks/live` back to back and one "
+        f"paging `GET /v1/trajectories` ({first['page_points']:,} points a page), each with "
+        "its keep-alive `httpx` connection. Ingest lag: from just before a batch's "
+        "`put_bytes` to its commit, seen by a watcher process polling the database file "
+        "every 0.5 ms. Latency: request sent to body read, in this process (its client "
+        "threads share one interpreter, and both processes the machine's cores). Without "
+        "smoothing: the same with the track end timeout at an hour (nothing ends).",
+        "",
+    ]
+    rows = []
+    for name, run in result["variants"].items():
+        alone, loaded = run["ingest_only"]["ingest_lag_ms"], run["loaded"]["ingest_lag_ms"]
+        live, pages = run["loaded"]["live"], run["loaded"]["trajectories"]
+        rows.append([
+            name.replace("_", " "), f"{_ms(alone['p50'])} / {_ms(alone['p99'])}",
+            f"{_ms(loaded['p50'])} / {_ms(loaded['p99'])}",
+            f"**{live['requests_per_s']:,.0f}**",
+            f"{_ms(live['latency_ms']['p50'])} / {_ms(live['latency_ms']['p99'])}",
+            f"{_ms(pages['latency_ms']['p50'])} / {_ms(pages['latency_ms']['p99'])}",
+            f"{run['smoothing']['tracks']:.0f} ({_ms(run['smoothing']['mean_ms'])})",
+            _ms(run["write_group_mean_ms"]),
+        ])  # fmt: skip
+    lines += _table(["Variant", "ingest lag alone p50 / p99", "ingest lag loaded p50 / p99",
+                     "live requests/s", "live p50 / p99", "trajectories page p50 / p99",
+                     "tracks smoothed (mean time each)", "write per group (mean)"], rows)  # fmt: skip
+    return [*lines, ""]
+
+
 SECTIONS: dict[str, tuple[str, Callable[[dict[str, Any]], list[str]]]] = {
     "bus_latency": ("one-way latency between two processes", _bus_latency),
     "bus_throughput": ("messages per second between two processes", _bus_throughput),
@@ -835,6 +918,10 @@ SECTIONS: dict[str, tuple[str, Callable[[dict[str, Any]], list[str]]]] = {
     "tracker_cycle": ("the fusion tracker's cycle with 200 tracks and three sensors",
                       _tracker_cycle),
     "alert_latency": ("the alert service: track batch to alert on the bus", _alert_latency),
+    "webhook_latency": ("gateway webhooks: alert on the bus to the signed POST at the receiver",
+                        _webhook_latency),
+    "gateway_live": ("the gateway storing 20 Hz track batches while clients read the live API",
+                     _gateway_live),
 }
 
 

@@ -32,11 +32,13 @@ from benchmarks import (
     bus_latency,
     bus_throughput,
     camera_detection,
+    gateway_live,
     lidar_detection,
     report,
     sensors,
     sumo_step,
     tracker_cycle,
+    webhook_latency,
 )
 from benchmarks.common import ROOT
 
@@ -51,6 +53,8 @@ BENCHMARKS: dict[str, Callable[[bool], dict[str, Any]]] = {
     "camera_detection": camera_detection.run,
     "tracker_cycle": tracker_cycle.run,
     "alert_latency": alert_latency.run,
+    "gateway_live": gateway_live.run,
+    "webhook_latency": webhook_latency.run,
 }
 RESULTS_PATH = ROOT / "benchmarks" / "results.json"
 MARKDOWN_PATH = ROOT / "BENCHMARKS.md"

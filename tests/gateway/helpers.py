@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import signal
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -112,3 +116,31 @@ def live_server(settings: GatewaySettings, storage: Storage,
     finally:
         server.should_exit = True
         thread.join(10.0)
+
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@contextmanager
+def gateway_process(bus_port: int, http_port: int, data_dir: Path, *, keys: bool = True,
+                    **settings: str) -> Iterator[subprocess.Popen[bytes]]:  # fmt: skip
+    """The gateway node as its own process, a client of the bus at ``bus_port``, serving HTTP
+    on ``http_port`` and storing in ``data_dir``; ``keys``: the read and admin keys of these
+    tests configured; ``settings``: more ``WZ_GATEWAY_<NAME>`` values (``dev_mode="true"``).
+    Stopped with SIGTERM, and it must then exit cleanly; one a test killed is left as is."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("WZ_")}
+    env.update(WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{bus_port}", WZ_BUS_LISTEN_ENDPOINTS="",
+               WZ_STATUS_PERIOD_S="0.2", WZ_LOG_FORMAT="json",
+               WZ_GATEWAY_PORT=str(http_port), WZ_GATEWAY_DATA_DIR=str(data_dir))  # fmt: skip
+    if keys:
+        env["WZ_GATEWAY_API_KEYS"] = f"read:{READ_KEY},admin:{ADMIN_KEY}"
+    env.update({f"WZ_GATEWAY_{name.upper()}": value for name, value in settings.items()})
+    node = subprocess.Popen([sys.executable, "-m", "wz_gateway.node"], cwd=ROOT, env=env)
+    try:
+        yield node
+    finally:
+        if node.poll() is None:
+            node.send_signal(signal.SIGTERM)
+            assert node.wait(20.0) == 0
+        else:  # it stopped by itself: only a kill by the test is fine
+            assert node.returncode in (0, -signal.SIGKILL), node.returncode

@@ -9,16 +9,32 @@ import pwd
 import shutil
 import subprocess
 import tempfile
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from tests.conftest import free_port
-from tests.gateway.helpers import SITE, batch, car_batches, make_track, sample_alert
-from wz_gateway import auth
+from tests.gateway.helpers import (
+    SITE,
+    batch,
+    car_batches,
+    gateway_settings,
+    make_track,
+    sample_alert,
+)
+from tests.gateway.tracking import car_tracks, filtered_car, merged_batches
+from tests.gateway.webhook_receiver import Receiver, eventually
+from wz_gateway import auth, webhooks
+from wz_gateway.delivery import WebhookDeliverer
+from wz_gateway.metrics import GatewayMetrics
+from wz_gateway.smoothing import rts_smooth
 from wz_gateway.storage import AlertQuery, PointQuery, Storage
 from wz_gateway.tables import SCHEMA_VERSION
+from wz_gateway.track_ends import TrackFinisher
+from wz_gateway.webhook_store import WebhookStore
 
 NOW = 1_750_000_000.0
 
@@ -96,3 +112,82 @@ def test_storage_round_trip_on_postgresql(postgres_url: str) -> None:
         assert deleted["track_points"] == 40 and deleted["alerts"] == 0
     finally:
         reopened.close()
+
+
+def test_webhook_outbox_on_postgresql(postgres_url: str, tmp_path: Path) -> None:
+    """The outbox's SQL on PostgreSQL: enqueue with the alert (once), claim with its lease,
+    delivery to a real receiver, the attempt recorded, expiry, unsubscribe."""
+    storage = Storage.open(postgres_url)
+    store = WebhookStore(storage.engine)
+    try:
+        with Receiver() as receiver:
+            secret = webhooks.new_secret()
+            receiver.secrets = [secret]
+            store.create(subscription_id="wh_00000000000000aa", url=receiver.url, secret=secret,
+                         event_types=["alert.speeding"], min_severity="warning",
+                         phases=["start"], description="pg", now=time.time())  # fmt: skip
+            wanted, ignored = sample_alert("pg-wh-1", 5.0), sample_alert("pg-wh-2", 5.0,
+                                                                         phase="clear")  # fmt: skip
+            now = time.time()
+            result = storage.ingest([wanted, ignored, wanted], geo=SITE.geo_frame, received_at=now)
+            assert (result.alerts, result.webhook_events) == (2, 1)
+            (claimed,) = store.claim(now, lease_until=now + 0.5, limit=8)
+            assert store.claim(now, lease_until=now + 0.5, limit=8) == []
+            assert claimed.event_id == webhooks.alert_event_id(wanted)
+            settings = gateway_settings(tmp_path, webhook_allowed_networks=[
+                "127.0.0.0/8"], webhook_poll_interval_s=0.1, webhook_timeout_s=0.2,
+                webhook_lease_s=0.5)  # fmt: skip
+            deliverer = WebhookDeliverer(store, settings)
+            deliverer.start()
+            try:
+                receiver.wait_until(lambda r: len(r.delivered_ids()) == 1, "the delivery")
+                eventually(lambda: [e.state for e in store.events("wh_00000000000000aa")]
+                           == ["delivered"], "recorded")  # fmt: skip
+            finally:
+                deliverer.close()
+            (request,) = receiver.snapshot()
+            assert request.verified and request.webhook_id == claimed.event_id
+            assert [d["status_code"] for d in store.deliveries(claimed.event_id)] == [204]
+            storage.ingest([sample_alert("pg-wh-3", 6.0)], geo=SITE.geo_frame,
+                           received_at=now - 3600.0)  # fmt: skip
+            assert store.pending_count() == 1
+            assert store.expire_overdue(time.time(), ttl_s=900.0) == 1
+            assert store.pending_count() == 0
+            assert store.delete("wh_00000000000000aa") and store.subscriptions() == []
+            assert store.deliveries(claimed.event_id) == []
+    finally:
+        storage.close()
+
+
+def test_track_smoothing_on_postgresql(postgres_url: str, tmp_path: Path) -> None:
+    """Track lives, the covariances (bytea) and the smoothed points on PostgreSQL: the RTS
+    result to the last bits, written once, the unfinished life found again. Another site's
+    rows, arrived later than the retention test purges."""
+    site = SITE.model_copy(update={"site_id": "pg-smoothing"})
+    received_at = NOW + 40 * 86400.0
+    settings = gateway_settings(tmp_path)
+    storage = Storage.open(postgres_url)
+    try:
+        finisher = TrackFinisher.of(storage, site, settings, GatewayMetrics(),
+                                    clock=lambda: received_at)  # fmt: skip
+        assert finisher.resume() == 0
+        car = filtered_car(seed=61, count=60)
+        messages = [*merged_batches((car.stamps_s, car_tracks(71, car))),
+                    batch(10.0, [make_track(72, 900.0, 20.0)], 500)]  # fmt: skip
+        for message in messages:
+            message = message.model_copy(update={"site": site.site_id})
+            finisher.before_write([message], received_at)
+            storage.ingest([message], geo=site.geo_frame, received_at=received_at)
+        (life,) = finisher.pending
+        assert life.track_id == 71 and finisher.work() == 1
+        assert finisher.finish(life) == 0  # already ended: nothing more
+        stored = storage.points(PointQuery(site=site.site_id, track_id=71, smoothed=True,
+                                           limit=100)).items  # fmt: skip
+        x_s, _ = rts_smooth(car.stamps_s, car.x_filt, car.P_filt,
+                            sigma_along_mps2=settings.smoothing_sigma_along_mps2,
+                            sigma_across_mps2=settings.smoothing_sigma_across_mps2)  # fmt: skip
+        np.testing.assert_allclose([[p.x_m, p.y_m, p.vx_mps, p.vy_mps] for p in stored], x_s,
+                                   rtol=0.0, atol=1e-9)  # fmt: skip
+        assert [lv.track_id for lv in storage.unfinished_track_lives(site.site_id)] == [72]
+    finally:
+        storage.close()

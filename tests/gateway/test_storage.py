@@ -31,7 +31,7 @@ from wz_gateway.storage import (
     decode_cursor,
     encode_cursor,
 )
-from wz_gateway.tables import SCHEMA_VERSION, metadata
+from wz_gateway.tables import MIGRATIONS, SCHEMA_VERSION, metadata
 from wz_shared.messages import AlertSeverity, AlertType, DetectionBatch, RoadsideDeviceState
 
 NOW = 1_750_000_000.0
@@ -80,7 +80,8 @@ def test_migration_from_empty_then_reopen_keeps_everything(tmp_path: Path) -> No
 
     with sqlite3.connect(path) as raw:
         assert raw.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
-        assert raw.execute("SELECT version FROM schema_version").fetchall() == [(1,)]
+        assert raw.execute("SELECT version FROM schema_version ORDER BY version").fetchall() == [
+            (m.version,) for m in MIGRATIONS]  # fmt: skip
 
     reopened = Storage.open(url_of(path))
     try:

@@ -126,6 +126,7 @@ def _demo_banner(site_id: str, endpoint: str) -> None:
         f"  wz tap{connect} 'wz/*/truth/**'     the simulated vehicles, live",
         f"  wz tap{connect} 'wz/*/detections/**' the LiDAR detector's vehicles (site frame)",
         f"  wz alerts{connect}                  open alerts, then each alert as it comes",
+        "  http://127.0.0.1:8000/              the live page: vehicles and alerts as they happen",
         "  http://127.0.0.1:8000/docs          the gateway's API: trajectories, alerts, WZDx feed",
         f"  wz tap{connect} 'wz/*/raw/**'       the sensors' frames (LiDAR, camera, radar)",
         f"  wz record{connect} demo.mcap        record the bus (opens in Foxglove); "

@@ -4,13 +4,15 @@ Routes (OpenAPI at ``/openapi.json``, docs at ``/docs``)::
 
     GET    /v1/site                      the site description
     GET    /v1/tracks/live               the newest fused tracks (WGS84 positions added)
-    GET    /v1/tracks/{track_id}         one track's stored trajectory      (json|csv|geojson)
-    GET    /v1/trajectories              stored points by time, area, speed (json|csv|geojson)
+    GET    /v1/tracks/{track_id}         one track's stored trajectory  (json|csv|geojson|parquet)
+    GET    /v1/trajectories              stored points by time, area, speed (...|parquet)
     GET    /v1/alerts                    alert events by type, severity, phase, time
     GET    /v1/wzdx/device-feed          the WZDx 4.2 DeviceFeed
+    GET    /v1/stream                    live tracks and alerts (Server-Sent Events)
     GET    /v1/admin/api-keys            the keys (admin)
     POST   /v1/admin/api-keys            make a key; its secret is shown once (admin)
     DELETE /v1/admin/api-keys/{key_id}   revoke a key (admin)
+    ...    /v1/webhooks                  signed webhook subscriptions (admin; webhook_routes.py)
     GET    /healthz  /readyz  /metrics   liveness, readiness, Prometheus (no key)
 
 Every ``/v1`` route needs a key (header ``X-API-Key``, or ``Authorization: Bearer``) of scope
@@ -42,6 +44,8 @@ from starlette.exceptions import HTTPException
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from wz_gateway import auth, export, views
+from wz_gateway.live import Broadcaster, broadcaster_for
+from wz_gateway.live_routes import page_router, static_files, stream_router
 from wz_gateway.metrics import GatewayMetrics
 from wz_gateway.models import (
     AlertPage,
@@ -60,6 +64,7 @@ from wz_gateway.models import (
 from wz_gateway.settings import GatewaySettings
 from wz_gateway.storage import AlertQuery, CursorError, Page, PointQuery, Storage
 from wz_gateway.tables import SCHEMA_VERSION
+from wz_gateway.webhook_routes import webhook_router
 from wz_shared.messages import AlertSeverity, AlertType
 from wz_shared.site import AreaKind, Site, load_site
 
@@ -68,7 +73,8 @@ log = logging.getLogger(__name__)
 PROBLEM_JSON = "application/problem+json"
 GEOJSON = "application/geo+json"
 CSV = "text/csv"
-OutputFormat = Literal["json", "csv", "geojson"]
+PARQUET = "application/vnd.apache.parquet"
+OutputFormat = Literal["json", "csv", "geojson", "parquet"]
 _KEY_CACHE_S = 30.0
 #: Largest track id, stamp and station a query may name: beyond any real value, and inside
 #: what every database's integers and JSON numbers hold exactly.
@@ -375,7 +381,8 @@ Stamp = Annotated[float | None, Query(ge=0.0, le=_MAX_STAMP_S, allow_inf_nan=Fal
 Limit = Annotated[int | None, Query(ge=1, le=100_000, description="Items per page (default "
                                     "1000 points or 100 alerts, at most max_page_size)")]
 Cursor = Annotated[str | None, Query(max_length=200, description="`next_cursor` of the previous page")]  # fmt: skip
-Format = Annotated[OutputFormat, Query(alias="format", description="json, csv or geojson")]
+Format = Annotated[OutputFormat, Query(alias="format",
+                                        description="json, csv, geojson or parquet")]
 Speed = Annotated[float | None, Query(ge=0.0, le=200.0, allow_inf_nan=False,
                                       description="Speed bound [m/s], inclusive")]  # fmt: skip
 Station = Annotated[float | None, Query(ge=-_MAX_STATION_M, le=_MAX_STATION_M,
@@ -386,11 +393,13 @@ _EXPORT_RESPONSES: dict[int | str, dict[str, Any]] = {
     200: {
         "content": {
             CSV: {"schema": {"type": "string"}},
+            PARQUET: {"schema": {"type": "string", "format": "binary"}},
             GEOJSON: {"schema": {"type": "object", "required": ["type", "features"],
                                  "properties": {"type": {"const": "FeatureCollection"},
                                                 "features": {"type": "array"}}}},
         },
-        "description": "JSON by default; CSV or GeoJSON with `format`",
+        "description": "JSON by default; CSV, GeoJSON or Parquet (the CSV's columns, typed) "
+                       "with `format`",
     }
 }  # fmt: skip
 
@@ -438,6 +447,9 @@ def _points_response(request: Request, output: OutputFormat, page: Page,
                      filename: str) -> Response:  # fmt: skip
     headers = _next_link(request, page.next_cursor)
     points: list[TrackPoint] = page.items
+    if output == "parquet":
+        headers["Content-Disposition"] = f'attachment; filename="{filename}.parquet"'
+        return Response(export.points_parquet(points), media_type=PARQUET, headers=headers)
     if output == "csv":
         headers["Content-Disposition"] = f'attachment; filename="{filename}.csv"'
         return Response(export.points_csv(points), media_type=CSV, headers=headers)
@@ -472,8 +484,9 @@ def _v1_router() -> APIRouter:
         track_id: Annotated[int, Path(ge=0, le=_MAX_ID, description="The tracker's track id")],
         start: Stamp = None,
         end: Stamp = None,
-        smoothed: Annotated[bool | None, Query(description="Only smoothed (true) or fused "
-                                                           "(false) points")] = None,
+        smoothed: Annotated[bool, Query(description="The smoothed trajectory (true; stored "
+                                                    "when the track ends) or the fused one "
+                                                    "(false)")] = False,
         limit: Limit = None,
         cursor: Cursor = None,
         output: Format = "json",
@@ -515,7 +528,8 @@ def _v1_router() -> APIRouter:
                                           "rightmost; -1: between lanes)")] = None,
         min_speed: Speed = None,
         max_speed: Speed = None,
-        smoothed: Annotated[bool | None, Query()] = None,
+        smoothed: Annotated[bool, Query(description="Smoothed points (true) or fused ones "
+                                                    "(false)")] = False,
         limit: Limit = None,
         cursor: Cursor = None,
         output: Format = "json",
@@ -641,6 +655,7 @@ def create_app(
     metrics: GatewayMetrics | None = None,
     readiness: Callable[[], dict[str, str]] | None = None,
     clock: Callable[[], float] = time.time,
+    live: Broadcaster | None = None,
 ) -> FastAPI:
     """The gateway's ASGI app.
 
@@ -658,6 +673,8 @@ def create_app(
         Extra readiness checks, ``{name: "ok" or what is wrong}`` (the node adds the bus).
     clock : callable
         Wall clock [Unix s]: ages, key times and the feed's dates.
+    live : Broadcaster, optional
+        What the writer stored, for ``/v1/stream`` (the node's); an idle one by default.
     """
     site = site if site is not None else load_site(settings.site_file)
     metrics = metrics if metrics is not None else GatewayMetrics()
@@ -682,6 +699,15 @@ def create_app(
     app.add_exception_handler(OperationalError, _on_database_error)
     app.add_exception_handler(Exception, _on_unexpected)
     app.include_router(_v1_router())
+    app.include_router(webhook_router(admin_access=Depends(require("admin")),
+                                      responses=_V1_RESPONSES))  # fmt: skip
+    live = live if live is not None else broadcaster_for(settings, metrics.registry)
+    app.include_router(stream_router(
+        live, heartbeat_s=settings.stream_heartbeat_s, retry_ms=2000,
+        read_access=Depends(require("read")), responses=_V1_RESPONSES,
+    ))  # fmt: skip
+    app.include_router(page_router())
+    app.mount("/static", static_files(), name="static")
 
     @app.get("/healthz", response_model=Health, tags=["operations"])
     def healthz() -> Health:

@@ -1,9 +1,12 @@
-"""Track points as CSV and GeoJSON: pure, no I/O.
+"""Track points as CSV, GeoJSON and Parquet: pure, no I/O.
 
 CSV: one row per point, the columns of :data:`~wz_gateway.models.TRACK_POINT_FIELDS` (units in
 the names), an empty cell for a missing value. GeoJSON (RFC 7946): positions are
 ``[longitude, latitude]`` in WGS84; a page of points is a FeatureCollection of Point features
 whose properties are the other columns; one track's trajectory is a LineString feature.
+Parquet: the CSV's columns, typed (:data:`PARQUET_SCHEMA`: 64-bit floats, integers, strings
+for the class and status, a boolean ``smoothed``, nulls for a missing size), zstd-compressed;
+the bytes of one file per page.
 """
 
 from __future__ import annotations
@@ -12,6 +15,9 @@ import csv
 import io
 from collections.abc import Sequence
 from typing import Any
+
+import pyarrow as pa
+import pyarrow.parquet as pq
 
 from wz_gateway.models import TRACK_POINT_FIELDS, TrackPoint
 
@@ -27,6 +33,27 @@ def points_csv(points: Sequence[TrackPoint]) -> str:
         row = point.model_dump(mode="json")
         writer.writerow("" if row[name] is None else row[name] for name in TRACK_POINT_FIELDS)
     return out.getvalue()
+
+
+#: The Parquet columns: those of the CSV, in its order, with their types; only the size may be
+#: missing (null).
+PARQUET_SCHEMA = pa.schema([
+    pa.field(name, {"track_id": pa.int64(), "lane_index": pa.int16(), "object_class": pa.string(),
+                    "status": pa.string(), "smoothed": pa.bool_()}.get(name, pa.float64()),
+             nullable=name in ("length_m", "width_m"))
+    for name in TRACK_POINT_FIELDS
+])  # fmt: skip
+
+
+def points_parquet(points: Sequence[TrackPoint]) -> bytes:
+    """One Parquet file of the points (a row group; no rows for no points)."""
+    rows = [point.model_dump(mode="json") for point in points]
+    columns = {name: [row[name] for row in rows] for name in TRACK_POINT_FIELDS}
+    table = pa.Table.from_pydict(columns, schema=PARQUET_SCHEMA)
+    sink = pa.BufferOutputStream()
+    pq.write_table(table, sink, compression="zstd")
+    data: bytes = sink.getvalue().to_pybytes()
+    return data
 
 
 def _position(point: TrackPoint) -> list[float]:

@@ -72,6 +72,31 @@ class GatewayMetrics:
                                          "Rows deleted by the retention", ["table"], registry=r)  # fmt: skip
         self.queue_depth = Gauge("wz_gateway_write_queue_depth",
                                  "Messages waiting for the database writer", registry=r)  # fmt: skip
+        self.smoothed_tracks = Counter("wz_gateway_smoothed_tracks",
+                                       "Ended track lives smoothed and stored", registry=r)  # fmt: skip
+        self.smoothed_points = Counter("wz_gateway_smoothed_track_points",
+                                       "Smoothed track points stored", registry=r)  # fmt: skip
+        self.smoothing_seconds = Histogram(
+            "wz_gateway_smoothing_seconds", "Time to read, smooth and store one ended track",
+            buckets=(0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 1.0), registry=r,
+        )  # fmt: skip
+        self.webhook_events = Counter(
+            "wz_gateway_webhook_events", "Webhook events that reached a final state: delivered, "
+            "failed (410 Gone, subscription disabled) or expired (past their time to live)",
+            ["state"], registry=r,
+        )  # fmt: skip
+        self.webhook_attempts = Counter(
+            "wz_gateway_webhook_attempts", "Webhook delivery attempts by answer: 2xx, 3xx, 4xx, "
+            "5xx, or error (no answer: refused, timed out, address refused)", ["result"],
+            registry=r,
+        )  # fmt: skip
+        self.webhook_attempt_seconds = Histogram(
+            "wz_gateway_webhook_attempt_seconds", "Time of one webhook delivery attempt",
+            buckets=(0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 10.0),
+            registry=r,
+        )  # fmt: skip
+        self.webhook_pending = Gauge("wz_gateway_webhook_pending",
+                                     "Webhook events waiting to be delivered", registry=r)  # fmt: skip
 
     def watch_bus(self, snapshot: BusSnapshot) -> None:
         """Export the bus's counters (call once, with ``bus.stats.snapshot``)."""
@@ -79,3 +104,14 @@ class GatewayMetrics:
 
     def watch_queue(self, depth: Callable[[], int]) -> None:
         self.queue_depth.set_function(lambda: float(depth()))
+
+    def watch_webhooks(self, pending: Callable[[], int]) -> None:
+        """Export the outbox's pending events (read at scrape time; NaN if the database fails)."""
+
+        def read() -> float:
+            try:
+                return float(pending())
+            except Exception:  # a scrape must not fail because the database is busy
+                return float("nan")
+
+        self.webhook_pending.set_function(read)

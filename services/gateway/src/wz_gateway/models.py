@@ -9,10 +9,19 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from wz_gateway import webhooks
 from wz_gateway.auth import Scope
-from wz_shared.messages import Alert, FiniteFloat, Track, TrackStatus, VehicleClass
+from wz_shared.messages import (
+    Alert,
+    AlertPhase,
+    AlertSeverity,
+    FiniteFloat,
+    Track,
+    TrackStatus,
+    VehicleClass,
+)
 
 
 class _Model(BaseModel):
@@ -148,3 +157,86 @@ class Problem(_Model):
     detail: str
     instance: str | None = None
     errors: list[ProblemField] | None = None
+
+
+# --- webhooks -----------------------------------------------------------------------------
+
+#: A subscription's public id: ``wh_`` and 16 hex digits.
+WEBHOOK_ID_PATTERN = r"^wh_[0-9a-f]{16}$"
+
+
+class NewWebhook(_Model):
+    """Subscribe a URL to alert events (admin). Each event is POSTed as signed JSON (Standard
+    Webhooks); the secret to check the signatures is in the answer, once."""
+
+    url: Annotated[str, Field(min_length=1, max_length=2000, description="http(s) URL the "
+                              "events are POSTed to; its host must resolve to public "
+                              "addresses unless the settings allow others")]  # fmt: skip
+    event_types: Annotated[
+        list[str],
+        Field(min_length=1, max_length=20,
+              description="`alert.*` for every alert, or `alert.<type>` (`alert.speeding`...)"),
+    ] = [webhooks.ALL_ALERTS]  # fmt: skip
+    #: Only alerts of this severity or higher; None: any.
+    min_severity: AlertSeverity | None = None
+    #: Only these episode phases (start, update, clear); None or empty: every phase.
+    phases: Annotated[list[AlertPhase], Field(max_length=3)] | None = None
+    description: Annotated[str, Field(max_length=200, pattern=r"^[^\x00-\x1f]*$")] = ""
+
+    @field_validator("event_types")
+    @classmethod
+    def _event_types(cls, value: list[str]) -> list[str]:
+        return webhooks.normalize_event_types(value)
+
+
+class WebhookInfo(_Model):
+    """A subscription, without its secret."""
+
+    subscription_id: str
+    url: str
+    event_types: list[str]
+    min_severity: AlertSeverity | None = None
+    phases: list[AlertPhase] | None = None
+    description: str
+    created_at: FiniteFloat
+    #: Set when the receiver answered 410 Gone: nothing more is sent (delete and subscribe again).
+    disabled_at: FiniteFloat | None = None
+    disabled_reason: str | None = None
+    #: After a rotation: until when the previous secret also signs [Unix s].
+    previous_secret_until: FiniteFloat | None = None
+
+
+class CreatedWebhook(WebhookInfo):
+    """A subscription just made: its signing secret (``whsec_...``) is shown this once."""
+
+    secret: str
+
+
+class WebhookSecret(_Model):
+    """A new signing secret; the previous one also signs until ``previous_secret_until``."""
+
+    subscription_id: str
+    secret: str
+    previous_secret_until: FiniteFloat | None
+
+
+class WebhookTestEvent(_Model):
+    """A ``webhook.test`` event queued for delivery."""
+
+    subscription_id: str
+    event_id: str
+    event_type: str
+
+
+class WebhookEventInfo(_Model):
+    """One event for one subscription and where its delivery stands."""
+
+    event_id: str
+    event_type: str
+    state: Literal["pending", "delivered", "failed", "expired"]
+    attempts: int
+    created_at: FiniteFloat
+    next_attempt_at: FiniteFloat | None = None
+    finished_at: FiniteFloat | None = None
+    last_status_code: int | None = None
+    last_error: str | None = None

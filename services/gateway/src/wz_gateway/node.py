@@ -10,6 +10,10 @@ Run it as ``python -m wz_gateway.node`` (settings ``WZ_GATEWAY_*``, bus ``WZ_BUS
   subscription does): nothing is dropped for being slow;
 - serves the API (:func:`wz_gateway.app.create_app`) with uvicorn in a thread of the same
   process, on ``WZ_GATEWAY_HOST:WZ_GATEWAY_PORT`` (127.0.0.1:8000 by default);
+- delivers the webhooks the stored alerts queued (:mod:`wz_gateway.delivery`: a thread and a
+  small pool, woken by the writer);
+- smooths the stored trajectory of each track that has ended, in the writer thread between
+  groups (:mod:`wz_gateway.track_ends`), and at start those a stopped process left;
 - deletes what is older than the retention, at start and every ``retention_period_s``.
 
 Bad input never stops it: an undecodable message, or one of another site, is counted in the
@@ -31,9 +35,13 @@ from pydantic import ValidationError
 
 from wz_gateway.app import create_app
 from wz_gateway.auth import new_secret, parse_configured_key
+from wz_gateway.delivery import WebhookDeliverer
+from wz_gateway.live import Broadcaster, broadcaster_for
 from wz_gateway.metrics import GatewayMetrics
 from wz_gateway.settings import GatewaySettings
 from wz_gateway.storage import Storage, StorageError
+from wz_gateway.track_ends import TrackFinisher
+from wz_gateway.webhook_store import WebhookStore
 from wz_shared.logs import configure_logging
 from wz_shared.messages import Alert, Message, RoadsideDeviceState, ServiceStatus, TrackBatch
 from wz_shared.service import ServiceRuntime
@@ -47,6 +55,8 @@ Report = Callable[[str, str, str], None]  # key, reason, detail
 #: Most messages stored in one transaction.
 MAX_GROUP = 256
 _WRITE_ATTEMPTS = 3
+#: Smoothing of ended tracks still done at a stop [s].
+_STOP_SMOOTHING_S = 2.0
 
 
 @dataclass
@@ -65,6 +75,12 @@ class Writer:
         ``report(key, reason, detail)`` for each refused message.
     clock : callable
         Wall clock [Unix s] stamped on rows as ``received_at``.
+    live : Broadcaster, optional
+        Handed each stored group, for the live stream's clients.
+    finisher : TrackFinisher, optional
+        Records track lives and smooths those that end, between groups.
+    webhooks : WebhookDeliverer, optional
+        Woken when a group queued webhook events.
     """
 
     storage: Storage
@@ -76,6 +92,9 @@ class Writer:
     stop: threading.Event = field(default_factory=threading.Event)
     written: int = 0
     last_error: str | None = None
+    live: Broadcaster | None = None
+    finisher: TrackFinisher | None = None
+    webhooks: WebhookDeliverer | None = None
 
     def __post_init__(self) -> None:
         self.queue: queue.Queue[Message] = queue.Queue(self.settings.queue_capacity)
@@ -107,11 +126,14 @@ class Writer:
 
     def write(self, group: list[Message]) -> bool:
         """Store one group, retrying a refused transaction; False if it was given up."""
+        received_at = self.clock()
+        if self.finisher is not None:
+            self.finisher.before_write(group, received_at)
         for attempt in range(1, _WRITE_ATTEMPTS + 1):
             started = time.perf_counter()
             try:
                 result = self.storage.ingest(group, geo=self.site.geo_frame,
-                                             received_at=self.clock())  # fmt: skip
+                                             received_at=received_at)  # fmt: skip
             except Exception as exc:  # the database refused: retry, then give the group up
                 self.last_error = f"{type(exc).__name__}: {exc}"
                 if attempt == _WRITE_ATTEMPTS:
@@ -125,6 +147,10 @@ class Writer:
             self.metrics.write_seconds.observe(time.perf_counter() - started)
             self.last_error = None
             self.written += len(group)
+            if self.webhooks is not None and result.webhook_events:
+                self.webhooks.wake()
+            if self.live is not None:
+                self.live.publish(group)  # returns at once, however slow its clients
             m = self.metrics
             m.ingested.labels("track_batch").inc(result.track_batches)
             m.ingested.labels("alert").inc(result.alerts)
@@ -153,14 +179,21 @@ class Writer:
                                                       if n))  # fmt: skip
 
     def run(self, keep_going: Callable[[], bool] = lambda: True) -> None:
-        """Store messages until ``stop`` (or ``keep_going()`` is False), then what is queued."""
+        """Store messages until ``stop`` (or ``keep_going()`` is False), then what is queued;
+        ended tracks are smoothed between groups."""
+        if self.finisher is not None:
+            self.finisher.resume()
         while not self.stop.is_set() and keep_going():
             self.purge_if_due()
             group = self._group(0.1)
             if group:
                 self.write(group)
+            if self.finisher is not None:
+                self.finisher.work()
         while group := self._group(0.0):  # what the bus delivered before the stop
             self.write(group)
+        if self.finisher is not None:  # what is left is taken up at the next start
+            self.finisher.work(budget_s=_STOP_SMOOTHING_S)
 
 
 def prepare_keys(storage: Storage, settings: GatewaySettings, now: float) -> str | None:
@@ -198,15 +231,19 @@ def run(runtime: ServiceRuntime, site: Site, settings: GatewaySettings, storage:
         metrics: GatewayMetrics) -> int:  # fmt: skip
     """Store the bus and serve HTTP until ``runtime.stop``; the messages stored."""
     bus = runtime.bus
+    deliverer = WebhookDeliverer(WebhookStore(storage.engine), settings, metrics)
     writer = Writer(storage, site, settings, metrics,
                     report=lambda key, reason, detail: bus.stats.count_invalid(key, reason, detail),
-                    stop=runtime.stop)  # fmt: skip
+                    stop=runtime.stop, live=broadcaster_for(settings, metrics.registry),
+                    finisher=TrackFinisher.of(storage, site, settings, metrics),
+                    webhooks=deliverer)  # fmt: skip
     bus.on(bus.keys.tracks, TrackBatch, writer.offer)
     bus.on(bus.keys.alerts_all, Alert, writer.offer)
     bus.on(bus.keys.devices_state, RoadsideDeviceState, writer.offer)
     bus.on(bus.keys.status_all, ServiceStatus, writer.offer)
     metrics.watch_bus(bus.stats.snapshot)
     metrics.watch_queue(writer.queue.qsize)
+    metrics.watch_webhooks(deliverer.store.pending_count)
 
     def readiness() -> dict[str, str]:
         checks = {"bus": "closed" if bus.closed else "ok",
@@ -215,15 +252,21 @@ def run(runtime: ServiceRuntime, site: Site, settings: GatewaySettings, storage:
             checks["queue"] = f"{writer.queue.qsize()} of {settings.queue_capacity} waiting"
         return checks
 
-    app = create_app(settings, storage, site=site, metrics=metrics, readiness=readiness)
+    app = create_app(settings, storage, site=site, metrics=metrics, readiness=readiness,
+                     live=writer.live)  # fmt: skip
     server = uvicorn.Server(
         uvicorn.Config(app, host=settings.host, port=settings.port, log_config=None,
-                       access_log=False, lifespan="off", server_header=False)
+                       access_log=False, lifespan="off", server_header=False,
+                       timeout_graceful_shutdown=5)
     )  # fmt: skip
     http = serve(server)
     log.info("storing %s, %s, %s; API on http://%s:%d", bus.keys.tracks, bus.keys.alerts_all,
              bus.keys.devices_state, settings.host, settings.port)  # fmt: skip
+    deliverer.start()
     writer.run(keep_going=http.is_alive)
+    deliverer.close()  # attempts in flight finish; the rest waits in the outbox
+    if writer.live is not None:
+        writer.live.close()  # ends the live streams, which would otherwise hold the server
     server.should_exit = True
     http.join(timeout=10.0)
     if not server.started or not runtime.stop.is_set():

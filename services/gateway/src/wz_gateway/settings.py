@@ -93,6 +93,70 @@ class GatewaySettings(ServiceSettings):
     #: WZDx ``feed_info``: who publishes the feed.
     publisher: Annotated[str, Field(min_length=1, max_length=200)] = "Work-zone edge gateway"
     contact_email: Annotated[str, Field(max_length=200)] | None = None
+    #: A track missing from the track batches for longer than this has ended, and its stored
+    #: trajectory is smoothed [s of stamps]; no batch at all for ``track_end_silence_s`` [s of
+    #: wall clock] ends every track (the tracker stopped).
+    track_end_after_s: Annotated[float, Field(gt=0.0, le=3600.0)] = 3.0
+    track_end_silence_s: Annotated[float, Field(gt=0.0, le=86400.0)] = 30.0
+    #: The smoother's process noise, acceleration std along and across the direction of
+    #: travel [m/s^2]: the fusion tracker's ``sigma_along_mps2``/``sigma_across_mps2``.
+    smoothing_sigma_along_mps2: Annotated[float, Field(gt=0.0, le=50.0)] = 3.5
+    smoothing_sigma_across_mps2: Annotated[float, Field(gt=0.0, le=50.0)] = 0.5
+    #: The live stream (/v1/stream): most track batches a second to one client [Hz], events
+    #: held for a slow client (beyond, its oldest are dropped), the heartbeat comment's
+    #: period [s], and the most clients at once.
+    stream_max_hz: Annotated[float, Field(gt=0.0, le=50.0)] = 10.0
+    stream_queue_capacity: Annotated[int, Field(ge=1, le=10_000)] = 64
+    stream_heartbeat_s: Annotated[float, Field(gt=0.0, le=300.0)] = 15.0
+    stream_max_clients: Annotated[int, Field(ge=1, le=10_000)] = 32
+
+    #: Webhooks. Receivers must be at public addresses (no SSRF into the site's network)
+    #: unless their addresses are in ``webhook_allowed_networks`` (CIDRs, e.g.
+    #: ``10.20.0.0/16,fd00::/8``) or ``webhook_allow_private``; dev mode allows loopback.
+    webhook_allow_private: bool = False
+    webhook_allowed_networks: Annotated[list[str], NoDecode] = Field(default_factory=list)
+    #: An event not delivered this long after it was stored expires (for safety alerts, late
+    #: is as bad as never) [s].
+    webhook_event_ttl_s: Annotated[float, Field(gt=0.0, le=7 * 86400.0)] = 900.0
+    #: Retries: full-jitter exponential backoff, uniform in [0, min(cap, base * 2^(n-1))] [s].
+    webhook_backoff_base_s: Annotated[float, Field(gt=0.0, le=3600.0)] = 1.0
+    webhook_backoff_cap_s: Annotated[float, Field(gt=0.0, le=86400.0)] = 300.0
+    #: One attempt's time limit (connect, send, each read) [s], and the claim's lease: an event
+    #: claimed by a gateway that died is taken again after it [s] (more than the timeout).
+    webhook_timeout_s: Annotated[float, Field(gt=0.0, le=120.0)] = 10.0
+    webhook_lease_s: Annotated[float, Field(gt=0.0, le=3600.0)] = 30.0
+    #: Subscriptions delivered to at once (one request in flight per subscription).
+    webhook_workers: Annotated[int, Field(ge=1, le=256)] = 8
+    #: How often the outbox is looked at when nothing wakes the delivery [s].
+    webhook_poll_interval_s: Annotated[float, Field(gt=0.0, le=60.0)] = 0.5
+    #: After a secret rotation, how long the previous secret still signs too [s].
+    webhook_secret_grace_s: Annotated[float, Field(ge=0.0, le=30 * 86400.0)] = 86400.0
+
+    @field_validator("webhook_allowed_networks", mode="before")
+    @classmethod
+    def _parse_networks(cls, value: object) -> object:
+        return _split_list(value)
+
+    @field_validator("webhook_allowed_networks")
+    @classmethod
+    def _networks(cls, value: list[str]) -> list[str]:
+        for entry in value:
+            try:
+                ipaddress.ip_network(entry, strict=False)
+            except ValueError as exc:
+                raise ValueError(f"WZ_GATEWAY_WEBHOOK_ALLOWED_NETWORKS: {entry!r} is not a "
+                                 "network (write CIDRs such as 10.20.0.0/16)") from exc  # fmt: skip
+        return value
+
+    @model_validator(mode="after")
+    def _webhook_lease(self) -> GatewaySettings:
+        if self.webhook_lease_s <= self.webhook_timeout_s:
+            raise ValueError(
+                f"webhook_lease_s ({self.webhook_lease_s}) must be longer than "
+                f"webhook_timeout_s ({self.webhook_timeout_s}): a lease running out while its "
+                "attempt still waits would let a second attempt start"
+            )
+        return self
 
     @field_validator("api_keys", "cors_origins", mode="before")
     @classmethod

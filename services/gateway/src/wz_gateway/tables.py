@@ -29,14 +29,20 @@ from sqlalchemy import (
     ForeignKey,
     Index,
     Integer,
+    LargeBinary,
     MetaData,
     SmallInteger,
     String,
     Table,
     Text,
+    text,
 )
+from sqlalchemy.schema import CreateColumn
 
 metadata = MetaData()
+
+#: ``struct`` format of ``track_points.covariance``.
+COVARIANCE_FORMAT = "<16d"
 
 # SQLite makes an INTEGER PRIMARY KEY the rowid (auto-incremented); PostgreSQL gets a BIGINT.
 RowId = BigInteger().with_variant(Integer(), "sqlite")
@@ -75,9 +81,35 @@ track_points = Table(
     Column("width_m", Double, nullable=True),
     Column("smoothed", Boolean, nullable=False, default=False),
     Column("received_at", Double, nullable=False),
+    # Migration 3: the state's 4x4 covariance (x, y, vx, vy) as the tracker sent it (smoothed
+    # rows: the smoothed one) [m^2, m^2/s, m^2/s^2], 16 little-endian float64s, row-major
+    # (:data:`COVARIANCE_FORMAT`: cheaper than JSON on the ingest path); None on points
+    # stored before.
+    Column("covariance", LargeBinary, nullable=True),
     Index("ix_track_points_site_stamp", "site", "stamp"),
     Index("ix_track_points_site_track", "site", "track_id", "stamp"),
     Index("ix_track_points_received_at", "received_at"),
+)
+
+#: One row per track life (a track id in one run of the tracker), written when the gateway
+#: first stores it; ``ended_at`` is set, in the transaction that writes its smoothed points,
+#: once it has ended. Its points: that site and track id, stamps from ``first_stamp`` to
+#: ``last_stamp``, received from ``first_received_at`` to ``last_received_at``.
+tracks = Table(
+    "tracks",
+    metadata,
+    Column("id", RowId, primary_key=True, autoincrement=True),
+    Column("site", String(64), nullable=False),
+    Column("track_id", BigInteger, nullable=False),
+    Column("first_stamp", Double, nullable=False),
+    Column("first_received_at", Double, nullable=False),
+    Column("last_stamp", Double, nullable=True),
+    Column("last_received_at", Double, nullable=True),
+    #: Wall clock when it was smoothed [Unix s]; None while it lives (or waits to be smoothed).
+    Column("ended_at", Double, nullable=True),
+    Column("smoothed_points", Integer, nullable=True),
+    Index("ix_tracks_site_ended", "site", "ended_at"),
+    Index("ix_tracks_site_track", "site", "track_id"),
 )
 
 #: Every alert event (start, update, clear) as the alert service published it.
@@ -167,6 +199,13 @@ webhook_subscriptions = Table(
     Column("description", String(200), nullable=False, default=""),
     Column("created_at", Double, nullable=False),
     Column("disabled_at", Double, nullable=True),
+    # Migration 2: filters, why it was disabled, the secret before a rotation (still signed
+    # with until ``previous_secret_until``, so receivers can switch without losing events).
+    Column("min_severity", String(16), nullable=True),
+    Column("phases", JSON, nullable=True),
+    Column("disabled_reason", String(200), nullable=True),
+    Column("previous_secret", Text, nullable=True),
+    Column("previous_secret_until", Double, nullable=True),
 )
 
 #: Durable outbox: an event for a subscriber is written here in the same transaction as what
@@ -187,9 +226,17 @@ webhook_outbox = Table(
     Column("created_at", Double, nullable=False),
     Column("next_attempt_at", Double, nullable=False),
     Column("attempts", Integer, nullable=False, default=0),
-    #: ``pending``, ``delivered`` or ``failed`` (gave up).
+    #: ``pending``, ``delivered``, ``failed`` (410 Gone, subscription disabled) or ``expired``
+    #: (not delivered within the event's time to live).
     Column("state", String(16), nullable=False, default="pending"),
+    # Migration 2: the claim's lease (a row claimed by a process that died is taken again
+    # once it runs out), when the row reached its final state, the last attempt's result.
+    Column("locked_until", Double, nullable=True),
+    Column("finished_at", Double, nullable=True),
+    Column("last_status_code", Integer, nullable=True),
+    Column("last_error", Text, nullable=True),
     Index("ix_webhook_outbox_due", "state", "next_attempt_at"),
+    Index("ux_webhook_outbox_subscription_event", "subscription_id", "event_id", unique=True),
 )
 
 webhook_deliveries = Table(
@@ -203,6 +250,8 @@ webhook_deliveries = Table(
     Column("status_code", Integer, nullable=True),
     Column("error", Text, nullable=True),
     Column("duration_ms", Double, nullable=False),
+    # Migration 2: which attempt of the event this was (1 the first).
+    Column("attempt", Integer, nullable=False, server_default="0"),
     Index("ix_webhook_deliveries_outbox", "outbox_id"),
 )
 
@@ -216,22 +265,114 @@ class Migration:
     apply: Callable[[Connection], None]
 
 
+# The webhook tables as migration 1 made them (migration 2 adds to them).
+_v1_metadata = MetaData()
+_v1_webhook_tables = [
+    Table(
+        "webhook_subscriptions",
+        _v1_metadata,
+        Column("id", RowId, primary_key=True, autoincrement=True),
+        Column("subscription_id", String(64), nullable=False, unique=True),
+        Column("url", Text, nullable=False),
+        Column("secret", Text, nullable=False),
+        Column("event_types", JSON, nullable=False),
+        Column("description", String(200), nullable=False, default=""),
+        Column("created_at", Double, nullable=False),
+        Column("disabled_at", Double, nullable=True),
+    ),
+    Table(
+        "webhook_outbox",
+        _v1_metadata,
+        Column("id", RowId, primary_key=True, autoincrement=True),
+        Column("event_id", String(64), nullable=False),
+        Column("subscription_id", RowId,
+               ForeignKey("webhook_subscriptions.id", ondelete="CASCADE"), nullable=False),
+        Column("event_type", String(64), nullable=False),
+        Column("payload", Text, nullable=False),
+        Column("created_at", Double, nullable=False),
+        Column("next_attempt_at", Double, nullable=False),
+        Column("attempts", Integer, nullable=False, default=0),
+        Column("state", String(16), nullable=False, default="pending"),
+        Index("ix_webhook_outbox_due", "state", "next_attempt_at"),
+    ),
+    Table(
+        "webhook_deliveries",
+        _v1_metadata,
+        Column("id", RowId, primary_key=True, autoincrement=True),
+        Column("outbox_id", RowId, ForeignKey("webhook_outbox.id", ondelete="CASCADE"),
+               nullable=False),
+        Column("attempted_at", Double, nullable=False),
+        Column("status_code", Integer, nullable=True),
+        Column("error", Text, nullable=True),
+        Column("duration_ms", Double, nullable=False),
+        Index("ix_webhook_deliveries_outbox", "outbox_id"),
+    ),
+]  # fmt: skip
+
+# track_points as migration 1 made it (migration 3 adds the covariance).
+_v1_track_points = Table(
+    "track_points",
+    _v1_metadata,
+    Column("id", RowId, primary_key=True, autoincrement=True),
+    Column("site", String(64), nullable=False),
+    Column("track_id", BigInteger, nullable=False),
+    Column("stamp", Double, nullable=False),
+    Column("x_m", Double, nullable=False),
+    Column("y_m", Double, nullable=False),
+    Column("latitude_deg", Double, nullable=False),
+    Column("longitude_deg", Double, nullable=False),
+    Column("station_m", Double, nullable=False),
+    Column("offset_m", Double, nullable=False),
+    Column("lane_index", SmallInteger, nullable=False),
+    Column("speed_mps", Double, nullable=False),
+    Column("heading_rad", Double, nullable=False),
+    Column("vx_mps", Double, nullable=False),
+    Column("vy_mps", Double, nullable=False),
+    Column("object_class", String(16), nullable=False),
+    Column("status", String(16), nullable=False),
+    Column("length_m", Double, nullable=True),
+    Column("width_m", Double, nullable=True),
+    Column("smoothed", Boolean, nullable=False, default=False),
+    Column("received_at", Double, nullable=False),
+    Index("ix_track_points_site_stamp", "site", "stamp"),
+    Index("ix_track_points_site_track", "site", "track_id", "stamp"),
+    Index("ix_track_points_received_at", "received_at"),
+)
+
+
 def _v1_initial(connection: Connection) -> None:
-    tables = [
-        track_points,
-        alerts,
-        device_states,
-        latest,
-        api_keys,
-        webhook_subscriptions,
-        webhook_outbox,
-        webhook_deliveries,
-    ]
-    metadata.create_all(connection, tables=tables)
+    metadata.create_all(connection, tables=[alerts, device_states, latest, api_keys])
+    _v1_metadata.create_all(connection, tables=[_v1_track_points, *_v1_webhook_tables])
+
+
+def _add_columns(connection: Connection, table: Table, names: list[str]) -> None:
+    """``ALTER TABLE ... ADD COLUMN`` for columns of ``table`` as defined above."""
+    for name in names:
+        spec = CreateColumn(table.c[name]).compile(dialect=connection.dialect)
+        connection.execute(text(f"ALTER TABLE {table.name} ADD COLUMN {spec}"))
+
+
+def _v2_webhooks(connection: Connection) -> None:
+    _add_columns(connection, webhook_subscriptions, ["min_severity", "phases", "disabled_reason",
+                                                     "previous_secret", "previous_secret_until"])  # fmt: skip
+    _add_columns(connection, webhook_outbox, ["locked_until", "finished_at", "last_status_code",
+                                              "last_error"])  # fmt: skip
+    _add_columns(connection, webhook_deliveries, ["attempt"])
+    # One outbox row per event and subscription: an event enqueued twice is written once.
+    next(i for i in webhook_outbox.indexes
+         if i.name == "ux_webhook_outbox_subscription_event").create(connection)  # fmt: skip
+
+
+def _v3_smoothing(connection: Connection) -> None:
+    _add_columns(connection, track_points, ["covariance"])
+    metadata.create_all(connection, tables=[tracks])
 
 
 #: Every migration, in order; the last one's version is the schema this code reads and writes.
 MIGRATIONS: tuple[Migration, ...] = (
     Migration(1, "trajectories, alerts, device states, latest, API keys, webhooks", _v1_initial),
+    Migration(2, "webhooks: filters, claim leases, expiry, delivery attempts", _v2_webhooks),
+    Migration(3, "track points' covariances, track lives (smoothed when they end)",
+              _v3_smoothing),
 )
 SCHEMA_VERSION = MIGRATIONS[-1].version
