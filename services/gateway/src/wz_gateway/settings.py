@@ -101,7 +101,7 @@ class GatewaySettings(ServiceSettings):
     #: The smoother's process noise, acceleration std along and across the direction of
     #: travel [m/s^2]: the fusion tracker's ``sigma_along_mps2``/``sigma_across_mps2``.
     smoothing_sigma_along_mps2: Annotated[float, Field(gt=0.0, le=50.0)] = 3.5
-    smoothing_sigma_across_mps2: Annotated[float, Field(gt=0.0, le=50.0)] = 0.5
+    smoothing_sigma_across_mps2: Annotated[float, Field(gt=0.0, le=50.0)] = 3.0
     #: The live stream (/v1/stream): most track batches a second to one client [Hz], events
     #: held for a slow client (beyond, its oldest are dropped), the heartbeat comment's
     #: period [s], and the most clients at once.
