@@ -8,7 +8,9 @@ A node's ``main()`` reads its settings, then::
 
 On entry the runtime declares the liveliness token ``wz/<site>/status/<service>`` and starts
 publishing a :class:`ServiceStatus` there every ``status_period_s`` (message rates per key,
-invalid and dropped counts). SIGTERM and SIGINT set ``stop``; leaving the block closes the bus.
+invalid and dropped counts). With a ``health_file`` (``WZ_HEALTH_FILE``), each status published
+also touches that file, which a container healthcheck reads (``python -m wz_shared.health``).
+SIGTERM and SIGINT set ``stop``; leaving the block closes the bus.
 """
 
 from __future__ import annotations
@@ -18,9 +20,11 @@ import os
 import signal
 import threading
 import time
+from pathlib import Path
 from types import FrameType
 from typing import Any
 
+from wz_shared import health
 from wz_shared.bus import Bus, BusStats
 from wz_shared.messages import ServiceState, ServiceStatus
 from wz_shared.settings import BusSettings
@@ -43,11 +47,14 @@ class ServiceRuntime:
         *,
         status_period_s: float = 1.0,
         clock_stamp: Any = None,
+        health_file: Path | None = None,
     ) -> None:
         self.service = service
         self.site = site
         self.bus_settings = bus_settings
         self.status_period_s = status_period_s
+        #: Touched after each status message published; removed on a clean stop.
+        self.health_file = health_file
         self.stop = threading.Event()
         self.state = ServiceState.STARTING
         #: Callable returning the stamp to put on status messages (simulation time in sim).
@@ -79,6 +86,8 @@ class ServiceRuntime:
             self._health.join(timeout=2.0)
         if self._bus is not None:
             self._bus.close()
+        if self.health_file is not None:
+            self.health_file.unlink(missing_ok=True)
         log.info("service %s stopped", self.service)
 
     def _install_signal_handlers(self) -> None:
@@ -124,6 +133,8 @@ class ServiceRuntime:
             try:
                 status, previous = self.status_message(bus.stats, previous, max(now - last, 1e-3))
                 publisher.put(status)
+                if self.health_file is not None:
+                    health.touch(self.health_file)
             except Exception:
                 if bus.closed:
                     return

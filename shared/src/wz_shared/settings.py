@@ -61,7 +61,7 @@ class ServiceSettings(BaseSettings):
     """Fields every service has; subclasses set their own ``env_prefix``.
 
     These few are stack-wide, so they keep one name whatever the service's prefix:
-    ``WZ_SITE_FILE``, ``WZ_STATUS_PERIOD_S``, ``WZ_LOG_LEVEL``.
+    ``WZ_SITE_FILE``, ``WZ_STATUS_PERIOD_S``, ``WZ_LOG_LEVEL``, ``WZ_HEALTH_FILE``.
     """
 
     model_config = SettingsConfigDict(env_prefix="WZ_", extra="ignore", populate_by_name=True)
@@ -71,3 +71,6 @@ class ServiceSettings(BaseSettings):
     log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = Field(
         default="INFO", validation_alias="WZ_LOG_LEVEL"
     )
+    #: Heartbeat file touched with each status message, for a container healthcheck
+    #: (``python -m wz_shared.health``); None: no file (the local stack).
+    health_file: Path | None = Field(default=None, validation_alias="WZ_HEALTH_FILE")

@@ -521,6 +521,7 @@ def main() -> None:
         BusSettings(),
         status_period_s=settings.status_period_s,
         clock_stamp=clock.now,
+        health_file=settings.health_file,
     ) as runtime:
         processed = run(runtime, site, settings, clock)
     log.info("stopped after %d frames", processed)

@@ -236,7 +236,8 @@ def main() -> None:
     clock = SimClock()
     with ServiceRuntime(SERVICE, site.site_id, BusSettings(),
                         status_period_s=settings.status_period_s,
-                        clock_stamp=clock.now) as runtime:  # fmt: skip
+                        clock_stamp=clock.now,
+                        health_file=settings.health_file) as runtime:  # fmt: skip
         published = run(runtime, site, settings, clock)
     log.info("stopped after %d track batches", published)
 

@@ -516,6 +516,7 @@ def main() -> None:
         BusSettings(),
         status_period_s=settings.status_period_s,
         clock_stamp=clock.now,
+        health_file=settings.health_file,
     ) as runtime:
         processed = run(runtime, site.site_id, mount, settings, clock)
     log.info("stopped after %d frames", processed)

@@ -124,6 +124,7 @@ def main() -> None:
             BusSettings(),
             status_period_s=settings.status_period_s,
             clock_stamp=clock.now,
+            health_file=settings.health_file,
         ) as runtime,
         TrafficWorld(site, settings) as world,
     ):

@@ -1,0 +1,78 @@
+"""A container health probe: is the service's heartbeat file fresh?
+
+A node run with ``WZ_HEALTH_FILE`` set (``ServiceSettings.health_file``) has its
+:class:`~wz_shared.service.ServiceRuntime` touch that file each time it has published a
+:class:`~wz_shared.messages.ServiceStatus` (every ``WZ_STATUS_PERIOD_S``), and remove it on a
+clean stop. A container's healthcheck then runs::
+
+    python -m wz_shared.health /tmp/wz-health --max-age-s 10
+
+which exits 0 when the file was touched within the last ``max_age_s`` seconds, else 1 with one
+line on stderr saying why. It reads one file's modification time: no bus session, no import of
+zenoh, so it costs a few milliseconds every interval.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+#: Default age beyond which a heartbeat is stale [s]: several status periods of 1 s.
+DEFAULT_MAX_AGE_S = 10.0
+
+
+def touch(path: Path) -> None:
+    """Mark the service alive now: create ``path`` (and its folder) or update its mtime."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.touch(exist_ok=True)
+    os.utime(path)
+
+
+def heartbeat_problem(path: Path, max_age_s: float, now_s: float | None = None) -> str | None:
+    """Why the heartbeat at ``path`` is not fresh, or None when it is.
+
+    Parameters
+    ----------
+    path
+        The heartbeat file.
+    max_age_s
+        Largest accepted age of its modification time [s].
+    now_s
+        Wall-clock time to compare against [s since the epoch]; default now.
+    """
+    try:
+        modified_s = path.stat().st_mtime
+    except FileNotFoundError:
+        return f"no heartbeat file {path} (service not started, or stopped)"
+    age_s = (time.time() if now_s is None else now_s) - modified_s
+    if age_s > max_age_s:
+        return f"heartbeat {path} is {age_s:.1f} s old (limit {max_age_s:g} s)"
+    return None
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m wz_shared.health",
+        description="Exit 0 when the service's heartbeat file is fresh, else 1.",
+    )
+    parser.add_argument("path", type=Path, help="the heartbeat file (the node's WZ_HEALTH_FILE)")
+    parser.add_argument(
+        "--max-age-s",
+        type=float,
+        default=DEFAULT_MAX_AGE_S,
+        help=f"largest accepted age [s] (default {DEFAULT_MAX_AGE_S:g})",
+    )
+    args = parser.parse_args(argv)
+    problem = heartbeat_problem(args.path, args.max_age_s)
+    if problem is not None:
+        sys.stderr.write(f"unhealthy: {problem}\n")
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

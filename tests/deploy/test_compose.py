@@ -1,0 +1,677 @@
+"""docker-compose.yml as the edge box's deployment, checked without Docker.
+
+The file is validated against the Compose Specification's JSON schema (vendored in
+deploy/schemas/, so the check runs offline), then against the code it deploys: the services of
+``wz up``, their settings classes, their Dockerfiles and their health probes.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import importlib
+import importlib.util
+import inspect
+import json
+import re
+import shlex
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import jsonschema
+import pytest
+import yaml
+from pydantic import BaseModel
+from pydantic_settings import BaseSettings
+
+from wz_cli.stack import ROUTER, STACK, ServiceSpec
+from wz_gateway.auth import new_secret
+from wz_shared.settings import BusSettings, ServiceSettings
+
+ROOT = Path(__file__).resolve().parents[2]
+COMPOSE_FILE = ROOT / "docker-compose.yml"
+SCHEMA_FILE = ROOT / "deploy" / "schemas" / "compose-spec.json"
+
+#: A stand-in for the variable .env must set; the other ${VAR:-default} take their defaults.
+STAND_IN_ENV = {"WZ_GATEWAY_API_KEYS": f"admin:{new_secret()}"}
+
+#: Each compose service's settings class (the one its node builds in main()).
+SETTINGS_CLASSES = {
+    "router": "wz_shared.settings:ServiceSettings",
+    "simulator": "wz_simulator.settings:SimulatorSettings",
+    "lidar-detector": "wz_lidar_detector.settings:LidarDetectorSettings",
+    "camera-detector": "wz_camera_detector.settings:CameraDetectorSettings",
+    "fusion-tracker": "wz_fusion_tracker.node:FusionTrackerSettings",
+    "alert-service": "wz_alert_service.node:AlertServiceSettings",
+    "gateway": "wz_gateway.settings:GatewaySettings",
+}
+
+#: Users that are root inside a container.
+ROOT_USERS = {"root", "0", "0:0", "root:root"}
+RESTART_POLICIES = {"always", "unless-stopped", "on-failure"}
+
+
+# --- loading ------------------------------------------------------------------------------
+
+
+def load_compose() -> dict[str, Any]:
+    """docker-compose.yml as YAML gives it (merge keys resolved, variables not)."""
+    with COMPOSE_FILE.open(encoding="utf-8") as stream:
+        loaded = yaml.safe_load(stream)
+    assert isinstance(loaded, dict)
+    return loaded
+
+
+_VARIABLE = re.compile(r"\$\$|\$\{(?P<name>[A-Za-z_][A-Za-z0-9_]*)(?:(?P<op>:?[-?])(?P<arg>[^}]*))?\}")
+
+
+def interpolate(value: Any, env: Mapping[str, str]) -> Any:
+    """``value`` with ``${VAR}``, ``${VAR:-default}`` and ``${VAR:?error}`` replaced as Compose
+    replaces them (``$$`` is a literal ``$``).
+
+    Raises
+    ------
+    KeyError
+        For a required variable (``:?``) that ``env`` lacks.
+    """
+    if isinstance(value, dict):
+        return {key: interpolate(item, env) for key, item in value.items()}
+    if isinstance(value, list):
+        return [interpolate(item, env) for item in value]
+    if not isinstance(value, str):
+        return value
+
+    def replace(match: re.Match[str]) -> str:
+        if match.group(0) == "$$":
+            return "$"
+        name, op, arg = match.group("name"), match.group("op"), match.group("arg")
+        given = env.get(name)
+        if op in (":-", "-"):
+            return given if given else arg
+        if op in (":?", "?"):
+            if not given:
+                raise KeyError(f"{name}: {arg}")
+            return given
+        return given or ""
+
+    return _VARIABLE.sub(replace, value)
+
+
+@dataclass
+class Dockerfile:
+    """A Dockerfile's instructions, grouped by stage (continuation lines joined)."""
+
+    path: Path
+    stages: list[list[tuple[str, str]]] = field(default_factory=list)
+
+    @classmethod
+    def read(cls, path: Path) -> Dockerfile:
+        dockerfile = cls(path)
+        logical = ""
+        for raw in path.read_text(encoding="utf-8").splitlines():
+            line = raw.strip()
+            if not logical and (not line or line.startswith("#")):
+                continue
+            if line.startswith("#"):
+                continue
+            if line.endswith("\\"):
+                logical += line[:-1] + " "
+                continue
+            logical += line
+            instruction, _, rest = logical.partition(" ")
+            instruction = instruction.upper()
+            if instruction == "FROM":
+                dockerfile.stages.append([])
+            dockerfile.stages[-1].append((instruction, rest.strip()))
+            logical = ""
+        return dockerfile
+
+    def instructions(self, name: str, stage: int = -1) -> list[str]:
+        return [rest for instruction, rest in self.stages[stage] if instruction == name]
+
+    @property
+    def final(self) -> list[tuple[str, str]]:
+        return self.stages[-1]
+
+    def env(self) -> dict[str, str]:
+        """The final stage's ENV values."""
+        values: dict[str, str] = {}
+        for rest in self.instructions("ENV"):
+            for word in shlex.split(rest):
+                key, sep, value = word.partition("=")
+                assert sep, f"{self.path}: ENV {rest!r}: use KEY=value"
+                values[key] = value
+        return values
+
+    def exec_form(self, name: str) -> list[str]:
+        """The final stage's last ``name`` (CMD, ENTRYPOINT) in exec (JSON) form."""
+        found = self.instructions(name)
+        assert found, f"{self.path} has no {name}"
+        words = json.loads(found[-1])
+        assert isinstance(words, list)
+        return [str(word) for word in words]
+
+
+@dataclass
+class Service:
+    """One compose service, interpolated, with what its image brings."""
+
+    name: str
+    config: dict[str, Any]
+    dockerfile: Dockerfile
+
+    @property
+    def environment(self) -> dict[str, str]:
+        """The container's environment: the image's ENV, then compose's ``environment``."""
+        env = self.dockerfile.env()
+        declared = self.config.get("environment", {})
+        assert isinstance(declared, dict), f"{self.name}: write environment as a mapping"
+        env.update({key: "" if value is None else str(value) for key, value in declared.items()})
+        return env
+
+    @property
+    def spec(self) -> ServiceSpec:
+        return {spec.name: spec for spec in (ROUTER, *STACK)}[self.name]
+
+
+@pytest.fixture(scope="module")
+def compose() -> dict[str, Any]:
+    interpolated = interpolate(load_compose(), STAND_IN_ENV)
+    assert isinstance(interpolated, dict)
+    return interpolated
+
+
+@pytest.fixture(scope="module")
+def services(compose: dict[str, Any]) -> dict[str, Service]:
+    found: dict[str, Service] = {}
+    for name, config in compose["services"].items():
+        build = config.get("build")
+        assert isinstance(build, dict), f"{name}: build: {{context, dockerfile}} expected"
+        path = (COMPOSE_FILE.parent / build.get("context", ".") / build["dockerfile"]).resolve()
+        assert path.is_file(), f"{name}: its Dockerfile {path} does not exist"
+        found[name] = Service(name, config, Dockerfile.read(path))
+    return found
+
+
+def schema_errors(document: Any) -> list[str]:
+    schema = json.loads(SCHEMA_FILE.read_text(encoding="utf-8"))
+    validator = jsonschema.Draft7Validator(schema)
+    return [
+        f"{'/'.join(str(part) for part in error.absolute_path)}: {error.message}"
+        for error in validator.iter_errors(document)
+    ]
+
+
+# --- the schema ---------------------------------------------------------------------------
+
+
+def test_schema_is_the_vendored_file() -> None:
+    """The file is the Compose Specification's schema, unedited (size and digest recorded in
+    deploy/schemas/README.md), and a valid draft-07 schema."""
+    data = SCHEMA_FILE.read_bytes()
+    readme = (SCHEMA_FILE.parent / "README.md").read_text(encoding="utf-8")
+    assert f"{len(data):,} bytes" in readme
+    assert hashlib.sha256(data).hexdigest() in readme
+    schema = json.loads(data)
+    assert schema["title"] == "Compose Specification"
+    jsonschema.Draft7Validator.check_schema(schema)
+
+
+def test_compose_file_is_valid_compose() -> None:
+    """As written and after variable substitution."""
+    raw = load_compose()
+    assert schema_errors(raw) == []
+    assert schema_errors(interpolate(raw, STAND_IN_ENV)) == []
+
+
+@pytest.mark.parametrize(
+    ("where", "bad_value"),
+    [
+        (("services", "gateway", "restart_policy"), "always"),  # swarm's word, not a key here
+        (("services", "gateway", "depends_on", "router"), {"condition": "healthy"}),
+        (("services", "gateway", "deploy", "resources", "limits", "memory"), 1024),
+        (("volumes", "gateway-data"), ["not", "a", "mapping"]),
+    ],
+)
+def test_schema_rejects_a_broken_file(where: tuple[str, ...], bad_value: Any) -> None:
+    """The validation can fail: each mistake above is caught."""
+    broken = copy.deepcopy(load_compose())
+    node = broken
+    for key in where[:-1]:
+        node = node[key]
+    node[where[-1]] = bad_value
+    assert schema_errors(broken) != []
+
+
+def test_a_required_variable_without_a_value_is_an_error() -> None:
+    """Compose refuses to start without WZ_GATEWAY_API_KEYS; so does our substitution."""
+    with pytest.raises(KeyError, match="WZ_GATEWAY_API_KEYS"):
+        interpolate(load_compose(), {})
+
+
+# --- the services are the stack of `wz up` ------------------------------------------------
+
+
+def test_services_are_the_stack_of_wz_up(services: dict[str, Service]) -> None:
+    assert set(services) == {ROUTER.name} | {spec.name for spec in STACK}
+
+
+def test_each_image_runs_its_stack_module(services: dict[str, Service]) -> None:
+    for spec in STACK:
+        service = services[spec.name]
+        command = service.config.get("command") or service.dockerfile.exec_form("CMD")
+        assert command == ["python", "-m", spec.module], spec.name
+    router = services[ROUTER.name]
+    assert router.dockerfile.exec_form("ENTRYPOINT") == ["wz"]
+    assert router.config["command"][: len(ROUTER.args)] == list(ROUTER.args)
+    assert ROUTER.module == "wz_cli.main"
+
+
+def _distribution_of(module: str) -> tuple[str, list[str]]:
+    """The workspace member that holds ``module``: its project name and dependencies."""
+    found = importlib.util.find_spec(module)
+    assert found is not None and found.origin is not None, f"{module} is not installed"
+    for folder in Path(found.origin).parents:
+        if (folder / "pyproject.toml").is_file():
+            project = tomllib.loads((folder / "pyproject.toml").read_text("utf-8"))["project"]
+            dependencies = [re.split(r"[\s<>=!~\[;]", dep, maxsplit=1)[0] for dep in
+                            project.get("dependencies", [])]  # fmt: skip
+            return str(project["name"]), dependencies
+    raise AssertionError(f"no pyproject.toml above {found.origin}")
+
+
+def _synced_package(dockerfile: Dockerfile) -> str:
+    syncs = [rest for rest in dockerfile.instructions("RUN", stage=0) if "uv sync" in rest]
+    assert len(syncs) == 1, f"{dockerfile.path}: one `uv sync` in the build stage"
+    words = shlex.split(syncs[0])
+    return words[words.index("--package") + 1]
+
+
+# --- Dockerfiles --------------------------------------------------------------------------
+
+
+def test_dockerfiles_are_multi_stage_non_root_and_locked(services: dict[str, Service]) -> None:
+    for service in services.values():
+        dockerfile = service.dockerfile
+        where = f"{service.name} ({dockerfile.path.relative_to(ROOT)})"
+        assert len(dockerfile.stages) >= 2, f"{where}: build and run stages"
+        build_stage = shlex.split(dockerfile.instructions("FROM", stage=0)[0])
+        assert len(build_stage) == 3 and build_stage[1].upper() == "AS", f"{where}: name stage 1"
+        copies = dockerfile.instructions("COPY")
+        assert any(c.startswith(f"--from={build_stage[2]} ") for c in copies), (
+            f"{where}: the run stage copies the environment built in stage {build_stage[2]!r}"
+        )
+        assert not any("uv sync" in rest or "pip install" in rest
+                       for rest in dockerfile.instructions("RUN")), f"{where}: no build tools"  # fmt: skip
+        users = dockerfile.instructions("USER")
+        assert users and users[-1] not in ROOT_USERS, f"{where}: runs as root"
+        assert "user" not in service.config or service.config["user"] not in ROOT_USERS, where
+        assert any("uv.lock" in c for c in dockerfile.instructions("COPY", stage=0)), where
+        sync = next(r for r in dockerfile.instructions("RUN", stage=0) if "uv sync" in r)
+        assert {"--frozen", "--locked"} & set(shlex.split(sync)), f"{where}: sync from uv.lock"
+        assert "--no-dev" in shlex.split(sync), f"{where}: no dev tools in the image"
+
+
+def test_each_image_installs_the_package_of_its_module(services: dict[str, Service]) -> None:
+    for service in services.values():
+        project, _ = _distribution_of(service.spec.module)
+        assert _synced_package(service.dockerfile) == project, service.name
+
+
+# --- health -------------------------------------------------------------------------------
+
+
+def _probe(service: Service) -> list[str]:
+    healthcheck = service.config.get("healthcheck")
+    assert healthcheck, f"{service.name} has no healthcheck"
+    assert not healthcheck.get("disable"), service.name
+    test = healthcheck["test"]
+    assert isinstance(test, list) and test[0] == "CMD", f"{service.name}: exec-form test"
+    return [str(word) for word in test[1:]]
+
+
+def test_every_service_has_a_real_health_probe(services: dict[str, Service]) -> None:
+    """Each probe runs something that exists in the image and looks where the service is."""
+    for service in services.values():
+        probe = _probe(service)
+        assert probe[0] == "python", service.name
+        if probe[1] == "-m":
+            module = probe[2]
+            assert module == "wz_shared.health", f"{service.name}: unknown probe {module}"
+            project, dependencies = _distribution_of(service.spec.module)
+            assert "wz-shared" in (project, *dependencies), service.name
+            health_file = service.environment.get("WZ_HEALTH_FILE")
+            assert probe[3] == health_file, f"{service.name}: probes a file the node never touches"
+            max_age_s = float(probe[probe.index("--max-age-s") + 1])
+            status_period_s = float(service.environment.get("WZ_STATUS_PERIOD_S", "1.0"))
+            assert max_age_s >= 3 * status_period_s, f"{service.name}: a late status is unhealthy"
+            image_probe = service.dockerfile.instructions("HEALTHCHECK")
+            assert image_probe and json.loads(image_probe[-1].split("CMD", 1)[1]) == probe, (
+                f"{service.name}: the image's HEALTHCHECK and compose's differ"
+            )
+        else:
+            assert probe[1] == "-c", service.name
+            compile(probe[2], f"<{service.name} healthcheck>", "exec")
+
+
+def test_router_probe_targets_the_port_it_listens_on(services: dict[str, Service]) -> None:
+    router = services[ROUTER.name]
+    command = router.config["command"]
+    listen = command[command.index("--listen") + 1]
+    port = int(listen.rsplit(":", 1)[1])
+    assert f"('127.0.0.1', {port})" in _probe(router)[2]
+    assert any(str(p).endswith(f":{port}") for p in router.config["ports"])
+    for service in services.values():
+        if service.name != ROUTER.name:
+            endpoint = service.environment["WZ_BUS_CONNECT_ENDPOINTS"]
+            assert endpoint == f"tcp/{ROUTER.name}:{port}", service.name
+
+
+def test_gateway_probe_asks_readiness_on_the_gateway_port(
+    services: dict[str, Service], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from wz_gateway.app import create_app
+    from wz_gateway.settings import GatewaySettings
+    from wz_gateway.storage import Storage
+    from wz_shared.site import load_site
+
+    gateway = services["gateway"]
+    url = re.search(r"http://127\.0\.0\.1:(\d+)(/\w+)", _probe(gateway)[2])
+    assert url is not None
+    port, path = int(url.group(1)), url.group(2)
+    _use_environment(monkeypatch, gateway.environment)
+    settings = GatewaySettings()
+    assert settings.port == port
+    assert any(str(p).endswith(f":{port}") for p in gateway.config["ports"])
+    settings = settings.model_copy(update={"data_dir": tmp_path})
+    storage = Storage.open(settings.resolved_database_url())
+    try:
+        app = create_app(settings, storage, site=load_site(ROOT / "deploy/sites/us75-lincoln.yaml"))
+        assert path in {getattr(route, "path", None) for route in app.routes}
+    finally:
+        storage.close()
+
+
+# --- start order, restarts, limits --------------------------------------------------------
+
+
+def test_dependencies_wait_for_healthy_services(services: dict[str, Service]) -> None:
+    for service in services.values():
+        depends_on = service.config.get("depends_on", {})
+        assert isinstance(depends_on, dict), f"{service.name}: depends_on as a mapping"
+        if service.name != ROUTER.name:
+            assert ROUTER.name in depends_on, f"{service.name} starts before the router"
+        for target, condition in depends_on.items():
+            assert condition["condition"] == "service_healthy", f"{service.name} -> {target}"
+            assert services[target].config.get("healthcheck"), target
+            # A dependency in a profile that is off would stop this service from starting.
+            assert set(services[target].config.get("profiles", [])) <= set(
+                service.config.get("profiles", [])
+            ), f"{service.name} depends on {target}, which a profile may leave out"
+
+
+def test_restart_policies(services: dict[str, Service]) -> None:
+    for service in services.values():
+        assert service.config.get("restart") in RESTART_POLICIES, service.name
+
+
+def test_logs_are_rotated(services: dict[str, Service]) -> None:
+    for service in services.values():
+        logging_config = service.config.get("logging", {})
+        assert logging_config.get("driver") == "json-file", service.name
+        assert {"max-size", "max-file"} <= set(logging_config.get("options", {})), service.name
+
+
+_UNITS = {"": 1, "b": 1, "k": 2**10, "m": 2**20, "g": 2**30}
+
+
+def memory_bytes(text: str) -> int:
+    match = re.fullmatch(r"(\d+(?:\.\d+)?)\s*([bkmg]?)b?", str(text).strip().lower())
+    assert match, f"memory {text!r}"
+    return int(float(match.group(1)) * _UNITS[match.group(2)])
+
+
+def test_memory_bytes() -> None:
+    assert memory_bytes("256M") == 256 * 2**20
+    assert memory_bytes("1g") == 2**30
+    assert memory_bytes("1536m") == 1536 * 2**20
+
+
+def test_limits_fit_the_edge_box(compose: dict[str, Any], services: dict[str, Service]) -> None:
+    box = compose["x-edge-box"]
+    budget = memory_bytes(box["memory"]) - memory_bytes(box["reserved_for_host"])
+    total = 0
+    for service in services.values():
+        limits = service.config.get("deploy", {}).get("resources", {}).get("limits", {})
+        assert {"cpus", "memory"} <= set(limits), f"{service.name}: cpus and memory limits"
+        assert 0 < float(limits["cpus"]) <= float(box["cpus"]), service.name
+        assert memory_bytes(limits["memory"]) >= 128 * 2**20, f"{service.name}: too small to run"
+        total += memory_bytes(limits["memory"])
+    assert total <= budget, f"limits add up to {total / 2**30:.2f} GiB, the box has {budget / 2**30:.2f}"
+
+
+# --- profiles, volumes, ports -------------------------------------------------------------
+
+
+def test_profiles_separate_simulation_from_the_field(
+    compose: dict[str, Any], services: dict[str, Service]
+) -> None:
+    declared = compose["x-profiles"]
+    assert {"simulation", "field"} <= set(declared)
+    assert services["simulator"].config.get("profiles") == ["simulation"]
+    for service in services.values():
+        used = set(service.config.get("profiles", []))
+        assert used <= set(declared), f"{service.name}: undeclared profile {used - set(declared)}"
+        if service.name != "simulator":
+            # The router and the pipeline run whatever feeds them.
+            assert not used, f"{service.name} would not run in the field"
+
+
+def _named_volumes(service: Service) -> dict[str, str]:
+    """Named volume -> target path, from the short syntax."""
+    mounts: dict[str, str] = {}
+    for entry in service.config.get("volumes", []):
+        source, target = str(entry).split(":")[:2]
+        if not source.startswith((".", "/", "~")):
+            mounts[source] = target
+    return mounts
+
+
+def test_named_volumes_are_declared_and_writable_by_the_image_user(
+    compose: dict[str, Any], services: dict[str, Service]
+) -> None:
+    """A new named volume copies its folder's owner from the image: a non-root service can
+    write to it only if the Dockerfile made the folder its user's."""
+    declared = set(compose.get("volumes", {}))
+    for service in services.values():
+        user = service.dockerfile.instructions("USER")[-1]
+        for volume, target in _named_volumes(service).items():
+            assert volume in declared, f"{service.name}: volume {volume} is not declared"
+            runs = " ".join(service.dockerfile.instructions("RUN"))
+            assert re.search(rf"chown {re.escape(user)}\S* {re.escape(target)}(\s|$)", runs), (
+                f"{service.name}: {target} is not made {user}'s in the Dockerfile"
+            )
+
+
+def test_gateway_database_and_recordings_outlive_containers(services: dict[str, Service]) -> None:
+    gateway = services["gateway"]
+    data_dir = gateway.environment["WZ_GATEWAY_DATA_DIR"]
+    assert "WZ_GATEWAY_DATABASE_URL" not in gateway.environment  # SQLite under data_dir
+    assert data_dir in _named_volumes(gateway).values()
+    recordings = {
+        (service.name, target)
+        for service in services.values()
+        for volume, target in _named_volumes(service).items()
+        if volume == "recordings"
+    }
+    assert recordings == {(ROUTER.name, "/var/lib/wz/recordings")}
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert "record /var/lib/wz/recordings/" in readme
+
+
+def test_gateway_is_published_on_the_host(services: dict[str, Service]) -> None:
+    ports = [str(port) for port in services["gateway"].config["ports"]]
+    assert ports == ["127.0.0.1:8000:8000"]  # the default of WZ_GATEWAY_PUBLISH
+    published = interpolate(load_compose(), {**STAND_IN_ENV, "WZ_GATEWAY_PUBLISH": "0.0.0.0:80"})
+    assert published["services"]["gateway"]["ports"] == ["0.0.0.0:80:8000"]
+
+
+# --- environment --------------------------------------------------------------------------
+
+
+def _settings_class(service: str) -> type[BaseSettings]:
+    module, name = SETTINGS_CLASSES[service].split(":")
+    found = getattr(importlib.import_module(module), name)
+    assert inspect.isclass(found) and issubclass(found, BaseSettings)
+    return found
+
+
+def env_names(model: type[BaseModel], prefix: str) -> dict[str, Any]:
+    """Environment names a settings class reads -> the field's annotation."""
+    names: dict[str, Any] = {}
+    for name, info in model.model_fields.items():
+        alias = info.validation_alias
+        env_name = alias if isinstance(alias, str) else prefix + name
+        names[env_name.upper()] = info.annotation
+    return names
+
+
+def _nested_model(annotation: Any) -> type[BaseModel] | None:
+    candidates = [annotation, *getattr(annotation, "__args__", ())]
+    return next((c for c in candidates if inspect.isclass(c) and issubclass(c, BaseModel)), None)
+
+
+def is_setting(variable: str, settings: type[BaseSettings]) -> bool:
+    """Whether ``variable`` sets a field of ``settings`` (nested ``__`` fields included)."""
+    prefix = str(settings.model_config.get("env_prefix", ""))
+    names = env_names(settings, prefix)
+    if variable in names:
+        return True
+    delimiter = settings.model_config.get("env_nested_delimiter")
+    if not delimiter or delimiter not in variable:
+        return False
+    head, *rest = variable.split(delimiter)
+    model = _nested_model(names.get(head))
+    for part in rest:
+        if model is None:
+            return False
+        fields = env_names(model, "")
+        if part not in fields:
+            return False
+        model = _nested_model(fields[part])
+    return True
+
+
+#: Read with os.environ outside a settings class, by every process (wz_shared.logs).
+READ_BY_LOGGING = {"WZ_LOG_FORMAT"}
+
+
+def _use_environment(monkeypatch: pytest.MonkeyPatch, env: Mapping[str, str]) -> None:
+    import os
+
+    for name in list(os.environ):
+        if name.startswith("WZ_"):
+            monkeypatch.delenv(name)
+    for name, value in env.items():
+        monkeypatch.setenv(name, value)
+
+
+def test_logging_variables_are_read_by_the_logging_setup() -> None:
+    import wz_shared.logs
+
+    source = inspect.getsource(wz_shared.logs)
+    for variable in READ_BY_LOGGING:
+        assert f'"{variable}"' in source
+
+
+def test_settings_classes_have_the_stack_prefixes() -> None:
+    for spec in STACK:
+        assert _settings_class(spec.name).model_config.get("env_prefix") == spec.env_prefix
+
+
+def test_every_variable_is_a_setting_of_its_service(
+    services: dict[str, Service], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Every WZ_* variable in compose or the image names a settings field of that service (or
+    of the bus), and the values pass the settings' validation."""
+    for service in services.values():
+        settings = _settings_class(service.name)
+        env = service.environment
+        unknown = [
+            name
+            for name in env
+            if name.startswith("WZ_")
+            and name not in READ_BY_LOGGING
+            and not is_setting(name, settings)
+            and not is_setting(name, BusSettings)
+        ]
+        assert unknown == [], f"{service.name}: no such settings: {unknown}"
+        with monkeypatch.context() as patched:
+            _use_environment(patched, env)
+            built = settings()
+            BusSettings()
+        if isinstance(built, ServiceSettings):
+            assert str(built.site_file) == env["WZ_SITE_FILE"]
+            assert (str(built.health_file) if built.health_file else None) == env.get(
+                "WZ_HEALTH_FILE"
+            )
+
+
+def test_variable_check_catches_a_misspelling() -> None:
+    from wz_lidar_detector.settings import LidarDetectorSettings
+
+    assert is_setting("WZ_LIDAR_BACKGROUND_FILE", LidarDetectorSettings)
+    assert not is_setting("WZ_LIDAR_BACKGROUND_PATH", LidarDetectorSettings)
+    assert not is_setting("WZ_SIM_BACKGROUND_FILE", LidarDetectorSettings)
+    assert is_setting("WZ_BUS_CONNECT_ENDPOINTS", BusSettings)
+    assert not is_setting("WZ_BUS_CONNECT", BusSettings)
+
+
+def test_mounted_files_exist(services: dict[str, Service]) -> None:
+    for service in services.values():
+        for entry in service.config.get("volumes", []):
+            source = str(entry).split(":")[0]
+            if source.startswith("."):
+                assert (COMPOSE_FILE.parent / source).is_file(), f"{service.name}: {source}"
+
+
+def _ignored(path: str, patterns: list[str]) -> bool:
+    """Whether .dockerignore leaves ``path`` out of the build context: the last pattern that
+    matches it or one of its parent folders wins; ``!`` patterns put it back."""
+    import fnmatch
+
+    parents = [str(Path(*Path(path).parts[: n + 1])) for n in range(len(Path(path).parts))]
+    ignored = False
+    for pattern in patterns:
+        keep = pattern.startswith("!")
+        pattern = pattern.lstrip("!")
+        anywhere = pattern.startswith("**/")  # matches a name at any depth
+        pattern = pattern.removeprefix("**/")
+        if any(fnmatch.fnmatch(Path(p).name if anywhere else p, pattern) for p in parents):
+            ignored = not keep
+    return ignored
+
+
+def test_build_context_holds_what_the_images_copy_and_no_secrets(
+    services: dict[str, Service],
+) -> None:
+    lines = (ROOT / ".dockerignore").read_text(encoding="utf-8").splitlines()
+    patterns = [line.strip() for line in lines if line.strip() and not line.startswith("#")]
+    for service in services.values():
+        for stage in service.dockerfile.stages:
+            for instruction, rest in stage:
+                if instruction != "COPY" or rest.startswith("--from="):
+                    continue
+                for source in shlex.split(rest)[:-1]:
+                    assert (ROOT / source).exists(), f"{service.name}: COPY {source}"
+                    assert not _ignored(source, patterns), f"{service.name}: {source} ignored"
+                    for inner in (ROOT / source).rglob("*.py") if (ROOT / source).is_dir() else ():
+                        if "__pycache__" not in inner.parts:
+                            relative = str(inner.relative_to(ROOT))
+                            assert not _ignored(relative, patterns), relative
+    for secret_or_bulk in (".env", ".venv/bin/python", ".git/config", "runs/eval", ".tools"):
+        assert _ignored(secret_or_bulk, patterns), secret_or_bulk
+    assert _ignored("shared/src/wz_shared/__pycache__/bus.cpython-311.pyc", patterns)
