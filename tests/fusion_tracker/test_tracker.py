@@ -667,3 +667,31 @@ def test_a_vehicle_back_from_a_gap_keeps_its_identity() -> None:
     assert handed == {1} and counters.tracks_handed_over == 1
     split, _ = ids(reacquire_along_m=0.0, hand_over_along_m=0.0)
     assert split == {1, 2}
+
+
+def test_a_stray_young_track_behind_a_briefly_unseen_vehicle_takes_nothing_over() -> None:
+    """A truck driving away: two stray boxes 7 m behind it start a young track, then the truck
+    goes unseen for 0.25 s (its track coasts). The young track was last updated before the
+    truck's track was, so it never took the truck up: no hand-over; the truck's track keeps
+    its own state and speed when the truck is seen again."""
+    cov = np.eye(2) * 1e-4
+    tracker = MultiTargetTracker(TrackerSettings(reorder_window_s=0.0),
+                                 heading_at=lambda x, y: 0.0)  # fmt: skip
+    for k in range(60):
+        t = 0.05 * k
+        measurements = []
+        if not 2.0 <= t < 2.25:
+            measurements.append(Measurement(x_m=25.0 * t, y_m=0.0, covariance_m2=cov,
+                                            object_class="truck"))  # fmt: skip
+        if k in (36, 37):  # t = 1.80, 1.85: the stray boxes
+            measurements.append(Measurement(x_m=25.0 * t - 7.0, y_m=0.0, covariance_m2=cov))
+        tracker.add(LIDAR, t, measurements)
+        if 2.0 <= t < 2.25:  # the camera's batches, about a car far away
+            tracker.add(CAMERA, t + 0.01, [Measurement(x_m=-100.0, y_m=3.6,
+                                                       covariance_m2=np.eye(2))])  # fmt: skip
+    tracker.flush()
+    assert tracker.counters.tracks_handed_over == 0
+    truck = next(s for s in tracker.tracks() if s.track_id == 1)
+    assert truck.status == "confirmed"
+    assert truck.speed_mps == pytest.approx(25.0, abs=0.5)
+    assert truck.x_m == pytest.approx(25.0 * 2.95, abs=0.3)

@@ -1437,8 +1437,8 @@ class MultiTargetTracker:
         When a vehicle comes back too far from its coasting track's prediction even for
         :meth:`_reacquire` (a long gap, a bent velocity), a new track starts on it. While the
         new track is young (``hand_over_age_s``) and the old one coasts just behind or ahead of
-        it (``hand_over_along_m``, ``hand_over_across_m``: the same lane or the next), moving alike, they
-        are one vehicle: the old track takes the new one's state and the new one goes, so the
+        it (``hand_over_along_m``, ``hand_over_across_m``: the same lane or the next), moving alike,
+        and the new one was updated after the old one last was, they are one vehicle: the old track takes the new one's state and the new one goes, so the
         vehicle keeps its identity.
         """
         settings = self.settings
@@ -1466,10 +1466,15 @@ class MultiTargetTracker:
         along = np.einsum("onk,ok->on", d, u)
         across = d[..., 1] * u[:, None, 0] - d[..., 0] * u[:, None, 1]
         dv = np.hypot(x_new[None, :, 2] - x_old[:, None, 2], x_new[None, :, 3] - x_old[:, None, 3])
+        # The young track must have taken the vehicle up: updated after the old one last was.
+        # A stray young track (a box split off a truck's trailer, 7 m behind it) whose last
+        # update is older than the coasting track's is not its vehicle come back.
+        took_up = (np.array([t.updated_s for t in young])[None, :]
+                   > np.array([t.updated_s for t in coasting])[:, None])  # fmt: skip
         allowed = ((np.abs(along) <= settings.hand_over_along_m)
                    & (np.abs(across) <= settings.hand_over_across_m)
                    & (dv < settings.merge_velocity_difference_mps)
-                   & (speed[:, None] >= 0.0))  # fmt: skip
+                   & (speed[:, None] >= 0.0) & took_up)  # fmt: skip
         if not allowed.any():
             return
         for row, column in gnn_assign(np.abs(along) + np.abs(across), allowed):
