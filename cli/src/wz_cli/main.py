@@ -79,8 +79,15 @@ def _key_expr_arg(text: str) -> str:
 def cmd_router(args: argparse.Namespace) -> int:
     from wz_cli.router import router_config, run_router
 
+    connect = None
+    if args.connect is not None:  # `--connect ''`: connect to nothing
+        connect = [
+            part.strip() for item in args.connect for part in item.split(",") if part.strip()
+        ]
+    if args.config is not None:
+        log.info("router config %s", args.config)
     stop = stop_on_signals()
-    return run_router(router_config(args.listen, args.config), stop)
+    return run_router(router_config(args.listen, args.config, connect), stop)
 
 
 def cmd_up(args: argparse.Namespace) -> int:
@@ -105,15 +112,24 @@ def cmd_up(args: argparse.Namespace) -> int:
             + ", ".join(f"{spec.name} (module {spec.module})" for spec in missing)
             + "; run `uv sync` in the workspace root, or leave them out with --only"
         )
+    topology = None
+    if args.topology is not None:
+        from wz_cli.stack import STACK
+        from wz_cli.topology import load_topology
+
+        topology = load_topology(args.topology, (spec.name for spec in STACK))
+    endpoint: str = args.listen or (topology.router.listen if topology else DEFAULT_ROUTER_ENDPOINT)
     options = StackOptions(
-        router_endpoint=args.listen,
+        router_endpoint=endpoint,
         site_file=site_file,
         realtime_factor=args.realtime_factor,
         seed=args.seed,
     )
+    if topology is not None:
+        options = topology.configure(options)
     stop = stop_on_signals()
     if args.command == "demo":
-        _demo_banner(site.site_id, args.listen)
+        _demo_banner(site.site_id, endpoint)
     return Supervisor(services, options, stop).run()
 
 
@@ -283,6 +299,13 @@ def build_parser() -> argparse.ArgumentParser:
     router.add_argument(
         "--config", type=Path, help="a zenoh JSON5 config, e.g. deploy/zenoh/router-local.json5"
     )
+    router.add_argument(
+        "--connect",
+        action="append",
+        metavar="ENDPOINT",
+        help="endpoint of another router to connect to, e.g. the regional router (repeatable or "
+        "comma-separated; replaces the config file's; '' for none)",
+    )
     router.set_defaults(handler=cmd_router)
 
     for name, summary in (
@@ -313,9 +336,17 @@ def build_parser() -> argparse.ArgumentParser:
         up.add_argument("--seed", type=int, help="seed of the simulation")
         up.add_argument(
             "--listen",
-            default=DEFAULT_ROUTER_ENDPOINT,
             metavar="ENDPOINT",
-            help=f"the router's endpoint, tcp/<host>:<port> (default {DEFAULT_ROUTER_ENDPOINT})",
+            help=f"the router's endpoint, tcp/<host>:<port> (default {DEFAULT_ROUTER_ENDPOINT}, "
+            "or the topology's)",
+        )
+        up.add_argument(
+            "--topology",
+            type=Path,
+            metavar="FILE",
+            help="which zenoh config the router and each service use, e.g. "
+            "deploy/topologies/edge-box.yaml (the edge box of docker-compose.yml, without "
+            "containers); default: the router and loopback peers",
         )
         up.set_defaults(handler=cmd_up)
 

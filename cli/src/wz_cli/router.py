@@ -26,10 +26,16 @@ LOCAL_ROUTER_CONFIG = (
 )
 
 
-def router_config(listen: Sequence[str] | None, config_file: Path | None) -> zenoh.Config:
+def router_config(
+    listen: Sequence[str] | None,
+    config_file: Path | None,
+    connect: Sequence[str] | None = None,
+) -> zenoh.Config:
     """The router's Zenoh config: ``config_file`` if given, else the built-in local one.
 
-    ``listen`` replaces the listen endpoints of either; multicast scouting is forced off.
+    ``listen`` replaces the listen endpoints of either, ``connect`` the endpoints it connects
+    to (an empty list: none, e.g. a trailer router without its regional router); None keeps
+    them. Multicast scouting is forced off.
     """
     if config_file is not None:
         try:
@@ -46,6 +52,11 @@ def router_config(listen: Sequence[str] | None, config_file: Path | None) -> zen
             config.insert_json5("listen/endpoints", json.dumps(list(listen)))
         except zenoh.ZError as exc:
             raise CliError(f"bad --listen endpoint in {', '.join(listen)}: {exc}") from exc
+    if connect is not None:
+        try:
+            config.insert_json5("connect/endpoints", json.dumps(list(connect)))
+        except zenoh.ZError as exc:
+            raise CliError(f"bad --connect endpoint in {', '.join(connect)}: {exc}") from exc
     config.insert_json5("scouting/multicast/enabled", json.dumps(False))
     return config
 
@@ -58,7 +69,13 @@ def run_router(config: zenoh.Config, stop: threading.Event) -> int:
     except zenoh.ZError as exc:  # e.g. the port is taken
         raise CliError(f"cannot start the router on {', '.join(listen)}: {exc}", 1) from exc
     try:
-        log.info("router %s listening on %s", session.zid(), ", ".join(listen))
+        connect = json.loads(config.get_json("connect/endpoints"))
+        log.info(
+            "router %s listening on %s, connecting to %s",
+            session.zid(),
+            ", ".join(listen),
+            ", ".join(connect) or "nothing",
+        )
         stop.wait()
     finally:
         session.close()  # type: ignore[no-untyped-call]

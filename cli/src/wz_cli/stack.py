@@ -12,6 +12,10 @@ Every child learns where the bus is and which site it serves from the environmen
 - ``WZ_LOG_FORMAT=json``: one JSON log line per event, re-emitted by the supervisor;
 - the options of ``wz up`` that a service takes (``--realtime-factor``, ``--seed``) as
   ``<prefix>REALTIME_FACTOR`` and ``<prefix>SEED``.
+
+With a topology (``wz up --topology``, :mod:`wz_cli.topology`) a service gets
+``WZ_BUS_CONFIG_FILE=<its zenoh config>`` and ``WZ_BUS_CONNECT_ENDPOINTS=<the router>`` instead:
+its mode and listen endpoints are the file's.
 """
 
 from __future__ import annotations
@@ -31,6 +35,13 @@ class StackOptions:
     site_file: Path
     realtime_factor: float | None = None
     seed: int | None = None
+    #: The router's zenoh config (``wz router --config``); None: the built-in local one.
+    router_config: Path | None = None
+    #: What the router connects to (``wz router --connect``); None: what its config says.
+    router_connect: tuple[str, ...] | None = None
+    #: Service name -> the zenoh config its session opens with (a topology); the others are
+    #: loopback peers.
+    service_configs: Mapping[str, Path] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -67,11 +78,17 @@ class ServiceSpec:
         """The environment of this service's process: ``base`` plus the stack's settings."""
         env = dict(base)
         site_file = str(options.site_file.resolve())
+        zenoh_config = options.service_configs.get(self.name)
+        if zenoh_config is None:
+            env.update({"WZ_BUS_MODE": "peer", "WZ_BUS_LISTEN_ENDPOINTS": "tcp/127.0.0.1:0"})
+        else:
+            # The file says the mode and what to listen on; only the router's address is local.
+            env["WZ_BUS_CONFIG_FILE"] = str(zenoh_config)
+            env.pop("WZ_BUS_MODE", None)
+            env.pop("WZ_BUS_LISTEN_ENDPOINTS", None)
         env.update(
             {
-                "WZ_BUS_MODE": "peer",
                 "WZ_BUS_CONNECT_ENDPOINTS": options.router_endpoint,
-                "WZ_BUS_LISTEN_ENDPOINTS": "tcp/127.0.0.1:0",
                 "WZ_BUS_MULTICAST_SCOUTING": "false",
                 "WZ_SITE_FILE": site_file,
                 f"{self.env_prefix}SITE_FILE": site_file,
@@ -87,7 +104,8 @@ class ServiceSpec:
         return env
 
 
-#: The router, started first; ``wz up`` appends ``--listen <endpoint>``.
+#: The router, started first; ``wz up`` appends ``--listen <endpoint>`` (and ``--config``,
+#: ``--connect`` from a topology).
 ROUTER = ServiceSpec(
     name="router",
     module="wz_cli.main",

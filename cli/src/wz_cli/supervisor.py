@@ -256,9 +256,14 @@ class Supervisor:
         self.stop_grace_s = stop_grace_s
         env = dict(os.environ if base_env is None else base_env)
         output = PrefixedOutput([ROUTER.name, *(spec.name for spec in services)])
+        router_argv = [*ROUTER.argv(python), "--listen", options.router_endpoint]
+        if options.router_config is not None:
+            router_argv += ["--config", str(options.router_config)]
+        if options.router_connect is not None:
+            router_argv += ["--connect", ",".join(options.router_connect)]
         self.router = Child(
             ROUTER,
-            [*ROUTER.argv(python), "--listen", options.router_endpoint],
+            router_argv,
             ROUTER.child_env(env, options),
             output,
         )

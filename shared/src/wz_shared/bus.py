@@ -54,16 +54,28 @@ Decoder = Callable[[bytes], T]
 
 
 def zenoh_config(settings: BusSettings) -> zenoh.Config:
-    """Build a Zenoh config: the optional file first, then the settings on top."""
-    config = (
-        zenoh.Config.from_file(str(settings.config_file))
-        if settings.config_file
-        else (zenoh.Config())
-    )
-    config.insert_json5("mode", json.dumps(settings.mode))
-    config.insert_json5("connect/endpoints", json.dumps(settings.connect_endpoints))
-    config.insert_json5("listen/endpoints", json.dumps(settings.listen_endpoints))
-    config.insert_json5("scouting/multicast/enabled", json.dumps(settings.multicast_scouting))
+    """Build a Zenoh config: the optional file first, then the settings on top.
+
+    Without a file every setting applies, defaults included. With one (a deployment's
+    ``deploy/zenoh/edge-service.json5``) only the settings given explicitly (``WZ_BUS_MODE`` ...
+    in the environment) override it: the file's mode and endpoints are not replaced by
+    defaults nobody asked for.
+    """
+    if settings.config_file:
+        config = zenoh.Config.from_file(str(settings.config_file))
+        given = settings.model_fields_set
+    else:
+        config = zenoh.Config()
+        given = set(BusSettings.model_fields)
+    overrides = {
+        "mode": ("mode", settings.mode),
+        "connect_endpoints": ("connect/endpoints", settings.connect_endpoints),
+        "listen_endpoints": ("listen/endpoints", settings.listen_endpoints),
+        "multicast_scouting": ("scouting/multicast/enabled", settings.multicast_scouting),
+    }
+    for field_name, (path, value) in overrides.items():
+        if field_name in given:
+            config.insert_json5(path, json.dumps(value))
     return config
 
 

@@ -1,0 +1,231 @@
+"""deploy/zenoh/: every config loads in the zenoh package, says what its role needs, and the
+router mesh relays samples (real routers as `wz router` processes, real sessions, loopback).
+
+The mesh: services (clients, edge-service.json5) -> trailer router (trailer-router.json5) ->
+regional router (regional-router.json5). The deployed endpoints (tcp/router:7447, the
+placeholder regional host, 0.0.0.0) are replaced by free loopback ports with the overrides the
+deployment has too: ``wz router --listen/--connect`` and ``WZ_BUS_CONNECT_ENDPOINTS``.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+import zenoh
+
+from tests.cli.procs import ROOT, free_port, port_open, stop_process, wait_for, wz_argv, wz_env
+from wz_shared.bus import zenoh_config
+from wz_shared.settings import BusSettings
+
+ZENOH_DIR = ROOT / "deploy" / "zenoh"
+EDGE_SERVICE = ZENOH_DIR / "edge-service.json5"
+TRAILER_ROUTER = ZENOH_DIR / "trailer-router.json5"
+REGIONAL_ROUTER = ZENOH_DIR / "regional-router.json5"
+CONFIGS = sorted(ZENOH_DIR.glob("*.json5"))
+#: How many samples each relay test publishes, and must receive exactly.
+N_SAMPLES = 5
+
+
+def get(config: zenoh.Config, path: str) -> Any:
+    return json.loads(config.get_json(path))
+
+
+# --- the files --------------------------------------------------------------------------------
+
+
+def test_the_configs_are_there() -> None:
+    names = {path.name for path in CONFIGS}
+    assert {
+        "router-local.json5",
+        "edge-service.json5",
+        "trailer-router.json5",
+        "regional-router.json5",
+        "trailer-router-tls.example.json5",
+        "regional-router-tls.example.json5",
+        "regional-router-acl.example.json5",
+    } <= names
+
+
+@pytest.mark.parametrize("path", CONFIGS, ids=[path.name for path in CONFIGS])
+def test_config_loads_in_zenoh_without_multicast(path: Path) -> None:
+    config = zenoh.Config.from_file(str(path))  # refuses unknown fields and bad types
+    assert get(config, "scouting/multicast/enabled") is False
+    assert get(config, "mode") in {"client", "router"}
+
+
+def test_edge_service_is_a_client_of_the_trailer_router() -> None:
+    config = zenoh.Config.from_file(str(EDGE_SERVICE))
+    assert get(config, "mode") == "client"
+    assert get(config, "connect/endpoints") == ["tcp/router:7447"]
+    assert get(config, "listen/endpoints") == []
+
+
+def test_trailer_router_listens_for_the_box_and_connects_up() -> None:
+    config = zenoh.Config.from_file(str(TRAILER_ROUTER))
+    assert get(config, "mode") == "router"
+    assert get(config, "listen/endpoints") == ["tcp/0.0.0.0:7447"]
+    # A placeholder that never resolves, replaced at install (or by --connect).
+    assert get(config, "connect/endpoints") == ["tcp/regional.wz.invalid:7447"]
+
+
+def test_regional_router_listens_and_connects_to_nobody() -> None:
+    config = zenoh.Config.from_file(str(REGIONAL_ROUTER))
+    assert get(config, "mode") == "router"
+    assert get(config, "listen/endpoints") == ["tcp/0.0.0.0:7447"]
+    assert get(config, "connect/endpoints") == []
+
+
+def test_tls_examples_use_tls_endpoints_and_certificates() -> None:
+    trailer = zenoh.Config.from_file(str(ZENOH_DIR / "trailer-router-tls.example.json5"))
+    assert all(e.startswith("tls/") for e in get(trailer, "connect/endpoints"))
+    tls = get(trailer, "transport/link/tls")
+    assert tls["enable_mtls"] is True and tls["verify_name_on_connect"] is True
+    assert tls["connect_certificate"].startswith("/etc/wz/tls/")
+    for name in ("regional-router-tls.example.json5", "regional-router-acl.example.json5"):
+        regional = zenoh.Config.from_file(str(ZENOH_DIR / name))
+        assert any(e.startswith("tls/") for e in get(regional, "listen/endpoints"))
+        tls = get(regional, "transport/link/tls")
+        assert tls["enable_mtls"] is True
+        assert tls["listen_certificate"].startswith("/etc/wz/tls/")
+        assert tls["listen_private_key"].startswith("/etc/wz/tls/")
+
+
+def test_acl_example_denies_by_default_and_its_policies_name_what_exists() -> None:
+    config = zenoh.Config.from_file(str(ZENOH_DIR / "regional-router-acl.example.json5"))
+    acl = get(config, "access_control")
+    assert acl["enabled"] is True and acl["default_permission"] == "deny"
+    rules = {rule["id"] for rule in acl["rules"]}
+    subjects = {subject["id"] for subject in acl["subjects"]}
+    assert acl["policies"]
+    for policy in acl["policies"]:
+        assert set(policy["rules"]) <= rules and set(policy["subjects"]) <= subjects
+    for rule in acl["rules"]:
+        for key_expr in rule["key_exprs"]:
+            zenoh.KeyExpr(key_expr)  # raises for an invalid one
+
+
+def test_a_service_session_takes_the_file_and_only_explicit_overrides(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    for name in ("WZ_BUS_MODE", "WZ_BUS_CONNECT_ENDPOINTS", "WZ_BUS_LISTEN_ENDPOINTS"):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setenv("WZ_BUS_CONFIG_FILE", str(EDGE_SERVICE))
+    config = zenoh_config(BusSettings())
+    assert get(config, "mode") == "client"  # the file's, not the default peer
+    assert get(config, "connect/endpoints") == ["tcp/router:7447"]
+    monkeypatch.setenv("WZ_BUS_CONNECT_ENDPOINTS", "tcp/127.0.0.1:7999")
+    config = zenoh_config(BusSettings())
+    assert get(config, "mode") == "client"
+    assert get(config, "connect/endpoints") == ["tcp/127.0.0.1:7999"]
+    assert get(config, "listen/endpoints") == []
+    # Without a file the defaults apply as before: a loopback peer.
+    monkeypatch.delenv("WZ_BUS_CONFIG_FILE")
+    assert get(zenoh_config(BusSettings()), "mode") == "peer"
+
+
+# --- the mesh, with real routers ----------------------------------------------------------------
+
+
+def start_router(config: Path, *extra: str) -> tuple[str, subprocess.Popen[bytes]]:
+    """`wz router --config CONFIG --listen <free loopback port> EXTRA`, accepting connections."""
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    process = subprocess.Popen(
+        wz_argv("router", "--config", str(config), "--listen", endpoint, *extra),
+        cwd=ROOT,
+        env=wz_env(),
+        stderr=subprocess.PIPE,
+    )
+    wait_for(lambda: port_open(port) or process.poll() is not None, 20.0, f"router {config.name}")
+    if process.poll() is not None:
+        err = process.stderr.read().decode() if process.stderr else ""
+        pytest.fail(f"router {config.name} exited: {err}")
+    return endpoint, process
+
+
+@pytest.fixture
+def routers() -> Iterator[list[subprocess.Popen[bytes]]]:
+    """The routers a test starts; each must exit 0 on SIGTERM."""
+    started: list[subprocess.Popen[bytes]] = []
+    try:
+        yield started
+    finally:
+        codes = [stop_process(process) for process in reversed(started)]
+        for process in started:
+            if process.stderr is not None:
+                process.stderr.close()
+        assert all(code == 0 for code in codes), codes
+
+
+def service_session(router_endpoint: str) -> zenoh.Session:
+    """A session opened as a service opens it: the edge-service file, the router's address
+    from WZ_BUS_CONNECT_ENDPOINTS."""
+    settings = BusSettings(config_file=EDGE_SERVICE, connect_endpoints=[router_endpoint])
+    return zenoh.open(zenoh_config(settings))
+
+
+def client_session(router_endpoint: str) -> zenoh.Session:
+    config = zenoh.Config()
+    config.insert_json5("mode", json.dumps("client"))
+    config.insert_json5("connect/endpoints", json.dumps([router_endpoint]))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(config)
+
+
+def relay(publisher_session: zenoh.Session, subscriber_session: zenoh.Session, key: str) -> None:
+    """Publish N_SAMPLES on ``key`` once the subscriber is known; all arrive, in order."""
+    subscriber = subscriber_session.declare_subscriber(key)
+    publisher = publisher_session.declare_publisher(key)
+    wait_for(lambda: publisher.matching_status.matching, 15.0, f"a subscriber of {key}")
+    for index in range(N_SAMPLES):
+        publisher.put(f"sample {index}")
+    received: list[str] = []
+
+    def all_received() -> bool:
+        while (sample := subscriber.try_recv()) is not None:
+            received.append(sample.payload.to_string())
+        return len(received) >= N_SAMPLES
+
+    wait_for(all_received, 10.0, f"{N_SAMPLES} samples on {key}")
+    assert received == [f"sample {index}" for index in range(N_SAMPLES)]
+    publisher.undeclare()
+    subscriber.undeclare()
+
+
+def test_trailer_router_relays_on_the_box_while_its_regional_router_is_unreachable(
+    routers: list[subprocess.Popen[bytes]],
+) -> None:
+    # The config's own uplink (the placeholder host) stays: it must not keep the router down.
+    trailer, process = start_router(TRAILER_ROUTER)
+    routers.append(process)
+    with service_session(trailer) as detector, service_session(trailer) as tracker:
+        relay(detector, tracker, "wz/test-site/detections/lidar")
+
+
+def test_trailer_router_relays_up_to_the_regional_router(
+    routers: list[subprocess.Popen[bytes]],
+) -> None:
+    regional, process = start_router(REGIONAL_ROUTER)
+    routers.append(process)
+    trailer, process = start_router(TRAILER_ROUTER, "--connect", regional)
+    routers.append(process)
+    with service_session(trailer) as alert_service, client_session(regional) as central:
+        relay(alert_service, central, "wz/test-site/alerts/speeding")
+        # And down: a sample published in the region reaches a service on the trailer.
+        relay(central, alert_service, "wz/test-site/config/sign")
+
+
+def test_router_connect_override_replaces_the_config_endpoints() -> None:
+    from wz_cli.router import router_config
+
+    config = router_config(["tcp/127.0.0.1:7999"], TRAILER_ROUTER, ["tcp/127.0.0.1:7998"])
+    assert get(config, "listen/endpoints") == ["tcp/127.0.0.1:7999"]
+    assert get(config, "connect/endpoints") == ["tcp/127.0.0.1:7998"]
+    assert get(router_config(None, TRAILER_ROUTER, []), "connect/endpoints") == []
+    kept = router_config(None, TRAILER_ROUTER)
+    assert get(kept, "connect/endpoints") == ["tcp/regional.wz.invalid:7447"]
