@@ -8,11 +8,13 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
+import httpx
+import pytest
 import uvicorn
 
 from tests.alert_service.helpers import SITE, batch, make_track
@@ -144,3 +146,20 @@ def gateway_process(bus_port: int, http_port: int, data_dir: Path, *, keys: bool
             assert node.wait(20.0) == 0
         else:  # it stopped by itself: only a kill by the test is fine
             assert node.returncode in (0, -signal.SIGKILL), node.returncode
+
+
+_T = TypeVar("_T")
+
+
+def eventually(probe: Callable[[], _T | None], what: str, timeout_s: float = 20.0) -> _T:
+    """Ask ``probe`` until it returns something (the HTTP side has no event to wait on)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        try:
+            value = probe()
+        except httpx.TransportError:  # the server is not listening yet
+            value = None
+        if value is not None:
+            return value
+        time.sleep(0.05)
+    pytest.fail(f"timed out after {timeout_s:.0f} s waiting for {what}")

@@ -14,8 +14,7 @@ import httpx
 
 from tests.conftest import free_port
 from tests.gateway.browser import chromium
-from tests.gateway.helpers import SITE, gateway_process, sample_alert
-from tests.gateway.test_node_process import eventually
+from tests.gateway.helpers import SITE, eventually, gateway_process, sample_alert
 from wz_shared.bus import Bus
 from wz_shared.messages import Alert, AlertSeverity, AlertType, Track, TrackBatch, VehicleClass
 from wz_shared.settings import BusSettings

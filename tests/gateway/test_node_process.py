@@ -19,6 +19,7 @@ from tests.gateway.helpers import (
     SITE,
     car_batches,
     devices_state,
+    eventually,
     gateway_process,
     sample_alert,
 )
@@ -30,18 +31,6 @@ READ = {"X-API-Key": READ_KEY}
 T = TypeVar("T")
 
 
-def eventually(probe: Callable[[], T | None], what: str, timeout_s: float = 20.0) -> T:
-    """Ask ``probe`` until it returns something (the HTTP side has no event to wait on)."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        try:
-            value = probe()
-        except httpx.TransportError:  # the server is not listening yet
-            value = None
-        if value is not None:
-            return value
-        time.sleep(0.05)
-    pytest.fail(f"timed out after {timeout_s:.0f} s waiting for {what}")
 
 
 def wait_for(subscription: Subscription[T], condition: Callable[[T], bool], what: str,

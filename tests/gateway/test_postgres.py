@@ -1,5 +1,5 @@
 """The same data layer on PostgreSQL: a throwaway cluster (initdb, pg_ctl) on a free loopback
-port, where the server is installed (Debian: apt-get install postgresql); skipped elsewhere."""
+port; the server comes from Debian's postgresql package (deploy/host/bootstrap.sh)."""
 
 from __future__ import annotations
 
@@ -50,15 +50,16 @@ def _binaries() -> Path | None:
 @pytest.fixture(scope="module")
 def postgres_url() -> Iterator[str]:
     bin_dir = _binaries()
-    if bin_dir is None:
-        pytest.skip("no PostgreSQL server here (apt-get install postgresql)")
+    assert bin_dir is not None, (
+        "no PostgreSQL server here (deploy/host/bootstrap.sh installs postgresql)")
     as_user: list[str] = []
     home = Path(tempfile.mkdtemp(prefix="wz-pg-"))
     if os.geteuid() == 0:  # initdb refuses root: run the cluster as the postgres user
         try:
             owner = pwd.getpwnam("postgres")
         except KeyError:
-            pytest.skip("running as root and there is no postgres user")
+            pytest.fail("running as root and there is no postgres user (the postgresql "
+                        "package makes it)")
         os.chown(home, owner.pw_uid, owner.pw_gid)
         as_user = ["runuser", "-u", "postgres", "--"]
     data = home / "data"

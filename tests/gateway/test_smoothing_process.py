@@ -12,8 +12,7 @@ import httpx
 import pyarrow.parquet as pq
 
 from tests.conftest import free_port
-from tests.gateway.helpers import READ_KEY, SITE, gateway_process
-from tests.gateway.test_node_process import eventually
+from tests.gateway.helpers import READ_KEY, SITE, eventually, gateway_process
 from tests.gateway.tracking import car_tracks, filtered_car, merged_batches
 from wz_shared.bus import Bus
 from wz_shared.messages import TrackBatch

@@ -16,10 +16,11 @@ from tests.gateway.helpers import (
     READ_KEY,
     SITE,
     car_batches,
+    eventually,
     gateway_process,
     sample_alert,
 )
-from tests.gateway.test_node_process import eventually, points_count
+from tests.gateway.test_node_process import points_count
 from tests.gateway.webhook_receiver import Answer, Receiver
 from wz_gateway import webhooks
 from wz_shared.bus import Bus
