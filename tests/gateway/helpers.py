@@ -23,6 +23,7 @@ from wz_gateway.app import create_app
 from wz_gateway.metrics import GatewayMetrics
 from wz_gateway.node import prepare_keys
 from wz_gateway.settings import GatewaySettings
+from wz_gateway.sites import Sites
 from wz_gateway.storage import Storage
 from wz_shared.messages import (
     Alert,
@@ -35,6 +36,7 @@ from wz_shared.messages import (
     Track,
     TrackBatch,
 )
+from wz_shared.site import Site
 
 __all__ = ["SITE", "batch", "make_track"]
 
@@ -100,10 +102,11 @@ def service_status(service: str, stamp: float, received_hz: dict[str, float]) ->
 
 @contextmanager
 def live_server(settings: GatewaySettings, storage: Storage,
-                metrics: GatewayMetrics | None = None) -> Iterator[str]:  # fmt: skip
+                metrics: GatewayMetrics | None = None, *, site: Site | Sites = SITE,
+                clock: Callable[[], float] = time.time) -> Iterator[str]:  # fmt: skip
     """The app on uvicorn on a free loopback port, in a thread; yields its base URL."""
     port = free_port()
-    app = create_app(settings, storage, site=SITE, metrics=metrics)
+    app = create_app(settings, storage, site=site, metrics=metrics, clock=clock)
     server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_config=None,
                                            access_log=False, lifespan="off"))  # fmt: skip
     thread = threading.Thread(target=server.run, daemon=True)

@@ -7,6 +7,8 @@ Scenarios
 - ``frames N HZ POINTS BLOCK``: N LiDAR frames of POINTS points at HZ; BLOCK=1 for blocking
   congestion control (lossless), 0 for drop.
 - ``malformed``: good, bad, good ... on one alert key and one frame key (see the test).
+- ``history N``: N alerts on a publisher with a history of N, before anyone subscribes; then
+  prints ``published`` and, once the test says ``more`` on ``.../test/more``, N more.
 The process waits until its publishers match a subscriber before it starts; when every message is
 out it waits for the test's acknowledgement on ``wz/test-site/test/ack`` (so it does not close
 its session while reliable samples are still in flight), then exits 0.
@@ -79,6 +81,19 @@ def scenario_malformed(bus: Bus) -> None:
         frames.put_bytes(payload)
 
 
+def scenario_history(bus: Bus, count: int) -> None:
+    alert = next(m for m in json_samples() if isinstance(m, Alert))
+    alerts = bus.publisher(bus.keys.alerts("speeding"), Alert, history=count)
+    more = bus.subscribe_raw(f"{bus.keys.prefix}/test/more")
+    for i in range(count):  # nobody listens yet: only the history keeps them
+        alerts.put(alert.model_copy(update={"alert_id": f"early-{i}"}))
+    print("published", flush=True)
+    if more.recv(30.0) is None:
+        raise SystemExit("the test never asked for more")
+    for i in range(count):
+        alerts.put(alert.model_copy(update={"alert_id": f"live-{i}"}))
+
+
 def main() -> None:
     endpoint, scenario, *args = sys.argv[1:]
     settings = BusSettings(mode="peer", connect_endpoints=[endpoint], listen_endpoints=[])
@@ -90,6 +105,8 @@ def main() -> None:
             scenario_frames(bus, int(args[0]), float(args[1]), int(args[2]), args[3] == "1")
         elif scenario == "malformed":
             scenario_malformed(bus)
+        elif scenario == "history":
+            scenario_history(bus, int(args[0]))
         else:
             raise SystemExit(f"unknown scenario {scenario}")
         if ack.recv(30.0) is None:

@@ -28,10 +28,11 @@ def bus(listening_bus_settings: BusSettings) -> Iterator[Bus]:
         yield opened
 
 
-def start_peer(port: int, *args: str) -> subprocess.Popen[bytes]:
+def start_peer(port: int, *args: str, stdout: int | None = None) -> subprocess.Popen[bytes]:
     return subprocess.Popen(
         [sys.executable, "-m", "tests.shared.bus_peer", f"tcp/127.0.0.1:{port}", *args],
         cwd=ROOT,
+        stdout=stdout,
     )
 
 
@@ -145,3 +146,30 @@ def test_malformed_payloads_counted_and_dropped(bus: Bus, port: int) -> None:
     }
     # And the subscriber keeps receiving after them.
     assert alerts.recv(0.2) is None
+
+
+def test_a_late_subscriber_with_recovery_gets_the_history_then_the_live_samples(
+    bus: Bus, port: int
+) -> None:
+    """Alerts published before anyone subscribed reach a ``recover=True`` subscription from the
+    publisher's history (store and forward), once each; a plain one sees only the live ones."""
+    peer = start_peer(port, "history", "40", stdout=subprocess.PIPE)
+    assert peer.stdout is not None
+    assert peer.stdout.readline().strip() == b"published"
+    recovered: list[str] = []
+    plain: list[str] = []
+    bus.on(bus.keys.alerts_all, Alert, lambda _, a: recovered.append(a.alert_id), recover=True)
+    bus.on(bus.keys.alerts_all, Alert, lambda _, a: plain.append(a.alert_id))
+    deadline = time.monotonic() + 15.0
+    while len(recovered) < 40 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert recovered == [f"early-{i}" for i in range(40)]
+    more = bus.publisher(f"{bus.keys.prefix}/test/more", Alert)
+    assert more.wait_for_subscribers(10.0)
+    more.put_bytes(b"more")
+    while len(recovered) < 80 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    finish_peer(bus, peer)
+    assert recovered == [f"early-{i}" for i in range(40)] + [f"live-{i}" for i in range(40)]
+    assert plain == [f"live-{i}" for i in range(40)]
+    assert not bus.stats.invalid  # nothing counted missed

@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 from typing import Any, Generic, Literal, TypeVar
 
 import zenoh
+import zenoh.ext
 
 from wz_shared import codec
 from wz_shared.keys import Keys
@@ -133,21 +134,46 @@ class BusStats:
 # --- publishing -----------------------------------------------------------------------------
 
 
-class Publisher(Generic[M]):
-    """Publishes messages of one type on one key."""
+#: How often a publisher with a history tells subscribers its newest sequence number [s]:
+#: a subscriber that missed the last samples (a link down) asks for them within this period.
+HEARTBEAT_S = 1.0
 
-    def __init__(self, bus: Bus, key: str, cls: type[M], *, block: bool) -> None:
+
+class Publisher(Generic[M]):
+    """Publishes messages of one type on one key.
+
+    With ``history`` (a number of samples) it is a Zenoh *advanced* publisher: it keeps its
+    newest ``history`` samples, numbers every sample, and announces itself and its newest
+    number (:data:`HEARTBEAT_S`). A subscriber with ``recover=True`` (:meth:`Bus.on`) that
+    missed samples, because a link was down or because it started later, fetches them from that
+    cache: store and forward without a broker. The cache is in this process's memory.
+    """
+
+    def __init__(
+        self, bus: Bus, key: str, cls: type[M], *, block: bool, history: int | None = None
+    ) -> None:
         self.key = key
         self.cls = cls
+        self.history = history
         self._stats = bus.stats
         self._frame = codec.is_frame_type(cls)
-        self._publisher = bus.session.declare_publisher(
-            key,
-            congestion_control=(
-                zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
-            ),
-            reliability=zenoh.Reliability.RELIABLE,
-        )
+        congestion = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
+        self._publisher: Any
+        if history is None:
+            self._publisher = bus.session.declare_publisher(
+                key, congestion_control=congestion, reliability=zenoh.Reliability.RELIABLE
+            )
+        else:
+            if history < 1:
+                raise ValueError("a publisher's history holds at least one sample")
+            self._publisher = zenoh.ext.declare_advanced_publisher(
+                bus.session, key, congestion_control=congestion,
+                reliability=zenoh.Reliability.RELIABLE,
+                cache=zenoh.ext.CacheConfig(history),
+                sample_miss_detection=zenoh.ext.MissDetectionConfig(
+                    heartbeat=HEARTBEAT_S, sporadic_heartbeat=None),
+                publisher_detection=True,
+            )  # fmt: skip
 
     def put(self, message: M) -> None:
         """Publish a JSON message."""
@@ -164,6 +190,8 @@ class Publisher(Generic[M]):
     @property
     def matched(self) -> bool:
         """Whether any subscriber for this key is known to the session now."""
+        if self.history is not None:
+            raise TypeError(f"{self.key}: a publisher with a history does not report matching")
         # zenoh's stub says bool; at run time it is a MatchingStatus with a .matching flag.
         status: Any = self._publisher.matching_status
         return bool(status.matching)
@@ -322,16 +350,43 @@ class CallbackSubscription(Generic[T]):
     """A subscription that decodes and calls ``callback`` on Zenoh's thread.
 
     Keep the callback short; an exception in it is logged, counted, and the subscription goes on.
+
+    With ``recover`` it is a Zenoh *advanced* subscriber: from publishers that keep a history
+    (``Bus.publisher(..., history=N)``) it fetches what it missed: their cached samples when
+    it starts or when one of them appears (a trailer whose link came back), and the samples
+    lost in a gap, which it finds from their sequence numbers and heartbeats. A sample may then
+    arrive twice (once live, once again from a cache after a reconnection): the callback must
+    be idempotent (the gateway stores an alert once per ``alert_id``). Gaps it could not fill
+    (the publisher's cache no longer had them) are counted under ``(key, "missed")``.
     """
 
     def __init__(
-        self, bus: Bus, key: str, decoder: Decoder[T], callback: Callable[[str, T], None]
+        self,
+        bus: Bus,
+        key: str,
+        decoder: Decoder[T],
+        callback: Callable[[str, T], None],
+        *,
+        recover: bool = False,
     ) -> None:
         self.key = key
         self._decoder = decoder
         self._callback = callback
         self._stats = bus.stats
-        self._subscriber = bus.session.declare_subscriber(key, self._on_sample)
+        self._subscriber: Any
+        if not recover:
+            self._subscriber = bus.session.declare_subscriber(key, self._on_sample)
+            return
+        self._subscriber = zenoh.ext.declare_advanced_subscriber(
+            bus.session, key, self._on_sample,
+            history=zenoh.ext.HistoryConfig(detect_late_publishers=True),
+            recovery=zenoh.ext.RecoveryConfig(periodic_queries=None, heartbeat=True),
+            subscriber_detection=True,
+        )  # fmt: skip
+        self._miss_listener = self._subscriber.sample_miss_listener(self._on_miss)
+
+    def _on_miss(self, miss: Any) -> None:
+        self._stats.count_invalid(self.key, "missed", f"{miss.nb} samples from {miss.source}")
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         self._stats.count_received(self.key)
@@ -350,6 +405,9 @@ class CallbackSubscription(Generic[T]):
             log.exception("callback for %s raised; the subscription goes on", self.key)
 
     def undeclare(self) -> None:
+        listener = getattr(self, "_miss_listener", None)
+        if listener is not None:
+            listener.undeclare()
         self._subscriber.undeclare()
 
 
@@ -415,15 +473,18 @@ class Bus:
         return entity
 
     # publishing
-    def publisher(self, key: str, cls: type[M], *, block: bool | None = None) -> Publisher[M]:
+    def publisher(
+        self, key: str, cls: type[M], *, block: bool | None = None, history: int | None = None
+    ) -> Publisher[M]:
         """A publisher of ``cls`` on ``key``.
 
         ``block`` chooses congestion control: frames default to dropping under congestion
-        (a stale frame is worthless), everything else to blocking (never lost).
+        (a stale frame is worthless), everything else to blocking (never lost). ``history``:
+        keep that many newest samples for subscribers that missed them (see :class:`Publisher`).
         """
         if block is None:
             block = not codec.is_frame_type(cls)
-        return self._keep(lambda: Publisher(self, key, cls, block=block))
+        return self._keep(lambda: Publisher(self, key, cls, block=block, history=history))
 
     # subscribing
     def subscribe(
@@ -455,10 +516,18 @@ class Bus:
         return self._keep(lambda: Subscription(self, key, raw_decoder, mode, capacity))
 
     def on(
-        self, key: str, cls: type[M], callback: Callable[[str, M], None]
+        self,
+        key: str,
+        cls: type[M],
+        callback: Callable[[str, M], None],
+        *,
+        recover: bool = False,
     ) -> CallbackSubscription[M]:
-        """Call ``callback(key, message)`` on Zenoh's thread for each valid JSON message."""
-        return self._keep(lambda: CallbackSubscription(self, key, json_decoder(cls), callback))
+        """Call ``callback(key, message)`` on Zenoh's thread for each valid JSON message;
+        ``recover``: also for those missed, from publishers with a history (at least once)."""
+        return self._keep(
+            lambda: CallbackSubscription(self, key, json_decoder(cls), callback, recover=recover)
+        )
 
     def on_raw(
         self, key: str, callback: Callable[[str, bytes], None]

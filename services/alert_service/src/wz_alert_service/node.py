@@ -61,6 +61,10 @@ class AlertServiceSettings(ServiceSettings):
     episode_id_prefix: str | None = None
     #: Track batches queued for the engine; beyond it the tracker's publisher waits.
     queue_capacity: Annotated[int, Field(ge=1, le=1_000_000)] = 1024
+    #: Alerts of each type kept in memory for subscribers that missed them (store and forward:
+    #: a central gateway whose link to the trailer was down fetches them when it comes back).
+    #: About 2 kB each; 2000 of each type is hours of alerts at a busy site.
+    history_per_type: Annotated[int, Field(ge=1, le=100_000)] = 2000
 
     @field_validator("episode_id_prefix")
     @classmethod
@@ -181,8 +185,10 @@ def run(runtime: ServiceRuntime, site: Site, settings: AlertServiceSettings,
         bus.stats.count_invalid(tracks_key, reason, detail)
 
     core = AlertCore(site, report, id_prefix=id_prefix)
-    publishers = {t: bus.publisher(bus.keys.alerts(t.value), Alert) for t in AlertType}
-    devices_publisher = bus.publisher(bus.keys.devices_state, RoadsideDeviceState)
+    publishers = {t: bus.publisher(bus.keys.alerts(t.value), Alert,
+                                   history=settings.history_per_type) for t in AlertType}  # fmt: skip
+    # The newest device state, for a gateway that starts (or reconnects) after it changed.
+    devices_publisher = bus.publisher(bus.keys.devices_state, RoadsideDeviceState, history=1)
     snapshot = [encode_json(core.active())]
     bus.serve(bus.keys.alerts_active, lambda: snapshot[-1])
     batches = bus.subscribe(tracks_key, TrackBatch, capacity=settings.queue_capacity)

@@ -2,6 +2,7 @@
 
 Routes (OpenAPI at ``/openapi.json``, docs at ``/docs``)::
 
+    GET    /v1/sites                     the sites served (several at a central gateway)
     GET    /v1/site                      the site description
     GET    /v1/tracks/live               the newest fused tracks (WGS84 positions added)
     GET    /v1/tracks/{track_id}         one track's stored trajectory  (json|csv|geojson|parquet)
@@ -20,6 +21,11 @@ Every ``/v1`` route needs a key (header ``X-API-Key``, or ``Authorization: Beare
 without a key) has a token bucket; past it, 429 with ``Retry-After``. Bodies above
 ``max_body_bytes`` get 413. Every error is ``application/problem+json`` (RFC 9457) with a
 ``detail`` a person can act on and, for bad input, ``errors`` naming each field.
+
+A central gateway serves several sites (:mod:`wz_gateway.sites`): every route that reads a
+site's data takes ``site=<site id>`` (default: the first site; an unknown one is 404);
+``/v1/alerts`` also takes ``site=*`` (every site's) and the device feed without ``site`` lists
+every site's devices.
 """
 
 from __future__ import annotations
@@ -58,15 +64,17 @@ from wz_gateway.models import (
     Problem,
     ProblemField,
     Readiness,
+    SiteSummary,
     TrackPoint,
     Trajectory,
 )
 from wz_gateway.settings import GatewaySettings
+from wz_gateway.sites import Sites, load_sites
 from wz_gateway.storage import AlertQuery, CursorError, Page, PointQuery, Storage
 from wz_gateway.tables import SCHEMA_VERSION
 from wz_gateway.webhook_routes import webhook_router
 from wz_shared.messages import AlertSeverity, AlertType
-from wz_shared.site import AreaKind, Site, load_site
+from wz_shared.site import AreaKind, Site
 
 log = logging.getLogger(__name__)
 
@@ -307,12 +315,17 @@ class GatewayContext:
 
     settings: GatewaySettings
     storage: Storage
-    site: Site
+    sites: Sites
     metrics: GatewayMetrics
     keys: KeyCache
     limiter: auth.TokenBuckets
     readiness: Callable[[], dict[str, str]] | None
     clock: Callable[[], float]
+
+    @property
+    def site(self) -> Site:
+        """The default site (the first served)."""
+        return self.sites.default
 
 
 def _context(request: Request) -> GatewayContext:
@@ -321,6 +334,25 @@ def _context(request: Request) -> GatewayContext:
 
 
 Ctx = Annotated[GatewayContext, Depends(_context)]
+
+_SITE_PATTERN = r"^[a-z0-9][a-z0-9_-]{0,62}$"
+
+
+def _site(
+    context: Ctx,
+    site: Annotated[str | None, Query(pattern=_SITE_PATTERN, description="Site id (a central "
+                                      "gateway serves several; default: its first)")] = None,
+) -> Site:  # fmt: skip
+    if site is None:
+        return context.sites.default
+    found = context.sites.get(site)
+    if found is None:
+        raise HTTPException(404, f"this gateway does not serve site {site!r}; it serves "
+                            f"{', '.join(context.sites.ids)} (GET /v1/sites)")  # fmt: skip
+    return found
+
+
+SiteParam = Annotated[Site, Depends(_site)]
 
 _api_key_header = APIKeyHeader(
     name="X-API-Key", auto_error=False, scheme_name="ApiKey",
@@ -465,21 +497,33 @@ def _points_response(request: Request, output: OutputFormat, page: Page,
 def _v1_router() -> APIRouter:
     router = APIRouter(prefix="/v1", responses=_V1_RESPONSES)
 
-    @router.get("/site", response_model=Site, tags=["site"])
-    def get_site(context: Ctx, _: Reader) -> Site:
-        """The site: road geometry, lanes, work-zone areas, limits, sensors, alert thresholds."""
-        return context.site
+    @router.get("/sites", response_model=list[SiteSummary], tags=["site"])
+    def get_sites(context: Ctx, _: Reader) -> list[SiteSummary]:
+        """The sites this gateway serves; the first is the default ``site`` of every route."""
+        return [SiteSummary(site_id=site.site_id, name=site.name, default=index == 0)
+                for index, site in enumerate(context.sites)]  # fmt: skip
 
-    @router.get("/tracks/live", response_model=LiveTracks, tags=["tracks"])
-    def get_live_tracks(context: Ctx, _: Reader) -> LiveTracks:
+    _site_responses: dict[int | str, dict[str, Any]] = {
+        404: _problem_response("The gateway does not serve this site")}
+
+    @router.get("/site", response_model=Site, tags=["site"], responses=_site_responses)
+    def get_site(site: SiteParam, _: Reader) -> Site:
+        """The site: road geometry, lanes, work-zone areas, limits, sensors, alert thresholds."""
+        return site
+
+    @router.get("/tracks/live", response_model=LiveTracks, tags=["tracks"],
+                responses=_site_responses)  # fmt: skip
+    def get_live_tracks(context: Ctx, site: SiteParam, _: Reader) -> LiveTracks:
         """The newest fused tracks (the tracker's last batch), with WGS84 positions."""
-        return views.live_tracks(context.storage, context.site, context.clock())
+        return views.live_tracks(context.storage, site, context.clock())
 
     @router.get("/tracks/{track_id}", response_model=Trajectory, tags=["tracks"],
-                responses={**_EXPORT_RESPONSES, 404: _problem_response("No such track")})  # fmt: skip
+                responses={**_EXPORT_RESPONSES,
+                           404: _problem_response("No such track, or a site not served")})  # fmt: skip
     def get_track(
         request: Request,
         context: Ctx,
+        site: SiteParam,
         _: Reader,
         track_id: Annotated[int, Path(ge=0, le=_MAX_ID, description="The tracker's track id")],
         start: Stamp = None,
@@ -493,7 +537,7 @@ def _v1_router() -> APIRouter:
     ) -> Response:  # fmt: skip
         """One track's stored trajectory, oldest first, a page at a time."""
         _check_order(start, end, "start", "end")
-        site_id = context.site.site_id
+        site_id = site.site_id
         page = context.storage.points(PointQuery(
             site=site_id, track_id=track_id, start_stamp=start, end_stamp=end,
             smoothed=smoothed, limit=_limit(limit, context), cursor=cursor,
@@ -510,10 +554,11 @@ def _v1_router() -> APIRouter:
         )  # fmt: skip
 
     @router.get("/trajectories", response_model=PointPage, tags=["tracks"],
-                responses=_EXPORT_RESPONSES)  # fmt: skip
+                responses={**_EXPORT_RESPONSES, **_site_responses})  # fmt: skip
     def get_trajectories(
         request: Request,
         context: Ctx,
+        site: SiteParam,
         _: Reader,
         start: Stamp = None,
         end: Stamp = None,
@@ -539,14 +584,14 @@ def _v1_router() -> APIRouter:
         _check_order(station_min, station_max, "station_min", "station_max")
         _check_order(min_speed, max_speed, "min_speed", "max_speed")
         if area is not None:
-            zone = next((a for a in context.site.work_zone if a.kind == area), None)
+            zone = next((a for a in site.work_zone if a.kind == area), None)
             if zone is None:
-                raise InputError("query.area", f"site {context.site.site_id} has no {area.value} area")  # fmt: skip
+                raise InputError("query.area", f"site {site.site_id} has no {area.value} area")
             station_min = max(zone.start_station_m, station_min if station_min is not None
                               else zone.start_station_m)  # fmt: skip
             station_max = min(zone.end_station_m, station_max if station_max is not None
                               else zone.end_station_m)  # fmt: skip
-        site_id = context.site.site_id
+        site_id = site.site_id
         page = context.storage.points(PointQuery(
             site=site_id, start_stamp=start, end_stamp=end, track_id=track_id,
             station_min_m=station_min, station_max_m=station_max,
@@ -562,12 +607,15 @@ def _v1_router() -> APIRouter:
             "trajectories",
         )  # fmt: skip
 
-    @router.get("/alerts", response_model=AlertPage, tags=["alerts"])
+    @router.get("/alerts", response_model=AlertPage, tags=["alerts"], responses=_site_responses)
     def get_alerts(
         request: Request,
         response: Response,
         context: Ctx,
         _: Reader,
+        site: Annotated[str | None, Query(pattern=r"^(\*|[a-z0-9][a-z0-9_-]{0,62})$",
+                                          description="Site id, or `*` for every site's "
+                                          "(default: the gateway's first site)")] = None,
         alert_type: Annotated[list[AlertType] | None, Query(alias="type", description="Repeat "
                                                             "for several")] = None,
         severity: Annotated[list[AlertSeverity] | None, Query()] = None,
@@ -582,8 +630,9 @@ def _v1_router() -> APIRouter:
     ) -> AlertPage:  # fmt: skip
         """Alert events (start, update, clear), newest first unless ``order=oldest``."""
         _check_order(start, end, "start", "end")
+        site_id = site if site == "*" else _site(context, site).site_id
         page = context.storage.alerts(AlertQuery(
-            site=context.site.site_id,
+            site=None if site_id == "*" else site_id,
             alert_types=tuple(t.value for t in alert_type or ()),
             severities=tuple(s.value for s in severity or ()),
             phases=tuple(phase or ()), start_stamp=start, end_stamp=end, track_id=track_id,
@@ -592,25 +641,32 @@ def _v1_router() -> APIRouter:
         ))  # fmt: skip
         for name, value in _next_link(request, page.next_cursor).items():
             response.headers[name] = value
-        return AlertPage(site=context.site.site_id, count=len(page.items),
+        return AlertPage(site=site_id, count=len(page.items),
                          next_cursor=page.next_cursor, alerts=page.items)  # fmt: skip
 
     @router.get("/wzdx/device-feed", tags=["wzdx"],
                 responses={200: {"description": "A WZDx 4.2 DeviceFeed (GeoJSON)",
                                  "content": {"application/json": {"schema": {
                                      "type": "object",
-                                     "required": ["feed_info", "type", "features"]}}}}})  # fmt: skip
-    def get_device_feed(context: Ctx, _: Reader) -> JSONResponse:
+                                     "required": ["feed_info", "type", "features"]}}}},
+                            **_site_responses})  # fmt: skip
+    def get_device_feed(
+        context: Ctx,
+        _: Reader,
+        site: Annotated[str | None, Query(pattern=_SITE_PATTERN, description="Only this site's "
+                                          "devices (default: every site's)")] = None,
+    ) -> JSONResponse:  # fmt: skip
         """The WZDx 4.2 DeviceFeed: traffic sensor (per-lane volumes, speeds, occupancy over the
         newest collection interval), cameras, flashing beacon and message sign, with status."""
         settings = context.settings
-        feed = views.device_feed_of(
-            context.storage, context.site, now=context.clock(), publisher=settings.publisher,
+        served = [_site(context, site)] if site is not None else list(context.sites)
+        feeds = [views.device_feed_of(
+            context.storage, one, now=context.clock(), publisher=settings.publisher,
             stale_after_s=settings.stale_after_s, traffic_interval_s=settings.traffic_interval_s,
             detector_station_override_m=settings.traffic_detector_station_m,
             contact_email=settings.contact_email,
-        )  # fmt: skip
-        return JSONResponse(feed)
+        ) for one in served]  # fmt: skip
+        return JSONResponse(views.merge_device_feeds(feeds))
 
     @router.get("/admin/api-keys", response_model=list[ApiKeyInfo], tags=["admin"])
     def list_keys(
@@ -651,7 +707,7 @@ def create_app(
     settings: GatewaySettings,
     storage: Storage,
     *,
-    site: Site | None = None,
+    site: Site | Sites | None = None,
     metrics: GatewayMetrics | None = None,
     readiness: Callable[[], dict[str, str]] | None = None,
     clock: Callable[[], float] = time.time,
@@ -665,8 +721,8 @@ def create_app(
         Limits, CORS, dev mode, feed options.
     storage : Storage
         The data layer (already migrated).
-    site : Site, optional
-        The site served; by default read from ``settings.site_file``.
+    site : Site or Sites, optional
+        The site(s) served; by default read from ``settings.site_entries``.
     metrics : GatewayMetrics, optional
         Shared with the node so ``/metrics`` shows ingestion too; a new one by default.
     readiness : callable, optional
@@ -676,7 +732,7 @@ def create_app(
     live : Broadcaster, optional
         What the writer stored, for ``/v1/stream`` (the node's); an idle one by default.
     """
-    site = site if site is not None else load_site(settings.site_file)
+    sites = Sites.of(site) if site is not None else load_sites(settings.site_entries)
     metrics = metrics if metrics is not None else GatewayMetrics()
     app = FastAPI(
         title="Work-zone gateway",
@@ -687,7 +743,7 @@ def create_app(
         redoc_url=None,
     )
     app.state.gateway = GatewayContext(
-        settings=settings, storage=storage, site=site, metrics=metrics,
+        settings=settings, storage=storage, sites=sites, metrics=metrics,
         keys=KeyCache(storage), limiter=auth.TokenBuckets(settings.rate_limit_per_s,
                                                           settings.rate_limit_burst),
         readiness=readiness, clock=clock,

@@ -207,7 +207,7 @@ class Broadcaster:
         self._sequence = 0
         self._latest_tracks: LiveEvent | None = None
         self._recent_alerts: deque[LiveEvent] = deque(maxlen=recent_alerts)
-        self._seen_alerts: OrderedDict[str, None] = OrderedDict()
+        self._seen_alerts: OrderedDict[tuple[str, str], None] = OrderedDict()
         self._closed = False
         self.dropped = 0
         self._dropped_metric: Counter | None = None
@@ -257,9 +257,9 @@ class Broadcaster:
                 self._latest_tracks = event
                 events.append(event)
             for alert in alerts:
-                if alert.alert_id in self._seen_alerts:
+                if (alert.site, alert.alert_id) in self._seen_alerts:
                     continue
-                self._seen_alerts[alert.alert_id] = None
+                self._seen_alerts[(alert.site, alert.alert_id)] = None
                 if len(self._seen_alerts) > _SEEN_ALERT_IDS:
                     self._seen_alerts.popitem(last=False)
                 event = self._event("alert", alert.model_dump_json)

@@ -93,8 +93,17 @@ class LiveTracks(_Model):
     tracks: list[LiveTrack]
 
 
+class SiteSummary(_Model):
+    """One site a gateway serves."""
+
+    site_id: str
+    name: str
+    default: bool
+
+
 class AlertPage(_Model):
-    """A page of alert events (newest first unless asked otherwise)."""
+    """A page of alert events (newest first unless asked otherwise); ``site`` is ``*`` for
+    every site's."""
 
     site: str
     count: int

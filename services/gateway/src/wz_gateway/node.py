@@ -4,7 +4,12 @@ Run it as ``python -m wz_gateway.node`` (settings ``WZ_GATEWAY_*``, bus ``WZ_BUS
 
 - subscribes to ``wz/<site>/tracks`` (:class:`TrackBatch`), ``wz/<site>/alerts/*``
   (:class:`Alert`), ``wz/<site>/devices/state`` (:class:`RoadsideDeviceState`) and
-  ``wz/<site>/status/*`` (:class:`ServiceStatus`, for the WZDx devices' status). Zenoh's
+  ``wz/<site>/status/*`` (:class:`ServiceStatus`, for the WZDx devices' status); a central
+  gateway given several sites (``WZ_GATEWAY_SITE_FILES``, :mod:`wz_gateway.sites`) subscribes
+  to ``wz/*/...`` and keeps the sites it was given. Alerts and device states are subscribed
+  with recovery: what the alert service published while this gateway was away (its link
+  down, or itself restarting) is fetched from the alert service's history when it comes back,
+  and stored once (by ``alert_id``). Zenoh's
   callbacks only queue the decoded messages; one writer thread (the main one) stores them, a
   group per transaction. A full queue holds the callbacks (back-pressure, as a FIFO
   subscription does): nothing is dropped for being slow;
@@ -16,7 +21,8 @@ Run it as ``python -m wz_gateway.node`` (settings ``WZ_GATEWAY_*``, bus ``WZ_BUS
   groups (:mod:`wz_gateway.track_ends`), and at start those a stopped process left;
 - deletes what is older than the retention, at start and every ``retention_period_s``.
 
-Bad input never stops it: an undecodable message, or one of another site, is counted in the
+Bad input never stops it: an undecodable message, or one of a site not served (or whose
+``site`` is not the one of its key), is counted in the
 status message's ``invalid_counts`` (``<key>|<reason>``) and on ``/metrics``, and dropped. A
 group the database refuses is retried, then logged and counted (``wz_gateway_write_errors``).
 """
@@ -39,14 +45,16 @@ from wz_gateway.delivery import WebhookDeliverer
 from wz_gateway.live import Broadcaster, broadcaster_for
 from wz_gateway.metrics import GatewayMetrics
 from wz_gateway.settings import GatewaySettings
+from wz_gateway.sites import Sites, load_sites
 from wz_gateway.storage import Storage, StorageError
-from wz_gateway.track_ends import TrackFinisher
+from wz_gateway.track_ends import SiteFinishers, TrackFinisher
 from wz_gateway.webhook_store import WebhookStore
+from wz_shared.keys import site_of_key
 from wz_shared.logs import configure_logging
 from wz_shared.messages import Alert, Message, RoadsideDeviceState, ServiceStatus, TrackBatch
 from wz_shared.service import ServiceRuntime
 from wz_shared.settings import BusSettings
-from wz_shared.site import Site, SiteFileError, load_site
+from wz_shared.site import Site, SiteFileError
 
 SERVICE = "gateway"
 log = logging.getLogger("wz_gateway.node")
@@ -66,8 +74,9 @@ class Writer:
     Parameters
     ----------
     storage : Storage
-    site : Site
-        Messages of another site are refused (``report(key, "wrong_site", ...)``).
+    sites : Site or Sites
+        The sites stored; a message of another site, or whose ``site`` is not its key's, is
+        refused (``report(key, "wrong_site", ...)``).
     settings : GatewaySettings
         Queue capacity and retention.
     metrics : GatewayMetrics
@@ -84,7 +93,7 @@ class Writer:
     """
 
     storage: Storage
-    site: Site
+    sites: Site | Sites
     settings: GatewaySettings
     metrics: GatewayMetrics
     report: Report
@@ -93,17 +102,20 @@ class Writer:
     written: int = 0
     last_error: str | None = None
     live: Broadcaster | None = None
-    finisher: TrackFinisher | None = None
+    finisher: TrackFinisher | SiteFinishers | None = None
     webhooks: WebhookDeliverer | None = None
 
     def __post_init__(self) -> None:
+        self.sites = Sites.of(self.sites)
+        self._geo = {site.site_id: site.geo_frame for site in self.sites}
         self.queue: queue.Queue[Message] = queue.Queue(self.settings.queue_capacity)
         self._next_purge = 0.0
 
     def offer(self, key: str, message: Message) -> None:
         """Queue a decoded message (Zenoh's thread); waits while the queue is full."""
-        if message.site != self.site.site_id:
-            self.report(key, "wrong_site", f"{type(message).__name__} of site {message.site}")
+        if message.site not in self.sites or site_of_key(key) not in (None, message.site):
+            self.report(key, "wrong_site", f"{type(message).__name__} of site {message.site} "
+                        f"on {key}")  # fmt: skip
             return
         while not self.stop.is_set():
             try:
@@ -132,8 +144,7 @@ class Writer:
         for attempt in range(1, _WRITE_ATTEMPTS + 1):
             started = time.perf_counter()
             try:
-                result = self.storage.ingest(group, geo=self.site.geo_frame,
-                                             received_at=received_at)  # fmt: skip
+                result = self.storage.ingest(group, geo=self._geo, received_at=received_at)
             except Exception as exc:  # the database refused: retry, then give the group up
                 self.last_error = f"{type(exc).__name__}: {exc}"
                 if attempt == _WRITE_ATTEMPTS:
@@ -227,20 +238,22 @@ def serve(app_server: uvicorn.Server) -> threading.Thread:
     return thread
 
 
-def run(runtime: ServiceRuntime, site: Site, settings: GatewaySettings, storage: Storage,
-        metrics: GatewayMetrics) -> int:  # fmt: skip
+def run(runtime: ServiceRuntime, site: Site | Sites, settings: GatewaySettings,
+        storage: Storage, metrics: GatewayMetrics) -> int:  # fmt: skip
     """Store the bus and serve HTTP until ``runtime.stop``; the messages stored."""
     bus = runtime.bus
+    sites = Sites.of(site)
     deliverer = WebhookDeliverer(WebhookStore(storage.engine), settings, metrics)
-    writer = Writer(storage, site, settings, metrics,
+    finisher = (SiteFinishers.of(storage, sites, settings, metrics) if sites.several
+                else TrackFinisher.of(storage, sites.default, settings, metrics))  # fmt: skip
+    writer = Writer(storage, sites, settings, metrics,
                     report=lambda key, reason, detail: bus.stats.count_invalid(key, reason, detail),
                     stop=runtime.stop, live=broadcaster_for(settings, metrics.registry),
-                    finisher=TrackFinisher.of(storage, site, settings, metrics),
-                    webhooks=deliverer)  # fmt: skip
-    bus.on(bus.keys.tracks, TrackBatch, writer.offer)
-    bus.on(bus.keys.alerts_all, Alert, writer.offer)
-    bus.on(bus.keys.devices_state, RoadsideDeviceState, writer.offer)
-    bus.on(bus.keys.status_all, ServiceStatus, writer.offer)
+                    finisher=finisher, webhooks=deliverer)  # fmt: skip
+    bus.on(sites.key("tracks"), TrackBatch, writer.offer)
+    bus.on(sites.key("alerts/*"), Alert, writer.offer, recover=True)
+    bus.on(sites.key("devices/state"), RoadsideDeviceState, writer.offer, recover=True)
+    bus.on(sites.key("status/*"), ServiceStatus, writer.offer)
     metrics.watch_bus(bus.stats.snapshot)
     metrics.watch_queue(writer.queue.qsize)
     metrics.watch_webhooks(deliverer.store.pending_count)
@@ -252,7 +265,7 @@ def run(runtime: ServiceRuntime, site: Site, settings: GatewaySettings, storage:
             checks["queue"] = f"{writer.queue.qsize()} of {settings.queue_capacity} waiting"
         return checks
 
-    app = create_app(settings, storage, site=site, metrics=metrics, readiness=readiness,
+    app = create_app(settings, storage, site=sites, metrics=metrics, readiness=readiness,
                      live=writer.live)  # fmt: skip
     server = uvicorn.Server(
         uvicorn.Config(app, host=settings.host, port=settings.port, log_config=None,
@@ -260,8 +273,9 @@ def run(runtime: ServiceRuntime, site: Site, settings: GatewaySettings, storage:
                        timeout_graceful_shutdown=5)
     )  # fmt: skip
     http = serve(server)
-    log.info("storing %s, %s, %s; API on http://%s:%d", bus.keys.tracks, bus.keys.alerts_all,
-             bus.keys.devices_state, settings.host, settings.port)  # fmt: skip
+    log.info("storing %s, %s, %s of %s; API on http://%s:%d", sites.key("tracks"),
+             sites.key("alerts/*"), sites.key("devices/state"), ", ".join(sites.ids),
+             settings.host, settings.port)  # fmt: skip
     deliverer.start()
     writer.run(keep_going=http.is_alive)
     deliverer.close()  # attempts in flight finish; the rest waits in the outbox
@@ -284,10 +298,11 @@ def main() -> None:
     except ValidationError as exc:
         raise SystemExit(f"{SERVICE}: invalid settings: {exc}") from exc
     try:
-        site = load_site(settings.site_file)
+        sites = load_sites(settings.site_entries)
     except SiteFileError as exc:
         raise SystemExit(f"{SERVICE}: {exc}") from exc
-    configure_logging(service=SERVICE, site=site.site_id, level=settings.log_level)
+    site_id = sites.default.site_id
+    configure_logging(service=SERVICE, site=site_id, level=settings.log_level)
     for name in ("uvicorn", "uvicorn.error"):
         logging.getLogger(name).addFilter(_PlainUvicorn())
     try:
@@ -298,9 +313,9 @@ def main() -> None:
         dev_secret = prepare_keys(storage, settings, time.time())
         if dev_secret is not None:
             log.warning("dev mode: reads need no key; admin key for this run: %s", dev_secret)
-        with ServiceRuntime(SERVICE, site.site_id, BusSettings(),
+        with ServiceRuntime(SERVICE, site_id, BusSettings(),
                             status_period_s=settings.status_period_s) as runtime:  # fmt: skip
-            written = run(runtime, site, settings, storage, GatewayMetrics())
+            written = run(runtime, sites, settings, storage, GatewayMetrics())
         log.info("stopped after storing %d messages", written)
     finally:
         storage.close()

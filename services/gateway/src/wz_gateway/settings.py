@@ -53,6 +53,10 @@ class GatewaySettings(ServiceSettings):
 
     model_config = SettingsConfigDict(env_prefix="WZ_GATEWAY_", extra="ignore")
 
+    #: The sites served: site files or folders of them (``*.yaml``), comma-separated. Empty:
+    #: the one in ``WZ_SITE_FILE`` (a trailer's gateway). A central gateway on the regional
+    #: router lists every trailer's and stores all of them; the first is the API's default.
+    site_files: Annotated[list[Path], NoDecode] = Field(default_factory=list)
     #: Address and port of the HTTP server; port 0 takes any free port (tests).
     host: str = "127.0.0.1"
     port: Annotated[int, Field(ge=0, le=65535)] = 8000
@@ -132,10 +136,15 @@ class GatewaySettings(ServiceSettings):
     #: After a secret rotation, how long the previous secret still signs too [s].
     webhook_secret_grace_s: Annotated[float, Field(ge=0.0, le=30 * 86400.0)] = 86400.0
 
-    @field_validator("webhook_allowed_networks", mode="before")
+    @field_validator("webhook_allowed_networks", "site_files", mode="before")
     @classmethod
     def _parse_networks(cls, value: object) -> object:
         return _split_list(value)
+
+    @property
+    def site_entries(self) -> list[Path]:
+        """The site files (or folders) to serve: ``site_files``, else ``site_file``."""
+        return list(self.site_files) or [self.site_file]
 
     @field_validator("webhook_allowed_networks")
     @classmethod

@@ -21,7 +21,7 @@ import logging
 import math
 import struct
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -43,6 +43,7 @@ from sqlalchemy import (
     or_,
     select,
     text,
+    true,
     tuple_,
     update,
 )
@@ -150,9 +151,10 @@ class PointQuery:
 
 @dataclass(frozen=True)
 class AlertQuery:
-    """Alert events wanted; empty tuples mean any type, severity or phase."""
+    """Alert events wanted; empty tuples mean any type, severity or phase; site None: every
+    site's."""
 
-    site: str
+    site: str | None
     alert_types: tuple[str, ...] = ()
     severities: tuple[str, ...] = ()
     phases: tuple[str, ...] = ()
@@ -366,7 +368,11 @@ class Storage:
         connection.execute(stmt)
 
     def ingest(
-        self, messages: Iterable[Message], *, geo: GeoFrame, received_at: float
+        self,
+        messages: Iterable[Message],
+        *,
+        geo: GeoFrame | Mapping[str, GeoFrame],
+        received_at: float,
     ) -> IngestResult:
         """Write messages from the bus in one transaction.
 
@@ -380,8 +386,9 @@ class Storage:
         ----------
         messages : iterable of Message
             In arrival order.
-        geo : GeoFrame
-            The site's WGS84 frame, for the points' latitude and longitude.
+        geo : GeoFrame or mapping of site id to GeoFrame
+            The site's WGS84 frame, for the points' latitude and longitude (one per site for
+            a gateway that serves several; a batch of a site without one raises ``KeyError``).
         received_at : float
             The gateway's wall clock [s since the epoch] for every row.
         """
@@ -393,7 +400,8 @@ class Storage:
         with self.engine.begin() as connection:
             for message in items:
                 if isinstance(message, TrackBatch):
-                    result.points += self._write_batch(connection, message, geo, received_at)
+                    frame = geo if isinstance(geo, GeoFrame) else geo[message.site]
+                    result.points += self._write_batch(connection, message, frame, received_at)
                     result.track_batches += 1
                 elif isinstance(message, Alert):
                     if self._write_alert(connection, message, received_at):
@@ -472,7 +480,7 @@ class Storage:
         )
         # RETURNING says whether a row went in (rowcount is not reliable across drivers here).
         outcome = connection.execute(
-            stmt.on_conflict_do_nothing(index_elements=[alerts.c.alert_id]).returning(alerts.c.id)
+            stmt.on_conflict_do_nothing(index_elements=[alerts.c.site, alerts.c.alert_id]).returning(alerts.c.id)
         )
         return outcome.first() is not None
 
@@ -553,7 +561,9 @@ class Storage:
     def alerts(self, query: AlertQuery) -> Page:
         """A page of alert events, items :class:`Alert`."""
         c = alerts.c
-        conditions: list[ColumnElement[bool]] = [c.site == query.site]
+        conditions: list[ColumnElement[bool]] = []
+        if query.site is not None:
+            conditions.append(c.site == query.site)
         if query.alert_types:
             conditions.append(c.alert_type.in_(query.alert_types))
         if query.severities:
@@ -568,7 +578,7 @@ class Storage:
             conditions.append(c.track_id == query.track_id)
         if query.episode_id is not None:
             conditions.append(c.episode_id == query.episode_id)
-        stmt = self._page_order(select(alerts).where(and_(*conditions)), alerts, query.cursor,
+        stmt = self._page_order(select(alerts).where(and_(true(), *conditions)), alerts, query.cursor,
                                 query.limit, newest_first=query.newest_first)  # fmt: skip
         with self.engine.connect() as connection:
             rows = connection.execute(stmt).all()

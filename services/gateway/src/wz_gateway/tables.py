@@ -35,6 +35,8 @@ from sqlalchemy import (
     String,
     Table,
     Text,
+    UniqueConstraint,
+    inspect,
     text,
 )
 from sqlalchemy.schema import CreateColumn
@@ -117,7 +119,7 @@ alerts = Table(
     "alerts",
     metadata,
     Column("id", RowId, primary_key=True, autoincrement=True),
-    Column("alert_id", String(128), nullable=False, unique=True),
+    Column("alert_id", String(128), nullable=False),
     Column("site", String(64), nullable=False),
     Column("source_id", String(128), nullable=False),
     Column("episode_id", String(128), nullable=True),
@@ -140,6 +142,9 @@ alerts = Table(
     Index("ix_alerts_site_stamp", "site", "stamp"),
     Index("ix_alerts_episode", "episode_id"),
     Index("ix_alerts_received_at", "received_at"),
+    # An alert is stored once per site and id (a central gateway stores many sites, whose
+    # alert services may name episodes alike).
+    Index("ux_alerts_site_alert", "site", "alert_id", unique=True),
 )
 
 #: What the beacon and the sign showed, each time it changed.
@@ -340,9 +345,16 @@ _v1_track_points = Table(
 )
 
 
+# alerts as migration 1 made it (migration 4 makes alert_id unique per site, not overall).
+_v1_alerts = alerts.to_metadata(_v1_metadata)
+_v1_alerts.append_constraint(UniqueConstraint("alert_id"))
+_v1_alerts.indexes.discard(next(i for i in _v1_alerts.indexes if i.name == "ux_alerts_site_alert"))
+
+
 def _v1_initial(connection: Connection) -> None:
-    metadata.create_all(connection, tables=[alerts, device_states, latest, api_keys])
-    _v1_metadata.create_all(connection, tables=[_v1_track_points, *_v1_webhook_tables])
+    metadata.create_all(connection, tables=[device_states, latest, api_keys])
+    _v1_metadata.create_all(connection, tables=[_v1_alerts, _v1_track_points,
+                                                *_v1_webhook_tables])  # fmt: skip
 
 
 def _add_columns(connection: Connection, table: Table, names: list[str]) -> None:
@@ -368,11 +380,29 @@ def _v3_smoothing(connection: Connection) -> None:
     metadata.create_all(connection, tables=[tracks])
 
 
+def _v4_alerts_per_site(connection: Connection) -> None:
+    if connection.dialect.name == "sqlite":  # a constraint cannot be dropped: copy the table
+        connection.execute(text("ALTER TABLE alerts RENAME TO alerts_v3"))
+        for index in alerts.indexes:  # the old ones went with the renamed table
+            connection.execute(text(f"DROP INDEX IF EXISTS {index.name}"))
+        metadata.create_all(connection, tables=[alerts])
+        names = ", ".join(column.name for column in alerts.c)
+        connection.execute(text(f"INSERT INTO alerts ({names}) SELECT {names} FROM alerts_v3"))
+        connection.execute(text("DROP TABLE alerts_v3"))
+        return
+    for constraint in inspect(connection).get_unique_constraints("alerts"):
+        if constraint["column_names"] == ["alert_id"]:
+            connection.execute(text(f'ALTER TABLE alerts DROP CONSTRAINT "{constraint["name"]}"'))
+    next(i for i in alerts.indexes if i.name == "ux_alerts_site_alert").create(connection)
+
+
 #: Every migration, in order; the last one's version is the schema this code reads and writes.
 MIGRATIONS: tuple[Migration, ...] = (
     Migration(1, "trajectories, alerts, device states, latest, API keys, webhooks", _v1_initial),
     Migration(2, "webhooks: filters, claim leases, expiry, delivery attempts", _v2_webhooks),
     Migration(3, "track points' covariances, track lives (smoothed when they end)",
               _v3_smoothing),
+    Migration(4, "alerts: one per site and alert_id (a central gateway stores many sites)",
+              _v4_alerts_per_site),
 )
 SCHEMA_VERSION = MIGRATIONS[-1].version

@@ -238,3 +238,27 @@ class TrackFinisher:
             self.metrics.smoothed_points.inc(len(points))
             self.metrics.smoothing_seconds.observe(time.perf_counter() - started)
         return len(points) if written else 0
+
+
+@dataclass
+class SiteFinishers:
+    """One :class:`TrackFinisher` per site, for a gateway that serves several; the writer
+    uses it as it would one finisher (each finisher only looks at its own site's batches)."""
+
+    finishers: list[TrackFinisher]
+
+    @classmethod
+    def of(cls, storage: Storage, sites: Iterable[Site], settings: GatewaySettings,
+           metrics: GatewayMetrics, clock: Callable[[], float] = time.time) -> SiteFinishers:  # fmt: skip
+        return cls([TrackFinisher.of(storage, site, settings, metrics, clock) for site in sites])
+
+    def resume(self) -> int:
+        return sum(finisher.resume() for finisher in self.finishers)
+
+    def before_write(self, group: Sequence[Message], received_at: float) -> None:
+        for finisher in self.finishers:
+            finisher.before_write(group, received_at)
+
+    def work(self, budget_s: float = SMOOTHING_BUDGET_S) -> int:
+        share = budget_s / max(1, len(self.finishers))
+        return sum(finisher.work(share) for finisher in self.finishers)

@@ -146,3 +146,15 @@ def device_feed_of(storage: Storage, site: Site, *, now: float, publisher: str,
         contact_email=contact_email,
     )  # fmt: skip
     return device_feed(inputs)
+
+
+def merge_device_feeds(feeds: list[dict[str, Any]]) -> dict[str, Any]:
+    """One DeviceFeed of several sites' (a central gateway): their features, and one data
+    source per site in ``feed_info`` (each feature's ``data_source_id`` names its own)."""
+    if len(feeds) == 1:
+        return feeds[0]
+    merged = {**feeds[0], "feed_info": dict(feeds[0]["feed_info"])}
+    merged["feed_info"]["data_sources"] = [source for feed in feeds
+                                           for source in feed["feed_info"]["data_sources"]]  # fmt: skip
+    merged["features"] = [feature for feed in feeds for feature in feed["features"]]
+    return merged
