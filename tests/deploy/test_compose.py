@@ -24,6 +24,7 @@ from typing import Any
 import jsonschema
 import pytest
 import yaml
+import zenoh
 from pydantic import BaseModel
 from pydantic_settings import BaseSettings
 
@@ -357,17 +358,37 @@ def test_every_service_has_a_real_health_probe(services: dict[str, Service]) -> 
             compile(probe[2], f"<{service.name} healthcheck>", "exec")
 
 
+def _mounted(service: Service, container_path: str) -> Path:
+    """The file of this repository that ``service`` sees at ``container_path``."""
+    for entry in service.config.get("volumes", []):
+        source, target = str(entry).split(":")[:2]
+        if container_path == target or container_path.startswith(target + "/"):
+            return COMPOSE_FILE.parent / source / container_path.removeprefix(target).lstrip("/")
+    raise AssertionError(f"{service.name} does not mount {container_path}")
+
+
+def _zenoh_endpoints(path: Path, which: str) -> list[str]:
+    return list(json.loads(zenoh.Config.from_file(str(path)).get_json(f"{which}/endpoints")))
+
+
 def test_router_probe_targets_the_port_it_listens_on(services: dict[str, Service]) -> None:
+    """The router listens (its zenoh config, as mounted) on the port its probe and the
+    published port name; every service's zenoh config (as mounted) connects to it."""
     router = services[ROUTER.name]
     command = router.config["command"]
-    listen = command[command.index("--listen") + 1]
+    assert "--listen" not in command  # the config file says it
+    (listen,) = _zenoh_endpoints(_mounted(router, command[command.index("--config") + 1]),
+                                 "listen")  # fmt: skip
     port = int(listen.rsplit(":", 1)[1])
+    assert listen == f"tcp/0.0.0.0:{port}"
     assert f"('127.0.0.1', {port})" in _probe(router)[2]
     assert any(str(p).endswith(f":{port}") for p in router.config["ports"])
     for service in services.values():
         if service.name != ROUTER.name:
-            endpoint = service.environment["WZ_BUS_CONNECT_ENDPOINTS"]
-            assert endpoint == f"tcp/{ROUTER.name}:{port}", service.name
+            assert not {"WZ_BUS_MODE", "WZ_BUS_CONNECT_ENDPOINTS"} & set(service.environment)
+            config = _mounted(service, service.environment["WZ_BUS_CONFIG_FILE"])
+            assert _zenoh_endpoints(config, "connect") == [f"tcp/{ROUTER.name}:{port}"]
+            assert json.loads(zenoh.Config.from_file(str(config)).get_json("mode")) == "client"
 
 
 def test_gateway_probe_asks_readiness_on_the_gateway_port(
@@ -635,7 +656,7 @@ def test_mounted_files_exist(services: dict[str, Service]) -> None:
         for entry in service.config.get("volumes", []):
             source = str(entry).split(":")[0]
             if source.startswith("."):
-                assert (COMPOSE_FILE.parent / source).is_file(), f"{service.name}: {source}"
+                assert (COMPOSE_FILE.parent / source).exists(), f"{service.name}: {source}"
 
 
 def _ignored(path: str, patterns: list[str]) -> bool:
@@ -675,3 +696,35 @@ def test_build_context_holds_what_the_images_copy_and_no_secrets(
     for secret_or_bulk in (".env", ".venv/bin/python", ".git/config", "runs/eval", ".tools"):
         assert _ignored(secret_or_bulk, patterns), secret_or_bulk
     assert _ignored("shared/src/wz_shared/__pycache__/bus.cpython-311.pyc", patterns)
+
+
+# --- the regional centre ------------------------------------------------------------------
+
+REGIONAL_FILE = ROOT / "deploy" / "regional" / "docker-compose.yml"
+
+
+def test_regional_file_is_valid_compose_and_serves_every_site() -> None:
+    """The centre: the regional router and a central gateway given the sites folder, each
+    with a probe, the gateway waiting for the router; what they mount exists."""
+    raw = yaml.safe_load(REGIONAL_FILE.read_text(encoding="utf-8"))
+    assert schema_errors(raw) == []
+    assert schema_errors(interpolate(raw, STAND_IN_ENV)) == []
+    router, gateway = raw["services"]["router"], raw["services"]["gateway"]
+    mounts = {target: REGIONAL_FILE.parent / source for service in (router, gateway)
+              for source, target, *_ in (str(v).split(":") for v in service["volumes"])
+              if source.startswith(".")}  # fmt: skip
+    config = router["command"][router["command"].index("--config") + 1]
+    assert config == "/etc/wz/zenoh/regional-router.json5"
+    assert (mounts["/etc/wz/zenoh"] / "regional-router.json5").is_file()
+    assert _zenoh_endpoints(mounts["/etc/wz/zenoh"] / "regional-router.json5", "connect") == []
+    env = gateway["environment"]
+    assert env["WZ_GATEWAY_SITE_FILES"] == "/etc/wz/sites"
+    assert list(mounts["/etc/wz/sites"].glob("*.yaml"))
+    assert gateway["depends_on"]["router"]["condition"] == "service_healthy"
+    for service in (router, gateway):
+        assert service["healthcheck"]["test"][0] == "CMD" and service["restart"] in RESTART_POLICIES
+    from wz_gateway.settings import GatewaySettings
+
+    unknown = [name for name in env if name not in READ_BY_LOGGING
+               and not is_setting(name, GatewaySettings) and not is_setting(name, BusSettings)]
+    assert unknown == []
