@@ -560,7 +560,14 @@ def markdown(report: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="wz eval", description=__doc__.split("\n")[0])
+    arguments = sys.argv[1:] if argv is None else argv
+    if any(a == "--log" or a.startswith("--log=") for a in arguments):  # a field log
+        from wz_eval.field_run import main as field_main
+
+        return field_main(arguments)
+    parser = argparse.ArgumentParser(prog="wz eval", description=__doc__.split("\n")[0],
+                                     epilog="With --log LOG_DIR [--truth GPS_FILE]: the paper's "
+                                     "field validation on a field log instead (its own options).")
     parser.add_argument("--site", type=Path, default=SimulatorSettings().site_file)
     parser.add_argument("--duration-s", type=float, default=600.0)
     parser.add_argument("--warmup-s", type=float, default=60.0)

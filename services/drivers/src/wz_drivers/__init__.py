@@ -1,0 +1,1 @@
+"""Field sensor drivers: real devices' formats in, the bus's messages out (see records.py)."""

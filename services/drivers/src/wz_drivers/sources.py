@@ -1,0 +1,170 @@
+"""A field log's sources as the bus's messages, merged in time order.
+
+Each source of the manifest (:mod:`wz_drivers.log`) is opened with its format's reader and each
+record becomes what the simulator would publish for that sensor:
+
+- a LiDAR sweep: a LiDAR frame envelope on ``wz/<site>/raw/lidar/<sensor>`` (the LiDAR detector
+  places it with the sensor's mount);
+- a camera image: a camera frame envelope on ``raw/camera/<sensor>``;
+- an object list of a radar or radar-camera unit: a :class:`DetectionBatch` on
+  ``detections/<sensor>``, the objects placed in the site frame with the unit's mount (ground
+  heading and position) and each given a covariance from the unit's range and azimuth noise
+  (the site file's radar intrinsics), as the camera-radar detector does for radar echoes. A
+  unit that tracks objects itself is a detector: its lists go to the fusion tracker directly.
+
+Stamps stay Unix seconds, on each device's clock.
+"""
+
+from __future__ import annotations
+
+import gzip
+import heapq
+import math
+import shutil
+import tempfile
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wz_drivers.log import FieldLog, LogSource
+from wz_drivers.records import CameraImage, FieldDataError, LidarSweep, ObjectList, Problems
+from wz_shared import codec
+from wz_shared.keys import Keys
+from wz_shared.messages import (
+    CameraFrameMeta,
+    Detection,
+    DetectionBatch,
+    LidarFrameMeta,
+    Message,
+)
+from wz_shared.site import RadarIntrinsics, SensorMount, Site
+
+#: Floor of a detection's variance [m^2] (a unit that reports 0 noise is not believed).
+_MIN_VARIANCE_M2 = 0.01
+
+
+@dataclass(frozen=True)
+class Outgoing:
+    """One message of the log, ready for the bus: its key, its payload, its message (None for
+    frames, which travel as envelopes), and its stamp [Unix s] for ordering and pacing."""
+
+    stamp: float
+    sensor_id: str
+    key: str
+    payload: bytes
+    message: Message | None = None
+
+
+def read_source(log: FieldLog, source: LogSource, problems: Problems) -> Iterator[Any]:
+    """The records of one source, with its format's reader (imported here: a log without an
+    Ouster recording does not need ouster-sdk loaded)."""
+    path = log.path(source.path) if "://" not in source.path else source.path
+    timestamps = None if source.timestamps is None else log.path(source.timestamps)
+    if source.format == "ouster":
+        assert source.metadata is not None  # the manifest requires it
+        return _read_ouster(log.path(source.path), log.path(source.metadata), problems)
+    if source.format == "frames":
+        from wz_drivers.lidar_files import read_frame_folder
+
+        return read_frame_folder(log.path(source.path), problems, timestamps=timestamps)
+    if source.format == "video":
+        from wz_drivers.video import read_video
+
+        return read_video(path, problems, timestamps=timestamps, start_unix_s=source.start_unix_s)
+    from wz_drivers.radar import read_objects
+
+    return read_objects(log.path(source.path), problems)
+
+
+def _read_ouster(path: Path, metadata: Path, problems: Problems) -> Iterator[LidarSweep]:
+    """An Ouster recording; a gzipped pcap (``.pcap.gz``, how logs are shipped) is unpacked to
+    a temporary file first (ouster-sdk reads files), removed when the reading ends."""
+    from wz_drivers.ouster import read_ouster
+
+    if path.suffix != ".gz":
+        yield from read_ouster(path, metadata, problems)
+        return
+    with tempfile.TemporaryDirectory(prefix="wz-ouster-") as folder:
+        unpacked = Path(folder) / path.stem
+        try:
+            with gzip.open(path, "rb") as packed, unpacked.open("wb") as raw:
+                shutil.copyfileobj(packed, raw)
+        except (OSError, EOFError) as exc:  # a cut archive: what came out is still read
+            problems.add(FieldDataError(path, f"the gzip archive is damaged ({exc}); reading "
+                                        "what could be unpacked"))  # fmt: skip
+        yield from read_ouster(unpacked, metadata, problems)
+
+
+def objects_to_detections(objects: ObjectList, mount: SensorMount, site: Site,
+                          index: int) -> DetectionBatch:  # fmt: skip
+    """An object list in the unit's frame as a site-frame :class:`DetectionBatch`."""
+    intrinsics = mount.intrinsics
+    if not isinstance(intrinsics, RadarIntrinsics):
+        raise ValueError(f"{mount.sensor_id} is a {mount.kind}, not a radar unit")
+    rotation = mount.pose.rotation()
+    heading = math.atan2(float(rotation[1, 0]), float(rotation[0, 0]))
+    c, s = math.cos(heading), math.sin(heading)
+    range_var = intrinsics.range_noise_std_m**2
+    azimuth_std = math.radians(intrinsics.azimuth_noise_std_deg)
+    detections = []
+    for obj in objects.objects:
+        x = mount.pose.x_m + c * obj.x_m - s * obj.y_m
+        y = mount.pose.y_m + s * obj.x_m + c * obj.y_m
+        rho = max(math.hypot(obj.x_m, obj.y_m), 1.0)
+        bearing = heading + math.atan2(obj.y_m, obj.x_m)
+        u = np.array([math.cos(bearing), math.sin(bearing)])
+        n = np.array([-u[1], u[0]])
+        covariance = (max(range_var, _MIN_VARIANCE_M2) * np.outer(u, u)
+                      + max((rho * azimuth_std) ** 2, _MIN_VARIANCE_M2) * np.outer(n, n))  # fmt: skip
+        detections.append(Detection(
+            x_m=x, y_m=y, covariance_m2=covariance.ravel().tolist(), object_class=obj.object_class,
+            speed_mps=obj.speed_mps, local_track_id=obj.object_id, length_m=obj.length_m,
+            width_m=obj.width_m,
+        ))  # fmt: skip
+    return DetectionBatch(site=site.site_id, source_id=mount.sensor_id, stamp=objects.stamp,
+                          frame_index=index, detections=detections)  # fmt: skip
+
+
+def to_outgoing(record: Any, source: LogSource, mount: SensorMount, site: Site,
+                index: int) -> Outgoing:  # fmt: skip
+    """One record of ``source`` as its bus message."""
+    keys = Keys(site.site_id)
+    sensor = source.sensor_id
+    if isinstance(record, LidarSweep):
+        meta = LidarFrameMeta(
+            site=site.site_id, source_id=sensor, stamp=record.stamp, frame_index=index,
+            rows=max(1, record.rows), columns=record.columns if record.organized else 0,
+            num_points=len(record.points), sweep_duration_s=record.sweep_duration_s,
+            organized=record.organized,
+        )  # fmt: skip
+        return Outgoing(record.stamp, sensor, keys.raw_lidar(sensor),
+                        codec.encode_lidar_frame(meta, record.points))  # fmt: skip
+    if isinstance(record, CameraImage):
+        camera_meta = CameraFrameMeta(site=site.site_id, source_id=sensor, stamp=record.stamp,
+                                      frame_index=index, width_px=record.width_px,
+                                      height_px=record.height_px)  # fmt: skip
+        return Outgoing(record.stamp, sensor, keys.raw_camera(sensor),
+                        codec.encode_camera_frame(camera_meta, record.jpeg))  # fmt: skip
+    if isinstance(record, ObjectList):
+        batch = objects_to_detections(record, mount, site, index)
+        return Outgoing(record.stamp, sensor, keys.detections(sensor),
+                        codec.encode_json(batch), batch)  # fmt: skip
+    raise TypeError(f"no bus message for a {type(record).__name__}")
+
+
+def _numbered(log: FieldLog, source: LogSource, problems: Problems) -> Iterator[Outgoing]:
+    mount = next(m for m in log.site.sensors if m.sensor_id == source.sensor_id)
+    for index, record in enumerate(read_source(log, source, problems)):
+        yield to_outgoing(record, source, mount, log.site, index)
+
+
+def merged(log: FieldLog, problems: Problems,
+           only: set[str] | None = None) -> Iterator[Outgoing]:  # fmt: skip
+    """Every source's messages in stamp order (each source is in order already: its reader
+    drops what goes back); ``only``: these sensor ids."""
+    streams = [_numbered(log, source, problems) for source in log.sources
+               if only is None or source.sensor_id in only]  # fmt: skip
+    return heapq.merge(*streams, key=lambda out: out.stamp)

@@ -1,0 +1,304 @@
+"""PCD / PLY / NPZ frame files and folders to LiDAR sweeps (real files in tmp_path)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+import pytest
+
+from wz_drivers.lidar_files import (
+    lzf_decompress,
+    read_frame,
+    read_frame_folder,
+    read_pcd,
+    read_ply,
+    time_from_name,
+)
+from wz_drivers.records import FieldDataError, Problems
+
+# The shared data folder sits beside the checkout (as for wz_lidar_detector.real_frame).
+REAL_FRAME = Path(__file__).resolve().parents[3] / "shared/data/real-freeway-lidar/rawdata.pcd"
+T0 = 1_700_000_000.0
+
+
+def organized_points(rows: int, columns: int, seed: int = 0) -> npt.NDArray[np.float32]:
+    """``(rows * columns, 4)`` x y z intensity with a few NaN (no-return) slots."""
+    rng = np.random.default_rng(seed)
+    points = rng.uniform(-50.0, 50.0, size=(rows * columns, 4)).astype(np.float32)
+    points[:, 3] = rng.integers(0, 256, size=rows * columns)
+    points[rng.choice(rows * columns, size=rows * columns // 5, replace=False), :3] = np.nan
+    return points
+
+
+def write_pcd(path: Path, points: npt.NDArray[np.float32], *, rows: int = 1, data: str = "ascii",
+              fields: tuple[str, ...] = ("x", "y", "z", "intensity")) -> Path:  # fmt: skip
+    """A PCD v0.7 file as PCL writes it (float32 fields)."""
+    count = len(points)
+    header = (
+        "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\n"
+        f"FIELDS {' '.join(fields)}\nSIZE {' '.join('4' for _ in fields)}\n"
+        f"TYPE {' '.join('F' for _ in fields)}\nCOUNT {' '.join('1' for _ in fields)}\n"
+        f"WIDTH {count // rows}\nHEIGHT {rows}\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {count}\n"
+        f"DATA {data}\n"
+    )
+    if data == "ascii":
+        body = "".join(" ".join(f"{v:.7g}" for v in row) + "\n" for row in points).encode()
+    else:
+        body = np.ascontiguousarray(points, dtype="<f4").tobytes()
+    path.write_bytes(header.encode() + body)
+    return path
+
+
+def write_ply(path: Path, points: npt.NDArray[np.float32], *, binary: bool,
+              big_endian: bool = False) -> Path:  # fmt: skip
+    properties = ["x", "y", "z", "intensity"][: points.shape[1]]
+    fmt = "ascii" if not binary else "binary_big_endian" if big_endian else "binary_little_endian"
+    header = (
+        f"ply\nformat {fmt} 1.0\ncomment seeded\n"
+        f"element vertex {len(points)}\n"
+        + "".join(f"property float {name}\n" for name in properties)
+        + "element face 0\nproperty list uchar int vertex_indices\nend_header\n"
+    )
+    if binary:
+        body = np.ascontiguousarray(points, dtype=">f4" if big_endian else "<f4").tobytes()
+    else:
+        body = "".join(" ".join(f"{v:.7g}" for v in row) + "\n" for row in points).encode()
+    path.write_bytes(header.encode() + body)
+    return path
+
+
+# --- the real 80-beam frame -----------------------------------------------------------------
+
+
+def test_real_frame_keeps_organization_values_and_no_return_slots() -> None:
+    assert REAL_FRAME.is_file(), f"the real frame is missing: {REAL_FRAME}"
+    sweep = read_pcd(REAL_FRAME)
+    # Header: WIDTH 1800, HEIGHT 80, POINTS 144000, fields x y z intensity (README).
+    assert (sweep.rows, sweep.columns, sweep.organized) == (80, 1800, True)
+    assert sweep.points.shape == (144_000, 4) and sweep.points.dtype == np.float32
+    returns = np.isfinite(sweep.points[:, :3]).all(axis=1)
+    assert returns.sum() == 95_026  # "about 95,000 real returns"
+    assert np.isnan(sweep.points[~returns, :3]).all()  # no-return slots stay NaN, in place
+    # The first return is point 9366 (row 5, column 366): data line 9366 after 11 header lines.
+    lines = REAL_FRAME.read_text().splitlines()
+    assert lines[11 + 9366] == "-28.49471 17.04936 -3.363432 37"
+    np.testing.assert_array_equal(np.flatnonzero(returns)[:2], [9366, 9446])
+    np.testing.assert_allclose(
+        sweep.points[9366], [-28.49471, 17.04936, -3.363432, 37.0], rtol=1e-6
+    )
+    np.testing.assert_allclose(sweep.points.reshape(80, 1800, 4)[5, 446],
+                               [-28.54152, 17.21296, -3.376043, 111.0], rtol=1e-6)  # fmt: skip
+    assert np.nanmax(sweep.points[:, 3]) == 251.0  # intensity in the sensor's 0-255 scale
+    assert sweep.stamp == 0.0 and sweep.where == str(REAL_FRAME)
+
+
+@pytest.mark.parametrize("name", ["rawdata.pcd", "background.pcd", "filtered.pcd"])
+def test_real_files_agree_with_the_lidar_detectors_reader(name: str) -> None:
+    """Two parsers written apart (wz_lidar_detector.readers is the detector's own)."""
+    readers = pytest.importorskip("wz_lidar_detector.readers")
+    path = REAL_FRAME.parent / name
+    ours = read_pcd(path)
+    theirs = readers.read_point_cloud(path)
+    expected = theirs.points
+    if ours.organized:
+        assert (ours.rows, ours.columns) == (theirs.rows, theirs.columns) == (80, 1800)
+    else:
+        assert theirs.rows == 1
+        expected = expected[np.isfinite(expected[:, :3]).all(axis=1)]  # we drop no-returns
+    np.testing.assert_array_equal(ours.points, expected)
+
+
+# --- single files ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("data", ["ascii", "binary"])
+def test_organized_pcd_round_trip(tmp_path: Path, data: str) -> None:
+    points = organized_points(4, 30, seed=1)
+    points[7, :3] = 0.0  # a driver's (0, 0, 0) no-return marker
+    sweep = read_pcd(write_pcd(tmp_path / f"{T0 + 0.25}.pcd", points, rows=4, data=data))
+    assert (sweep.rows, sweep.columns, sweep.organized) == (4, 30, True)
+    assert sweep.stamp == T0 + 0.25  # from the file name
+    expected = points.copy()
+    expected[7, :3] = np.nan
+    np.testing.assert_allclose(sweep.points, expected, rtol=1e-6, equal_nan=True)
+
+
+def test_unorganized_pcd_drops_no_return_points_and_fills_missing_intensity(
+    tmp_path: Path,
+) -> None:
+    points = organized_points(1, 40, seed=2)[:, :3]
+    sweep = read_pcd(write_pcd(tmp_path / "a.pcd", points, fields=("x", "y", "z")))
+    finite = np.isfinite(points).all(axis=1)
+    assert (sweep.rows, sweep.columns, sweep.organized) == (1, 0, False)
+    np.testing.assert_allclose(sweep.points[:, :3], points[finite], rtol=1e-6)
+    assert np.isnan(sweep.points[:, 3]).all()
+
+
+def test_binary_compressed_pcd_written_by_open3d(tmp_path: Path) -> None:
+    o3d = pytest.importorskip("open3d")
+    # A grid with repeated values, so that LZF uses back references, not only literals.
+    grid = np.stack(np.meshgrid(np.arange(20.0), np.arange(15.0), [-4.5]), axis=-1)
+    xyz = grid.reshape(-1, 3) + np.random.default_rng(3).integers(0, 3, size=(300, 1))
+    cloud = o3d.geometry.PointCloud()
+    cloud.points = o3d.utility.Vector3dVector(xyz)
+    path = tmp_path / "compressed.pcd"
+    assert o3d.io.write_point_cloud(str(path), cloud, write_ascii=False, compressed=True)
+    data = path.read_bytes()
+    body = data.index(b"DATA binary_compressed\n") + len(b"DATA binary_compressed\n")
+    compressed_size, raw_size = np.frombuffer(data, dtype="<u4", count=2, offset=body)
+    assert compressed_size < raw_size // 2  # back references were needed
+    sweep = read_frame(path, stamp=T0)
+    np.testing.assert_allclose(sweep.points[:, :3], xyz, rtol=1e-6)
+    assert sweep.stamp == T0 and not sweep.organized
+
+
+def test_lzf_overlapping_back_reference_and_corrupt_stream() -> None:
+    # "ab" as a literal run, then a reference 2 back of length 6: the run repeats itself.
+    assert lzf_decompress(bytes([0x01]) + b"ab" + bytes([0x80, 0x01]), 8) == b"abababab"
+    with pytest.raises(ValueError, match="out of bounds"):
+        lzf_decompress(bytes([0x80, 0x05]), 8)  # a reference before the start
+
+
+@pytest.mark.parametrize(("binary", "big_endian"), [(False, False), (True, False), (True, True)])
+def test_ply_vertices(tmp_path: Path, binary: bool, big_endian: bool) -> None:
+    points = np.random.default_rng(4).uniform(-20, 20, size=(25, 4)).astype(np.float32)
+    path = write_ply(tmp_path / "cloud.ply", points, binary=binary, big_endian=big_endian)
+    sweep = read_ply(path)
+    np.testing.assert_allclose(sweep.points, points, rtol=1e-6)
+    no_intensity = read_frame(write_ply(tmp_path / "xyz.ply", points[:, :3], binary=binary))
+    assert np.isnan(no_intensity.points[:, 3]).all()
+
+
+def test_npz_frames_flat_and_organized(tmp_path: Path) -> None:
+    points = organized_points(3, 10, seed=5)
+    np.savez(tmp_path / "flat.npz", points=points, stamp=np.float64(T0 + 1.5))
+    flat = read_frame(tmp_path / "flat.npz")
+    assert flat.stamp == T0 + 1.5 and not flat.organized
+    assert len(flat.points) == np.isfinite(points[:, :3]).all(axis=1).sum()
+    np.savez(tmp_path / "image.npz", points=points.reshape(3, 10, 4))
+    image = read_frame(tmp_path / "image.npz", stamp=T0)
+    assert (image.rows, image.columns, image.organized) == (3, 10, True)
+    np.testing.assert_array_equal(image.points, points)
+
+
+def test_file_names_carrying_times() -> None:
+    assert time_from_name(Path("1700000000.123456789.pcd")) == pytest.approx(T0 + 0.123456789)
+    assert time_from_name(Path("lidar_1700000000250000000.pcd")) == T0 + 0.25  # ns
+    assert time_from_name(Path("1700000000250.ply")) == T0 + 0.25  # ms
+    assert time_from_name(Path("sensor2_1700000000.npz")) == T0
+    assert time_from_name(Path("000123.pcd")) is None  # a frame counter is not a time
+    assert time_from_name(Path("frame.pcd")) is None
+
+
+# --- malformed files ------------------------------------------------------------------------
+
+
+def test_truncated_ascii_pcd_names_the_line_where_data_ends(tmp_path: Path) -> None:
+    path = write_pcd(tmp_path / "cut.pcd", organized_points(2, 10, seed=6), rows=2)
+    lines = path.read_text().splitlines(keepends=True)
+    path.write_text("".join(lines[:-5]))  # 11 header lines, 15 of 20 points
+    with pytest.raises(FieldDataError, match="20 points, the data ends after 15") as caught:
+        read_pcd(path)
+    assert caught.value.path == str(path) and caught.value.line == 27
+
+
+def test_bad_ascii_value_names_its_line(tmp_path: Path) -> None:
+    path = write_pcd(tmp_path / "bad.pcd", organized_points(1, 10, seed=7))
+    lines = path.read_text().splitlines(keepends=True)
+    lines[14] = "1.0 2.0 oops 4\n"
+    path.write_text("".join(lines))
+    with pytest.raises(FieldDataError, match="not numbers") as caught:
+        read_pcd(path)
+    assert str(caught.value).startswith(f"{path}:15: ")
+
+
+def test_truncated_binary_pcd(tmp_path: Path) -> None:
+    path = write_pcd(tmp_path / "cut.pcd", organized_points(2, 10, seed=8), rows=2, data="binary")
+    path.write_bytes(path.read_bytes()[:-40])
+    with pytest.raises(FieldDataError, match=r"20 points, data has 17 .*truncated"):
+        read_pcd(path)
+
+
+def test_header_without_z_names_the_fields_line(tmp_path: Path) -> None:
+    points = organized_points(1, 5, seed=9)[:, [0, 1, 3]]
+    path = write_pcd(tmp_path / "noz.pcd", points, fields=("x", "y", "intensity"))
+    with pytest.raises(FieldDataError, match="no z field: FIELDS x y intensity") as caught:
+        read_pcd(path)
+    assert caught.value.line == 3
+
+
+def test_not_a_point_cloud(tmp_path: Path) -> None:
+    (tmp_path / "notes.pcd").write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00binary junk")
+    with pytest.raises(FieldDataError, match="header is not ASCII text"):
+        read_frame(tmp_path / "notes.pcd")
+    with pytest.raises(FieldDataError, match="no such file"):
+        read_frame(tmp_path / "missing.pcd")
+
+
+# --- folders --------------------------------------------------------------------------------
+
+
+def test_folder_with_timestamps_csv_reports_and_skips_bad_frames(tmp_path: Path) -> None:
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for index in range(1, 7):
+        write_pcd(frames / f"{index:06d}.pcd", organized_points(2, 8, seed=index), rows=2,
+                  data="binary" if index % 2 else "ascii")  # fmt: skip
+    # Frame 3 truncated; frame 5's time goes back; frame 6 has no row.
+    path3 = frames / "000003.pcd"
+    path3.write_bytes(path3.read_bytes()[:-10])
+    (frames / "README.txt").write_text("not a frame")
+    csv_path = tmp_path / "timestamps.csv"
+    csv_path.write_text(
+        "file,time_unix_s\n"
+        f"000001.pcd,{T0}\n000002.pcd,{T0 + 0.1}\n000003.pcd,{T0 + 0.2}\n"
+        f"000004.pcd,{T0 + 0.3}\n000005.pcd,{T0 + 0.25}\n"
+    )
+    problems = Problems()
+    sweeps = list(read_frame_folder(frames, problems, timestamps=csv_path))
+    assert [Path(s.where).name for s in sweeps] == ["000001.pcd", "000002.pcd", "000004.pcd"]
+    assert [s.stamp for s in sweeps] == [T0, T0 + 0.1, T0 + 0.3]
+    np.testing.assert_allclose(sweeps[1].points, organized_points(2, 8, seed=2), rtol=1e-6,
+                               equal_nan=True)  # fmt: skip
+    messages = [str(error) for error in problems.errors]
+    assert len(messages) == 3, messages
+    assert messages[0].startswith(f"{path3}: header says 16 points")
+    assert messages[1].startswith(f"{csv_path}:6: time 1700000000.250000 of 000005.pcd is not "
+                                  "after 1700000000.300000 (000004.pcd)")  # fmt: skip
+    assert messages[2] == f"{frames / '000006.pcd'}: no row in {csv_path}: frame skipped"
+
+
+def test_folder_times_from_names_and_npz_stamps(tmp_path: Path) -> None:
+    rng_points = organized_points(1, 12, seed=10)
+    write_pcd(tmp_path / "scan_1700000000.5.pcd", rng_points)
+    write_pcd(tmp_path / "scan_1700000000.25.pcd", rng_points)  # .25 sorts before .5
+    write_ply(tmp_path / "scan_1700000001000000000.ply", rng_points[:4], binary=True)  # ns
+    np.savez(tmp_path / "scan_later.npz", points=rng_points, stamp=np.float64(T0 + 2))
+    write_pcd(tmp_path / "scan_noname.pcd", rng_points)
+    problems = Problems()
+    sweeps = list(read_frame_folder(tmp_path, problems))
+    assert [s.stamp for s in sweeps] == [T0 + 0.25, T0 + 0.5, T0 + 1.0, T0 + 2.0]
+    assert [str(e) for e in problems.errors] == [
+        f"{tmp_path / 'scan_noname.pcd'}: no time in the file name: frame skipped"
+    ]
+
+
+def test_folder_without_any_time_or_frames_raises(tmp_path: Path) -> None:
+    write_pcd(tmp_path / "000001.pcd", organized_points(1, 4, seed=11))
+    with pytest.raises(FieldDataError, match="no time for the frames"):
+        list(read_frame_folder(tmp_path, Problems()))
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with pytest.raises(FieldDataError, match="no frame files"):
+        list(read_frame_folder(empty, Problems()))
+    with pytest.raises(FieldDataError, match="no such folder"):
+        list(read_frame_folder(tmp_path / "absent", Problems()))
+
+
+def test_timestamps_csv_without_time_column_raises(tmp_path: Path) -> None:
+    write_pcd(tmp_path / "000001.pcd", organized_points(1, 4, seed=12))
+    (tmp_path / "times.csv").write_text("file,stamp\n000001.pcd,1\n")
+    with pytest.raises(FieldDataError, match=r"times.csv:1: missing columns: time \(time_unix_s"):
+        list(read_frame_folder(tmp_path, Problems(), timestamps=tmp_path / "times.csv"))
