@@ -222,6 +222,34 @@ def test_the_legacy_profile_round_trips_too(sweeps: list[LidarSweep], tmp_path: 
     assert_same_sweep(read, sweeps[0])
 
 
+def test_an_azimuth_window_sends_a_quarter_of_the_packets_and_reads_back(
+    sweeps: list[LidarSweep], tmp_path: Path
+) -> None:
+    """Encoder angles 135..225 deg: +-45 deg about the sensor's boresight (column j looks at
+    180 - 360 j / W deg), a quarter of the packets; the returns there come back as they were,
+    the rest is no return."""
+    pcap_path, metadata_path = tmp_path / "window.pcap", tmp_path / "window.json"
+    written = write_ouster_pcap(sweeps, pcap_path, metadata_path,
+                                azimuth_window_deg=(135.0, 225.0))  # fmt: skip
+    assert written.packets == SWEEPS * PACKETS_PER_SCAN // 4
+    problems = Problems()
+    read = list(read_ouster(pcap_path, metadata_path, problems))
+    assert len(problems) == 0 and len(read) == SWEEPS
+    for got, simulated in zip(read, sweeps, strict=True):
+        assert got.stamp == pytest.approx(simulated.stamp, abs=1e-6)
+        azimuth = np.degrees(np.arctan2(simulated.points[:, 1], simulated.points[:, 0]))
+        inside = np.isfinite(simulated.points[:, 0]) & (np.abs(azimuth) < 44.0)
+        returned = np.isfinite(got.points[:, 0])
+        assert returned.sum() >= inside.sum() > 0
+        got_azimuth = np.degrees(np.arctan2(got.points[returned, 1], got.points[returned, 0]))
+        assert np.abs(got_azimuth).max() <= 45.0 + 360.0 / COLUMNS
+        np.testing.assert_allclose(got.points[inside, :3], simulated.points[inside, :3],
+                                   atol=XYZ_TOLERANCE_M)  # fmt: skip
+    with pytest.raises(ValueError, match="azimuth window"):
+        write_ouster_pcap(sweeps, tmp_path / "bad.pcap", tmp_path / "bad.json",
+                          azimuth_window_deg=(200.0, 100.0))  # fmt: skip
+
+
 def test_an_osf_made_by_ouster_sdk_reads_the_same(
     recording: tuple[Path, Path, OusterRecording], tmp_path: Path
 ) -> None:

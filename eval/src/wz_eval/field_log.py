@@ -45,7 +45,9 @@ from wz_shared.site import DEFAULT_SITE_PATH, LidarIntrinsics, Site, load_site
 #: Unix time of simulation time zero.
 T0_UNIX_S = dt.datetime(2026, 9, 1, 14, 0, 0, tzinfo=dt.UTC).timestamp()
 LIDAR_ID, UNIT_ID = "lidar-mast", "radar-mast"
-LIDAR_CHANNELS, LIDAR_COLUMNS, LIDAR_RATE_HZ = 64, 512, 10
+LIDAR_CHANNELS, LIDAR_COLUMNS, LIDAR_RATE_HZ = 64, 2048, 10
+#: The LiDAR's azimuth window (Ouster encoder angles): +-45 deg about its boresight, the approach.
+LIDAR_WINDOW_DEG = (135.0, 225.0)
 UNIT_RATE_HZ = 5.0
 UNIT_CLOCK_AHEAD_S = 0.12
 UNIT_LOSS = 0.1
@@ -174,7 +176,8 @@ def write_sample_log(out: Path, options: SampleOptions | None = None) -> Path:
     pcap = out / "lidar" / "os1-64.pcap"
     write_ouster_pcap(sweeps, pcap, out / "lidar" / "os1-64.json", channels=LIDAR_CHANNELS,
                       columns_per_frame=LIDAR_COLUMNS, vertical_min_deg=-30.0,
-                      vertical_max_deg=11.0, rate_hz=LIDAR_RATE_HZ)  # fmt: skip
+                      vertical_max_deg=11.0, rate_hz=LIDAR_RATE_HZ,
+                      azimuth_window_deg=LIDAR_WINDOW_DEG)  # fmt: skip
     with pcap.open("rb") as raw, gzip.GzipFile(pcap.with_suffix(".pcap.gz"), "wb", mtime=0) as packed:
         shutil.copyfileobj(raw, packed)
     pcap.unlink()

@@ -18,7 +18,7 @@ import math
 import sys
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +31,7 @@ from wz_drivers.sources import merged
 from wz_eval.field import (
     FieldSettings,
     SourceObservations,
+    associate,
     estimate_clock_offset,
     evaluate_field,
     markdown_table,
@@ -78,8 +79,9 @@ class FieldRun:
     wall_s: float = 0.0
 
     def observations(self, sensor_id: str) -> list[Observation]:
-        """Every detection of one source, flattened."""
-        return [Observation(b.stamp, d.x_m, d.y_m, d.local_track_id)
+        """Every detection of one source, flattened, each at its own capture time (a spinning
+        LiDAR's objects are seen up to a sweep after the frame's stamp)."""
+        return [Observation(b.stamp + (d.time_offset_s or 0.0), d.x_m, d.y_m, d.local_track_id)
                 for b in self.detections.get(sensor_id, []) for d in b.detections]  # fmt: skip
 
 
@@ -185,6 +187,19 @@ def evaluate_log(field_log: FieldLog, truth_path: Path | None = None, *,
     sources = {**per_source, FUSED: _observations(run.fused)}
     result = evaluate_field(track, sources, road, settings,
                             clock_offsets_s={**offsets, FUSED: 0.0})  # fmt: skip
+    # The same, on the stretch every source saw the probe on: each on the same ground.
+    spans = []
+    for name, observations in sources.items():
+        association = associate(track, observations, road, offsets.get(name, 0.0), settings)
+        if len(association):
+            spans.append((float(association.truth_station_m.min()),
+                          float(association.truth_station_m.max())))  # fmt: skip
+    common = None
+    if len(spans) == len(sources) and max(a for a, _ in spans) < min(b for _, b in spans):
+        window = (max(a for a, _ in spans), min(b for _, b in spans))
+        common = evaluate_field(track, sources, road,
+                                replace(settings or FieldSettings(), station_window_m=window),
+                                clock_offsets_s={**offsets, FUSED: 0.0})  # fmt: skip
     report: dict[str, Any] = {
         "log": str(field_log.folder), "site": field_log.site.site_id,
         "truth": str(truth_path), "gps_fixes": len(track),
@@ -195,6 +210,8 @@ def evaluate_log(field_log: FieldLog, truth_path: Path | None = None, *,
         "detector_problems": run.detector_problems,
         "result": result.to_dict(),
         "table": markdown_table(result),
+        "common": None if common is None else common.to_dict(),
+        "common_table": None if common is None else markdown_table(common),
         "wall_s": run.wall_s,
     }  # fmt: skip
     if out_dir is not None:
@@ -209,9 +226,13 @@ def markdown(report: dict[str, Any]) -> str:
     lines = [f"# Field validation: `{report['log']}` against `{report['truth']}`", "",
              f"Site `{report['site']}`; {report['gps_fixes']} GPS fixes; detections per source: "
              + ", ".join(f"{k} {v}" for k, v in report["detections"].items()) + ".", "",
-             report["table"], "",
+             "Each source over all it saw of the probe:", "", report["table"], "",
              f"Fused track: {fused['distinct_ids']} track id(s), {fused['id_changes']} change(s) "
              f"on the probe; longest gap {fused['longest_gap_s']:.2f} s.", ""]  # fmt: skip
+    if report["common_table"]:
+        window = report["common"]["station_window_m"]
+        lines += [f"On the stretch every source saw the probe on (stations {window[0]:.0f} to "
+                  f"{window[1]:.0f} m):", "", report["common_table"], ""]
     if report["skipped_records"]:
         lines += ["Records skipped: " + ", ".join(f"{k}: {v}" for k, v in
                                                   report["skipped_records"].items()), ""]  # fmt: skip

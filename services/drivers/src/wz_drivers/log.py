@@ -19,6 +19,7 @@
         kind: objects                 # a radar or radar-camera unit's object lists
         format: csv                   # csv | jsonl
         path: radar-camera/objects.csv
+        clock_offset_s: 0.12          # its clock minus the GPS's (optional; wz eval --log)
     truth:                            # optional: the probe vehicle's GPS
       path: gps/probe.nmea            # NMEA (GGA/RMC/VTG) or CSV
       antenna_forward_m: 1.2          # antenna ahead of the vehicle's centre
@@ -61,6 +62,9 @@ class LogSource(_Strict):
     metadata: str | None = None
     timestamps: str | None = None
     start_unix_s: float | None = None
+    #: This source's clock minus the reference (GPS) clock [s], taken off every stamp before
+    #: anything uses it; ``wz eval --log`` estimates it (e.g. a unit on its own NTP: 0.12).
+    clock_offset_s: Annotated[float, Field(ge=-60.0, le=60.0)] = 0.0
 
     @model_validator(mode="after")
     def _format_fits_kind(self) -> LogSource:

@@ -590,6 +590,7 @@ def synthetic_sensor_info(
     serial_number: int = 992_000_000_001,
     init_id: int = 0x5A5A5,
     lidar_port: int = 7502,
+    azimuth_window_deg: tuple[float, float] = (0.0, 360.0),
 ) -> SensorInfo:
     """Metadata of an idealised OS-1 whose pixels are the simulator's rays.
 
@@ -600,6 +601,10 @@ def synthetic_sensor_info(
     sensor origin (``lidar_to_sensor_transform`` the half turn about z of every Ouster, without
     the 36.18 mm lift of a real OS-1): every ray leaves the sensor origin, like the
     simulator's. Serial number, firmware and ``user_data`` say the recording is synthetic.
+    ``azimuth_window_deg``: the sensor's azimuth window (Ouster's ``azimuth_window``, encoder
+    angles in the lidar frame, where column ``j`` is at ``360 j / W`` deg and looks at
+    ``180 - 360 j / W`` deg in the sensor frame): only the packets of those columns are sent,
+    as a roadside unit set to the approach does (a smaller recording).
 
     Raises
     ------
@@ -623,7 +628,15 @@ def synthetic_sensor_info(
     data_format.pixels_per_column = channels
     data_format.udp_profile_lidar = profile
     data_format.pixel_shift_by_row = [0] * channels
-    data_format.column_window = (0, columns_per_frame - 1)
+    first, last = azimuth_window_deg
+    if not 0.0 <= first < last <= 360.0:
+        raise ValueError(f"azimuth window {azimuth_window_deg} is not 0 <= start < end <= 360")
+    per_packet = data_format.columns_per_packet
+    # Whole packets: the window's columns rounded out to packet boundaries.
+    data_format.column_window = (
+        math.floor(first / 360.0 * columns_per_frame / per_packet) * per_packet,
+        min(columns_per_frame, math.ceil(last / 360.0 * columns_per_frame / per_packet)
+            * per_packet) - 1)  # fmt: skip
     info.format = data_format
     info.beam_altitude_angles = np.linspace(vertical_max_deg, vertical_min_deg, channels).tolist()
     info.beam_azimuth_angles = [0.0] * channels
@@ -644,7 +657,7 @@ def synthetic_sensor_info(
     config.udp_port_lidar = lidar_port
     config.udp_port_imu = lidar_port + 1
     config.timestamp_mode = TimestampMode.__members__[timestamp_mode]
-    config.azimuth_window = (0, 360_000)
+    config.azimuth_window = (round(first * 1000), round(last * 1000))
     info.config = config
     return info
 
@@ -662,6 +675,7 @@ def write_ouster_pcap(
     udp_profile: WritableProfile = "RNG19_RFL8_SIG16_NIR16",
     timestamp_mode: TimestampModeName = "TIME_FROM_PTP_1588",
     lidar_port: int = 7502,
+    azimuth_window_deg: tuple[float, float] = (0.0, 360.0),
 ) -> OusterRecording:
     """Write sweeps (e.g. simulated) as an Ouster recording: a pcap of lidar UDP packets and
     its sensor metadata JSON, which :func:`read_ouster`, ouster-sdk and Ouster's tools read.
@@ -713,8 +727,8 @@ def write_ouster_pcap(
         Beams and the lidar mode (``1024x20``, ``1024x10``, ``2048x10``, ...).
     vertical_min_deg, vertical_max_deg
         Altitudes of the lowest and highest beams [deg].
-    udp_profile, timestamp_mode, lidar_port
-        As above.
+    udp_profile, timestamp_mode, lidar_port, azimuth_window_deg
+        As above (:func:`synthetic_sensor_info`).
 
     Returns
     -------
@@ -735,6 +749,7 @@ def write_ouster_pcap(
         udp_profile=udp_profile,
         timestamp_mode=timestamp_mode,
         lidar_port=lidar_port,
+        azimuth_window_deg=azimuth_window_deg,
     )
     packet_format = PacketFormat(info)
     counts = {"scans": 0, "points_in": 0, "points_written": 0, "packets": 0}
@@ -754,12 +769,18 @@ def write_ouster_pcap(
                 frame.timestamp[:] = (unix_ns - boot_ns).astype(np.uint64)
             scan_packets = frame_to_packets(frame, packet_format, info.init_id, info.sn)
             per_packet = info.format.columns_per_packet
+            window_first, window_last = info.format.column_window
+            sent = 0
             for index, packet in enumerate(scan_packets):
-                last_column = min((index + 1) * per_packet, columns_per_frame) - 1
+                first_column = index * per_packet
+                last_column = min(first_column + per_packet, columns_per_frame) - 1
+                if last_column < window_first or first_column > window_last:
+                    continue  # outside the azimuth window: the sensor does not send it
                 packet.host_timestamp = int(unix_ns[last_column])
+                sent += 1
                 yield packet
             counts["scans"] += 1
-            counts["packets"] += len(scan_packets)
+            counts["packets"] += sent
             counts["points_in"] += offered
             counts["points_written"] += written
 

@@ -12,7 +12,8 @@ record becomes what the simulator would publish for that sensor:
   (the site file's radar intrinsics), as the camera-radar detector does for radar echoes. A
   unit that tracks objects itself is a detector: its lists go to the fusion tracker directly.
 
-Stamps stay Unix seconds, on each device's clock.
+Stamps stay Unix seconds, on each device's clock less the source's ``clock_offset_s`` (the
+manifest's; 0 by default).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import math
 import shutil
 import tempfile
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -95,7 +96,22 @@ def _read_ouster(path: Path, metadata: Path, problems: Problems) -> Iterator[Lid
         except (OSError, EOFError) as exc:  # a cut archive: what came out is still read
             problems.add(FieldDataError(path, f"the gzip archive is damaged ({exc}); reading "
                                         "what could be unpacked"))  # fmt: skip
-        yield from read_ouster(unpacked, metadata, problems)
+        yield from read_ouster(unpacked, metadata, _Renamed(problems, unpacked, path))
+
+
+class _Renamed(Problems):
+    """Passes each problem on, naming the archive instead of its temporary unpacked copy."""
+
+    def __init__(self, target: Problems, unpacked: Path, archive: Path) -> None:
+        super().__init__()
+        self._target, self._prefix, self._archive = target, str(unpacked), archive
+
+    def add(self, error: FieldDataError) -> None:
+        text = str(error)
+        if text.startswith(self._prefix):
+            where, _, message = text[len(self._prefix):].partition(": ")
+            error = FieldDataError(self._archive, f"unpacked{where}: {message}", line=None)
+        self._target.add(error)
 
 
 def objects_to_detections(objects: ObjectList, mount: SensorMount, site: Site,
@@ -158,6 +174,8 @@ def to_outgoing(record: Any, source: LogSource, mount: SensorMount, site: Site,
 def _numbered(log: FieldLog, source: LogSource, problems: Problems) -> Iterator[Outgoing]:
     mount = next(m for m in log.site.sensors if m.sensor_id == source.sensor_id)
     for index, record in enumerate(read_source(log, source, problems)):
+        if source.clock_offset_s:
+            record = replace(record, stamp=record.stamp - source.clock_offset_s)
         yield to_outgoing(record, source, mount, log.site, index)
 
 
