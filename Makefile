@@ -18,7 +18,7 @@ lint:
 	$(RUN) ruff check .
 
 typecheck:
-	$(RUN) mypy shared/src services/simulator/src services/lidar_detector/src services/camera_detector/src cli/src eval/src services/fusion_tracker/src services/alert_service/src services/gateway/src
+	$(RUN) mypy shared/src services/simulator/src services/lidar_detector/src services/camera_detector/src cli/src eval/src services/fusion_tracker/src services/alert_service/src services/gateway/src services/drivers/src
 
 pytest:
 	$(RUN) pytest -q

@@ -186,7 +186,7 @@ def evaluate_log(field_log: FieldLog, truth_path: Path | None = None, *,
     run.fused = fuse(field_log, run, offsets)
     sources = {**per_source, FUSED: _observations(run.fused)}
     result = evaluate_field(track, sources, road, settings,
-                            clock_offsets_s={**offsets, FUSED: 0.0})  # fmt: skip
+                            clock_offsets_s={FUSED: 0.0})  # fmt: skip
     # The same, on the stretch every source saw the probe on: each on the same ground.
     spans = []
     for name, observations in sources.items():
@@ -199,7 +199,7 @@ def evaluate_log(field_log: FieldLog, truth_path: Path | None = None, *,
         window = (max(a for a, _ in spans), min(b for _, b in spans))
         common = evaluate_field(track, sources, road,
                                 replace(settings or FieldSettings(), station_window_m=window),
-                                clock_offsets_s={**offsets, FUSED: 0.0})  # fmt: skip
+                                clock_offsets_s={FUSED: 0.0})  # fmt: skip
     report: dict[str, Any] = {
         "log": str(field_log.folder), "site": field_log.site.site_id,
         "truth": str(truth_path), "gps_fixes": len(track),
