@@ -194,3 +194,61 @@ def test_replay_over_zenoh_through_the_detector_and_tracker_processes(tmp_path: 
     # the check here is that the probe is tracked, not how often.
     assert near >= 10, f"{near} track positions within 2 m of the probe"
 
+
+
+def test_the_drivers_node_reads_a_live_udp_unit_onto_the_bus(tmp_path: Path) -> None:
+    """``python -m wz_drivers.node`` with a live source (``udp://``): each datagram's object
+    list becomes a site-frame DetectionBatch on the unit's key; a bad datagram is counted in the
+    node's status and the next one still goes through."""
+    import json
+    import socket
+
+    from tests.conftest import free_port
+    from wz_shared.messages import DetectionBatch, ServiceStatus
+
+    port = free_port()
+    log = tmp_path / "live"
+    log.mkdir()
+    shutil.copy(SAMPLE / "site.yaml", log / "site.yaml")
+    (log / "log.yaml").write_text(yaml.safe_dump({
+        "format": "wz-field-log/1", "site": "site.yaml",
+        "sources": [{"sensor_id": UNIT, "kind": "objects", "format": "udp",
+                     "path": f"udp://127.0.0.1:{port}"}]}))  # fmt: skip
+    endpoint, router = start_router()
+    env = {k: v for k, v in os.environ.items() if not k.startswith("WZ_")}
+    env.update(WZ_BUS_CONNECT_ENDPOINTS=endpoint, WZ_BUS_LISTEN_ENDPOINTS="",
+               WZ_DRIVERS_SOURCES=str(log / "log.yaml"), WZ_STATUS_PERIOD_S="0.2",
+               WZ_LOG_FORMAT="json")  # fmt: skip
+    node = subprocess.Popen([sys.executable, "-m", "wz_drivers.node"], cwd=ROOT, env=env)
+    settings = BusSettings(mode="client", connect_endpoints=[endpoint], listen_endpoints=[])
+    mount = next(m for m in load_log(SAMPLE).site.sensors if m.sensor_id == UNIT)
+    try:
+        with Bus.open(settings, site="us75-lincoln", service="test") as bus, \
+                socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp:  # fmt: skip
+            detections = bus.subscribe(bus.keys.detections(UNIT), DetectionBatch)
+            status = bus.subscribe(bus.keys.status("drivers"), ServiceStatus, mode="ring")
+            deadline = time.monotonic() + 30.0
+            got: DetectionBatch | None = None
+            while got is None and time.monotonic() < deadline:
+                for payload in (b"{not json", json.dumps({
+                        "time": 1_790_000_000.5, "objects": [
+                            {"id": 7, "range_m": 50.0, "azimuth_deg": 0.0, "speed_mps": 25.0,
+                             "class": "car"}]}).encode()):  # fmt: skip
+                    udp.sendto(payload, ("127.0.0.1", port))
+                got = detections.recv(0.5)
+            assert got is not None, "no detections from the drivers node"
+            (detection,) = got.detections
+            heading = np.arctan2(*mount.pose.rotation()[1::-1, 0])
+            assert detection.x_m == pytest.approx(mount.pose.x_m + 50.0 * np.cos(heading), abs=1e-6)
+            assert detection.y_m == pytest.approx(mount.pose.y_m + 50.0 * np.sin(heading), abs=1e-6)
+            assert (detection.local_track_id, detection.speed_mps) == (7, 25.0)
+            counted = None
+            while counted is None and time.monotonic() < deadline:
+                message = status.recv(0.5)
+                if message is not None and any("bad_record" in k for k in message.invalid_counts):
+                    counted = message
+            assert counted is not None, "the bad datagram was not counted"
+            assert node.poll() is None
+    finally:
+        stop_process(node)
+        stop_process(router)

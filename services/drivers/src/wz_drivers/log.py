@@ -20,6 +20,11 @@
         format: csv                   # csv | jsonl
         path: radar-camera/objects.csv
         clock_offset_s: 0.12          # its clock minus the GPS's (optional; wz eval --log)
+
+A live source names its device instead of a file (the drivers node reads it as it comes):
+``path: ouster://os-992xxx.local`` (an Ouster by hostname; metadata from the sensor),
+``path: rtsp://camera.local/stream`` (format video), ``path: udp://0.0.0.0:5005`` (format udp:
+one JSON object list a datagram).
     truth:                            # optional: the probe vehicle's GPS
       path: gps/probe.nmea            # NMEA (GGA/RMC/VTG) or CSV
       antenna_forward_m: 1.2          # antenna ahead of the vehicle's centre
@@ -57,7 +62,7 @@ class _Strict(BaseModel):
 class LogSource(_Strict):
     sensor_id: SensorId
     kind: Literal["lidar", "camera", "objects"]
-    format: Literal["ouster", "frames", "video", "csv", "jsonl"]
+    format: Literal["ouster", "frames", "video", "csv", "jsonl", "udp"]
     path: str
     metadata: str | None = None
     timestamps: str | None = None
@@ -69,13 +74,21 @@ class LogSource(_Strict):
     @model_validator(mode="after")
     def _format_fits_kind(self) -> LogSource:
         allowed = {"lidar": {"ouster", "frames"}, "camera": {"video"},
-                   "objects": {"csv", "jsonl"}}[self.kind]  # fmt: skip
+                   "objects": {"csv", "jsonl", "udp"}}[self.kind]  # fmt: skip
         if self.format not in allowed:
             raise ValueError(f"a {self.kind} source is one of {sorted(allowed)}, not "
                              f"{self.format!r}")  # fmt: skip
-        if self.format == "ouster" and self.metadata is None:
+        if self.format == "udp" and not self.path.startswith("udp://"):
+            raise ValueError("a udp source's path is udp://<host>:<port> to listen on")
+        if self.format == "ouster" and self.metadata is None and not self.live:
             raise ValueError("an Ouster recording needs its metadata JSON (metadata: ...)")
         return self
+
+
+    @property
+    def live(self) -> bool:
+        """A device, not a file: ``ouster://<hostname>``, ``rtsp://...``, ``udp://host:port``."""
+        return "://" in self.path
 
 
 class LogTruth(_Strict):
@@ -147,9 +160,8 @@ def load_log(folder: str | Path) -> FieldLog:
         if mount.kind != SITE_KIND[source.kind]:
             raise FieldDataError(manifest_path, f"source {source.sensor_id} is {source.kind} "
                                  f"data but the site's sensor is a {mount.kind}")  # fmt: skip
-        is_url = "://" in source.path
         for relative in (source.path, source.metadata, source.timestamps):
-            if relative is not None and not (is_url and relative == source.path) \
+            if relative is not None and not (source.live and relative == source.path) \
                     and not (folder / relative).exists():  # fmt: skip
                 raise FieldDataError(manifest_path, f"source {source.sensor_id}: {relative} "
                                      "is missing")  # fmt: skip

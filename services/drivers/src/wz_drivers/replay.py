@@ -31,7 +31,8 @@ log = logging.getLogger(__name__)
 
 #: Exit code of a replay that skipped records (everything readable was replayed).
 EXIT_SKIPPED = 3
-_CLASS_OF_KIND = {"lidar": LidarFrameMeta, "camera": CameraFrameMeta, "objects": DetectionBatch}
+#: The message type of each source kind (frames travel as envelopes of their metadata).
+MESSAGE_CLASS = {"lidar": LidarFrameMeta, "camera": CameraFrameMeta, "objects": DetectionBatch}
 
 
 class _Publishers:
@@ -49,7 +50,7 @@ class _Publishers:
         publisher = self._by_sensor.get(out.sensor_id)
         if publisher is None:
             source = next(s for s in self._log.sources if s.sensor_id == out.sensor_id)
-            publisher = self._bus.publisher(out.key, _CLASS_OF_KIND[source.kind], block=True)
+            publisher = self._bus.publisher(out.key, MESSAGE_CLASS[source.kind], block=True)
             self._by_sensor[out.sensor_id] = publisher
             if not self._waited:  # declarations take a moment to reach the subscribers
                 publisher.wait_for_subscribers(self._wait_s)

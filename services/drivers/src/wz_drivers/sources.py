@@ -23,6 +23,7 @@ import heapq
 import math
 import shutil
 import tempfile
+import threading
 from collections.abc import Iterator
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -59,10 +60,20 @@ class Outgoing:
     message: Message | None = None
 
 
-def read_source(log: FieldLog, source: LogSource, problems: Problems) -> Iterator[Any]:
+def read_source(log: FieldLog, source: LogSource, problems: Problems,
+                stop: threading.Event | None = None) -> Iterator[Any]:  # fmt: skip
     """The records of one source, with its format's reader (imported here: a log without an
-    Ouster recording does not need ouster-sdk loaded)."""
-    path = log.path(source.path) if "://" not in source.path else source.path
+    Ouster recording does not need ouster-sdk loaded); a live source's until ``stop``."""
+    path = source.path if source.live else log.path(source.path)
+    if source.format == "ouster" and source.live:
+        from wz_drivers.ouster import open_live
+
+        return open_live(source.path.split("://", 1)[1], problems)
+    if source.format == "udp":
+        from wz_drivers.radar import listen_udp
+
+        host, _, port = source.path.split("://", 1)[1].rpartition(":")
+        return listen_udp(host, int(port), problems, stop=stop or threading.Event())
     timestamps = None if source.timestamps is None else log.path(source.timestamps)
     if source.format == "ouster":
         assert source.metadata is not None  # the manifest requires it
@@ -144,6 +155,16 @@ def objects_to_detections(objects: ObjectList, mount: SensorMount, site: Site,
                           frame_index=index, detections=detections)  # fmt: skip
 
 
+def key_of(site: Site, source: LogSource) -> str:
+    """The bus key a source's messages go on."""
+    keys = Keys(site.site_id)
+    if source.kind == "lidar":
+        return keys.raw_lidar(source.sensor_id)
+    if source.kind == "camera":
+        return keys.raw_camera(source.sensor_id)
+    return keys.detections(source.sensor_id)
+
+
 def to_outgoing(record: Any, source: LogSource, mount: SensorMount, site: Site,
                 index: int) -> Outgoing:  # fmt: skip
     """One record of ``source`` as its bus message."""
@@ -171,9 +192,11 @@ def to_outgoing(record: Any, source: LogSource, mount: SensorMount, site: Site,
     raise TypeError(f"no bus message for a {type(record).__name__}")
 
 
-def _numbered(log: FieldLog, source: LogSource, problems: Problems) -> Iterator[Outgoing]:
+def source_messages(log: FieldLog, source: LogSource, problems: Problems,
+                    stop: threading.Event | None = None) -> Iterator[Outgoing]:  # fmt: skip
+    """One source's messages in its order (a live source's as they come, until ``stop``)."""
     mount = next(m for m in log.site.sensors if m.sensor_id == source.sensor_id)
-    for index, record in enumerate(read_source(log, source, problems)):
+    for index, record in enumerate(read_source(log, source, problems, stop)):
         if source.clock_offset_s:
             record = replace(record, stamp=record.stamp - source.clock_offset_s)
         yield to_outgoing(record, source, mount, log.site, index)
@@ -183,6 +206,6 @@ def merged(log: FieldLog, problems: Problems,
            only: set[str] | None = None) -> Iterator[Outgoing]:  # fmt: skip
     """Every source's messages in stamp order (each source is in order already: its reader
     drops what goes back); ``only``: these sensor ids."""
-    streams = [_numbered(log, source, problems) for source in log.sources
+    streams = [source_messages(log, source, problems) for source in log.sources
                if only is None or source.sensor_id in only]  # fmt: skip
     return heapq.merge(*streams, key=lambda out: out.stamp)
