@@ -234,7 +234,33 @@ def _summary(benchmarks: dict[str, Any]) -> list[str]:
             f"{_ms(loaded['ingest_lag_ms']['p50'])} (p99 {_ms(loaded['ingest_lag_ms']['p99'])}) "
             f"under that load."
         )
+    crashes = benchmarks.get("recovery", {}).get("result")
+    if crashes:
+        services = crashes["services"]
+        worst = max(services, key=lambda name: services[name]["recovered_s"]["median"] or 0.0)
+        plain = {r["service"]: r["recovered_s"] for r in crashes["without_standby"]
+                 if r["recovered_s"] is not None}  # fmt: skip
+        slowest = max(plain, key=lambda name: plain[name]) if plain else None
+        lines.append(
+            f"- `kill -9` of each service of `wz up` in turn: restarted after "
+            f"**{_s(_median_of(services, 'restart_s'))}** (median over services), pipeline back "
+            f"to the gateway within **{_s(services[worst]['recovered_s']['median'])}** at worst "
+            f"({worst}, median of {crashes['rounds']} rounds; target {crashes['target_s']:.0f} "
+            f"s); restarted as new interpreters, without the warm standbys, up to "
+            f"{_s(plain.get(slowest) if slowest else None)} ({slowest}). "
+            + ("The gateway lost nothing it had stored."
+               if not any(crashes["gateway_lost"]) else "**The gateway lost stored data.**")
+        )  # fmt: skip
     return ["## Summary", "", *lines, ""] if lines else []
+
+
+def _s(value: float | None) -> str:
+    return "—" if value is None else f"{value:.1f} s"
+
+
+def _median_of(services: dict[str, Any], name: str) -> float | None:
+    values = sorted(v[name]["median"] for v in services.values() if v[name]["median"] is not None)
+    return values[len(values) // 2] if values else None
 
 
 # --- per benchmark ----------------------------------------------------------------------------
@@ -907,6 +933,62 @@ def _gateway_live(result: dict[str, Any]) -> list[str]:
     return [*lines, ""]
 
 
+def _recovery(result: dict[str, Any]) -> list[str]:
+    lines = [
+        "The real stack as `wz up` runs it (router, simulator with SUMO and its sensors, both "
+        "detectors, fusion tracker, alert service, gateway on SQLite; seed "
+        f"{result['seed']}, status messages every {result['status_period_s']} s). While the "
+        "pipeline is steady (every service running, the gateway's newest track batch fresh "
+        "and fed by both sensors, the service's warm standby ready), each service in turn gets "
+        "SIGKILL. Times from the kill, on one wall clock: **restart**, the supervisor's "
+        "`started <name>` line; **status**, the new process's first status message that is "
+        "`running` with data going through it; **pipeline**, the gateway's API (polled every "
+        f"{result['poll_period_s']} s) serving a batch received after the restart with a track "
+        "fresh from a sensor (from the killed detector's sensor after a detector's kill; after "
+        "the alert service's, also its first devices message); **recovered**, the latest of "
+        f"these. Median of {result['rounds']} rounds (each round's in brackets), then one "
+        "round with each standby killed first, so that the service restarts as a new "
+        f"interpreter. The stack was steady {result['ready_s']} s after `wz up`. Method: "
+        "`benchmarks/recovery.py`.",
+        "",
+    ]
+    plain = {r["service"]: r for r in result["without_standby"]}
+
+    def cell(times: dict[str, Any]) -> str:
+        median = times["median"]
+        if median is None:
+            return "—"
+        each = ", ".join("—" if v is None else f"{v:.2f}" for v in times["values"])
+        return f"{median:.2f} s ({each})"
+
+    rows = []
+    for service, times in result["services"].items():
+        bare = plain.get(service, {})
+        rows.append([
+            f"`{service}`", cell(times["restart_s"]), cell(times["status_s"]),
+            cell(times["pipeline_s"]), f"**{cell(times['recovered_s'])}**",
+            "—" if bare.get("recovered_s") is None else f"{bare['recovered_s']:.2f} s",
+        ])  # fmt: skip
+    lines += _table(["Killed", "restart", "status", "pipeline", "recovered",
+                     "recovered, no standby"], rows)  # fmt: skip
+    lines.append("")
+    devices = result["services"].get("alert-service", {}).get("devices_s")
+    if devices and devices["median"] is not None:
+        lines.append(f"- Alert service: its first devices message after the restart "
+                     f"{cell(devices)} after the kill.")  # fmt: skip
+    for index, check in enumerate(result["gateway_stored"]):
+        before, after = check["before"], check["after"]
+        label = f"round {index + 1}" if index < result["rounds"] else "round without standbys"
+        lines.append(
+            f"- Gateway, {label}: before its kill {before['track_points']:,} track points, "
+            f"{before['track_ids']} track ids, {before['alert_ids']} alert events; after its "
+            f"restart {after['track_points']:,}, {after['track_ids']}, {after['alert_ids']}: "
+            + ("nothing lost." if not check["lost"] else f"**lost {check['lost']}**.")
+        )
+    lines.append("")
+    return lines
+
+
 SECTIONS: dict[str, tuple[str, Callable[[dict[str, Any]], list[str]]]] = {
     "bus_latency": ("one-way latency between two processes", _bus_latency),
     "bus_throughput": ("messages per second between two processes", _bus_throughput),
@@ -922,6 +1004,8 @@ SECTIONS: dict[str, tuple[str, Callable[[dict[str, Any]], list[str]]]] = {
                         _webhook_latency),
     "gateway_live": ("the gateway storing 20 Hz track batches while clients read the live API",
                      _gateway_live),
+    "recovery": ("`kill -9` of each service of `wz up`: restart and pipeline recovery",
+                 _recovery),
 }
 
 

@@ -34,6 +34,7 @@ from benchmarks import (
     camera_detection,
     gateway_live,
     lidar_detection,
+    recovery,
     report,
     sensors,
     sumo_step,
@@ -55,6 +56,7 @@ BENCHMARKS: dict[str, Callable[[bool], dict[str, Any]]] = {
     "alert_latency": alert_latency.run,
     "gateway_live": gateway_live.run,
     "webhook_latency": webhook_latency.run,
+    "recovery": recovery.run,
 }
 RESULTS_PATH = ROOT / "benchmarks" / "results.json"
 MARKDOWN_PATH = ROOT / "BENCHMARKS.md"

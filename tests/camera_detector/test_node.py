@@ -179,6 +179,37 @@ def test_fused_detections_carry_the_radar_speed(
     assert reports == []
 
 
+def test_a_new_run_starts_the_image_tracker_and_the_radar_again(
+    small_camera: tuple[CameraModel, SensorMount],
+) -> None:
+    """A restarted simulation: the frames' stamps start again. Two frames are out of order;
+    from the third, a new run: detections again, fused with the new run's radar scans, local
+    ids after the old ones."""
+    model, mount = small_camera
+    detector, reports = make_detector(mount, with_radar=True)
+    radar_site_mount = radar_mount(SITE, None)
+    assert radar_site_mount is not None
+    radar = RadarModel(radar_site_mount, WEATHER_PRESETS["day"], seed=3, site_id=SITE.site_id)
+    old = run_frames(detector, model, radar, WARM_UP + 5)  # stamps 0 to 1.9 s
+    old_ids = {d.local_track_id for d in old[-1].detections}
+    assert old_ids and detector.runs == 1
+    new: list[DetectionBatch | None] = []
+    for index in range(6):  # stamps 0.05 to 0.55 s
+        meta, jpeg = frame(model, WARM_UP + index, traffic=True)
+        meta = meta.model_copy(update={"stamp": 0.05 + index * PERIOD_S})
+        detector.radar_scan(radar.scan(VEHICLES, meta.stamp, 100 + index).scan)
+        new.append(detector.handle(meta, jpeg, time.monotonic()))
+    assert new[:2] == [None, None]
+    assert [reason for reason, _ in reports] == ["out_of_order", "out_of_order"]
+    assert detector.runs == 2 and detector.last_stamp_s == pytest.approx(0.55)
+    last = new[-1]
+    assert last is not None and last.stamp == pytest.approx(0.55)
+    assert len(last.detections) == len(VEHICLES)  # confirmed again after min_hits frames
+    new_ids = {d.local_track_id for d in last.detections}
+    assert min(i for i in new_ids if i is not None) > max(i for i in old_ids if i is not None)
+    assert any(d.speed_mps is not None for d in last.detections)  # the new run's radar
+
+
 def test_a_garbage_jpeg_is_counted_and_skipped(
     small_camera: tuple[CameraModel, SensorMount],
 ) -> None:

@@ -1,17 +1,27 @@
-"""Stand-ins for services in the supervisor test: one that crashes, one that ignores SIGTERM.
+"""Stand-ins for services in the supervisor tests: one that crashes, one that ignores SIGTERM,
+one that serves until SIGTERM and says who it is.
 
-Usage: python -m tests.cli.stub_service crash|stubborn
+Usage: python -m tests.cli.stub_service crash|stubborn|serve [ARG...]
 """
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
+import threading
 import time
 
 
 def main() -> None:
     behaviour = sys.argv[1]
+    if behaviour == "serve":
+        stop = threading.Event()
+        signal.signal(signal.SIGTERM, lambda *_: stop.set())
+        sys.stdout.write(f"serving: pid {os.getpid()}, args {sys.argv[1:]}\n")
+        sys.stdout.flush()
+        stop.wait()
+        return
     if behaviour == "crash":
         sys.stdout.write("crashing now\n")
         sys.stderr.write("a line on stderr\n")

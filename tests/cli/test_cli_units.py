@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import signal
@@ -75,6 +76,18 @@ def test_stack_selection_and_child_environment(tmp_path: Path) -> None:
     assert (env["WZ_SIM_REALTIME_FACTOR"], env["WZ_SIM_SEED"]) == ("2.5", "7")
     names = [spec.name for spec in STACK]
     assert len(set(names)) == len(names)
+    # Defaults unless set: the simulator's warm-up.
+    assert env["WZ_SIM_WARMUP_S"] == "60"
+    assert simulator.child_env({"WZ_SIM_WARMUP_S": "0"}, options)["WZ_SIM_WARMUP_S"] == "0"
+    # State kept across restarts: under the run's state folder, unless set.
+    lidar = select(["lidar-detector"])[0]
+    assert "WZ_LIDAR_BACKGROUND_FILE" not in lidar.child_env({}, options)
+    with_state = dataclasses.replace(options, state_dir=tmp_path / "state")
+    assert lidar.child_env({}, with_state)["WZ_LIDAR_BACKGROUND_FILE"] == str(
+        (tmp_path / "state").resolve() / "lidar-detector" / "background.npz")  # fmt: skip
+    mine = {"WZ_LIDAR_BACKGROUND_FILE": "/var/lib/bg.npz"}
+    assert lidar.child_env(mine, with_state)["WZ_LIDAR_BACKGROUND_FILE"] == "/var/lib/bg.npz"
+    assert all(spec.standby for spec in STACK)
 
 
 def test_overlapping_key_expressions_are_recorded_once() -> None:

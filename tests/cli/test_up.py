@@ -21,6 +21,7 @@ from typing import Any
 import pytest
 
 from tests.cli.procs import ROOT, free_port, run_wz, running, wait_for, wz_argv, wz_env
+from wz_cli import supervisor as supervisor_module
 from wz_cli.stack import ServiceSpec, StackOptions
 from wz_cli.supervisor import Supervisor
 from wz_shared.site import DEFAULT_SITE_PATH
@@ -39,7 +40,23 @@ def _gone(pid: int) -> bool:
     return _state(pid) in (None, "Z", "X")  # a zombie has exited; only its parent must reap it
 
 
+def _is_standby(pid: int) -> bool:
+    """Whether ``pid`` runs ``python -m wz_cli.standby ...`` (waiting, or woken as a service)."""
+    try:
+        return b"wz_cli.standby" in Path(f"/proc/{pid}/cmdline").read_bytes()
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+
+
+def _waiting_standbys(log: str) -> set[int]:
+    """The warm standbys the supervisor's log shows started and not (yet) woken."""
+    started = re.findall(r"standby of \S+ \(pid (\d+)\) importing", log)
+    woken = re.findall(r"started \S+ \(pid (\d+)\) from its warm standby", log)
+    return {int(pid) for pid in started} - {int(pid) for pid in woken}
+
+
 def _children(pid: int) -> list[int]:
+    """Every live child of ``pid`` (services and their warm standbys)."""
     found = []
     for entry in Path("/proc").iterdir():
         if entry.name.isdigit():
@@ -131,7 +148,9 @@ def test_up_status_tap_restart_and_stop(tmp_path: Path) -> None:
         second_pid = pids[0]
         assert second_pid is not None
         children = _children(up.pid)
-        assert second_pid in children and len(children) == 2  # the router and the simulator
+        waiting = _waiting_standbys((tmp_path / "up.log").read_text())
+        services = [pid for pid in children if pid not in waiting]
+        assert second_pid in services and len(services) == 2  # the router and the simulator
 
         up.send_signal(signal.SIGINT)
         assert up.wait(30) == 0
@@ -149,8 +168,12 @@ def test_no_child_outlives_a_killed_supervisor(tmp_path: Path) -> None:
     demo = _start_up("demo", endpoint, tmp_path)
     with running(demo):
         wait_for(lambda: _simulator_pid(endpoint) is not None, 90.0, "the simulator alive")
+        # The simulator's warm standby too: one, and gone with the rest.
+        log = tmp_path / "demo.log"
+        wait_for(lambda: bool(_waiting_standbys(log.read_text())), 60.0, "the standby")
         children = _children(demo.pid)
-        assert len(children) == 2
+        (standby,) = _waiting_standbys(log.read_text())
+        assert standby in children and _is_standby(standby) and len(children) == 3
         demo.kill()  # SIGKILL: no chance to stop its children itself
         demo.wait()
     wait_for(lambda: all(map(_gone, children)), 15.0, "the orphans to exit")
@@ -219,3 +242,50 @@ def test_supervisor_backs_off_and_kills_what_ignores_sigterm(
     out = capsys.readouterr().out
     assert "crasher  | crashing now\n" in out and "crasher  | a line on stderr\n" in out
     assert "stubborn | ignoring SIGTERM\n" in out
+
+
+def test_a_crashed_service_restarts_from_its_warm_standby(
+    monkeypatch: pytest.MonkeyPatch,
+    caplog: pytest.LogCaptureFixture,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """Once the child has run STANDBY_AFTER_S, a standby imports its module and waits; a kill
+    -9 of the child wakes the standby: a new process that runs the module as `python -m`
+    would, arguments included. Stopping the stack ends the standby started after it."""
+    monkeypatch.setattr(supervisor_module, "STANDBY_AFTER_S", 0.5)
+    spec = ServiceSpec("server", "tests.cli.stub_service", "serves", "X_",
+                       args=("serve", "--flag"), standby=True)  # fmt: skip
+    options = StackOptions(f"tcp/127.0.0.1:{free_port()}", DEFAULT_SITE_PATH)
+    stop = threading.Event()
+    supervisor = Supervisor([spec], options, stop, base_env=wz_env(PYTHONPATH=str(ROOT)))
+    (child,) = supervisor.services
+    codes: list[int] = []
+    caplog.set_level(logging.INFO, logger="wz_cli.supervisor")
+    thread = threading.Thread(target=lambda: codes.append(supervisor.run()))
+    thread.start()
+    spares: list[int] = []
+    try:
+        wait_for(child.spare_ready.is_set, 60.0, "the standby ready")
+        assert child.process is not None and child.spare is not None
+        first, standby = child.process.pid, child.spare.pid
+        assert _is_standby(standby) and not _is_standby(first)
+        os.kill(first, signal.SIGKILL)
+        wait_for(lambda: child.restarts == 1 and child.running, 10.0, "the restart")
+        assert child.process is not None and child.process.pid == standby
+        wait_for(lambda: child.spare is not None, 10.0, "the next standby")
+        assert child.spare is not None
+        spares.append(child.spare.pid)
+    finally:
+        stop.set()
+        thread.join(30.0)
+    assert codes == [0]
+    assert child.process is not None and child.process.returncode == 0  # SIGTERM: clean stop
+    wait_for(lambda: all(map(_gone, spares)), 10.0, "the new standby to end")
+    out = capsys.readouterr().out
+    assert f"server | serving: pid {first}, args ['serve', '--flag']\n" in out
+    assert f"server | serving: pid {standby}, args ['serve', '--flag']\n" in out
+    assert "wz-standby-ready" not in out  # the supervisor takes that line
+    messages = [record.getMessage() for record in caplog.records]
+    assert f"started server (pid {standby}) from its warm standby, restart #1" in messages
+    assert any(m.startswith(f"standby of server (pid {standby}) ready: its imports took ")
+               for m in messages)  # fmt: skip

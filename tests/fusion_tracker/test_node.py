@@ -70,6 +70,33 @@ def test_core_publishes_a_batch_per_output_period_with_road_coordinates() -> Non
         assert track.status == TrackStatus.CONFIRMED and track.sources == ["lidar-mast"]
 
 
+def test_core_starts_a_new_run_when_a_sensor_starts_again() -> None:
+    """A restarted simulation counts from its start again: the sensors' stamps go back. The
+    first batches of the new run are late; from the third, a new run: tracks again, their ids
+    after the old ones, the output grid on the new stamps."""
+    rng = np.random.default_rng(4)
+    reports: list[str] = []
+    core = FusionCore(SITE, FusionTrackerSettings(), report=lambda r, d: reports.append(r))
+    first: list[TrackBatch] = []
+    for k in range(60):  # 3 s
+        first += core.add(batch("lidar-mast", k, 0.05 * k, rng, 0.2))
+    old_ids = {t.track_id for t in first[-1].tracks}
+    assert len(old_ids) == 2 and core.runs == 1
+    second: list[TrackBatch] = []
+    for k in range(60):  # the same 3 s again, from 0
+        second += core.add(batch("lidar-mast", 100 + k, 0.05 * k, rng, 0.2))
+    assert core.runs == 2
+    assert reports == ["late", "late"]  # the two batches before the new run was certain
+    assert second and second[0].stamp < 0.5 and second[-1].stamp > 2.5
+    assert np.allclose(np.diff([b.stamp for b in second]), 0.1, atol=0.051)
+    assert [b.cycle_index for b in second] == list(range(len(first), len(first) + len(second)))
+    new_ids = {t.track_id for t in second[-1].tracks}
+    assert len(new_ids) == 2 and min(new_ids) > max(old_ids)  # never reused
+    for track, (x, y) in zip(sorted(second[-1].tracks, key=lambda t: t.x_m),
+                             truth_at(second[-1].stamp), strict=True):  # fmt: skip
+        assert math.hypot(track.x_m - x, track.y_m - y) < 0.5
+
+
 def test_node_process_tracks_two_sensors_and_survives_bad_input(port: int) -> None:
     settings = BusSettings(listen_endpoints=[f"tcp/127.0.0.1:{port}"], connect_endpoints=[])
     env = {k: v for k, v in os.environ.items() if not k.startswith("WZ_")}

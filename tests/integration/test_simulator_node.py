@@ -123,3 +123,47 @@ def test_simulator_node_publishes_every_sensor_at_its_rate(port: int, tmp_path: 
     image = cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR)
     assert image.shape == (1200, 1200, 3)
     assert any(scan.targets for scan in radar_scans)
+
+
+def test_simulator_node_warms_up_before_it_publishes(port: int, tmp_path: Path) -> None:
+    """With a warm-up, the node simulates traffic first, publishing nothing ("starting"): the
+    first truth and frames come after it, on a road with vehicles as far as the sensors, each
+    sensor's frames numbered on simulation time as without one."""
+    site = load_site(DEFAULT_SITE_PATH)
+    settings = BusSettings(listen_endpoints=[f"tcp/127.0.0.1:{port}"], connect_endpoints=[])
+    with Bus.open(settings, site=site.site_id, service="node-test") as bus:
+        keys = bus.keys
+        lidar = bus.subscribe_frames(
+            keys.raw_lidar("lidar-mast"), LidarFrameMeta, mode="fifo", capacity=64
+        )
+        truth = bus.subscribe(keys.truth, GroundTruth)
+        status = bus.subscribe(keys.status("simulator"), ServiceStatus)
+        env = {
+            **os.environ,
+            "WZ_BUS_CONNECT_ENDPOINTS": f"tcp/127.0.0.1:{port}",
+            "WZ_BUS_LISTEN_ENDPOINTS": "",
+            "WZ_SIM_REALTIME_FACTOR": "1",
+            "WZ_SIM_WARMUP_S": "45",
+            "WZ_SIM_DURATION_S": "47",  # the warm-up counts: 2 s published
+            "WZ_SIM_SEED": "3",
+            "WZ_SIM_WORK_DIR": str(tmp_path),
+            "WZ_STATUS_PERIOD_S": "0.2",
+        }
+        node = subprocess.Popen([sys.executable, "-m", "wz_simulator.node"], cwd=ROOT, env=env)
+        try:
+            assert node.wait(120.0) == 0
+        finally:
+            if node.poll() is None:
+                node.kill()
+        truths = truth.drain()
+        frames = lidar.drain()
+        states = [s.state.value for s in status.drain()]
+    assert truths and frames
+    assert all(45.0 < t.stamp <= 47.0 + 1e-9 for t in truths)
+    assert truths[0].step_index > 45.0 / 0.05 - 1  # the warm-up's steps count
+    # Traffic all along the road, within the LiDAR's range (the mast is at station 980) too.
+    stations = [v.station_m for v in truths[0].vehicles]
+    assert len(stations) >= 5 and max(stations) > 850.0, stations
+    assert all(f.meta.stamp > 45.0 for f in frames)
+    assert all(abs(f.meta.stamp - f.meta.frame_index / 20.0) < 1e-9 for f in frames)
+    assert states[0] == "starting" and "running" in states

@@ -19,7 +19,7 @@ from wz_shared.keys import Keys, site_of_key
 from wz_shared.logs import JsonFormatter, configure_logging
 from wz_shared.messages import Alert
 from wz_shared.settings import BusSettings
-from wz_shared.timebase import Pacer, SimClock
+from wz_shared.timebase import Pacer, RunWatch, SimClock
 
 ROOT = Path(__file__).resolve().parents[2]
 ALERT = next(m for m in json_samples() if isinstance(m, Alert))
@@ -156,6 +156,27 @@ def test_sim_clock_never_goes_back() -> None:
     assert clock.now() == 1.5
     with pytest.raises(ValueError, match="back"):
         clock.advance_to(1.0)
+    clock.restart(0.2)  # a new run only
+    assert clock.now() == 0.2
+    clock.advance_to(0.3)
+    assert clock.now() == 0.3
+
+
+def test_run_watch_tells_a_new_run_from_a_stray_late_message() -> None:
+    watch = RunWatch(step_back_s=1.0, confirm=3)
+    assert [watch.observe(t) for t in (10.0, 10.1, 9.5, 10.2)] == ["run"] * 4  # within 1 s
+    assert watch.newest_s == 10.2
+    # One stray old message, then the run goes on: late, not a new run.
+    assert [watch.observe(t) for t in (3.0, 10.3)] == ["behind", "run"]
+    # Stamps going back and on for three messages: a restarted stream.
+    assert [watch.observe(t) for t in (0.05, 0.10, 0.15, 0.20)] == [
+        "behind", "behind", "new_run", "run"]  # fmt: skip
+    assert watch.newest_s == 0.20
+    # Far back but not going on from there (not increasing): no new run.
+    watch = RunWatch(step_back_s=1.0, confirm=3)
+    watch.observe(50.0)
+    assert [watch.observe(t) for t in (5.0, 4.0, 3.0, 2.0)] == ["behind"] * 4
+    assert watch.newest_s == 50.0
 
 
 def test_pacer_holds_simulation_to_a_multiple_of_real_time() -> None:

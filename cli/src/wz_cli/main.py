@@ -14,6 +14,7 @@ import logging
 import os
 import subprocess
 import sys
+import tempfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -119,18 +120,21 @@ def cmd_up(args: argparse.Namespace) -> int:
 
         topology = load_topology(args.topology, (spec.name for spec in STACK))
     endpoint: str = args.listen or (topology.router.listen if topology else DEFAULT_ROUTER_ENDPOINT)
-    options = StackOptions(
-        router_endpoint=endpoint,
-        site_file=site_file,
-        realtime_factor=args.realtime_factor,
-        seed=args.seed,
-    )
-    if topology is not None:
-        options = topology.configure(options)
     stop = stop_on_signals()
     if args.command == "demo":
         _demo_banner(site.site_id, endpoint)
-    return Supervisor(services, options, stop).run()
+    # What the services keep across their restarts in this run (the LiDAR background).
+    with tempfile.TemporaryDirectory(prefix="wz-up-") as state_dir:
+        options = StackOptions(
+            router_endpoint=endpoint,
+            site_file=site_file,
+            realtime_factor=args.realtime_factor,
+            seed=args.seed,
+            state_dir=Path(state_dir),
+        )
+        if topology is not None:
+            options = topology.configure(options)
+        return Supervisor(services, options, stop).run()
 
 
 def _demo_banner(site_id: str, endpoint: str) -> None:
@@ -221,6 +225,8 @@ def cmd_record(args: argparse.Namespace) -> int:
 def cmd_replay(args: argparse.Namespace) -> int:
     from wz_cli.replay import run_replay
 
+    if args.recording.is_dir():  # a field log: the devices' own recordings and a log.yaml
+        return _replay_field_log(args)
     if not args.recording.is_file():
         raise CliError(f"no such recording: {args.recording}", 1)
     stop = stop_on_signals()
@@ -233,6 +239,22 @@ def cmd_replay(args: argparse.Namespace) -> int:
             wait_subscribers_s=args.wait_subscribers,
             stop=stop,
         )
+
+
+def _replay_field_log(args: argparse.Namespace) -> int:
+    try:
+        from wz_drivers.records import FieldDataError
+        from wz_drivers.replay import run_field_replay
+    except ModuleNotFoundError as exc:  # the drivers are not installed with this CLI
+        raise CliError(f"replaying a field log needs the drivers package: {exc}", 1) from exc
+    stop = stop_on_signals()
+    try:
+        with open_bus(args.connect, site=ANY_SITE, service="wz-replay") as bus:
+            return run_field_replay(bus, args.recording, rate=None if args.fast else args.rate,
+                                    loop=args.loop, wait_subscribers_s=args.wait_subscribers,
+                                    stop=stop, emit=emit)  # fmt: skip
+    except FieldDataError as exc:
+        raise CliError(str(exc), 1) from exc
 
 
 #: Commands that run a tool of a service in its own process: the CLI stays light (no SUMO,
@@ -251,6 +273,10 @@ SERVICE_TOOLS = {
     "eval": (
         "wz_eval.fusion",
         "run the pipeline on the simulated work zone and score it against truth (tracks, MOT)",
+    ),
+    "field-log": (
+        "wz_eval.field_log",
+        "write a field log (Ouster pcap, radar-camera objects, RTK-GPS NMEA) from simulation",
     ),
     "eval-camera": (
         "wz_eval.camera",
@@ -428,7 +454,10 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="Exit code: 3 if the recording was cut short (everything readable was replayed), "
         "1 if it cannot be read, else 0.",
     )
-    replay.add_argument("recording", type=Path, metavar="IN.mcap")
+    replay.add_argument("recording", type=Path, metavar="IN.mcap|LOG_DIR",
+                        help="a recording of the bus (wz record), or a field log folder (the "
+                        "devices' recordings and their log.yaml; run the pipeline with "
+                        "--site LOG_DIR/site.yaml)")  # fmt: skip
     pace = replay.add_mutually_exclusive_group()
     pace.add_argument(
         "--rate",

@@ -11,7 +11,17 @@ Every child learns where the bus is and which site it serves from the environmen
   prefix, e.g. ``WZ_SIM_``);
 - ``WZ_LOG_FORMAT=json``: one JSON log line per event, re-emitted by the supervisor;
 - the options of ``wz up`` that a service takes (``--realtime-factor``, ``--seed``) as
-  ``<prefix>REALTIME_FACTOR`` and ``<prefix>SEED``.
+  ``<prefix>REALTIME_FACTOR`` and ``<prefix>SEED``;
+- its ``defaults`` (set unless the environment of ``wz up`` sets them: the simulator's
+  warm-up), and its ``state_files`` under the run's state folder (see below), then its fixed
+  ``env``.
+
+State kept across restarts. A service that learns something at start (the LiDAR detector's
+background) names the setting of its file in ``state_files``; with a state folder
+(``StackOptions.state_dir``: ``wz up`` makes a temporary one per run and removes it at the
+end) it gets ``<state_dir>/<service>/<file>``, so that a restarted child loads what the crashed
+one saved instead of learning it again, as the containers and systemd units do with their
+volumes. A value set in the environment of ``wz up`` wins.
 
 With a topology (``wz up --topology``, :mod:`wz_cli.topology`) a service gets
 ``WZ_BUS_CONFIG_FILE=<its zenoh config>`` and ``WZ_BUS_CONNECT_ENDPOINTS=<the router>`` instead:
@@ -42,6 +52,8 @@ class StackOptions:
     #: Service name -> the zenoh config its session opens with (a topology); the others are
     #: loopback peers.
     service_configs: Mapping[str, Path] = field(default_factory=dict)
+    #: Where services keep their ``state_files`` for this run (None: they keep none).
+    state_dir: Path | None = None
 
 
 @dataclass(frozen=True)
@@ -61,8 +73,15 @@ class ServiceSpec:
     args: tuple[str, ...] = ()
     #: Which ``wz up`` options the service takes: a subset of {"realtime_factor", "seed"}.
     takes: frozenset[str] = frozenset()
+    #: Environment set unless the supervisor's own environment sets it.
+    defaults: Mapping[str, str] = field(default_factory=dict)
+    #: Setting (environment variable) -> file name: a file the service keeps across its
+    #: restarts, under ``<state_dir>/<name>/`` (see the module).
+    state_files: Mapping[str, str] = field(default_factory=dict)
     #: Fixed extra environment.
     env: Mapping[str, str] = field(default_factory=dict)
+    #: Keep a warm standby (imports done) to restart it from (see :mod:`wz_cli.supervisor`).
+    standby: bool = False
 
     def argv(self, python: str = sys.executable) -> list[str]:
         return [python, "-m", self.module, *self.args]
@@ -100,6 +119,11 @@ class ServiceSpec:
             env[f"{self.env_prefix}REALTIME_FACTOR"] = repr(options.realtime_factor)
         if options.seed is not None and "seed" in self.takes:
             env[f"{self.env_prefix}SEED"] = str(options.seed)
+        for name, value in self.defaults.items():
+            env.setdefault(name, value)
+        if options.state_dir is not None:
+            for name, file_name in self.state_files.items():
+                env.setdefault(name, str(options.state_dir.resolve() / self.name / file_name))
         env.update(self.env)
         return env
 
@@ -121,13 +145,21 @@ STACK: tuple[ServiceSpec, ...] = (
         module="wz_simulator.node",
         summary="SUMO work zone with LiDAR, camera and radar models; raw frames and truth",
         env_prefix="WZ_SIM_",
+        standby=True,
         takes=frozenset({"realtime_factor", "seed"}),
+        # It starts, and restarts after a crash, on a road in steady traffic: a restarted
+        # simulation is a new run from 0, and on an empty road the first vehicle would reach
+        # the sensors half a minute later.
+        defaults={"WZ_SIM_WARMUP_S": "60"},
     ),
     ServiceSpec(
         name="lidar-detector",
         module="wz_lidar_detector.node",
         summary="LiDAR frames to vehicle detections (background-model fast path or the paper's)",
         env_prefix="WZ_LIDAR_",
+        standby=True,
+        # Learned once per run; a restart loads it.
+        state_files={"WZ_LIDAR_BACKGROUND_FILE": "background.npz"},
     ),
     ServiceSpec(
         name="camera-detector",
@@ -135,12 +167,14 @@ STACK: tuple[ServiceSpec, ...] = (
         summary="camera frames (+ radar) to vehicle detections (YOLO on ONNX Runtime, radar "
         "fusion)",
         env_prefix="WZ_CAMERA_",
+        standby=True,
     ),
     ServiceSpec(
         name="fusion-tracker",
         module="wz_fusion_tracker.node",
         summary="every sensor's detections to fused tracks (Kalman, GNN, life cycle)",
         env_prefix="WZ_FUSION_",
+        standby=True,
     ),
     ServiceSpec(
         name="alert-service",
@@ -148,6 +182,7 @@ STACK: tuple[ServiceSpec, ...] = (
         summary="fused tracks to alerts (speeding, hard braking, late merge, TTC, queue, "
         "intrusion) and the beacon and sign",
         env_prefix="WZ_ALERT_",
+        standby=True,
     ),
     ServiceSpec(
         name="gateway",
@@ -155,6 +190,7 @@ STACK: tuple[ServiceSpec, ...] = (
         summary="trajectories, alerts and devices into SQLite; REST API and WZDx device feed on "
         "http://127.0.0.1:8000 (dev mode: reads need no key, an admin key is logged)",
         env_prefix="WZ_GATEWAY_",
+        standby=True,
         # The local stack is a development machine: loopback only, reads open.
         env={"WZ_GATEWAY_DEV_MODE": "true"},
     ),

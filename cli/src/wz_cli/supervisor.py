@@ -7,10 +7,21 @@ restarted after an exponential backoff: 0.5 s, doubling up to 30 s, back to 0.5 
 has lasted 30 s. SIGINT or SIGTERM stops the stack: SIGTERM to every service, up to 5 s for them
 to exit, then SIGKILL; then the router the same way.
 
-No child outlives the supervisor: on Linux each child asks the kernel for SIGTERM when its
-parent dies (``PR_SET_PDEATHSIG``), so even ``kill -9`` of the supervisor stops the stack.
-The signal is tied to the thread that started the child: children are started from the main
-thread only.
+Warm standbys. A service whose spec asks for it (``ServiceSpec.standby``: every service of the
+stack) gets a standby process (:mod:`wz_cli.standby`) once its child has run
+``STANDBY_AFTER_S``: the same command and environment, its module imported, waiting. A restart
+then wakes the standby instead of starting a new interpreter, so it does not wait for the
+imports (FastAPI and SQLAlchemy for the gateway, open3d and SUMO for the simulator: one to
+three seconds of CPU each, twice that on two cores busy with the rest of the stack); the
+restarted service is still a new process that runs its ``main()`` from the start. Standbys are
+started one at a time, ``STANDBY_STAGGER_S`` apart, not to take the CPU from the running stack
+all at once; a standby that exits by itself is not replaced (the service restarts the plain
+way); they are stopped with the stack.
+
+No child outlives the supervisor: on Linux each child (standbys too) asks the kernel for SIGTERM
+when its parent dies (``PR_SET_PDEATHSIG``), so even ``kill -9`` of the supervisor stops the
+stack. The signal is tied to the thread that started the child: children are started from the
+main thread only.
 """
 
 from __future__ import annotations
@@ -30,6 +41,7 @@ from typing import IO
 
 from wz_cli.common import CliError, emit, port_accepts, tcp_address, wait_for_port
 from wz_cli.stack import ROUTER, ServiceSpec, StackOptions
+from wz_cli.standby import READY as STANDBY_READY
 
 log = logging.getLogger(__name__)
 
@@ -39,6 +51,11 @@ ROUTER_READY_TIMEOUT_S = 15.0
 STOP_GRACE_S = 5.0
 #: How often the supervisor looks at its children [s].
 POLL_PERIOD_S = 0.1
+#: A service gets its warm standby once its child has run this long [s]: after the stack's
+#: start-up, whose imports already keep the cores busy.
+STANDBY_AFTER_S = 20.0
+#: At most one standby is started per this long [s].
+STANDBY_STAGGER_S = 2.0
 
 _PR_SET_PDEATHSIG = 1
 
@@ -128,26 +145,53 @@ class Child:
         self.restart_at: float | None = None
         self.restarts = 0
         self._readers: list[threading.Thread] = []
+        #: The warm standby (see the module), when the spec asks for one and it is up.
+        self.spare: subprocess.Popen[bytes] | None = None
+        self._spare_readers: list[threading.Thread] = []
+        self._spare_failed = not spec.standby
+        #: Set once the standby has imported its module (its reader saw the line).
+        self.spare_ready = threading.Event()
 
     @property
     def running(self) -> bool:
         return self.process is not None and self.process.poll() is None
 
+    def _spawn(
+        self, argv: list[str], stdin: int, *, standby: bool = False
+    ) -> tuple[subprocess.Popen[bytes], list[threading.Thread]]:
+        process = subprocess.Popen(
+            argv,
+            env=self.env,
+            stdin=stdin,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            start_new_session=False,
+            # Runs between fork and exec; it only calls prctl (resolved beforehand).
+            preexec_fn=_die_with_parent_hook(),
+        )
+        assert process.stdout is not None and process.stderr is not None
+        readers = [
+            threading.Thread(
+                target=self._pump,
+                args=(stream, process.pid if standby and what == "out" else None),
+                name=f"{self.name}-{what}",
+                daemon=True,
+            )
+            for what, stream in (("out", process.stdout), ("err", process.stderr))
+        ]
+        for reader in readers:
+            reader.start()
+        return process, readers
+
     def start(self) -> None:
-        """Start the process (from the main thread); on failure schedule a retry."""
+        """Start the process (from the main thread): wake the warm standby if there is one,
+        else a new one; on failure schedule a retry."""
         self.restart_at = None
         self.started_at = time.monotonic()
+        if self._wake_spare():
+            return
         try:
-            self.process = subprocess.Popen(
-                self.argv,
-                env=self.env,
-                stdin=subprocess.DEVNULL,
-                stdout=subprocess.PIPE,
-                stderr=subprocess.PIPE,
-                start_new_session=False,
-                # Runs between fork and exec; it only calls prctl (resolved beforehand).
-                preexec_fn=_die_with_parent_hook(),
-            )
+            self.process, self._readers = self._spawn(self.argv, subprocess.DEVNULL)
         except OSError as exc:
             delay = self.backoff.delay_after_exit(0.0)
             log.error("cannot start %s: %s; retrying in %.1f s", self.name, exc, delay)
@@ -161,20 +205,96 @@ class Child:
             f", restart #{self.restarts}" if self.restarts else "",
             extra={"child": self.name, "pid": self.process.pid},
         )
-        assert self.process.stdout is not None and self.process.stderr is not None
-        self._readers = [
-            threading.Thread(
-                target=self._pump, args=(stream,), name=f"{self.name}-{what}", daemon=True
-            )
-            for what, stream in (("out", self.process.stdout), ("err", self.process.stderr))
-        ]
-        for reader in self._readers:
-            reader.start()
 
-    def _pump(self, stream: IO[bytes]) -> None:
+    def _wake_spare(self) -> bool:
+        """Make the warm standby the running process; False when there is none to wake."""
+        spare, self.spare = self.spare, None
+        if spare is None or not self._spare_alive(spare):
+            return False
+        assert spare.stdin is not None
+        try:
+            spare.stdin.write(b"run\n")
+            spare.stdin.close()
+        except OSError as exc:  # it died just now
+            log.warning("the standby of %s (pid %d) cannot be woken: %s", self.name, spare.pid,
+                        exc)  # fmt: skip
+            self._spare_failed = True
+            return False
+        self.process, self._readers = spare, self._spare_readers
+        self._spare_readers = []
+        log.info(
+            "started %s (pid %d) from its warm standby%s",
+            self.name,
+            spare.pid,
+            f", restart #{self.restarts}" if self.restarts else "",
+            extra={"child": self.name, "pid": spare.pid, "standby": True},
+        )
+        return True
+
+    def _spare_alive(self, spare: subprocess.Popen[bytes]) -> bool:
+        returncode = spare.poll()
+        if returncode is None:
+            return True
+        log.warning(
+            "the standby of %s (pid %d) %s; %s restarts without one from now on",
+            self.name, spare.pid, describe_exit(returncode), self.name,
+        )  # fmt: skip
+        self._spare_failed = True
+        return False
+
+    def wants_spare(self, now: float) -> bool:
+        """Whether a standby should be started now: asked for, none yet, the child settled."""
+        if self._spare_failed:
+            return False
+        if self.spare is not None:
+            if self._spare_alive(self.spare):
+                return False
+            self.spare = None
+            return False
+        return self.running and now - self.started_at >= STANDBY_AFTER_S
+
+    def start_spare(self) -> None:
+        """Start the warm standby (from the main thread)."""
+        argv = [self.argv[0], "-m", "wz_cli.standby", self.spec.module, *self.spec.args]
+        self.spare_ready.clear()
+        try:
+            self.spare, self._spare_readers = self._spawn(argv, subprocess.PIPE, standby=True)
+        except OSError as exc:
+            log.warning("cannot start a standby of %s: %s", self.name, exc)
+            self._spare_failed = True
+            return
+        log.info("standby of %s (pid %d) importing, for a restart", self.name, self.spare.pid,
+                 extra={"child": self.name, "pid": self.spare.pid})  # fmt: skip
+
+    def release_spare(self) -> subprocess.Popen[bytes] | None:
+        """End the standby (SIGTERM: it holds nothing yet) and take no other; the standby, for
+        the caller to wait on (:func:`stop_children`)."""
+        spare, self.spare = self.spare, None
+        self._spare_failed = True
+        if spare is not None:
+            with contextlib.suppress(OSError):
+                assert spare.stdin is not None
+                spare.stdin.close()
+            with contextlib.suppress(ProcessLookupError):
+                spare.send_signal(signal.SIGTERM)
+        return spare
+
+    def _pump(self, stream: IO[bytes], standby_pid: int | None = None) -> None:
+        """Re-emit the stream's lines; a standby's stdout (``standby_pid``) first says when
+        it is ready, which is logged, not re-emitted."""
         with stream:
             for raw in iter(stream.readline, b""):
-                self.output.write(self.name, raw.decode("utf-8", "replace").rstrip("\r\n"))
+                line = raw.decode("utf-8", "replace").rstrip("\r\n")
+                if standby_pid is not None and line.startswith(STANDBY_READY):
+                    log.info(
+                        "standby of %s (pid %d) ready: its imports took %s s",
+                        self.name, standby_pid, line.removeprefix(STANDBY_READY).strip(),
+                        extra={"child": self.name, "pid": standby_pid},
+                    )  # fmt: skip
+                    self.spare_ready.set()
+                    standby_pid = None
+                    continue
+                self.output.write(self.name, line)
 
     def supervise(self, now: float) -> None:
         """Notice an exit and schedule the restart; restart when its time has come."""
@@ -206,7 +326,9 @@ class Child:
 
 
 def stop_children(children: Sequence[Child], grace_s: float = STOP_GRACE_S) -> None:
-    """SIGTERM every running child, wait up to ``grace_s`` in all, SIGKILL the rest."""
+    """End the standbys; SIGTERM every running child, wait up to ``grace_s`` in all, SIGKILL
+    the rest."""
+    spares = [spare for child in children if (spare := child.release_spare()) is not None]
     running = [c for c in children if c.process is not None and c.process.poll() is None]
     for child in running:
         assert child.process is not None
@@ -227,6 +349,12 @@ def stop_children(children: Sequence[Child], grace_s: float = STOP_GRACE_S) -> N
             )
             child.process.kill()
             child.process.wait()
+    for spare in spares:
+        try:
+            spare.wait(max(0.0, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            spare.kill()
+            spare.wait()
     for child in children:
         child.restart_at = None
         child.join_output()
@@ -294,10 +422,18 @@ class Supervisor:
                 self.options.router_endpoint,
                 ", ".join(child.name for child in self.services) or "none",
             )
+            next_spare_at = 0.0
             while not self.stop.is_set():
                 now = time.monotonic()
                 for child in self.children:
                     child.supervise(now)
+                if now >= next_spare_at:
+                    # The child that has waited longest first (not one just restarted).
+                    waiting = min((c for c in self.services if c.wants_spare(now)),
+                                  key=lambda c: c.started_at, default=None)  # fmt: skip
+                    if waiting is not None:
+                        waiting.start_spare()
+                        next_spare_at = now + STANDBY_STAGGER_S
                 self.stop.wait(POLL_PERIOD_S)
         finally:
             log.info("stopping the stack")

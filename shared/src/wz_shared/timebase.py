@@ -9,7 +9,15 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Protocol
+from typing import Literal, Protocol
+
+#: A stream whose own stamps go back by more than this [s], several messages in a row, has
+#: started a new run (:class:`RunWatch`).
+NEW_RUN_STEP_BACK_S = 1.0
+#: ... that many messages in a row [-].
+NEW_RUN_CONFIRM_MESSAGES = 3
+
+RunVerdict = Literal["run", "behind", "new_run"]
 
 
 class Clock(Protocol):
@@ -40,6 +48,12 @@ class SimClock:
         with self._lock:
             if t_s < self._now:
                 raise ValueError(f"simulation time cannot go back ({t_s} < {self._now})")
+            self._now = t_s
+
+    def restart(self, t_s: float) -> None:
+        """A new run (a restarted simulation counts from its start again): the time is ``t_s``,
+        earlier or not. Only for that; within a run, :meth:`advance_to`."""
+        with self._lock:
             self._now = t_s
 
 
@@ -76,3 +90,48 @@ class Pacer:
                 stop.wait(delay)
             else:
                 time.sleep(delay)
+
+
+class RunWatch:
+    """Tells when one stream's stamps start again: a new run.
+
+    A restarted simulation counts from its start again (a replayed recording too). A consumer
+    that keeps state over time (a tracker, an ordering check) would otherwise drop everything
+    as late or out of order until the new stamps passed the old ones; told of the new run, it
+    starts its state again. One stream's own stamps (one sensor's frames, one producer's
+    batches) never go back otherwise: lateness is against other streams.
+
+    :meth:`observe` says, for each stamp of the stream in arrival order:
+
+    - ``"run"``: in the current run (at most ``step_back_s`` before its newest stamp);
+    - ``"behind"``: further back, not (yet) a new run: treat it as late or out of order. A
+      single stray message stays that;
+    - ``"new_run"``: the ``confirm`` th stamp in a row that far back, each after the one
+      before: the stream has started again, and this stamp belongs to the new run.
+    """
+
+    def __init__(
+        self, step_back_s: float = NEW_RUN_STEP_BACK_S, confirm: int = NEW_RUN_CONFIRM_MESSAGES
+    ) -> None:
+        if step_back_s < 0 or confirm < 1:
+            raise ValueError(f"step_back_s >= 0 and confirm >= 1, got {step_back_s}, {confirm}")
+        self.step_back_s = step_back_s
+        self.confirm = confirm
+        #: Newest stamp of the current run [s]; None before the first.
+        self.newest_s: float | None = None
+        self._behind: list[float] = []
+
+    def observe(self, stamp_s: float) -> RunVerdict:
+        newest = self.newest_s
+        if newest is None or stamp_s >= newest - self.step_back_s:
+            self._behind.clear()
+            self.newest_s = stamp_s if newest is None else max(newest, stamp_s)
+            return "run"
+        if self._behind and stamp_s <= self._behind[-1]:
+            self._behind.clear()  # not a stream going on from a new start
+        self._behind.append(stamp_s)
+        if len(self._behind) < self.confirm:
+            return "behind"
+        self._behind.clear()
+        self.newest_s = stamp_s
+        return "new_run"

@@ -39,7 +39,10 @@ under ``<raw camera key>|<reason>`` (the bus's own decode reasons such as ``bad_
 - ``wrong_size``: the image is not the size its metadata says, or does not contain the
   detector's region of interest (skipped);
 - ``wrong_sensor``: the metadata names another camera or site;
-- ``out_of_order``: the stamp is not after the previous frame's (skipped);
+- ``out_of_order``: the stamp is not after the previous frame's (skipped). When the stamps
+  go back for good (:class:`~wz_shared.timebase.RunWatch`: a restarted simulation counts from
+  its start again), a new run starts instead: the image tracker (its ids go on) and the radar
+  scan start again, and the frame is processed;
 - ``detector_error``: the backend raised (traceback logged once);
 - ``above_horizon``: a box whose bottom is at or above the horizon (dropped);
 
@@ -89,7 +92,7 @@ from wz_shared.messages import (
 from wz_shared.service import ServiceRuntime
 from wz_shared.settings import BusSettings
 from wz_shared.site import SensorMount, Site, load_site
-from wz_shared.timebase import SimClock
+from wz_shared.timebase import RunWatch, SimClock
 
 SERVICE = "camera-detector"
 log = logging.getLogger("wz_camera_detector.node")
@@ -236,6 +239,9 @@ class CameraDetector:
         self._frames_taken = 0
         #: Stamp of the newest frame taken [s] (the node's clock on simulation time).
         self.last_stamp_s = 0.0
+        self._run = RunWatch()
+        #: Runs seen: 1, then one more each time the frames' stamps start again.
+        self.runs = 1
 
     @property
     def state(self) -> ServiceState:
@@ -301,7 +307,10 @@ class CameraDetector:
                 f"{meta.width_px}x{meta.height_px}, detector ROI {roi}",
             )
             return None
-        if self._frames_taken and meta.stamp <= self.last_stamp_s:
+        new_run = self._run.observe(meta.stamp) == "new_run"
+        if new_run:
+            self._start_new_run(meta.stamp)
+        elif self._frames_taken and meta.stamp <= self.last_stamp_s:
             self.report(
                 "out_of_order",
                 f"frame {meta.frame_index} stamp {meta.stamp:.6f} s is not after "
@@ -321,6 +330,16 @@ class CameraDetector:
             detections=self._detections(result.fused),
             latency_s=max(0.0, time.monotonic() - taken_s),
         )
+
+    def _start_new_run(self, stamp_s: float) -> None:
+        log.warning(
+            "frame stamps went back from %.3f s to %.3f s: a new run (a restarted simulation); "
+            "the image tracker and the radar scan start again",
+            self.last_stamp_s, stamp_s,
+        )  # fmt: skip
+        self.tracker.restart()
+        self._scan = None
+        self.runs += 1
 
     def process_image(self, image: U8, stamp_s: float, frame_index: int) -> FrameResult | None:
         """Detect, track, range and fuse one decoded frame (no checks on the frame's order).
@@ -492,9 +511,13 @@ def run(
         if frame is None:
             continue
         taken_s = time.monotonic()
+        runs = detector.runs
         batch = detector.handle(frame.meta, frame.payload, taken_s)
         runtime.state = detector.state
-        clock.advance_to(detector.last_stamp_s)
+        if detector.runs != runs:
+            clock.restart(detector.last_stamp_s)
+        else:
+            clock.advance_to(detector.last_stamp_s)
         if batch is not None:
             publisher.put(batch)
             processed += 1

@@ -289,6 +289,12 @@ class ImageTracker:
         self._next_id += 1
         return track
 
+    def restart(self) -> None:
+        """A new run (the frames' stamps started again): drop every track and the previous
+        stamp; ids go on (never reused)."""
+        self._tracks = []
+        self._last_stamp_s = None
+
     # --- one cycle ---
 
     def update(self, detections: Sequence[ImageDetection], stamp_s: float) -> list[ImageTrack]:

@@ -14,7 +14,12 @@ Run it as ``python -m wz_fusion_tracker.node`` (settings: ``WZ_FUSION_*``, bus `
   with the newest batch;
 - when no detections arrive at all (every sensor silent), moves the tracker's clock on by the
   wall time elapsed since the last batch, so coasting tracks end rather than hang (data time
-  follows wall time there; with a simulator faster than real time this is conservative).
+  follows wall time there; with a simulator faster than real time this is conservative);
+- when a sensor's own stamps go back for good (:class:`~wz_shared.timebase.RunWatch`: a
+  restarted simulation counts from its start again), starts a new run: a fresh tracker whose
+  ids go on from the old one's (ids are never reused), the output grid and the clock taken
+  from the new stamps. Without it every batch of the new run would be dropped as late until
+  its stamps passed the old run's. The batches before the new run is certain are late.
 
 Bad input never stops it; each problem is counted in the status message's ``invalid_counts``
 under ``<detections key>|<reason>``: ``wrong_site``, ``bad_detection`` (a covariance that is not
@@ -48,7 +53,7 @@ from wz_shared.messages import (
 from wz_shared.service import ServiceRuntime
 from wz_shared.settings import BusSettings, ServiceSettings
 from wz_shared.site import Site, load_site
-from wz_shared.timebase import SimClock
+from wz_shared.timebase import RunWatch, SimClock
 
 SERVICE = "fusion-tracker"
 log = logging.getLogger("wz_fusion_tracker.node")
@@ -142,17 +147,40 @@ class FusionCore:
         self.site = site
         self.settings = settings
         self.report = report
-        self.tracker = MultiTargetTracker(settings.tracker, heading_at=road_heading_hook(site),
-                                          sensor_positions=sensor_positions(site),
-                                          headings_at=road_headings_hook(site))  # fmt: skip
+        self.tracker = self._new_tracker(first_track_id=1)
         self._next_output_s: float | None = None
         self._cycle = 0
+        #: Runs seen: 1, then one more each time a sensor's stamps go back (see the module).
+        self.runs = 1
+        self._runs_by_sensor: dict[str, RunWatch] = {}
+
+    def _new_tracker(self, first_track_id: int) -> MultiTargetTracker:
+        site = self.site
+        return MultiTargetTracker(self.settings.tracker, heading_at=road_heading_hook(site),
+                                  sensor_positions=sensor_positions(site),
+                                  headings_at=road_headings_hook(site),
+                                  first_track_id=first_track_id)  # fmt: skip
+
+    def _start_new_run(self, batch: DetectionBatch) -> None:
+        log.warning(
+            "%s's stamps went back to %.3f s: a new run (a restarted simulation); the tracker "
+            "starts again, track ids from %d",
+            batch.source_id, batch.stamp, self.tracker.next_track_id,
+        )  # fmt: skip
+        self.tracker = self._new_tracker(first_track_id=self.tracker.next_track_id)
+        self._next_output_s = None
+        # The other sensors' stamps are the old run's until they go back too.
+        self._runs_by_sensor = {batch.source_id: self._runs_by_sensor[batch.source_id]}
+        self.runs += 1
 
     def add(self, batch: DetectionBatch) -> list[TrackBatch]:
         """Give one batch to the tracker; the track batches of the cycles now complete."""
         if batch.site != self.site.site_id:
             self.report("wrong_site", f"batch of site {batch.site} from {batch.source_id}")
             return []
+        watch = self._runs_by_sensor.setdefault(batch.source_id, RunWatch())
+        if watch.observe(batch.stamp) == "new_run":
+            self._start_new_run(batch)
         late_before = self.tracker.counters.batches_late
         self.tracker.add(batch.source_id, batch.stamp, to_measurements(batch, self.report))
         if self.tracker.counters.batches_late > late_before:
@@ -208,11 +236,15 @@ def run(runtime: ServiceRuntime, site: Site, settings: FusionTrackerSettings,
     published = 0
     last_batch_wall = time.monotonic()
     last_data_s: float | None = None
+    runs = core.runs
+    clock_restarts = False
     while not runtime.stop.is_set():
         batch = batches.recv(0.1)
         now = time.monotonic()
         if batch is not None:
             outputs = core.add(batch)
+            if core.runs != runs:  # a new run: its time starts again, at its first output
+                runs, last_data_s, clock_restarts = core.runs, None, True
             last_batch_wall, last_data_s = now, max(last_data_s or batch.stamp, batch.stamp)
         elif last_data_s is not None and now - last_batch_wall > settings.idle_advance_after_s:
             outputs = core.advance_to(last_data_s + (now - last_batch_wall))
@@ -221,7 +253,11 @@ def run(runtime: ServiceRuntime, site: Site, settings: FusionTrackerSettings,
         for output in outputs:
             publisher.put(output)
             latest[:] = [encode_json(output)]
-            clock.advance_to(output.stamp)
+            if clock_restarts:
+                clock.restart(output.stamp)
+                clock_restarts = False
+            else:
+                clock.advance_to(output.stamp)
             published += 1
     return published
 

@@ -836,6 +836,9 @@ class MultiTargetTracker:
     sensor_positions
         Site position of each sensor ``(x_m, y_m)``; with it, a box completed from the face a
         sensor sees is re-centred with the track's own length (:meth:`_reference_point`).
+    first_track_id
+        The first track's id (a tracker that takes over from another in the same process, for
+        a new run, goes on from :attr:`next_track_id` of the old one: ids are never reused).
     """
 
     def __init__(
@@ -844,6 +847,7 @@ class MultiTargetTracker:
         heading_at: HeadingAt | None = None,
         sensor_positions: Mapping[str, tuple[float, float]] | None = None,
         headings_at: HeadingsAt | None = None,
+        first_track_id: int = 1,
     ) -> None:
         self.settings = settings
         self._heading_at = heading_at
@@ -851,7 +855,9 @@ class MultiTargetTracker:
         self._sensor_positions = dict(sensor_positions or {})
         self._bank = TrackStateBank()
         self._tracks: dict[int, _Track] = {}  # by track id, in creation (= id) order
-        self._next_id = 1
+        if first_track_id < 1:
+            raise ValueError(f"track ids start at 1 or more, got {first_track_id}")
+        self._next_id = first_track_id
         self._local_ids: dict[tuple[str, int], int] = {}  # (sensor, local id) -> track id
         self._pending: list[_PendingBatch] = []  # a heap by (stamp, sensor, arrival)
         self._arrivals = 0
@@ -948,6 +954,11 @@ class MultiTargetTracker:
     def counters(self) -> TrackerCounters:
         """A copy of the counters."""
         return replace(self._counters)
+
+    @property
+    def next_track_id(self) -> int:
+        """The id the next new track will get."""
+        return self._next_id
 
     @property
     def last_processed_stamp_s(self) -> float | None:

@@ -78,11 +78,10 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 import numpy.typing as npt
-import open3d as o3d
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 from scipy.cluster.hierarchy import fcluster, linkage
 from scipy.spatial import ConvexHull, QhullError
@@ -95,6 +94,9 @@ from wz_lidar_detector.detection import (
     PointFrame,
 )
 from wz_shared.messages import VehicleClass
+
+if TYPE_CHECKING:
+    import open3d as o3d
 
 IntArray = npt.NDArray[np.int64]
 
@@ -460,8 +462,21 @@ def _voxel_downsample(xyz: FloatArray, voxel_size_m: float) -> tuple[FloatArray,
     return cloud, voxel_of
 
 
+def _open3d() -> Any:
+    """open3d, imported on first use: importing it takes a second or more (it brings its
+    plotting, dash and plotly, along), which the node on the fast path, which only shares this
+    module's box fit, should not pay at every start or restart."""
+    import open3d
+
+    return open3d
+
+
 def _to_open3d(xyz: FloatArray) -> o3d.geometry.PointCloud:
-    return o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.ascontiguousarray(xyz)))
+    lib = _open3d()
+    cloud: o3d.geometry.PointCloud = lib.geometry.PointCloud(
+        lib.utility.Vector3dVector(np.ascontiguousarray(xyz))
+    )
+    return cloud
 
 
 def _height_above(xyz: FloatArray, plane: FloatArray) -> FloatArray:
@@ -483,7 +498,7 @@ def _fit_ground_plane(cloud: FloatArray, s: ReferenceSettings) -> FloatArray | N
     for attempt in range(s.ground_max_attempts):
         if len(candidates) < min_inliers:
             return None
-        o3d.utility.random.seed(s.ground_random_seed + attempt)
+        _open3d().utility.random.seed(s.ground_random_seed + attempt)
         model, inliers = _to_open3d(cloud[candidates]).segment_plane(
             s.ground_distance_threshold_m, s.ground_ransac_n, s.ground_iterations
         )

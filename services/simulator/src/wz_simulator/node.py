@@ -9,6 +9,9 @@ Run it as ``python -m wz_simulator.node`` (``wz up`` does). Settings come from t
   at its own rate (frames as binary envelopes, radar scans as JSON), stamped with the firing
   time (see :mod:`wz_simulator.sensors.rig`);
 - ``wz/<site>/status/simulator``: liveliness and health (see :mod:`wz_shared.service`);
+  ``starting`` until it publishes (SUMO, the sensor models, and the warm-up: ``warmup_s`` of
+  traffic simulated as fast as possible, nothing published, so that the stream starts on a
+  road in steady traffic), then ``running``;
 
 and answers queries on ``wz/<site>/config/site`` with the site description as JSON.
 """
@@ -18,12 +21,19 @@ from __future__ import annotations
 import gc
 import logging
 import threading
+import time
 from collections.abc import Callable
 
 from wz_shared.bus import Bus, Publisher
 from wz_shared.codec import encode_camera_frame, encode_lidar_frame
 from wz_shared.logs import configure_logging
-from wz_shared.messages import CameraFrameMeta, GroundTruth, LidarFrameMeta, RadarScan
+from wz_shared.messages import (
+    CameraFrameMeta,
+    GroundTruth,
+    LidarFrameMeta,
+    RadarScan,
+    ServiceState,
+)
 from wz_shared.service import ServiceRuntime
 from wz_shared.settings import BusSettings
 from wz_shared.site import Site, load_site
@@ -111,50 +121,76 @@ def run_loop(
     return steps
 
 
+def warm_up(world: TrafficWorld, until_s: float, stop: threading.Event) -> int:
+    """Step the world to ``until_s`` as fast as possible, publishing nothing; the steps taken."""
+    steps = 0
+    while world.sim_time_s < until_s - 1e-9 and not world.finished and not stop.is_set():
+        world.step()
+        steps += 1
+    return steps
+
+
 def main() -> None:
     settings = SimulatorSettings()
     site = load_site(settings.site_file)
     configure_logging(service=SERVICE, site=site.site_id, level=settings.log_level)
     clock = SimClock()
     site_json = site.model_dump_json().encode()
-    with (
-        ServiceRuntime(
-            SERVICE,
-            site.site_id,
-            BusSettings(),
-            status_period_s=settings.status_period_s,
-            clock_stamp=clock.now,
-            health_file=settings.health_file,
-        ) as runtime,
-        TrafficWorld(site, settings) as world,
-    ):
-        bus = runtime.bus
-        truth = bus.publisher(bus.keys.truth, GroundTruth)
-        bus.serve(bus.keys.config_site, lambda: site_json)
-        rig = None
-        publish_sensor = None
-        if settings.sensors_enabled and site.sensors:
-            rig = SensorRig(
-                site, WEATHER_PRESETS[settings.weather], settings.seed,
-                jpeg_quality=settings.jpeg_quality,
-            )  # fmt: skip
-            publish_sensor = SensorPublisher(bus, site).publish
-            log.info("sensors: %s (%s)", [m.sensor_id for m in rig.mounts], settings.weather)
-        # The scene, the models and their caches live for the whole run: move them out of the
-        # collector's generations so full collections stay short (they paused single camera
-        # frames for 70-85 ms; BENCHMARKS.md, sensors).
-        gc.collect()
-        gc.freeze()
-        steps = run_loop(
-            world, truth.put, clock, Pacer(settings.realtime_factor), runtime.stop, rig,
-            publish_sensor,
+    with ServiceRuntime(
+        SERVICE,
+        site.site_id,
+        BusSettings(),
+        status_period_s=settings.status_period_s,
+        clock_stamp=clock.now,
+        health_file=settings.health_file,
+    ) as runtime:
+        runtime.state = ServiceState.STARTING  # until it publishes
+        with TrafficWorld(site, settings) as world:
+            simulate(runtime, site, settings, world, clock, site_json)
+
+
+def simulate(runtime: ServiceRuntime, site: Site, settings: SimulatorSettings,
+             world: TrafficWorld, clock: SimClock, site_json: bytes) -> None:  # fmt: skip
+    """Publish the world until ``runtime.stop`` or its duration: sensors built, warmed up."""
+    bus = runtime.bus
+    truth = bus.publisher(bus.keys.truth, GroundTruth)
+    bus.serve(bus.keys.config_site, lambda: site_json)
+    rig = None
+    publish_sensor = None
+    if settings.sensors_enabled and site.sensors:
+        rig = SensorRig(
+            site, WEATHER_PRESETS[settings.weather], settings.seed,
+            jpeg_quality=settings.jpeg_quality,
         )  # fmt: skip
+        publish_sensor = SensorPublisher(bus, site).publish
+        log.info("sensors: %s (%s)", [m.sensor_id for m in rig.mounts], settings.weather)
+    if settings.warmup_s > 0:
+        started = time.monotonic()
+        steps = warm_up(world, settings.warmup_s, runtime.stop)
+        clock.advance_to(world.sim_time_s)
+        if rig is not None:
+            rig.skip_until(world.sim_time_s)
         log.info(
-            "simulation ended after %d steps (%.1f s simulated): %s",
-            steps,
-            world.sim_time_s,
-            world.counters,
-        )
+            "warmed up: %.1f s simulated in %.2f s (%d steps), %d vehicles on the road",
+            world.sim_time_s, time.monotonic() - started, steps,
+            world.counters.departed - world.counters.arrived,
+        )  # fmt: skip
+    # The scene, the models and their caches live for the whole run: move them out of the
+    # collector's generations so full collections stay short (they paused single camera
+    # frames for 70-85 ms; BENCHMARKS.md, sensors).
+    gc.collect()
+    gc.freeze()
+    runtime.state = ServiceState.RUNNING
+    steps = run_loop(
+        world, truth.put, clock, Pacer(settings.realtime_factor), runtime.stop, rig,
+        publish_sensor,
+    )  # fmt: skip
+    log.info(
+        "simulation ended after %d steps (%.1f s simulated): %s",
+        steps,
+        world.sim_time_s,
+        world.counters,
+    )
 
 
 if __name__ == "__main__":

@@ -39,6 +39,11 @@ class SimulatorSettings(ServiceSettings):
     realtime_factor: Annotated[float, Field(ge=0.0)] = 1.0
     #: Simulated time to run [s]; 0 = forever.
     duration_s: Annotated[float, Field(ge=0.0)] = 0.0
+    #: The node first simulates this long as fast as it can, publishing nothing, sensors off,
+    #: so that it starts (and restarts) on a road in steady traffic rather than an empty one
+    #: [s]; stamps then start here and it counts toward ``duration_s``. 0 = start on an empty
+    #: road. ``wz up`` sets 60 (the road's 1.8 km at 70 mph take about a minute).
+    warmup_s: Annotated[float, Field(ge=0.0, le=3600.0)] = 0.0
     #: Lane changes move sideways at each vehicle type's lateral speed (about 3.7 s for a
     #: normal car, 2 s for an aggressive one); False = SUMO's instantaneous jump to the lane.
     continuous_lane_changes: bool = True

@@ -148,6 +148,13 @@ class SensorRig:
                 )
             self._schedules[mount.sensor_id] = _Schedule(mount.rate_hz)
 
+    def skip_until(self, t_s: float) -> None:
+        """Leave out every firing at or before ``t_s`` (the simulation ran without sensors
+        until then: a warm-up); frame indices stay ``round(fire time * rate)``."""
+        for schedule in self._schedules.values():
+            first = math.floor(t_s * schedule.rate_hz + 1e-9) + 1
+            schedule.next_index = max(schedule.next_index, first)
+
     def due(self, until_s: float) -> list[tuple[str, int, float]]:
         """Firings due up to ``until_s``: (sensor id, frame index, time), in time order."""
         firings = []
