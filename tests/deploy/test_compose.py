@@ -48,6 +48,7 @@ SETTINGS_CLASSES = {
     "fusion-tracker": "wz_fusion_tracker.node:FusionTrackerSettings",
     "alert-service": "wz_alert_service.node:AlertServiceSettings",
     "gateway": "wz_gateway.settings:GatewaySettings",
+    "drivers": "wz_drivers.node:DriversSettings",
 }
 
 #: Users that are root inside a container.
@@ -486,7 +487,9 @@ def test_profiles_separate_simulation_from_the_field(
     for service in services.values():
         used = set(service.config.get("profiles", []))
         assert used <= set(declared), f"{service.name}: undeclared profile {used - set(declared)}"
-        if service.name != "simulator":
+        if service.name == "drivers":  # the field's sensors, in the simulator's place
+            assert used == {"field"}
+        elif service.name != "simulator":
             # The router and the pipeline run whatever feeds them.
             assert not used, f"{service.name} would not run in the field"
 

@@ -82,6 +82,9 @@ class ServiceSpec:
     env: Mapping[str, str] = field(default_factory=dict)
     #: Keep a warm standby (imports done) to restart it from (see :mod:`wz_cli.supervisor`).
     standby: bool = False
+    #: Started only when named (``wz up --only drivers,...``): the field sensors' drivers,
+    #: which need a manifest of devices (``WZ_DRIVERS_SOURCES``) and replace the simulator.
+    optional: bool = False
 
     def argv(self, python: str = sys.executable) -> list[str]:
         return [python, "-m", self.module, *self.args]
@@ -185,6 +188,14 @@ STACK: tuple[ServiceSpec, ...] = (
         standby=True,
     ),
     ServiceSpec(
+        name="drivers",
+        module="wz_drivers.node",
+        summary="the field sensors (Ouster, RTSP camera, radar-camera unit over UDP) or a field "
+        "log onto the bus, in place of the simulator (WZ_DRIVERS_SOURCES: their manifest)",
+        env_prefix="WZ_DRIVERS_",
+        optional=True,
+    ),
+    ServiceSpec(
         name="gateway",
         module="wz_gateway.node",
         summary="trajectories, alerts and devices into SQLite; REST API and WZDx device feed on "
@@ -198,7 +209,7 @@ STACK: tuple[ServiceSpec, ...] = (
 
 
 def select(only: Sequence[str] | None, stack: Sequence[ServiceSpec] = STACK) -> list[ServiceSpec]:
-    """The services named in ``only`` (all when None), in stack order.
+    """The services named in ``only`` (when None: all but the optional ones), in stack order.
 
     Raises
     ------
@@ -206,7 +217,7 @@ def select(only: Sequence[str] | None, stack: Sequence[ServiceSpec] = STACK) -> 
         For a name that is not in the stack, listing the names that are.
     """
     if not only:
-        return list(stack)
+        return [spec for spec in stack if not spec.optional]
     known = {spec.name for spec in stack}
     unknown = [name for name in only if name not in known]
     if unknown:
