@@ -8,7 +8,7 @@ import pytest
 from tests.alert_service.helpers import SITE, batch, make_track, stamps
 from wz_alert_service.node import AlertCore, AlertOutputs, AlertServiceSettings
 from wz_shared import codec
-from wz_shared.messages import ActiveAlerts, AlertType, TrackBatch
+from wz_shared.messages import ActiveAlerts, Alert, AlertType, TrackBatch
 from wz_shared.site import MPH_TO_MPS
 
 FAST_MPS = 55.0 * MPH_TO_MPS + 8.0 * MPH_TO_MPS  # 8 mph over the 55 mph limit
@@ -77,3 +77,29 @@ def test_settings_refuse_an_episode_prefix_that_cannot_be_an_identifier(
     monkeypatch.setenv("WZ_ALERT_QUEUE_CAPACITY", "16")
     settings = AlertServiceSettings()
     assert (settings.episode_id_prefix, settings.queue_capacity) == ("edge-1", 16)
+
+
+def test_a_new_run_of_the_tracker_starts_the_engine_again_with_ids_going_on() -> None:
+    """The tracker's stamps go back for good (the simulation restarted): after RunWatch's
+    confirmation the engine starts again and alerts on the new run; a single stray old batch
+    before that is still ignored; no episode id repeats."""
+    core, reports = core_and_reports()
+
+    def speeder(start_s: float, duration_s: float, first_cycle: int) -> list[Alert]:
+        alerts: list[Alert] = []
+        for k, t in enumerate(stamps(duration_s, rate_hz=10.0, start_s=start_s)):
+            tracks = [make_track(1, 500.0 + 27.0 * (t - start_s), FAST_MPS)] \
+                if t < start_s + duration_s - 0.5 else []  # fmt: skip
+            alerts += core.add(batch(t, tracks, first_cycle + k)).alerts
+        return alerts
+
+    first = speeder(300.0, 3.0, 0)
+    assert core.add(batch(5.0, [], 99)).accepted is False  # one stray old batch: ignored
+    assert [reason for reason, _ in reports] == ["out_of_order"]
+    second = speeder(0.0, 3.0, 0)  # the new run, from 0 s
+    assert core.runs == 2
+    starts = [a for a in first + second if a.phase == "start" and a.alert_type is AlertType.SPEEDING]
+    # The new run is confirmed at its third batch (0.2 s): the hold runs from there.
+    assert len(starts) == 2 and starts[1].stamp == pytest.approx(1.2)
+    ids = [a.alert_id for a in first + second]
+    assert len(ids) == len(set(ids))

@@ -300,7 +300,9 @@ class AlertEngine:
             self.rules.hard_braking.window_s, self.rules.aggressive_approach.trend_window_s
         )
         self._last_stamp_s: float | None = None
-        self._episode_count = 0
+        #: Episodes opened so far: the number in each episode id (a successor engine of a new
+        #: run carries it on, so ids never repeat in one process).
+        self.episode_count = 0
 
     # --- public ---------------------------------------------------------------------------
 
@@ -440,9 +442,9 @@ class AlertEngine:
         return []
 
     def _start(self, key: EpisodeKey, episode: _Episode, t: float) -> AlertEvent:
-        self._episode_count += 1
+        self.episode_count += 1
         subject = "site" if key[0] is None else str(key[0])
-        episode.episode_id = f"{self._id_prefix}{key[1].value}-{subject}-{self._episode_count}"
+        episode.episode_id = f"{self._id_prefix}{key[1].value}-{subject}-{self.episode_count}"
         episode.start_s = t
         episode.severity = episode.finding.severity
         self.counters.starts += 1

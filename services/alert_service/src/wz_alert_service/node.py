@@ -43,7 +43,7 @@ from wz_shared.messages import ActiveAlerts, Alert, AlertType, RoadsideDeviceSta
 from wz_shared.service import ServiceRuntime
 from wz_shared.settings import BusSettings, ServiceSettings
 from wz_shared.site import Site, load_site
-from wz_shared.timebase import SimClock
+from wz_shared.timebase import RunWatch, SimClock
 
 SERVICE = "alert-service"
 log = logging.getLogger("wz_alert_service.node")
@@ -117,16 +117,34 @@ class AlertCore:
         self.site = site
         self.report = report
         self.source_id = source_id
+        self._id_prefix = id_prefix
         self.engine = AlertEngine(site, id_prefix=id_prefix)
         self.devices: RoadsideDeviceState | None = None
         self._newest: dict[str, Alert] = {}  # episode id -> its newest start or update
         self._stamp_s = 0.0
+        #: The tracker's stamps going back for good (a restarted simulation or replay): a new
+        #: run, whose batches would otherwise all be ignored as out of order.
+        self._run = RunWatch()
+        self.runs = 1
+
+    def _start_new_run(self, batch: TrackBatch) -> None:
+        """Start the engine again for the new run; its episode numbers go on (ids stay unique),
+        the old run's open episodes end without a clear (their tracks are gone)."""
+        count = self.engine.episode_count
+        self.engine = AlertEngine(self.site, id_prefix=self._id_prefix)
+        self.engine.episode_count = count
+        self._newest.clear()
+        self.runs += 1
+        log.warning("track stamps went back to %.3f s (from %.3f s): a new run; the alert "
+                    "engine starts again", batch.stamp, self._stamp_s)  # fmt: skip
 
     def add(self, batch: TrackBatch) -> AlertOutputs:
         """Evaluate one track batch."""
         if batch.site != self.site.site_id:
             self.report("wrong_site", f"track batch of site {batch.site} from {batch.source_id}")
             return AlertOutputs(accepted=False)
+        if self._run.observe(batch.stamp) == "new_run":
+            self._start_new_run(batch)
         out_of_order = self.engine.counters.batches_out_of_order
         events = self.engine.update(batch)
         if self.engine.counters.batches_out_of_order > out_of_order:
@@ -194,6 +212,7 @@ def run(runtime: ServiceRuntime, site: Site, settings: AlertServiceSettings,
     batches = bus.subscribe(tracks_key, TrackBatch, capacity=settings.queue_capacity)
     log.info("alerting on %s -> %s", tracks_key, bus.keys.alerts_all)
     published = 0
+    runs = core.runs
     while not runtime.stop.is_set():
         batch = batches.recv(0.1)
         if batch is None:
@@ -211,7 +230,10 @@ def run(runtime: ServiceRuntime, site: Site, settings: AlertServiceSettings,
             log.info("devices: beacon %s, sign %r", "on" if outputs.devices.beacon_on else "off",
                      outputs.devices.sign_text)  # fmt: skip
         snapshot[:] = [encode_json(core.active())]
-        if batch.stamp >= clock.now():
+        if core.runs != runs:  # a new run: its time starts again
+            runs = core.runs
+            clock.restart(batch.stamp)
+        elif batch.stamp >= clock.now():
             clock.advance_to(batch.stamp)
     return published
 
