@@ -12,7 +12,7 @@ from pathlib import Path
 
 import httpx
 
-from tests.cli.procs import ROOT, free_port, running, wz_argv, wz_env
+from tests.cli.procs import ROOT, free_port, port_open, running, wait_for, wz_argv, wz_env
 from wz_shared.bus import Bus
 from wz_shared.messages import GroundTruth, TrackBatch
 from wz_shared.settings import BusSettings
@@ -34,7 +34,7 @@ def test_wz_up_runs_the_pipeline_from_sensors_to_fused_tracks(tmp_path: Path) ->
     )  # fmt: skip
     settings = BusSettings(mode="client", connect_endpoints=[endpoint], listen_endpoints=[])
     with running(up):
-        time.sleep(2.0)  # the router listens
+        wait_for(lambda: port_open(port), 30.0, "the router to listen")
         with Bus.open(settings, site=SITE.site_id, service="pipeline-test") as bus:
             tracks = bus.subscribe(bus.keys.tracks, TrackBatch, mode="ring", capacity=1)
             # Truth by simulation step: each batch is compared with the truth at its own stamp
