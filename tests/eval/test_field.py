@@ -139,7 +139,7 @@ def test_default_window_spans_the_associations() -> None:
 
 def test_table_and_dict_render(result: FieldResult) -> None:
     table = markdown_table(result)
-    assert table.startswith("| source | samples | RMSE longitudinal [m] | RMSE lateral [m]")
+    assert table.startswith("| source | samples | RMSE distance [m] | RMSE longitudinal [m] | RMSE lateral [m]")
     rows = [line for line in table.splitlines() if line.startswith("| radar-camera |")]
     assert len(rows) == 1 and "+0.3" in rows[0]
     assert "| lidar | " in table and "(given)" in table and "95.0" in table

@@ -204,10 +204,18 @@ class SourceResult:
     distinct_ids: int | None
     id_changes: int | None
 
+    @property
+    def distance_rmse_m(self) -> float | None:
+        """RMSE of the distance to the GPS position [m] (both axes: sqrt of the sum of their
+        mean squares)."""
+        lon, lat = self.longitudinal.rmse_m, self.lateral.rmse_m
+        return None if lon is None or lat is None else math.hypot(lon, lat)
+
     def summary(self) -> dict[str, Any]:
         """JSON-able, with :meth:`wz_eval.metrics.AxisErrors.summary`'s names."""
         out: dict[str, Any] = {"observations": self.observations,
-                               "samples": self.longitudinal.count}  # fmt: skip
+                               "samples": self.longitudinal.count,
+                               "rmse_distance_m": self.distance_rmse_m}  # fmt: skip
         for axis, stats in (("longitudinal", self.longitudinal), ("lateral", self.lateral)):
             out[f"rmse_{axis}_m"] = stats.rmse_m
             out[f"bias_{axis}_m"] = stats.mean_m
@@ -564,17 +572,19 @@ def markdown_table(result: FieldResult) -> str:
         return "-" if value is None else f"{value:.{digits}f}"
 
     lines = [
-        "| source | samples | RMSE longitudinal [m] | RMSE lateral [m] | bias longitudinal [m] "
+        "| source | samples | RMSE distance [m] | RMSE longitudinal [m] | RMSE lateral [m] "
+        "| bias longitudinal [m] "
         "| bias lateral [m] | p95 longitudinal [m] | p95 lateral [m] | available [%] "
         "| longest gap [s] | clock offset [s] |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, row in result.sources.items():
         availability = None if row.availability is None else 100.0 * row.availability
         offset = f"{row.clock.offset_s:+.3f}" + ("" if row.clock.estimated
                                                  else f" ({row.clock.note.split(':')[0]})")  # fmt: skip
         lines.append(
-            f"| {name} | {row.longitudinal.count} | {cell(row.longitudinal.rmse_m)} | "
+            f"| {name} | {row.longitudinal.count} | {cell(row.distance_rmse_m)} | "
+            f"{cell(row.longitudinal.rmse_m)} | "
             f"{cell(row.lateral.rmse_m)} | {cell(row.longitudinal.mean_m)} | "
             f"{cell(row.lateral.mean_m)} | {cell(row.longitudinal.p95_abs_m)} | "
             f"{cell(row.lateral.p95_abs_m)} | {cell(availability, 1)} | "
