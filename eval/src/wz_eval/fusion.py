@@ -561,7 +561,7 @@ def markdown(report: dict[str, Any]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     arguments = sys.argv[1:] if argv is None else argv
-    if any(a == "--log" or a.startswith("--log=") for a in arguments):  # a field log
+    if any(a.split("=")[0] in ("--log", "--truth") for a in arguments):  # a field log
         from wz_eval.field_run import main as field_main
 
         return field_main(arguments)
