@@ -47,7 +47,8 @@ def test_simulator_node_publishes_truth_and_serves_site(port: int, tmp_path: Pat
             messages: list[GroundTruth] = []
             deadline = time.monotonic() + 60.0
             while time.monotonic() < deadline and not any(m.vehicles for m in messages[-1:]):
-                message = truth.recv(5.0)
+                # The first waits for the node's start (its imports: seconds on a loaded box).
+                message = truth.recv(5.0 if messages else 30.0)
                 assert message is not None, "no truth from the simulator"
                 messages.append(message)
             assert messages[-1].vehicles, "no vehicle appeared within 60 s"
