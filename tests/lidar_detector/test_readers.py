@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
-from wz_lidar_detector.readers import (
+from wz_shared.pointcloud_files import (
     PointCloudFileError,
     lzf_decompress,
     read_npz,

@@ -5,7 +5,7 @@ Usage (``python -m wz_lidar_detector.cli``, or ``wz detect-lidar``)::
     wz detect-lidar FILE... [--background FILE] [--path fast|reference]
                     [--frame sensor|site] [--site SITE.yaml] [--sensor ID]
 
-Each input (PCD, PLY or NPZ; see :mod:`wz_lidar_detector.readers`) gives one line on stdout::
+Each input (PCD, PLY or NPZ; see :mod:`wz_shared.pointcloud_files`) gives one line on stdout::
 
     {"file": "rawdata.pcd", "stamp": 0.0, "path": "reference", "frame": "sensor",
      "rows": 80, "columns": 1800, "points": 95026, "foreground_points": 9731,
@@ -47,11 +47,11 @@ from wz_lidar_detector.background import (
 )
 from wz_lidar_detector.detection import BoxDetection, DetectionResult, PointFrame
 from wz_lidar_detector.fast import FastPipeline
-from wz_lidar_detector.readers import PointCloudFileError, read_point_cloud
 from wz_lidar_detector.reference import ReferencePipeline
 from wz_lidar_detector.settings import LidarDetectorSettings, lidar_mount
 from wz_lidar_detector.transform import box_to_site
 from wz_shared.logs import configure_logging
+from wz_shared.pointcloud_files import PointCloudFileError, read_point_cloud
 from wz_shared.site import LidarIntrinsics, SensorMount, SiteFileError, load_site
 
 log = logging.getLogger("wz_lidar_detector.cli")

@@ -14,45 +14,12 @@ import numpy.typing as npt
 
 from wz_shared.messages import VehicleClass
 
+# One LiDAR frame: defined with the file readers, in the shared library.
+from wz_shared.pointcloud_files import PointFrame as PointFrame
+
 Float32Array = npt.NDArray[np.float32]
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
-
-
-@dataclass(frozen=True)
-class PointFrame:
-    """One LiDAR frame.
-
-    Attributes
-    ----------
-    points
-        ``(N, 4)`` float32: x, y, z [m] in the sensor frame and intensity (NaN where the sensor
-        gives none). NaN x marks a no-return slot of an organized frame.
-    rows, columns
-        Shape of an organized frame (``rows * columns == N``, row-major by beam then column);
-        ``rows == 1`` for an unorganized cloud.
-    stamp_s
-        Capture time [s] (sweep start).
-    """
-
-    points: Float32Array
-    rows: int
-    columns: int
-    stamp_s: float = 0.0
-
-    @property
-    def organized(self) -> bool:
-        return self.rows > 1 and self.rows * self.columns == len(self.points)
-
-    @classmethod
-    def unorganized(cls, points: npt.ArrayLike, stamp_s: float = 0.0) -> PointFrame:
-        """A cloud without beam/column structure; a missing intensity column becomes NaN."""
-        array = np.asarray(points, dtype=np.float32)
-        if array.ndim != 2 or array.shape[1] not in (3, 4):
-            raise ValueError(f"points must have shape (N, 3) or (N, 4), got {array.shape}")
-        if array.shape[1] == 3:
-            array = np.column_stack([array, np.full(len(array), np.nan, dtype=np.float32)])
-        return cls(points=array, rows=1, columns=len(array), stamp_s=stamp_s)
 
 
 @dataclass(frozen=True)

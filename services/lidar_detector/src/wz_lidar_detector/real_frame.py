@@ -31,8 +31,8 @@ from scipy.spatial import cKDTree
 from wz_lidar_detector.background import VoxelBackground
 from wz_lidar_detector.detection import DetectionResult
 from wz_lidar_detector.fast import FastPipeline, FastSettings
-from wz_lidar_detector.readers import read_point_cloud
 from wz_lidar_detector.reference import ReferencePipeline, ReferenceSettings
+from wz_shared.pointcloud_files import read_point_cloud
 
 DEFAULT_DATA = Path(__file__).resolve().parents[5] / "shared" / "data" / "real-freeway-lidar"
 ROAD_X_M = (-10.0, 130.0)

@@ -1,5 +1,8 @@
 """Point-cloud files to :class:`PointFrame`: PCD v0.7, PLY and NPZ (pure parsing, numpy only).
 
+Shared by the LiDAR detector (``wz detect-lidar``, its background files) and the field drivers
+(folders of recorded frames, :mod:`wz_drivers.lidar_files`): one parser for both.
+
 Formats
 -------
 PCD (v0.7, and the older headers that use the same keywords)
@@ -35,7 +38,44 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from wz_lidar_detector.detection import PointFrame
+Float32Array = npt.NDArray[np.float32]
+
+
+@dataclass(frozen=True)
+class PointFrame:
+    """One LiDAR frame.
+
+    Attributes
+    ----------
+    points
+        ``(N, 4)`` float32: x, y, z [m] in the sensor frame and intensity (NaN where the sensor
+        gives none). NaN x marks a no-return slot of an organized frame.
+    rows, columns
+        Shape of an organized frame (``rows * columns == N``, row-major by beam then column);
+        ``rows == 1`` for an unorganized cloud.
+    stamp_s
+        Capture time [s] (sweep start).
+    """
+
+    points: Float32Array
+    rows: int
+    columns: int
+    stamp_s: float = 0.0
+
+    @property
+    def organized(self) -> bool:
+        return self.rows > 1 and self.rows * self.columns == len(self.points)
+
+    @classmethod
+    def unorganized(cls, points: npt.ArrayLike, stamp_s: float = 0.0) -> PointFrame:
+        """A cloud without beam/column structure; a missing intensity column becomes NaN."""
+        array = np.asarray(points, dtype=np.float32)
+        if array.ndim != 2 or array.shape[1] not in (3, 4):
+            raise ValueError(f"points must have shape (N, 3) or (N, 4), got {array.shape}")
+        if array.shape[1] == 3:
+            array = np.column_stack([array, np.full(len(array), np.nan, dtype=np.float32)])
+        return cls(points=array, rows=1, columns=len(array), stamp_s=stamp_s)
+
 
 #: A PCD or PLY header longer than this is not a header [bytes].
 MAX_HEADER_BYTES = 64 * 1024
@@ -549,7 +589,10 @@ def read_npz(path: str | Path, *, shape_hint: tuple[int, int] | None = None) -> 
         raise PointCloudFileError(path, "cannot read: no such file") from exc
     except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as exc:
         raise PointCloudFileError(path, f"not a readable NPZ archive: {exc}") from exc
-    stamp_s = _npz_scalar(path, arrays, "stamp_s") or 0.0
+    stamp_s = _npz_scalar(path, arrays, "stamp_s")
+    if stamp_s is None:  # a recorder's Unix time, e.g. a field log's frame
+        stamp_s = _npz_scalar(path, arrays, "stamp")
+    stamp_s = stamp_s or 0.0
     if not math.isfinite(stamp_s) or stamp_s < 0:
         raise PointCloudFileError(path, f"stamp_s {stamp_s} is not a time")
     if "points" in arrays:
