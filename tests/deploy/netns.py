@@ -73,6 +73,7 @@ class Network:
         self.prefix = prefix
         self.hosts: list[Host] = []
         self._subnet = 0
+        self._root_ifs: list[str] = []  # veth ends in this test's own namespace
 
     def host(self, name: str) -> Host:
         host = Host(f"{self.prefix}-{name}")
@@ -107,11 +108,11 @@ class Network:
         _ip("link", "set", near_if, "up")
         _ip("-n", far.name, "addr", "add", f"10.231.{n}.2/30", "dev", far_if)
         _ip("-n", far.name, "link", "set", far_if, "up")
-        self._root_ifs = [*getattr(self, "_root_ifs", []), near_if]
+        self._root_ifs.append(near_if)
         return f"10.231.{n}.2"
 
     def close(self) -> None:
-        for ifname in getattr(self, "_root_ifs", []):
+        for ifname in self._root_ifs:
             subprocess.run(["ip", "link", "del", ifname], capture_output=True, check=False)
         for host in self.hosts:  # deleting a namespace deletes its veth ends (and the peers)
             subprocess.run(["ip", "netns", "del", host.name], capture_output=True, check=False)

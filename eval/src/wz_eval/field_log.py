@@ -222,8 +222,7 @@ def _write_unit(path: Path, truth: list[tuple[float, list[VehicleTruth]]], mount
 
     assert isinstance(mount, SensorMount) and isinstance(mount.intrinsics, RadarIntrinsics)
     intrinsics = mount.intrinsics
-    rotation = mount.pose.rotation()
-    heading = math.atan2(float(rotation[1, 0]), float(rotation[0, 0]))
+    heading = mount.pose.ground_heading_rad()
     half_fov = math.radians(intrinsics.horizontal_fov_deg) / 2.0
     ids: dict[str, int] = {}
     period = 1.0 / UNIT_RATE_HZ

@@ -26,8 +26,8 @@ import numpy as np
 
 from wz_drivers.gps import gps_track, read_gps
 from wz_drivers.log import FieldLog, load_log
-from wz_drivers.records import FieldDataError, Problems
-from wz_drivers.sources import merged
+from wz_drivers.records import FieldDataError, LidarSweep, ObjectList, Problems
+from wz_drivers.sources import lidar_meta, merged_records, objects_to_detections
 from wz_eval.field import (
     FieldSettings,
     SourceObservations,
@@ -46,9 +46,8 @@ from wz_fusion_tracker.node import (
 from wz_fusion_tracker.tracker import MultiTargetTracker, TrackerSettings
 from wz_lidar_detector.node import LidarDetector
 from wz_lidar_detector.settings import LidarDetectorSettings
-from wz_shared import codec
 from wz_shared.logs import configure_logging
-from wz_shared.messages import DetectionBatch, LidarFrameMeta
+from wz_shared.messages import DetectionBatch
 
 log = logging.getLogger(__name__)
 #: The fused tracks' name in the report.
@@ -102,18 +101,22 @@ def detect(field_log: FieldLog, *, learn_frames: int = 20) -> FieldRun:
             detectors[source.sensor_id] = LidarDetector(field_log.site.site_id, mount, settings,
                                                         report)  # fmt: skip
         elif source.kind == "camera":
-            raise NotImplementedError(
-                "camera video in a field evaluation: replay it on the bus through the camera "
-                "detector (wz replay); the in-process evaluation reads LiDAR and object lists")
-    for out in merged(field_log, run.problems):
-        if out.message is not None:
-            assert isinstance(out.message, DetectionBatch)
-            run.detections[out.sensor_id].append(out.message)
+            raise FieldDataError(
+                field_log.folder / "log.yaml", f"source {source.sensor_id} is a camera video: "
+                "the in-process evaluation reads LiDAR and object lists; replay a video on the "
+                "bus through the camera detector (wz replay)")
+    site = field_log.site
+    for item in merged_records(field_log, run.problems):  # the records: no envelope round trip
+        sensor = item.source.sensor_id
+        if isinstance(item.record, ObjectList):
+            run.detections[sensor].append(
+                objects_to_detections(item.record, item.mount, site, item.index))
             continue
-        frame = codec.decode_frame(out.payload, LidarFrameMeta)
-        batch = detectors[out.sensor_id].handle(frame.meta, frame.points(), time.monotonic())
+        assert isinstance(item.record, LidarSweep)
+        meta = lidar_meta(item.record, sensor, site, item.index)
+        batch = detectors[sensor].handle(meta, item.record.points, time.monotonic())
         if batch is not None:
-            run.detections[out.sensor_id].append(batch)
+            run.detections[sensor].append(batch)
     run.wall_s = time.perf_counter() - started
     return run
 

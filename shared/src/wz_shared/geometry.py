@@ -30,6 +30,8 @@ frame extrapolates along the end segment with its normal held fixed (``s < 0`` o
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import numpy.typing as npt
 from pyproj import Transformer
@@ -53,6 +55,19 @@ _GRID_CELL_M = 10.0
 _GRID_MAX_CELLS = 1 << 18
 # Points per batch of the grid search: keeps temporaries in cache.
 _GRID_CHUNK_POINTS = 2048
+
+
+def polar_covariance(bearing_rad: float, range_variance_m2: float, lateral_variance_m2: float,
+                     min_variance_m2: float = 1e-6) -> FloatArray:  # fmt: skip
+    """A position seen along a line of sight at ``bearing_rad`` (CCW from the site x axis):
+    ``sigma_rho^2 u u^T + sigma_lat^2 n n^T`` [m^2], shape (2, 2), with ``u`` the line of sight,
+    ``n`` its left normal, and each variance at least ``min_variance_m2``."""
+    cos_b, sin_b = math.cos(bearing_rad), math.sin(bearing_rad)
+    u, n = np.array([cos_b, sin_b]), np.array([-sin_b, cos_b])
+    covariance: FloatArray = max(range_variance_m2, min_variance_m2) * np.outer(u, u) + max(
+        lateral_variance_m2, min_variance_m2
+    ) * np.outer(n, n)
+    return covariance
 
 
 class RoadFrame:

@@ -137,6 +137,12 @@ class Pose(_Strict):
         rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
         return np.asarray(rz @ ry @ rx, dtype=np.float64)
 
+    def ground_heading_rad(self) -> float:
+        """Site-frame heading of the sensor's x axis projected on the ground [rad], CCW from
+        east (the bearing of its boresight on the map)."""
+        rotation = self.rotation()
+        return math.atan2(float(rotation[1, 0]), float(rotation[0, 0]))
+
 
 class LidarIntrinsics(_Strict):
     """A spinning multi-beam LiDAR."""

@@ -100,16 +100,13 @@ import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field
 from scipy.optimize import linear_sum_assignment
 
+from wz_shared.geometry import polar_covariance
 from wz_shared.messages import Detection, RadarScan, RadarTarget, VehicleClass
 from wz_shared.site import RadarIntrinsics, SensorMount
 
 F64 = npt.NDArray[np.float64]
 
 FusedSource = Literal["camera+radar", "camera", "radar"]
-
-#: Variance floor on each principal axis of a built covariance [m^2]: keeps it positive
-#: definite when an intrinsics noise is configured as zero.
-_MIN_VARIANCE_M2 = 1e-6
 
 #: Cost of a forbidden pair in the assignment; far above any admissible ``d^2``.
 _FORBIDDEN_COST = 1e12
@@ -276,23 +273,6 @@ def _unit(bearing_rad: float) -> tuple[F64, F64]:
     return np.array([cos_b, sin_b]), np.array([-sin_b, cos_b])
 
 
-def _polar_covariance(
-    bearing_rad: float, range_variance_m2: float, lateral_variance_m2: float
-) -> F64:
-    """``sigma_rho^2 u u^T + sigma_lat^2 n n^T`` [m^2], shape (2, 2), each floored."""
-    u, n = _unit(bearing_rad)
-    covariance: F64 = max(range_variance_m2, _MIN_VARIANCE_M2) * np.outer(u, u) + max(
-        lateral_variance_m2, _MIN_VARIANCE_M2
-    ) * np.outer(n, n)
-    return covariance
-
-
-def mount_ground_heading_rad(mount: SensorMount) -> float:
-    """Site-frame heading of the sensor's x axis projected on the ground [rad], CCW from east."""
-    rotation = mount.pose.rotation()
-    return math.atan2(float(rotation[1, 0]), float(rotation[0, 0]))
-
-
 def radar_targets_to_site(
     targets: Sequence[RadarTarget],
     mount: SensorMount,
@@ -324,7 +304,7 @@ def radar_targets_to_site(
     range_std_m = intrinsics.range_noise_std_m
     azimuth_std_rad = math.radians(intrinsics.azimuth_noise_std_deg)
     height_m = mount.pose.z_m - settings.target_height_m
-    heading_rad = mount_ground_heading_rad(mount)
+    heading_rad = mount.pose.ground_heading_rad()
     points: list[RadarPoint] = []
     for index, target in enumerate(targets):
         slant_m = target.range_m
@@ -333,7 +313,7 @@ def radar_targets_to_site(
         rho_jacobian_m = max(rho_m, settings.min_horizontal_range_m)
         bearing = heading_rad + target.azimuth_rad
         # R = (sigma_r r / rho)^2 u u^T + (rho sigma_a)^2 n n^T
-        covariance = _polar_covariance(
+        covariance = polar_covariance(
             bearing,
             (range_std_m * max(slant_m, rho_jacobian_m) / rho_jacobian_m) ** 2,
             (rho_jacobian_m * azimuth_std_rad) ** 2,
@@ -556,7 +536,7 @@ def fuse_pair(
         / radar_rho_jacobian_m
     ) ** 2 + settings.centre_std_m**2  # where on the near face it echoed, the setback's
     # guess of length and heading: the centre is that uncertain along the range
-    covariance = _polar_covariance(
+    covariance = polar_covariance(
         camera_bearing, range_variance_m2, radar_rho_jacobian_m**2 * bearing_variance_rad2
     )
     centre_rho_m = radar_rho_m + reflection_setback_m(camera, camera_bearing)

@@ -34,9 +34,7 @@ reported (naming the CSV line when its time came from the CSV) and skipped.
 
 from __future__ import annotations
 
-import csv
 import logging
-import math
 import re
 from collections.abc import Iterator
 from decimal import Decimal
@@ -45,6 +43,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from wz_drivers.frame_times import read_frame_times
 from wz_drivers.records import FieldDataError, LidarSweep, Problems
 from wz_shared.pointcloud_files import PointCloudFileError, PointFrame, read_point_cloud
 
@@ -54,9 +53,6 @@ Float32Array = npt.NDArray[np.float32]
 
 #: Suffixes of the files :func:`read_frame_folder` takes as frames (compared lower-case).
 FRAME_SUFFIXES = (".pcd", ".ply", ".npz")
-#: Names of the timestamps CSV's columns (compared lower-case, first match wins).
-FILE_COLUMN_NAMES = ("file",)
-TIME_COLUMN_NAMES = ("time_unix_s", "time")
 #: Unix times a file name may carry [s]: 2000-01-01 to 2100-01-01 (UTC).
 PLAUSIBLE_UNIX_S = (946_684_800.0, 4_102_444_800.0)
 #: Digits of an integer time in a file name -> units per second (s, ms, us, ns).
@@ -232,56 +228,14 @@ def _sweep(frame: PointFrame, stamp: float, where: str) -> LidarSweep:
 def _read_timestamps(
     path: Path, frame_names: set[str], problems: Problems
 ) -> tuple[dict[str, tuple[float, int]], set[str]]:
-    """``file name -> (time [Unix s], CSV line)``, and the names of frames whose row was bad
-    (reported and left out)."""
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise FieldDataError(path, "no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise FieldDataError(path, f"cannot read: {exc}") from None
-    reader = csv.reader(text.splitlines())
-    header = [name.strip().lower() for name in next(reader, [])]
-    file_column = next((header.index(n) for n in FILE_COLUMN_NAMES if n in header), None)
-    time_column = next((header.index(n) for n in TIME_COLUMN_NAMES if n in header), None)
-    if file_column is None or time_column is None:
-        missing = [f"{what} ({' or '.join(names)})" for what, names, column in (
-            ("file", FILE_COLUMN_NAMES, file_column), ("time", TIME_COLUMN_NAMES, time_column))
-            if column is None]  # fmt: skip
-        raise FieldDataError(
-            path, f"missing columns: {', '.join(missing)}; header: {','.join(header)}", line=1
-        )
-    table: dict[str, tuple[float, int]] = {}
-    rejected: set[str] = set()
-    for row in reader:
-        number = reader.line_num
-        if not any(cell.strip() for cell in row):
-            continue
-        if len(row) <= max(file_column, time_column):
-            problems.add(FieldDataError(path, f"{len(row)} cells, expected {len(header)}",
-                                        line=number))  # fmt: skip
-            continue
-        name = Path(row[file_column].strip()).name
-        try:
-            stamp = float(row[time_column])
-        except ValueError:
-            stamp = math.nan
-        if not (math.isfinite(stamp) and stamp >= 0.0):
-            problems.add(FieldDataError(
-                path, f"time {row[time_column].strip()!r} of {name} is not a Unix time [s]: "
-                "frame skipped", line=number))  # fmt: skip
-            rejected.add(name)
-            continue
-        if name in table:
-            problems.add(
-                FieldDataError(
-                    path, f"{name} again (first at line {table[name][1]}): row ignored", line=number
-                )
-            )
-            continue
+    """``file name -> (time [Unix s], CSV line)`` of the folder's frames, and the names of
+    frames whose row was bad (reported and left out)."""
+    table, rejected = read_frame_times(path, problems, key="file",
+                                       parse_key=lambda cell: Path(cell.strip()).name,
+                                       describe=lambda name: name)  # fmt: skip
+    for name, (_, number) in list(table.items()):
         if name not in frame_names:
             problems.add(FieldDataError(path, f"no frame file {name!r} in the folder",
                                         line=number))  # fmt: skip
-            continue
-        table[name] = (stamp, number)
-    return table, rejected - table.keys()
+            del table[name]
+    return table, rejected

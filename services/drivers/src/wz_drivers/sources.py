@@ -29,11 +29,10 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from wz_drivers.log import FieldLog, LogSource
 from wz_drivers.records import CameraImage, FieldDataError, LidarSweep, ObjectList, Problems
 from wz_shared import codec
+from wz_shared.geometry import polar_covariance
 from wz_shared.keys import Keys
 from wz_shared.messages import (
     CameraFrameMeta,
@@ -131,8 +130,7 @@ def objects_to_detections(objects: ObjectList, mount: SensorMount, site: Site,
     intrinsics = mount.intrinsics
     if not isinstance(intrinsics, RadarIntrinsics):
         raise ValueError(f"{mount.sensor_id} is a {mount.kind}, not a radar unit")
-    rotation = mount.pose.rotation()
-    heading = math.atan2(float(rotation[1, 0]), float(rotation[0, 0]))
+    heading = mount.pose.ground_heading_rad()
     c, s = math.cos(heading), math.sin(heading)
     range_var = intrinsics.range_noise_std_m**2
     azimuth_std = math.radians(intrinsics.azimuth_noise_std_deg)
@@ -142,10 +140,8 @@ def objects_to_detections(objects: ObjectList, mount: SensorMount, site: Site,
         y = mount.pose.y_m + s * obj.x_m + c * obj.y_m
         rho = max(math.hypot(obj.x_m, obj.y_m), 1.0)
         bearing = heading + math.atan2(obj.y_m, obj.x_m)
-        u = np.array([math.cos(bearing), math.sin(bearing)])
-        n = np.array([-u[1], u[0]])
-        covariance = (max(range_var, _MIN_VARIANCE_M2) * np.outer(u, u)
-                      + max((rho * azimuth_std) ** 2, _MIN_VARIANCE_M2) * np.outer(n, n))  # fmt: skip
+        covariance = polar_covariance(bearing, range_var, (rho * azimuth_std) ** 2,
+                                      min_variance_m2=_MIN_VARIANCE_M2)  # fmt: skip
         detections.append(Detection(
             x_m=x, y_m=y, covariance_m2=covariance.ravel().tolist(), object_class=obj.object_class,
             speed_mps=obj.speed_mps, local_track_id=obj.object_id, length_m=obj.length_m,
@@ -165,18 +161,38 @@ def key_of(site: Site, source: LogSource) -> str:
     return keys.detections(source.sensor_id)
 
 
+@dataclass(frozen=True)
+class SourceRecord:
+    """One record of a source (stamp corrected by its ``clock_offset_s``) and where it is from:
+    the source, its sensor's mount, and its number in the source."""
+
+    source: LogSource
+    mount: SensorMount
+    index: int
+    record: Any
+
+    @property
+    def stamp(self) -> float:
+        return float(self.record.stamp)
+
+
+def lidar_meta(sweep: LidarSweep, sensor_id: str, site: Site, index: int) -> LidarFrameMeta:
+    """The frame metadata of a sweep, as the simulator would publish it."""
+    return LidarFrameMeta(
+        site=site.site_id, source_id=sensor_id, stamp=sweep.stamp, frame_index=index,
+        rows=max(1, sweep.rows), columns=sweep.columns if sweep.organized else 0,
+        num_points=len(sweep.points), sweep_duration_s=sweep.sweep_duration_s,
+        organized=sweep.organized,
+    )  # fmt: skip
+
+
 def to_outgoing(record: Any, source: LogSource, mount: SensorMount, site: Site,
                 index: int) -> Outgoing:  # fmt: skip
     """One record of ``source`` as its bus message."""
     keys = Keys(site.site_id)
     sensor = source.sensor_id
     if isinstance(record, LidarSweep):
-        meta = LidarFrameMeta(
-            site=site.site_id, source_id=sensor, stamp=record.stamp, frame_index=index,
-            rows=max(1, record.rows), columns=record.columns if record.organized else 0,
-            num_points=len(record.points), sweep_duration_s=record.sweep_duration_s,
-            organized=record.organized,
-        )  # fmt: skip
+        meta = lidar_meta(record, sensor, site, index)
         return Outgoing(record.stamp, sensor, keys.raw_lidar(sensor),
                         codec.encode_lidar_frame(meta, record.points))  # fmt: skip
     if isinstance(record, CameraImage):
@@ -192,20 +208,36 @@ def to_outgoing(record: Any, source: LogSource, mount: SensorMount, site: Site,
     raise TypeError(f"no bus message for a {type(record).__name__}")
 
 
-def source_messages(log: FieldLog, source: LogSource, problems: Problems,
-                    stop: threading.Event | None = None) -> Iterator[Outgoing]:  # fmt: skip
-    """One source's messages in its order (a live source's as they come, until ``stop``)."""
+def source_records(log: FieldLog, source: LogSource, problems: Problems,
+                   stop: threading.Event | None = None) -> Iterator[SourceRecord]:  # fmt: skip
+    """One source's records in its order (a live source's as they come, until ``stop``)."""
     mount = next(m for m in log.site.sensors if m.sensor_id == source.sensor_id)
     for index, record in enumerate(read_source(log, source, problems, stop)):
         if source.clock_offset_s:
             record = replace(record, stamp=record.stamp - source.clock_offset_s)
-        yield to_outgoing(record, source, mount, log.site, index)
+        yield SourceRecord(source, mount, index, record)
+
+
+def merged_records(log: FieldLog, problems: Problems,
+                   only: set[str] | None = None) -> Iterator[SourceRecord]:  # fmt: skip
+    """Every source's records in stamp order (each source is in order already: its reader
+    drops what goes back); ``only``: these sensor ids."""
+    streams = [source_records(log, source, problems) for source in log.sources
+               if only is None or source.sensor_id in only]  # fmt: skip
+    return heapq.merge(*streams, key=lambda item: item.stamp)
+
+
+def _outgoing(log: FieldLog, item: SourceRecord) -> Outgoing:
+    return to_outgoing(item.record, item.source, item.mount, log.site, item.index)
+
+
+def source_messages(log: FieldLog, source: LogSource, problems: Problems,
+                    stop: threading.Event | None = None) -> Iterator[Outgoing]:  # fmt: skip
+    """One source's messages in its order (a live source's as they come, until ``stop``)."""
+    return (_outgoing(log, item) for item in source_records(log, source, problems, stop))
 
 
 def merged(log: FieldLog, problems: Problems,
            only: set[str] | None = None) -> Iterator[Outgoing]:  # fmt: skip
-    """Every source's messages in stamp order (each source is in order already: its reader
-    drops what goes back); ``only``: these sensor ids."""
-    streams = [source_messages(log, source, problems) for source in log.sources
-               if only is None or source.sensor_id in only]  # fmt: skip
-    return heapq.merge(*streams, key=lambda out: out.stamp)
+    """Every source's messages in stamp order (see :func:`merged_records`)."""
+    return (_outgoing(log, item) for item in merged_records(log, problems, only))

@@ -24,7 +24,6 @@ reported (the CSV line, or the frame of the file) and skipped. Credentials in a 
 
 from __future__ import annotations
 
-import csv
 import logging
 import math
 import time
@@ -36,15 +35,13 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from wz_drivers.frame_times import read_frame_times
 from wz_drivers.records import CameraImage, FieldDataError, Problems
 
 log = logging.getLogger(__name__)
 
 #: URL schemes read as live streams; anything else is a file path.
 STREAM_SCHEMES = ("rtsp", "rtsps", "rtmp", "http", "https", "udp", "tcp", "srt")
-#: Names of the timestamps CSV's columns (compared lower-case, first match wins).
-FRAME_COLUMN_NAMES = ("frame",)
-TIME_COLUMN_NAMES = ("time_unix_s", "time")
 
 
 def is_stream_url(source: str | Path) -> bool:
@@ -230,60 +227,19 @@ def _retrieve(capture: cv2.VideoCapture, encode_params: list[int], stamp: float,
                        height_px=int(height), where=where)  # fmt: skip
 
 
+def _frame_number(cell: str) -> int:
+    try:
+        frame = int(cell)
+    except ValueError:
+        frame = -1
+    if frame < 0:
+        raise ValueError(f"frame {cell.strip()!r} is not a frame number (0, 1 ...)")
+    return frame
+
+
 def _read_timestamps(
     path: Path, problems: Problems
 ) -> tuple[dict[int, tuple[float, int]], set[int]]:
     """``frame -> (time [Unix s], CSV line)``, and the frames whose row was bad (reported)."""
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise FieldDataError(path, "no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise FieldDataError(path, f"cannot read: {exc}") from None
-    reader = csv.reader(text.splitlines())
-    header = [name.strip().lower() for name in next(reader, [])]
-    frame_column = next((header.index(n) for n in FRAME_COLUMN_NAMES if n in header), None)
-    time_column = next((header.index(n) for n in TIME_COLUMN_NAMES if n in header), None)
-    if frame_column is None or time_column is None:
-        missing = [f"{what} ({' or '.join(names)})" for what, names, column in (
-            ("frame", FRAME_COLUMN_NAMES, frame_column), ("time", TIME_COLUMN_NAMES, time_column))
-            if column is None]  # fmt: skip
-        raise FieldDataError(
-            path, f"missing columns: {', '.join(missing)}; header: {','.join(header)}", line=1
-        )
-    table: dict[int, tuple[float, int]] = {}
-    rejected: set[int] = set()
-    for row in reader:
-        number = reader.line_num
-        if not any(cell.strip() for cell in row):
-            continue
-        if len(row) <= max(frame_column, time_column):
-            problems.add(FieldDataError(path, f"{len(row)} cells, expected {len(header)}",
-                                        line=number))  # fmt: skip
-            continue
-        try:
-            frame = int(row[frame_column])
-        except ValueError:
-            frame = -1
-        if frame < 0:
-            problems.add(FieldDataError(
-                path, f"frame {row[frame_column].strip()!r} is not a frame number (0, 1 ...)",
-                line=number))  # fmt: skip
-            continue
-        try:
-            stamp = float(row[time_column])
-        except ValueError:
-            stamp = math.nan
-        if not (math.isfinite(stamp) and stamp >= 0.0):
-            problems.add(FieldDataError(
-                path, f"time {row[time_column].strip()!r} of frame {frame} is not a Unix time "
-                "[s]: frame skipped", line=number))  # fmt: skip
-            rejected.add(frame)
-            continue
-        if frame in table:
-            problems.add(FieldDataError(
-                path, f"frame {frame} again (first at line {table[frame][1]}): row ignored",
-                line=number))  # fmt: skip
-            continue
-        table[frame] = (stamp, number)
-    return table, rejected - table.keys()
+    return read_frame_times(path, problems, key="frame", parse_key=_frame_number,
+                            describe=lambda frame: f"frame {frame}")  # fmt: skip
