@@ -10,7 +10,15 @@ import pytest
 
 from tests.purity import top_level_imports
 from wz_camera_detector import world
-from wz_camera_detector.world import box_bottom_centre_px, box_to_ground, paper_box_to_ground
+from wz_camera_detector.world import (
+    PIXEL_EDGE_INSET_PX,
+    VehicleShape,
+    box_bottom_centre_px,
+    box_to_ground,
+    fit_box_to_ground,
+    paper_box_to_ground,
+    vehicle_image_boxes,
+)
 from wz_shared.camera_geometry import LensDistortion, PinholeCamera, backproject_to_ground
 from wz_shared.site import CameraIntrinsics, Pose, SensorMount
 
@@ -102,6 +110,88 @@ def test_bottom_centre_and_degenerate_inputs() -> None:
     assert all(math.isnan(c) for c in paper_box_to_ground(camera.mount, above_horizon))
     with pytest.raises(ValueError, match="must not be negative"):
         box_to_ground(camera, [500.0, 700.0, 700.0, 900.0], 0.0, -4.6, 1.9)
+
+
+TRUCK = VehicleShape(16.5, 2.6, 4.0, clearance_m=0.5, wheel_inset_m=0.3)
+CAR_BOX = VehicleShape(LENGTH_M, WIDTH_M, HEIGHT_M)
+CAR_ON_WHEELS = VehicleShape(LENGTH_M, WIDTH_M, HEIGHT_M, clearance_m=0.28, wheel_inset_m=0.53)
+
+
+def labelled_box(camera: PinholeCamera, centre_xy_m: tuple[float, float], heading_rad: float,
+                 shape: VehicleShape) -> np.ndarray:  # fmt: skip
+    """The box a label around the vehicle's pixels has: its exact box grown by half a pixel."""
+    exact = vehicle_image_boxes(camera, [centre_xy_m], heading_rad, shape)[0]
+    return exact + PIXEL_EDGE_INSET_PX * np.array([-1.0, -1.0, 1.0, 1.0])
+
+
+def test_a_box_shape_has_the_box_of_its_corners() -> None:
+    camera = PinholeCamera(site_camera_mount(), LensDistortion(k1=-0.1, k2=0.01))
+    box = vehicle_image_boxes(camera, [(40.0, -3.0)], math.pi, CAR_BOX)[0]
+    np.testing.assert_allclose(box, vehicle_box_px(camera, (40.0, -3.0), math.pi), atol=1e-9)
+
+
+def test_a_raised_body_ends_higher_in_the_image_than_its_wheels_foot() -> None:
+    """Seen from a mast, the foot of a car's front wheels (0.53 m behind the bumper, on the
+    road) is lower in the image than the bumper's underside (0.28 m up): the box's bottom."""
+    camera = PinholeCamera(site_camera_mount())
+    on_wheels = vehicle_image_boxes(camera, [(60.0, -3.0)], math.pi, CAR_ON_WHEELS)[0]
+    as_box = vehicle_image_boxes(camera, [(60.0, -3.0)], math.pi, CAR_BOX)[0]
+    wheel_foot = camera.project([[60.0 - 0.5 * LENGTH_M + 0.53, -3.0 - 0.5 * WIDTH_M, 0.0]])[0][0]
+    assert on_wheels[3] == pytest.approx(wheel_foot[1], abs=1e-9)
+    assert on_wheels[3] < as_box[3], "higher in the image than a body reaching the road"
+    np.testing.assert_allclose(on_wheels[[0, 1, 2]], as_box[[0, 1, 2]], atol=1.0)
+
+
+@pytest.mark.parametrize("distortion", [None, LensDistortion(k1=-0.1, k2=0.01)])
+@pytest.mark.parametrize("lateral_m", [-9.0, -5.5, 3.5])
+@pytest.mark.parametrize("distance_m", [25.0, 40.0, 80.0, 150.0])
+def test_fit_recovers_a_truck_the_contact_point_places_across_the_road(
+    distance_m: float, lateral_m: float, distortion: LensDistortion | None
+) -> None:
+    """A semitrailer seen obliquely spans the image from its near front corner to its far rear
+    top corner: the middle column is not its bearing. The fit recovers the centre."""
+    camera = PinholeCamera(site_camera_mount(), distortion)
+    truth = np.array([distance_m, lateral_m])
+    box = labelled_box(camera, (distance_m, lateral_m), math.pi, TRUCK)
+
+    fitted = np.array(fit_box_to_ground(camera, box, math.pi, TRUCK))
+    contact = np.array(box_to_ground(camera, box, math.pi, TRUCK.length_m, TRUCK.width_m))
+
+    assert np.linalg.norm(fitted - truth) < 0.02
+    if distance_m <= 40.0 and abs(lateral_m) > 5.0:
+        assert abs(contact[1] - lateral_m) > 0.3, "the contact-point estimate is metres off"
+
+
+@pytest.mark.parametrize("heading_rad", [math.pi, 0.0, math.pi - 0.15])
+@pytest.mark.parametrize("shape", [CAR_BOX, CAR_ON_WHEELS])
+def test_fit_recovers_a_car_at_any_heading(heading_rad: float, shape: VehicleShape) -> None:
+    camera = PinholeCamera(site_camera_mount())
+    box = labelled_box(camera, (60.0, -4.0), heading_rad, shape)
+    fitted = fit_box_to_ground(camera, box, heading_rad, shape)
+    np.testing.assert_allclose(fitted, (60.0, -4.0), atol=0.02)
+
+
+def test_fit_falls_back_on_a_box_no_vehicle_of_that_shape_has() -> None:
+    """A box cut by an occluder (its right part hidden) fits no car within a few pixels: the
+    contact-point estimate is kept rather than a fit dragged metres away."""
+    camera = PinholeCamera(site_camera_mount())
+    box = labelled_box(camera, (30.0, -4.0), math.pi, CAR_BOX)
+    cut = box.copy()
+    cut[2] = cut[0] + 0.3 * (cut[2] - cut[0])
+    assert fit_box_to_ground(camera, cut, math.pi, CAR_BOX) == box_to_ground(
+        camera, cut, math.pi, LENGTH_M, WIDTH_M
+    )
+    above_horizon = [500.0, 0.0, 700.0, 10.0]
+    assert all(math.isnan(c) for c in fit_box_to_ground(camera, above_horizon, 0.0, CAR_BOX))
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [dict(height_m=-1.0), dict(clearance_m=-0.1), dict(clearance_m=2.0), dict(wheel_inset_m=2.5)],
+)
+def test_impossible_shapes_are_refused(bad: dict[str, float]) -> None:
+    with pytest.raises(ValueError, match="vehicle shape"):
+        VehicleShape(**({"length_m": 4.6, "width_m": 1.8, "height_m": 1.5} | bad))
 
 
 def test_world_core_depends_on_the_shared_library_only() -> None:

@@ -17,9 +17,8 @@ its frames in order. Each frame gives one line on stdout::
      "timings_ms": {"detect": 21.3}}
 
 ``box`` is in pixels of the frame (edges, continuous). ``x, y`` [m, site frame] is the vehicle
-centre from the calibrated pinhole model of ``--camera`` in ``--site`` with the contact-point
-correction (:func:`wz_camera_detector.world.box_to_ground`, the class's typical size, the road's
-heading); ``paper_x, paper_y`` is the paper's Eq. 1-2 ground point of the box's bottom centre;
+centre from the calibrated pinhole model of ``--camera`` in ``--site``: the class's typical
+outline (body on wheels), on the road's heading, fitted to the box (:func:`wz_camera_detector.world.fit_box_to_ground`); ``paper_x, paper_y`` is the paper's Eq. 1-2 ground point of the box's bottom centre;
 ``station, offset`` the centre in the road frame; ``range`` its ground distance from the camera.
 Positions are null for a box reaching above the horizon, and for a box cut by the edge of the
 detector's view (``"cut": true``: its bottom is not its ground contact), as in the node. ``stamp`` is the video's frame time
@@ -59,7 +58,7 @@ from wz_camera_detector.node import (
 )
 from wz_camera_detector.settings import CameraDetectorSettings, camera_mount
 from wz_camera_detector.tracker import ImageTracker
-from wz_camera_detector.world import box_to_ground, paper_box_to_ground
+from wz_camera_detector.world import box_to_ground, fit_box_to_ground, paper_box_to_ground
 from wz_camera_detector.yolo import ImageDetection, ModelLoadError
 from wz_shared.camera_geometry import PinholeCamera, camera_intrinsics
 from wz_shared.logs import configure_logging
@@ -185,7 +184,7 @@ class FrameProcessor:
         self, camera: PinholeCamera, mount: SensorMount, detection: ImageDetection,
         track_id: int | None,
     ) -> dict[str, Any]:  # fmt: skip
-        _, length_m, width_m = CLASS_SIZES[detection.class_name]
+        _, shape = CLASS_SIZES[detection.class_name]
         record: dict[str, Any] = {
             "box": [round(v, 1) for v in detection.box_xyxy_px],
             "class": detection.class_name, "score": round(detection.score, 4),
@@ -199,7 +198,7 @@ class FrameProcessor:
         if record["cut"] or not all(math.isfinite(v) for v in contact):
             return record | dict.fromkeys(keys)
         heading = road_heading_at(self.site, *contact)
-        x_m, y_m = box_to_ground(camera, detection.box_xyxy_px, heading, length_m, width_m)
+        x_m, y_m = fit_box_to_ground(camera, detection.box_xyxy_px, heading, shape)
         station, offset = self.site.road_frame.to_road(x_m, y_m)
         paper_x, paper_y = paper_box_to_ground(mount, detection.box_xyxy_px)
         values = (x_m, y_m, float(station), float(offset),

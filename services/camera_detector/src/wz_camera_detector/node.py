@@ -9,9 +9,9 @@ Run it as ``python -m wz_camera_detector.node``. Settings come from the environm
   the newest scan of ``wz/<site>/raw/radar/<radar>`` (a ring of one too);
 - per frame: decodes the JPEG (``cv2.imdecode``), detects boxes with the backend
   (background subtraction, or a local YOLOv8 ONNX model), tracks them in the image
-  (:class:`ImageTracker`), puts each box on the road (:func:`box_to_ground`, the vehicle
-  heading being the site road's heading at the box's ground point, the size a class's typical
-  one: car 4.6 x 1.8 m for ``car``/``vehicle``, truck 16.5 x 2.6 m for ``truck``/``bus``),
+  (:class:`ImageTracker`), puts each box on the road (:func:`fit_box_to_ground`: the class's
+  typical shape, :data:`CLASS_SIZES`, on the site road's heading at the box's ground point,
+  placed so that its image box has the box's left, right and bottom edges),
   gives it the camera covariance (below), and fuses with the newest radar scan when its stamp
   is within ``radar_max_age_s`` of the frame's (:func:`fuse_camera_radar`, speeds along the
   road heading at the mast);
@@ -76,7 +76,7 @@ from wz_camera_detector.association import (
 from wz_camera_detector.background import BACKEND, BackgroundSubtractionDetector
 from wz_camera_detector.settings import CameraDetectorSettings, camera_mount, radar_mount
 from wz_camera_detector.tracker import ImageTrack, ImageTracker
-from wz_camera_detector.world import box_to_ground
+from wz_camera_detector.world import VehicleShape, box_to_ground, fit_box_to_ground
 from wz_camera_detector.yolo import ImageDetection, ModelLoadError, YoloOnnxDetector
 from wz_shared.camera_geometry import PinholeCamera, camera_intrinsics
 from wz_shared.codec import Frame
@@ -105,14 +105,18 @@ Report = Callable[[str, str], None]
 #: A box this close to the edge of the detector's view is cut by it: not ranged [px].
 TRUNCATION_MARGIN_PX = 3.0
 
-#: Image class name -> (bus class, typical length [m], width [m]); other names are ignored.
-CLASS_SIZES: dict[str, tuple[VehicleClass, float, float]] = {
-    "car": (VehicleClass.CAR, 4.6, 1.8),
+#: A passenger car: 4.6 x 1.8 x 1.5 m, its bumpers 0.28 m up, the front wheels' foot about
+#: half a metre behind the bumper (a 0.85 m overhang less a 0.32 m tyre radius).
+CAR_SHAPE = VehicleShape(4.6, 1.8, 1.5, clearance_m=0.28, wheel_inset_m=0.53)
+#: Image class name -> (bus class, typical shape); other names are ignored. A tractor-
+#: semitrailer's bumper is about 0.5 m up, its steer axle's tyres 0.3 m behind it.
+CLASS_SIZES: dict[str, tuple[VehicleClass, VehicleShape]] = {
+    "car": (VehicleClass.CAR, CAR_SHAPE),
     # The background backend cannot classify: a car-sized guess, class unknown.
-    "vehicle": (VehicleClass.UNKNOWN, 4.6, 1.8),
-    "truck": (VehicleClass.TRUCK, 16.5, 2.6),
-    "bus": (VehicleClass.BUS, 12.0, 2.55),
-    "motorcycle": (VehicleClass.MOTORCYCLE, 2.2, 0.8),
+    "vehicle": (VehicleClass.UNKNOWN, CAR_SHAPE),
+    "truck": (VehicleClass.TRUCK, VehicleShape(16.5, 2.6, 4.0, clearance_m=0.5, wheel_inset_m=0.3)),
+    "bus": (VehicleClass.BUS, VehicleShape(12.0, 2.55, 3.2, clearance_m=0.35, wheel_inset_m=0.6)),
+    "motorcycle": (VehicleClass.MOTORCYCLE, VehicleShape(2.2, 0.8, 1.4)),
 }
 
 
@@ -388,7 +392,7 @@ class CameraDetector:
                 # Its bottom is not where it meets the road, nor its middle column the
                 # vehicle's bearing. Not ranged (the LiDAR sees it).
                 continue
-            object_class, length_m, width_m = CLASS_SIZES[track.class_name]
+            object_class, shape = CLASS_SIZES[track.class_name]
             # Heading from where the box's contact point lies (the road's direction there).
             x0, y0 = box_to_ground(camera, track.box_xyxy_px, 0.0, 0.0, 0.0)
             if not (math.isfinite(x0) and math.isfinite(y0)):
@@ -398,7 +402,7 @@ class CameraDetector:
                 )
                 continue
             heading = road_heading_at(self.site, x0, y0)
-            x_m, y_m = box_to_ground(camera, track.box_xyxy_px, heading, length_m, width_m)
+            x_m, y_m = fit_box_to_ground(camera, track.box_xyxy_px, heading, shape)
             objects.append(
                 CameraObject(
                     local_id=track.local_id,
@@ -408,8 +412,8 @@ class CameraDetector:
                     object_class=object_class,
                     score=track.score,
                     heading_rad=heading,
-                    length_m=length_m,
-                    width_m=width_m,
+                    length_m=shape.length_m,
+                    width_m=shape.width_m,
                 )
             )
         return objects
