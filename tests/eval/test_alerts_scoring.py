@@ -21,10 +21,12 @@ from tests.alert_service.helpers import SITE
 from wz_alert_service.engine import AlertEvent
 from wz_alert_service.rules import Finding
 from wz_eval.alerts import (
+    observed_truth,
     run_alert_engine,
     score_alerts,
     summary_lines,
     taper_arrivals,
+    track_follows,
     truth_batches,
     truth_episodes,
 )
@@ -33,6 +35,8 @@ from wz_shared.messages import (
     AlertPhase,
     AlertSeverity,
     AlertType,
+    Detection,
+    DetectionBatch,
     DriverProfile,
     VehicleClass,
     VehicleTruth,
@@ -137,3 +141,55 @@ def test_the_engine_on_perfect_tracks_scores_perfectly() -> None:
     messages = [e.to_message(SITE.site_id, "alert-service") for e in events]
     assert score_alerts(SITE, TRUTH, messages) == report
     assert isinstance(events[0].finding, Finding)
+
+
+def test_an_alert_is_about_the_vehicle_its_track_followed() -> None:
+    """A track that starts 4 m beside A (a far camera box that took in the next lane) and then
+    follows A: its alert is A's, not a ghost, once the scorer knows what the track followed."""
+    batches, vehicle_of = truth_batches(SITE, TRUTH)
+    track_of_a = next(track for track, vehicle in vehicle_of.items() if vehicle == "A")
+    follows = track_follows(batches, TRUTH)
+    assert {vehicle for _, vehicle in follows[track_of_a]} == {"A"}
+    assert len(follows[track_of_a]) == len(TRUTH)  # every cycle
+    off_start = alert("ep-a", 1.5, station("A", 1.5) + 4.0).model_copy(
+        update={"track_id": track_of_a}
+    )
+    clear = alert("ep-a", 8.0, station("A", 8.0), phase="clear").model_copy(
+        update={"track_id": track_of_a}
+    )
+    by_position = score_alerts(SITE, TRUTH, [off_start, clear])["speeding"]
+    assert (by_position["true_positives"], by_position["false_positives"]) == (0, 1)
+    by_track = score_alerts(SITE, TRUTH, [off_start, clear], follows=follows)["speeding"]
+    assert (by_track["true_positives"], by_track["false_positives"]) == (1, 0)
+    # A track that followed C during the episode makes the same alert C's: a false positive.
+    track_of_c = next(track for track, vehicle in vehicle_of.items() if vehicle == "C")
+    on_c = [e.model_copy(update={"track_id": track_of_c}) for e in (off_start, clear)]
+    assert score_alerts(SITE, TRUTH, on_c, follows=follows)["speeding"]["false_positives"] == 1
+
+
+def detections_of(vehicle_id: str, stamps: list[float]) -> list[DetectionBatch]:
+    return [
+        DetectionBatch(site=SITE.site_id, source_id="lidar-mast", stamp=t, frame_index=i, detections=[
+            Detection(x_m=-OFFSET_M + 0.2, y_m=station(vehicle_id, t) + 0.5,
+                      covariance_m2=[0.1, 0.0, 0.0, 0.1], object_class=VehicleClass.CAR,
+                      score=0.9)])
+        for i, t in enumerate(stamps)
+    ]  # fmt: skip
+
+
+def test_observed_truth_keeps_the_vehicles_a_sensor_saw_recently() -> None:
+    """B is hidden until 12 s (a truck beside it), then seen every 0.1 s; A is seen throughout;
+    C never. The truth keeps A always, B from 12 s (and 1 s after its last sighting), never C."""
+    seen = detections_of("A", [k / 10.0 for k in range(211)]) + detections_of(
+        "B", [12.0 + k / 10.0 for k in range(50)]
+    )
+    observed = dict(observed_truth(TRUTH, seen))
+    ids = {t: {v.vehicle_id for v in vehicles} for t, vehicles in observed.items()}
+    assert ids[5.0] == {"A"} and ids[12.0] == {"A", "B"} and ids[17.9] == {"A", "B"}
+    assert ids[18.0] == {"A"}, "B's last detection at 16.9 s is more than 1 s old"
+    assert all("C" not in vehicles for vehicles in ids.values())
+    # Scored on what the sensors saw, B's speeding before 12 s is no longer a miss the chain
+    # could have avoided: B's episode starts only once it is seen for the rule's hold.
+    speeding = [e for e in truth_episodes(SITE, list(observed.items()))
+                if e.alert_type is AlertType.SPEEDING]  # fmt: skip
+    assert sorted((e.vehicle_id, round(e.onset_s, 2)) for e in speeding) == [("A", 0.0), ("B", 12.0)]

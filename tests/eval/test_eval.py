@@ -42,8 +42,13 @@ def test_wz_eval_writes_the_report_json_markdown_and_plots(tmp_path: Path) -> No
     assert dropout["id_switches_from_start_to_2s_after"] >= 0
     for row in report["paper_table"]:
         assert {"camera", "lidar", "average", "paper_kf", "fused"} <= set(row)
+    # The same alerts, scored on the vehicles a sensor saw and on every vehicle in range.
+    for key in ("alerts", "alerts_all_in_range"):
+        assert {"speeding", "late_merge"} <= set(report[key])
+    for alert_type, seen in report["alerts"].items():
+        assert seen["alerts"] == report["alerts_all_in_range"][alert_type]["alerts"]
     markdown = (out / "eval.md").read_text()
-    assert "MOTA" in markdown and "| fused |" in markdown
+    assert "MOTA" in markdown and "| fused |" in markdown and "hidden ones included" in markdown
     assert all((out / name).stat().st_size > 10_000 for name in report.get("plots", []))
     assert "simulating" in result.stderr  # the progress lines
 

@@ -10,9 +10,15 @@ tracker), not the rules.
 
 Matching, per alert type
 ------------------------
-- An alert episode (its start event; updates and the clear only end it) is tied to a vehicle:
-  the truth vehicle nearest its position at its start stamp, within ``tie_gate_m`` (3 m) in
-  the road frame, ``sqrt(ds^2 + dd^2)`` (truth moved to the stamp from the nearest step, see
+- An alert episode (its start event; updates and the clear only end it) is tied to a vehicle.
+  Given the tracks the alerts came from (:func:`track_follows`), it is the vehicle its track
+  followed for most of the episode: at each track cycle from its start to its clear, the
+  vehicle the track was matched to (one-to-one, least total distance, within ``tie_gate_m``). So an alert
+  whose track starts a few metres off its vehicle (a far camera box that took in the car in
+  the next lane) is still about the vehicle the track then follows. Without the tracks, or
+  when its track matched no vehicle during the episode, it is the truth vehicle nearest the
+  alert's position at its start stamp, within ``tie_gate_m`` (3 m) in the road frame,
+  ``sqrt(ds^2 + dd^2)`` (truth moved to the stamp from the nearest step, see
   :class:`wz_eval.metrics.TruthIndex`). Site-level alerts (the queue) need no vehicle.
 - Each episode spans ``[onset, clear]`` (to the end of the data when it never cleared). An
   alert episode matches a truth episode of the same type and vehicle when their spans,
@@ -31,24 +37,34 @@ when the alert came after the vehicle was at the taper. ``lead_time_s`` is their
 speeding, ``lead_time_aggressive_s`` restricts the median to aggressive drivers.
 
 The truth covers the whole simulated road; to score the chain within its sensors' coverage,
-pass truth frames cut to the covered stretch (a vehicle never seen cannot be alerted on).
+pass truth frames cut to the covered stretch (a vehicle never seen cannot be alerted on), and
+to the vehicles the sensors saw (:func:`observed_truth`): from a mast beside the road a car
+overtaking a truck, or side by side with another car further out, is hidden from every sensor
+for seconds, and no software on the mast can alert on what it cannot see. That is how MOT
+benchmarks treat objects no sensor could see (MOTChallenge leaves out boxes below a visibility
+threshold); ``wz eval`` reports the scores both ways.
 Pure: no I/O; :func:`run_alert_engine` and :func:`score_alerts` are what ``wz eval`` calls.
 """
 
 from __future__ import annotations
 
+import bisect
 import math
 import statistics
+from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from wz_alert_service.engine import AlertEngine, AlertEvent
 from wz_alert_service.zone import ZoneGeometry
-from wz_eval.metrics import TruthIndex
+from wz_eval.metrics import TruthIndex, match
 from wz_shared.messages import (
     Alert,
     AlertType,
+    DetectionBatch,
     DriverProfile,
     Track,
     TrackBatch,
@@ -110,17 +126,18 @@ class _Event:
     station_m: float
     offset_m: float
     site_level: bool
+    track_id: int | None = None
 
 
 def _as_event(event: AlertEvent | Alert) -> _Event:
     if isinstance(event, AlertEvent):
         return _Event(event.episode_id, event.alert_type, event.phase, event.stamp,
                       event.onset_stamp, event.finding.station_m, event.finding.offset_m,
-                      event.track_id is None)  # fmt: skip
+                      event.track_id is None, event.track_id)  # fmt: skip
     onset = event.stamp if event.onset_stamp is None else event.onset_stamp
     return _Event(event.episode_id or event.alert_id, event.alert_type, event.phase,
                   event.stamp, onset, event.station_m, event.offset_m,
-                  event.track_id is None)  # fmt: skip
+                  event.track_id is None, event.track_id)  # fmt: skip
 
 
 def run_alert_engine(site: Site, track_batches: Iterable[TrackBatch]) -> list[AlertEvent]:
@@ -212,6 +229,75 @@ def tie_to_vehicle(truth: TruthIndex, stamp_s: float, station_m: float, offset_m
     return nearest.vehicle_id if distance_m <= gate_m else None
 
 
+#: Per track id, ``(stamp [s], vehicle id)`` of each cycle its track was matched to a vehicle.
+TrackFollows = dict[int, list[tuple[float, str]]]
+
+
+def track_follows(track_batches: Iterable[TrackBatch], truth_frames: TruthFrames,
+                  gate_m: float = TIE_GATE_M) -> TrackFollows:  # fmt: skip
+    """Which vehicle each track followed, cycle by cycle: the batch's tracks matched one-to-one
+    to the truth at its stamp (least total road-frame distance, pairs within ``gate_m``)."""
+    index = TruthIndex([(stamp, list(vehicles)) for stamp, vehicles in truth_frames])
+    follows: TrackFollows = {}
+    for batch in track_batches:
+        vehicles = index.at(batch.stamp, MAX_TRUTH_GAP_S)
+        if not vehicles or not batch.tracks:
+            continue
+        pairs = match(
+            np.array([(t.station_m, t.offset_m) for t in batch.tracks], dtype=np.float64),
+            np.array([(v.station_m, v.offset_m) for v in vehicles], dtype=np.float64),
+            gate_m,
+        )
+        for t, v in pairs:
+            follows.setdefault(batch.tracks[t].track_id, []).append(
+                (batch.stamp, vehicles[v].vehicle_id)
+            )
+    return follows
+
+
+#: A vehicle counts as seen for this long after a detection within the tie gate [s]: a sensor
+#: misses a frame or two, and a rule's hold needs its kinematics continuously.
+OBSERVED_HOLD_S = 1.0
+
+
+def observed_truth(truth_frames: TruthFrames, detection_batches: Iterable[DetectionBatch],
+                   gate_m: float = TIE_GATE_M,
+                   hold_s: float = OBSERVED_HOLD_S) -> list[tuple[float, list[VehicleTruth]]]:  # fmt: skip
+    """The truth frames cut to the vehicles some sensor saw: at each stamp, the vehicles with a
+    detection (any sensor, matched one-to-one within ``gate_m``) in the last ``hold_s``."""
+    index = TruthIndex([(stamp, list(vehicles)) for stamp, vehicles in truth_frames])
+    seen: dict[str, list[float]] = {}
+    for batch in sorted(detection_batches, key=lambda b: b.stamp):
+        vehicles = index.at(batch.stamp, MAX_TRUTH_GAP_S)
+        if not vehicles or not batch.detections:
+            continue
+        pairs = match(
+            np.array([(d.x_m, d.y_m) for d in batch.detections], dtype=np.float64),
+            np.array([(v.x_m, v.y_m) for v in vehicles], dtype=np.float64),
+            gate_m,
+        )
+        for _, v in pairs:
+            seen.setdefault(vehicles[v].vehicle_id, []).append(batch.stamp)
+
+    def recently_seen(vehicle_id: str, stamp_s: float) -> bool:
+        stamps = seen.get(vehicle_id, [])
+        i = bisect.bisect_right(stamps, stamp_s + 1e-9)
+        return i > 0 and stamp_s - stamps[i - 1] <= hold_s
+
+    return [(stamp, [v for v in vehicles if recently_seen(v.vehicle_id, stamp)])
+            for stamp, vehicles in truth_frames]  # fmt: skip
+
+
+def _followed(follows: TrackFollows, track_id: int | None, start_s: float,
+              end_s: float) -> str | None:  # fmt: skip
+    """The vehicle ``track_id`` was matched to most often within ``[start_s, end_s]``."""
+    if track_id is None:
+        return None
+    counts = Counter(vehicle for stamp, vehicle in follows.get(track_id, ())
+                     if start_s <= stamp <= end_s)  # fmt: skip
+    return counts.most_common(1)[0][0] if counts else None
+
+
 def taper_arrivals(truth_frames: TruthFrames, taper_start_m: float) -> dict[str, float]:
     """When each vehicle's centre crosses the taper's start station [s], interpolated between
     steps; vehicles first seen at or past it, or never reaching it, are left out."""
@@ -245,6 +331,7 @@ def score_alerts(
     *,
     tie_gate_m: float = TIE_GATE_M,
     slack_s: float = MATCH_SLACK_S,
+    follows: TrackFollows | None = None,
 ) -> dict[str, dict[str, Any]]:
     """Precision, recall and lead time of the alerts per type, against the truth.
 
@@ -261,6 +348,10 @@ def score_alerts(
         Largest distance from an alert's position to its vehicle [m].
     slack_s : float
         Slack on each side of the episodes' spans when matching [s].
+    follows : TrackFollows or None
+        Which vehicle each track followed (:func:`track_follows` of the batches the alerts
+        came from), to tie an episode to the vehicle its track followed; None to tie by the
+        start position alone.
 
     Returns
     -------
@@ -274,11 +365,17 @@ def score_alerts(
     index = TruthIndex([(stamp, list(vehicles)) for stamp, vehicles in truth_frames])
     profile = {v.vehicle_id: v.driver_profile for _, vehicles in truth_frames for v in vehicles}
     reduced = [_as_event(e) for e in events]
-    tied = {
-        e.episode_id: None if e.site_level else tie_to_vehicle(index, e.stamp_s, e.station_m,
-                                                               e.offset_m, tie_gate_m)
-        for e in reduced if e.phase == "start"
-    }  # fmt: skip
+    clears = {e.episode_id: e.stamp_s for e in reduced if e.phase == "clear"}
+
+    def tie(start: _Event) -> str | None:
+        if start.site_level:
+            return None
+        end_s = clears.get(start.episode_id, math.inf)
+        followed = _followed(follows or {}, start.track_id, start.stamp_s, end_s)
+        return followed or tie_to_vehicle(index, start.stamp_s, start.station_m,
+                                          start.offset_m, tie_gate_m)  # fmt: skip
+
+    tied = {e.episode_id: tie(e) for e in reduced if e.phase == "start"}
     alert_episodes = _episodes(reduced, tied)
     truths = truth_episodes(site, truth_frames)
     arrivals = taper_arrivals(truth_frames, ZoneGeometry.from_site(site).taper_start_m)
