@@ -37,7 +37,12 @@ Inputs: camera objects already ranged onto the road (site-frame ground positions
    A pair is admissible when ``d^2 < gate_chi2`` (chi-square with 2 degrees of freedom; the
    default 13.82 keeps 99.9 % of true pairs). Mahalanobis distance is used rather than separate
    range and azimuth gates because the camera's error ellipse is not aligned with the radar's
-   polar axes unless the camera and radar share a mast position.
+   polar axes unless the camera and radar share a mast position. A camera object whose image
+   track was paired before carries the range that echo predicts now
+   (``CameraObject.expected_range_m``, kept by the node for ``echo_memory_s``); echoes further
+   than ``max_range_jump_m`` from it are refused. Far out the camera ranges to a few metres, so
+   without this a box whose own echo was missed in a scan took the echo of a car one lane over
+   that the camera could not see, and published that car's range and speed in its own lane.
 
 3. **Global nearest neighbour** (:func:`associate`): the assignment minimising the sum of
    ``d^2`` over admissible pairs (``scipy.optimize.linear_sum_assignment``); pairs beyond the
