@@ -5,7 +5,6 @@ over 200 seeded trials (radar range, camera bearing), camera-only, radar-only an
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -383,35 +382,3 @@ def test_radar_range_is_carried_to_the_frame_time_with_the_radial_speed() -> Non
     moved_m = horizontal_range(now.x_m, now.y_m) - horizontal_range(later.x_m, later.y_m)
     # Approaching at 20 m/s along the slant line: 1 m in 50 ms, rho / slant of it horizontal.
     assert moved_m == pytest.approx(20.0 * 0.05 * rho / slant, rel=1e-6)
-
-
-def test_an_image_track_keeps_to_its_own_echos_range() -> None:
-    """A car seen by the camera, and the car one lane over 6 m ahead that the camera cannot see
-    (the radar sees both). Far out, the camera's range is poor, so when the near car's own echo
-    is missed its box would take the hidden car's echo: its lane, the other's range and speed.
-    With the range its last echo predicts, that echo is refused and the box stays camera-only."""
-    seen_xy, hidden_xy = (5.5, 800.0), (9.1, 806.0)
-    camera = camera_object(3, *seen_xy)
-    echo_seen, echo_hidden = radar_target(*seen_xy), radar_target(*hidden_xy)
-    settings = AssociationSettings()
-
-    # Its own echo missed: without an expectation the box pairs with the hidden car's echo.
-    (chimera,) = by_source(
-        fuse_camera_radar([camera], scan_of(echo_hidden), RADAR, settings, ROAD_HEADING_RAD),
-        "camera+radar",
-    )
-    assert chimera.radar_range_m == pytest.approx(horizontal_range(*hidden_xy), abs=0.05)
-    expected = horizontal_range(*seen_xy)
-    keeping = replace(camera, expected_range_m=expected)
-    fused = fuse_camera_radar([keeping], scan_of(echo_hidden), RADAR, settings, ROAD_HEADING_RAD)
-    assert [f.source for f in fused] == ["camera", "radar"]
-    # With both echoes it takes its own; the expectation never forces a pair beyond the gate.
-    fused = fuse_camera_radar([keeping], scan_of(echo_hidden, echo_seen), RADAR, settings,
-                              ROAD_HEADING_RAD)  # fmt: skip
-    (pair,) = by_source(fused, "camera+radar")
-    assert pair.radar_target_index == 1
-    assert pair.radar_range_m == pytest.approx(expected, abs=0.05)
-    assert pair.radar_range_rate_mps is not None and pair.radar_range_rate_mps < 0.0  # closing
-    far = replace(camera, expected_range_m=expected + settings.max_range_jump_m + 0.5)
-    fused = fuse_camera_radar([far], scan_of(echo_seen), RADAR, settings, ROAD_HEADING_RAD)
-    assert [f.source for f in fused] == ["camera", "radar"]

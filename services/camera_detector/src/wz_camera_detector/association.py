@@ -37,12 +37,7 @@ Inputs: camera objects already ranged onto the road (site-frame ground positions
    A pair is admissible when ``d^2 < gate_chi2`` (chi-square with 2 degrees of freedom; the
    default 13.82 keeps 99.9 % of true pairs). Mahalanobis distance is used rather than separate
    range and azimuth gates because the camera's error ellipse is not aligned with the radar's
-   polar axes unless the camera and radar share a mast position. A camera object whose image
-   track was paired before carries the range that echo predicts now
-   (``CameraObject.expected_range_m``, kept by the node for ``echo_memory_s``); echoes further
-   than ``max_range_jump_m`` from it are refused. Far out the camera ranges to a few metres, so
-   without this a box whose own echo was missed in a scan took the echo of a car one lane over
-   that the camera could not see, and published that car's range and speed in its own lane.
+   polar axes unless the camera and radar share a mast position.
 
 3. **Global nearest neighbour** (:func:`associate`): the assignment minimising the sum of
    ``d^2`` over admissible pairs (``scipy.optimize.linear_sum_assignment``); pairs beyond the
@@ -152,12 +147,6 @@ class AssociationSettings(BaseModel):
     radar_only_score: float = Field(default=0.5, ge=0.0, le=1.0)
     #: Smallest |cos(line of sight - road heading)| at which a radial speed is converted.
     min_speed_cosine: float = Field(default=0.2, gt=0.0, le=1.0)
-    #: Largest difference between an echo's horizontal range and the range the camera
-    #: object's previous echo predicts (``CameraObject.expected_range_m``) for the pair to be
-    #: admissible [m]. The echo wanders over the near face (about 1 m) and the range is
-    #: carried with the radial speed, so 3 m keeps a vehicle's own echo; a car side by side
-    #: with it one lane over and 5-15 m ahead, hidden from the camera, is refused.
-    max_range_jump_m: float = Field(default=3.0, gt=0.0)
 
 
 #: Size assumed for a radar-only object (a car), for its echo's setback [m].
@@ -185,9 +174,6 @@ class CameraObject:
         Assumed heading [rad], CCW from east (the road's); None: no reflection setback.
     length_m, width_m
         Assumed size [m] (the class's typical one), for the radar's reflection setback.
-    expected_range_m
-        Horizontal range from the radar [m] that the echo this image track was last paired
-        with predicts at the scan's time (carried with its range rate); None without one.
     """
 
     local_id: int
@@ -199,7 +185,6 @@ class CameraObject:
     heading_rad: float | None = None
     length_m: float = 0.0
     width_m: float = 0.0
-    expected_range_m: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -260,9 +245,6 @@ class FusedObject:
         The camera object's local id, None for a radar-only object.
     radar_target_index
         Index of the radar target in its scan, None for a camera-only object.
-    radar_range_m, radar_range_rate_mps
-        The echo's horizontal range from the radar [m] at the scan's time and its rate
-        [m/s] (radial speed times ``rho / r``); None for a camera-only object.
     """
 
     source: FusedSource
@@ -274,8 +256,6 @@ class FusedObject:
     speed_mps: float | None
     camera_local_id: int | None
     radar_target_index: int | None
-    radar_range_m: float | None = None
-    radar_range_rate_mps: float | None = None
 
 
 def _radar_intrinsics(mount: SensorMount) -> RadarIntrinsics:
@@ -572,8 +552,6 @@ def fuse_pair(
         ),
         camera_local_id=camera.local_id,
         radar_target_index=radar.target_index,
-        radar_range_m=radar.horizontal_range_m,
-        radar_range_rate_mps=radar.radial_speed_mps * slant_ratio,
     )
 
 
@@ -668,13 +646,6 @@ def fuse_camera_radar(
     echoes = [expected_echo(camera, radar_xy) for camera in camera_objects]
     distances_sq = gate_distances(echoes, radar_points, settings.reflection_extent_std_m,
                                   settings.reflection_width_std_m)  # fmt: skip
-    # An image track keeps to its own echo's range: a jump is another vehicle's echo.
-    for c, camera in enumerate(camera_objects):
-        if camera.expected_range_m is None:
-            continue
-        for r, radar in enumerate(radar_points):
-            if abs(radar.horizontal_range_m - camera.expected_range_m) > settings.max_range_jump_m:
-                distances_sq[c, r] = np.inf
     pairs = associate(distances_sq, settings.gate_chi2, settings.ambiguity_margin_chi2)
     fused = [
         fuse_pair(camera_objects[c], radar_points[r], mount, settings, road_heading_rad, dt_s)

@@ -54,7 +54,6 @@ middle column the vehicle's bearing (a vehicle passing under the mast; the LiDAR
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 import time
@@ -240,9 +239,6 @@ class CameraDetector:
             road_heading_at(site, radar.pose.x_m, radar.pose.y_m) if radar is not None else None
         )
         self._scan: RadarScan | None = None
-        #: Per image-track local id: (scan stamp [s], horizontal range [m], its rate [m/s]) of
-        #: the echo it was last paired with, to keep it to that echo's range.
-        self._echoes: dict[int, tuple[float, float, float]] = {}
         self._logged: set[str] = set()
         self._frames_taken = 0
         #: Stamp of the newest frame taken [s] (the node's clock on simulation time).
@@ -347,7 +343,6 @@ class CameraDetector:
         )  # fmt: skip
         self.tracker.restart()
         self._scan = None
-        self._echoes.clear()
         self.runs += 1
 
     def process_image(self, image: U8, stamp_s: float, frame_index: int) -> FrameResult | None:
@@ -432,35 +427,10 @@ class CameraDetector:
             or abs(scan.stamp - stamp_s) > self.settings.radar_max_age_s
         ):
             return [camera_only(camera) for camera in objects]
-        objects = [self._with_expected_range(camera, scan.stamp) for camera in objects]
-        fused = fuse_camera_radar(
+        return fuse_camera_radar(
             objects, scan, self.radar_mount, self.settings.association, self._radar_heading,
             dt_s=stamp_s - scan.stamp,
         )  # fmt: skip
-        live = {camera.local_id for camera in objects}
-        self._echoes = {k: v for k, v in self._echoes.items() if k in live}
-        for obj in fused:
-            if (
-                obj.camera_local_id is not None
-                and obj.radar_range_m is not None
-                and obj.radar_range_rate_mps is not None
-            ):
-                self._echoes[obj.camera_local_id] = (
-                    scan.stamp, obj.radar_range_m, obj.radar_range_rate_mps
-                )
-        return fused
-
-    def _with_expected_range(self, camera: CameraObject, scan_stamp_s: float) -> CameraObject:
-        """``camera`` with the range its last echo predicts at ``scan_stamp_s`` (none when that
-        echo is older than ``echo_memory_s``)."""
-        echo = self._echoes.get(camera.local_id)
-        if echo is None:
-            return camera
-        stamp_s, range_m, rate_mps = echo
-        age_s = scan_stamp_s - stamp_s
-        if not 0.0 <= age_s <= self.settings.echo_memory_s:
-            return camera
-        return dataclasses.replace(camera, expected_range_m=range_m + rate_mps * age_s)
 
     def _detections(self, fused: list[FusedObject]) -> list[Detection]:
         detections = []

@@ -80,10 +80,6 @@ class CameraDetectorSettings(ServiceSettings):
     #: a pixel row: road slope, pitch and the assumed vehicle size grow with range).
     range_std_m: Annotated[float, Field(gt=0.0)] = 1.0
     range_std_per_m: Annotated[float, Field(ge=0.0)] = 0.03
-    #: An image track keeps to the range of the echo it was last paired with for this long
-    #: [s] (``AssociationSettings.max_range_jump_m``): then a car hidden from the camera beside
-    #: it cannot lend it its range and speed. Later the track may pair with any echo again.
-    echo_memory_s: Annotated[float, Field(ge=0.0)] = 1.0
     background: BackgroundSubtractionSettings = Field(default_factory=BackgroundSubtractionSettings)
     tracker: ImageTrackerSettings = Field(default_factory=ImageTrackerSettings)
     association: AssociationSettings = Field(default_factory=AssociationSettings)
