@@ -233,24 +233,29 @@ def tie_to_vehicle(truth: TruthIndex, stamp_s: float, station_m: float, offset_m
 TrackFollows = dict[int, list[tuple[float, str]]]
 
 
+def _matched(index: TruthIndex, stamp_s: float, estimates_xy: list[tuple[float, float]],
+             gate_m: float) -> list[tuple[int, VehicleTruth]]:  # fmt: skip
+    """``(estimate index, vehicle)`` pairs: site positions matched one-to-one to the truth at
+    ``stamp_s`` (least total distance, pairs within ``gate_m``)."""
+    vehicles = index.at(stamp_s, MAX_TRUTH_GAP_S)
+    if not vehicles or not estimates_xy:
+        return []
+    truth_xy = np.array([(v.x_m, v.y_m) for v in vehicles], dtype=np.float64)
+    pairs = match(np.array(estimates_xy, dtype=np.float64), truth_xy, gate_m)
+    return [(e, vehicles[v]) for e, v in pairs]
+
+
 def track_follows(track_batches: Iterable[TrackBatch], truth_frames: TruthFrames,
                   gate_m: float = TIE_GATE_M) -> TrackFollows:  # fmt: skip
     """Which vehicle each track followed, cycle by cycle: the batch's tracks matched one-to-one
-    to the truth at its stamp (least total road-frame distance, pairs within ``gate_m``)."""
+    to the truth at its stamp (least total distance, pairs within ``gate_m``)."""
     index = TruthIndex([(stamp, list(vehicles)) for stamp, vehicles in truth_frames])
     follows: TrackFollows = {}
     for batch in track_batches:
-        vehicles = index.at(batch.stamp, MAX_TRUTH_GAP_S)
-        if not vehicles or not batch.tracks:
-            continue
-        pairs = match(
-            np.array([(t.station_m, t.offset_m) for t in batch.tracks], dtype=np.float64),
-            np.array([(v.station_m, v.offset_m) for v in vehicles], dtype=np.float64),
-            gate_m,
-        )
-        for t, v in pairs:
+        estimates = [(t.x_m, t.y_m) for t in batch.tracks]
+        for t, vehicle in _matched(index, batch.stamp, estimates, gate_m):
             follows.setdefault(batch.tracks[t].track_id, []).append(
-                (batch.stamp, vehicles[v].vehicle_id)
+                (batch.stamp, vehicle.vehicle_id)
             )
     return follows
 
@@ -268,16 +273,9 @@ def observed_truth(truth_frames: TruthFrames, detection_batches: Iterable[Detect
     index = TruthIndex([(stamp, list(vehicles)) for stamp, vehicles in truth_frames])
     seen: dict[str, list[float]] = {}
     for batch in sorted(detection_batches, key=lambda b: b.stamp):
-        vehicles = index.at(batch.stamp, MAX_TRUTH_GAP_S)
-        if not vehicles or not batch.detections:
-            continue
-        pairs = match(
-            np.array([(d.x_m, d.y_m) for d in batch.detections], dtype=np.float64),
-            np.array([(v.x_m, v.y_m) for v in vehicles], dtype=np.float64),
-            gate_m,
-        )
-        for _, v in pairs:
-            seen.setdefault(vehicles[v].vehicle_id, []).append(batch.stamp)
+        estimates = [(d.x_m, d.y_m) for d in batch.detections]
+        for _, vehicle in _matched(index, batch.stamp, estimates, gate_m):
+            seen.setdefault(vehicle.vehicle_id, []).append(batch.stamp)
 
     def recently_seen(vehicle_id: str, stamp_s: float) -> bool:
         stamps = seen.get(vehicle_id, [])
