@@ -528,6 +528,9 @@ def markdown(report: dict[str, Any]) -> str:
     def cell(value: float | None) -> str:
         return "-" if value is None else f"{value:.2f}"
 
+    def ratio(value: float | None) -> str:  # three places: 0.946 must not read as 0.95
+        return "-" if value is None else f"{value:.3f}"
+
     lines = [
         f"# Evaluation: `{report['site']}`, seed {report['seed']}, {report['duration_s']:g} "
         f"simulated s, vehicles within {report['max_range_m']:g} m of the mast",
@@ -564,9 +567,9 @@ def markdown(report: dict[str, Any]) -> str:
     everything = report.get("alerts_all_in_range", {})
     for alert_type, row in report.get("alerts", {}).items():
         other = everything.get(alert_type, {})
-        lines.append(f"| {alert_type} | {cell(row.get('precision'))} "
-                     f"({cell(other.get('precision'))}) | {cell(row.get('recall'))} "
-                     f"({cell(other.get('recall'))}) | {row.get('true_positives')} | "
+        lines.append(f"| {alert_type} | {ratio(row.get('precision'))} "
+                     f"({ratio(other.get('precision'))}) | {ratio(row.get('recall'))} "
+                     f"({ratio(other.get('recall'))}) | {row.get('true_positives')} | "
                      f"{row.get('false_positives')} | {row.get('false_negatives')} "
                      f"({other.get('false_negatives')}) | {cell(row.get('lead_time_s'))} |")  # fmt: skip
     lines.append("")
