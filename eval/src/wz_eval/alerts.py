@@ -13,11 +13,11 @@ Matching, per alert type
 - An alert episode (its start event; updates and the clear only end it) is tied to a vehicle.
   Given the tracks the alerts came from (:func:`track_follows`), it is the vehicle its track
   followed for most of the episode: at each track cycle from its start to its clear, the
-  vehicle the track was matched to (one-to-one, least total distance, within ``tie_gate_m``). So an alert
-  whose track starts a few metres off its vehicle (a far camera box that took in the car in
-  the next lane) is still about the vehicle the track then follows. Without the tracks, or
-  when its track matched no vehicle during the episode, it is the truth vehicle nearest the
-  alert's position at its start stamp, within ``tie_gate_m`` (3 m) in the road frame,
+  vehicle the track was matched to (one-to-one, least total distance, within ``tie_gate_m``).
+  So an alert whose track starts a few metres off its vehicle (a far camera box that took in
+  the car in the next lane) is still about the vehicle the track then follows. Without the
+  tracks, or when its track matched no vehicle during the episode, it is the truth vehicle
+  nearest the alert's position at its start stamp, within ``tie_gate_m`` (3 m) in the road frame,
   ``sqrt(ds^2 + dd^2)`` (truth moved to the stamp from the nearest step, see
   :class:`wz_eval.metrics.TruthIndex`). Site-level alerts (the queue) need no vehicle.
 - Each episode spans ``[onset, clear]`` (to the end of the data when it never cleared). An

@@ -18,7 +18,9 @@ its frames in order. Each frame gives one line on stdout::
 
 ``box`` is in pixels of the frame (edges, continuous). ``x, y`` [m, site frame] is the vehicle
 centre from the calibrated pinhole model of ``--camera`` in ``--site``: the class's typical
-outline (body on wheels), on the road's heading, fitted to the box (:func:`wz_camera_detector.world.fit_box_to_ground`); ``paper_x, paper_y`` is the paper's Eq. 1-2 ground point of the box's bottom centre;
+outline (a body on wheels), on the road's heading, fitted to the box
+(:func:`wz_camera_detector.world.fit_box_to_ground`); ``paper_x, paper_y`` is the paper's
+Eq. 1-2 ground point of the box's bottom centre;
 ``station, offset`` the centre in the road frame; ``range`` its ground distance from the camera.
 Positions are null for a box reaching above the horizon, and for a box cut by the edge of the
 detector's view (``"cut": true``: its bottom is not its ground contact), as in the node. ``stamp`` is the video's frame time
@@ -49,7 +51,7 @@ import numpy.typing as npt
 from pydantic import ValidationError
 
 from wz_camera_detector.node import (
-    CLASS_SIZES,
+    CLASS_SHAPES,
     ImageBackend,
     camera_at_size,
     cut_by_view,
@@ -167,7 +169,7 @@ class FrameProcessor:
         started = time.perf_counter()
         found = self.backend.detect(image)
         detect_s = time.perf_counter() - started
-        found = [d for d in found if d.class_name in CLASS_SIZES]
+        found = [d for d in found if d.class_name in CLASS_SHAPES]
         height, width = image.shape[:2]
         rows: list[tuple[ImageDetection, int | None]]
         if self.tracker is not None:
@@ -184,7 +186,7 @@ class FrameProcessor:
         self, camera: PinholeCamera, mount: SensorMount, detection: ImageDetection,
         track_id: int | None,
     ) -> dict[str, Any]:  # fmt: skip
-        _, shape = CLASS_SIZES[detection.class_name]
+        _, shape = CLASS_SHAPES[detection.class_name]
         record: dict[str, Any] = {
             "box": [round(v, 1) for v in detection.box_xyxy_px],
             "class": detection.class_name, "score": round(detection.score, 4),

@@ -10,7 +10,7 @@ Run it as ``python -m wz_camera_detector.node``. Settings come from the environm
 - per frame: decodes the JPEG (``cv2.imdecode``), detects boxes with the backend
   (background subtraction, or a local YOLOv8 ONNX model), tracks them in the image
   (:class:`ImageTracker`), puts each box on the road (:func:`fit_box_to_ground`: the class's
-  typical shape, :data:`CLASS_SIZES`, on the site road's heading at the box's ground point,
+  typical shape, :data:`CLASS_SHAPES`, on the site road's heading at the box's ground point,
   placed so that its image box has the box's left, right and bottom edges),
   gives it the camera covariance (below), and fuses with the newest radar scan when its stamp
   is within ``radar_max_age_s`` of the frame's (:func:`fuse_camera_radar`, speeds along the
@@ -110,7 +110,7 @@ TRUNCATION_MARGIN_PX = 3.0
 CAR_SHAPE = VehicleShape(4.6, 1.8, 1.5, clearance_m=0.28, wheel_inset_m=0.53)
 #: Image class name -> (bus class, typical shape); other names are ignored. A tractor-
 #: semitrailer's bumper is about 0.5 m up, its steer axle's tyres 0.3 m behind it.
-CLASS_SIZES: dict[str, tuple[VehicleClass, VehicleShape]] = {
+CLASS_SHAPES: dict[str, tuple[VehicleClass, VehicleShape]] = {
     "car": (VehicleClass.CAR, CAR_SHAPE),
     # The background backend cannot classify: a car-sized guess, class unknown.
     "vehicle": (VehicleClass.UNKNOWN, CAR_SHAPE),
@@ -361,7 +361,7 @@ class CameraDetector:
             return None
         if warming_up:
             return None
-        boxes = [box for box in boxes if box.class_name in CLASS_SIZES]
+        boxes = [box for box in boxes if box.class_name in CLASS_SHAPES]
         tracks = self.tracker.update(boxes, stamp_s)
         if self.settings.confirmed_only:
             tracks = [track for track in tracks if track.confirmed]
@@ -392,7 +392,7 @@ class CameraDetector:
                 # Its bottom is not where it meets the road, nor its middle column the
                 # vehicle's bearing. Not ranged (the LiDAR sees it).
                 continue
-            object_class, shape = CLASS_SIZES[track.class_name]
+            object_class, shape = CLASS_SHAPES[track.class_name]
             # Heading from where the box's contact point lies (the road's direction there).
             x0, y0 = box_to_ground(camera, track.box_xyxy_px, 0.0, 0.0, 0.0)
             if not (math.isfinite(x0) and math.isfinite(y0)):
