@@ -73,6 +73,16 @@ def test_simulator_node_publishes_truth_and_serves_site(port: int, tmp_path: Pat
         assert bus.alive() == []
 
 
+def run_node_to_the_end(env: dict[str, str]) -> None:
+    """Run the simulator node with ``env`` until it exits by itself (its duration), successfully."""
+    node = subprocess.Popen([sys.executable, "-m", "wz_simulator.node"], cwd=ROOT, env=env)
+    try:
+        assert node.wait(120.0) == 0
+    finally:
+        if node.poll() is None:
+            node.kill()
+
+
 def test_simulator_node_publishes_every_sensor_at_its_rate(port: int, tmp_path: Path) -> None:
     """Truth at 20 Hz, LiDAR 20 Hz, camera 10 Hz, radar 15 Hz, all on simulation time."""
     site = load_site(DEFAULT_SITE_PATH)
@@ -95,12 +105,7 @@ def test_simulator_node_publishes_every_sensor_at_its_rate(port: int, tmp_path: 
             "WZ_SIM_DURATION_S": "4",
             "WZ_SIM_WORK_DIR": str(tmp_path),
         }
-        node = subprocess.Popen([sys.executable, "-m", "wz_simulator.node"], cwd=ROOT, env=env)
-        try:
-            assert node.wait(120.0) == 0
-        finally:
-            if node.poll() is None:
-                node.kill()
+        run_node_to_the_end(env)
         lidar_frames = lidar.drain()
         camera_frames = camera.drain()
         radar_scans = radar.drain()
@@ -150,12 +155,7 @@ def test_simulator_node_warms_up_before_it_publishes(port: int, tmp_path: Path) 
             "WZ_SIM_WORK_DIR": str(tmp_path),
             "WZ_STATUS_PERIOD_S": "0.2",
         }
-        node = subprocess.Popen([sys.executable, "-m", "wz_simulator.node"], cwd=ROOT, env=env)
-        try:
-            assert node.wait(120.0) == 0
-        finally:
-            if node.poll() is None:
-                node.kill()
+        run_node_to_the_end(env)
         truths = truth.drain()
         frames = lidar.drain()
         states = [s.state.value for s in status.drain()]
