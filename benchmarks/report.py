@@ -852,6 +852,11 @@ def _tracker_cycle(result: dict[str, Any]) -> list[str]:
     rows.append(["snapshot (200 tracks)", _ms(result["snapshot"]["median_ms"]),
                  _ms(result["snapshot"]["p99_ms"]), _ms(result["snapshot"]["max_ms"]),
                  str(result["snapshot"]["samples"])])
+    imm = result.get("imm")
+    if imm:  # the IMM motion model (an option), same batches
+        for label, key in (("all batches, IMM option", "cycle"), ("snapshot, IMM option", "snapshot")):
+            rows.append([label, _ms(imm[key]["median_ms"]), _ms(imm[key]["p99_ms"]),
+                         _ms(imm[key]["max_ms"]), str(imm[key]["samples"])])
     lines += _table(["Step", "median", "p99", "max", "samples"], rows)
     return [*lines, ""]
 

@@ -36,6 +36,10 @@ LIDAR_STD_M = 0.2
 # The camera ranges badly along the road (x here) and well across it.
 CAMERA_STD_XY_M = (0.8, 0.3)
 SETTINGS = TrackerSettings()
+#: The scenario tests run with both motion models: one CV model (the default) and the IMM.
+BOTH_MODELS = pytest.mark.parametrize(
+    "settings", [SETTINGS, TrackerSettings(motion_model="imm")], ids=["cv", "imm"]
+)
 
 Batch = tuple[str, float, list[Measurement]]
 
@@ -196,9 +200,10 @@ def test_cascade_serves_confirmed_tracks_first() -> None:
 # ----------------------------------------------------------------------------- scenes
 
 
-def test_two_vehicles_two_asynchronous_sensors_one_track_each_no_switch_low_error() -> None:
+@BOTH_MODELS
+def test_two_vehicles_two_asynchronous_sensors_one_track_each_no_switch_low_error(settings: TrackerSettings) -> None:
     vehicles = [Vehicle(0.0, 0.0, 25.0, local_id=1), Vehicle(-30.0, 20.0, 30.0, -1.0, local_id=2)]
-    tracker = MultiTargetTracker(SETTINGS)
+    tracker = MultiTargetTracker(settings)
     snapshots = feed(tracker, scene(vehicles, duration_s=10.0, seed=1))
     tracker.flush()
     final = tracker.tracks()
@@ -226,11 +231,12 @@ def test_two_vehicles_two_asynchronous_sensors_one_track_each_no_switch_low_erro
     assert all(track.object_class == "car" for track in final)
 
 
-def test_an_overtake_in_the_adjacent_lane_keeps_both_identities() -> None:
+@BOTH_MODELS
+def test_an_overtake_in_the_adjacent_lane_keeps_both_identities(settings: TrackerSettings) -> None:
     # The faster car starts 20 m behind in the next lane (3.6 m over) and passes at t = 2 s.
     vehicles = [Vehicle(-20.0, 0.0, 32.0, local_id=1), Vehicle(0.0, 3.6, 22.0, local_id=2)]
     for seed in range(3):
-        tracker = MultiTargetTracker(SETTINGS)
+        tracker = MultiTargetTracker(settings)
         snapshots = feed(tracker, scene(vehicles, duration_s=5.0, seed=seed))
         tracker.flush()
         ids = ids_by_vehicle(snapshots, vehicles)
@@ -238,19 +244,20 @@ def test_an_overtake_in_the_adjacent_lane_keeps_both_identities() -> None:
         assert tracker.counters.tracks_confirmed == 2
 
 
-def test_a_sensor_silent_for_two_seconds_the_tracks_continue_on_the_other() -> None:
+@BOTH_MODELS
+def test_a_sensor_silent_for_two_seconds_the_tracks_continue_on_the_other(settings: TrackerSettings) -> None:
     vehicles = [Vehicle(0.0, 0.0, 25.0, local_id=1), Vehicle(0.0, 10.0, 20.0, local_id=2)]
 
     def lidar_down(sensor: str, t: float) -> bool:
         return sensor == LIDAR and 3.0 <= t < 5.0
 
-    tracker = MultiTargetTracker(SETTINGS)
+    tracker = MultiTargetTracker(settings)
     snapshots = feed(tracker, scene(vehicles, duration_s=8.0, seed=2, silent=lidar_down))
     assert ids_by_vehicle(snapshots, vehicles) == {0: {1}, 1: {2}}
     during = tracker.tracks()  # at the end, both sensors back
     assert [t.track_id for t in during] == [1, 2]
     # Half-way through the outage the tracks are confirmed, updated by the camera alone.
-    tracker = MultiTargetTracker(SETTINGS)
+    tracker = MultiTargetTracker(settings)
     feed(tracker, scene(vehicles, duration_s=4.0, seed=2, silent=lidar_down))
     tracker.flush()
     mid = tracker.tracks(4.0)
@@ -296,7 +303,8 @@ def test_both_sensors_silent_longer_than_max_coast_deletes_the_tracks() -> None:
     assert set(before) <= {h.track_id for h in tracker.pop_finished_histories()}
 
 
-def test_out_of_order_batches_within_the_window_give_the_same_tracks() -> None:
+@BOTH_MODELS
+def test_out_of_order_batches_within_the_window_give_the_same_tracks(settings: TrackerSettings) -> None:
     vehicles = [Vehicle(0.0, 0.0, 25.0, local_id=1), Vehicle(10.0, 3.6, 20.0, local_id=2)]
     in_order = scene(vehicles, duration_s=4.0, seed=4)
     # Every camera batch arrives after the LiDAR batch that follows it (up to 67 ms late).
@@ -308,7 +316,7 @@ def test_out_of_order_batches_within_the_window_give_the_same_tracks() -> None:
             i += 1
         i += 1
     assert shuffled != in_order
-    reference, reordered = MultiTargetTracker(SETTINGS), MultiTargetTracker(SETTINGS)
+    reference, reordered = MultiTargetTracker(settings), MultiTargetTracker(settings)
     feed(reference, in_order)
     feed(reordered, shuffled)
     reference.flush()
@@ -562,9 +570,10 @@ def test_radar_speed_along_a_road_heading_sharpens_the_velocity() -> None:
     assert along @ with_radar.P[2:, 2:] @ along < 0.5 * (along @ without.P[2:, 2:] @ along)
 
 
-def test_the_history_is_the_filters_and_rts_smoothing_it_lowers_the_error() -> None:
+@BOTH_MODELS
+def test_the_history_is_the_filters_and_rts_smoothing_it_lowers_the_error(settings: TrackerSettings) -> None:
     vehicles = [Vehicle(0.0, 0.0, 25.0, local_id=1)]
-    tracker = MultiTargetTracker(SETTINGS)
+    tracker = MultiTargetTracker(settings)
     feed(tracker, scene(vehicles, duration_s=6.0, seed=10))
     tracker.flush()
     history = tracker.history(1)
@@ -574,7 +583,7 @@ def test_the_history_is_the_filters_and_rts_smoothing_it_lowers_the_error() -> N
         history.stamps_s,
         history.x_filt,
         history.P_filt,
-        ProcessNoise(SETTINGS.sigma_along_mps2, SETTINGS.sigma_across_mps2),
+        ProcessNoise(settings.sigma_along_mps2, settings.sigma_across_mps2),
         x_pred=history.x_pred,
         P_pred=history.P_pred,
     )

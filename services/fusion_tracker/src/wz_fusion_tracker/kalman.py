@@ -518,24 +518,16 @@ def update_position_blocks(x: F64, P: F64, z: F64, R: F64) -> tuple[F64, F64]:
     return x_post, _symmetrise(P_post)
 
 
-class TrackStateBank:
-    """States of many targets in arrays, predicted and updated a subset at a time.
+class SlotBank:
+    """Slot bookkeeping shared by the state banks: which rows are in use, and their stamps.
 
-    Each target occupies a *slot*: row ``slot`` of ``x (capacity, 4)``, ``P (capacity, 4, 4)``
-    and of ``stamp_s (capacity,)``, the time its state refers to [s]. Slots are reused after
-    :meth:`remove`; the arrays double when full. Every method takes an array of distinct slots
-    and does its maths in one vectorised pass.
-
-    Parameters
-    ----------
-    capacity
-        Initial number of slots.
+    Each target occupies a *slot*, a row of the bank's arrays and of ``stamp_s (capacity,)``,
+    the time its state refers to [s]. Slots are reused after :meth:`remove`; the arrays double
+    when full (a subclass grows its own in :meth:`_grow_arrays`).
     """
 
-    def __init__(self, capacity: int = 64) -> None:
+    def __init__(self, capacity: int) -> None:
         capacity = max(1, capacity)
-        self._x = np.zeros((capacity, STATE_DIM))
-        self._P = np.broadcast_to(np.eye(STATE_DIM), (capacity, STATE_DIM, STATE_DIM)).copy()
         self._stamp_s = np.zeros(capacity)
         self._live = np.zeros(capacity, dtype=bool)
         self._free: list[int] = list(range(capacity - 1, -1, -1))
@@ -552,16 +544,26 @@ class TrackStateBank:
         """Slots in use, increasing, shape (N,)."""
         return np.flatnonzero(self._live)
 
-    def add(self, x: npt.ArrayLike, P: npt.ArrayLike, stamp_s: float) -> int:
-        """Store a new target's state ``x`` (4,) and ``P`` (4, 4) at ``stamp_s`` [s]; its slot."""
+    def stamps_s(self, slots: npt.ArrayLike) -> F64:
+        """Times the states of ``slots`` refer to [s], shape (K,) (a copy)."""
+        return self._stamp_s[np.asarray(slots, dtype=np.intp)]
+
+    def _take_slot(self, stamp_s: float) -> int:
+        """A free slot, now in use at ``stamp_s``; the caller fills its state."""
         if not self._free:
-            self._grow()
+            old = self.capacity
+            self._grow_arrays(old)
+            self._stamp_s = np.concatenate([self._stamp_s, np.zeros(old)])
+            self._live = np.concatenate([self._live, np.zeros(old, dtype=bool)])
+            self._free.extend(range(2 * old - 1, old - 1, -1))
         slot = self._free.pop()
-        self._x[slot] = np.asarray(x, dtype=np.float64).reshape(STATE_DIM)
-        self._P[slot] = np.asarray(P, dtype=np.float64).reshape(STATE_DIM, STATE_DIM)
         self._stamp_s[slot] = stamp_s
         self._live[slot] = True
         return slot
+
+    def _grow_arrays(self, added: int) -> None:
+        """Append ``added`` rows to the subclass's state arrays."""
+        raise NotImplementedError
 
     def remove(self, slot: int) -> None:
         """Free ``slot`` for reuse."""
@@ -570,15 +572,42 @@ class TrackStateBank:
         self._live[slot] = False
         self._free.append(slot)
 
-    def _grow(self) -> None:
-        old = self.capacity
-        new = 2 * old
-        self._x = np.concatenate([self._x, np.zeros((old, STATE_DIM))])
-        eyes = np.broadcast_to(np.eye(STATE_DIM), (old, STATE_DIM, STATE_DIM))
+
+class TrackStateBank(SlotBank):
+    """States of many targets in arrays, predicted and updated a subset at a time.
+
+    Each target occupies a *slot* (:class:`SlotBank`): row ``slot`` of ``x (capacity, 4)`` and
+    ``P (capacity, 4, 4)``. Every method takes an array of distinct slots and does its maths in
+    one vectorised pass.
+
+    Parameters
+    ----------
+    capacity
+        Initial number of slots.
+    """
+
+    def __init__(self, capacity: int = 64) -> None:
+        super().__init__(capacity)
+        self._x = np.zeros((self.capacity, STATE_DIM))
+        self._P = np.broadcast_to(np.eye(STATE_DIM), (self.capacity, STATE_DIM, STATE_DIM)).copy()
+
+    def add(self, x: npt.ArrayLike, P: npt.ArrayLike, stamp_s: float) -> int:
+        """Store a new target's state ``x`` (4,) and ``P`` (4, 4) at ``stamp_s`` [s]; its slot."""
+        slot = self._take_slot(stamp_s)
+        self._x[slot] = np.asarray(x, dtype=np.float64).reshape(STATE_DIM)
+        self._P[slot] = np.asarray(P, dtype=np.float64).reshape(STATE_DIM, STATE_DIM)
+        return slot
+
+    def _grow_arrays(self, added: int) -> None:
+        self._x = np.concatenate([self._x, np.zeros((added, STATE_DIM))])
+        eyes = np.broadcast_to(np.eye(STATE_DIM), (added, STATE_DIM, STATE_DIM))
         self._P = np.concatenate([self._P, eyes])
-        self._stamp_s = np.concatenate([self._stamp_s, np.zeros(old)])
-        self._live = np.concatenate([self._live, np.zeros(old, dtype=bool)])
-        self._free.extend(range(new - 1, old - 1, -1))
+
+    def copy_slot(self, source: int, target: int) -> None:
+        """Give ``target`` the state, covariance and stamp of ``source``."""
+        self._x[target] = self._x[source]
+        self._P[target] = self._P[source]
+        self._stamp_s[target] = self._stamp_s[source]
 
     def states(self, slots: npt.ArrayLike) -> F64:
         """States of ``slots`` [m, m/s], shape (K, 4) (a copy)."""
@@ -588,16 +617,17 @@ class TrackStateBank:
         """Covariances of ``slots``, shape (K, 4, 4) (a copy)."""
         return self._P[np.asarray(slots, dtype=np.intp)]
 
-    def stamps_s(self, slots: npt.ArrayLike) -> F64:
-        """Times the states of ``slots`` refer to [s], shape (K,) (a copy)."""
-        return self._stamp_s[np.asarray(slots, dtype=np.intp)]
-
     def set(self, slots: npt.ArrayLike, x: F64, P: F64, stamp_s: npt.ArrayLike) -> None:
         """Overwrite the states of ``slots`` with ``x`` (K, 4), ``P`` (K, 4, 4) at ``stamp_s``."""
         index = np.asarray(slots, dtype=np.intp)
         self._x[index] = x
         self._P[index] = P
         self._stamp_s[index] = stamp_s
+
+    def commit_prior(self, slots: npt.ArrayLike, x: F64, P: F64, stamp_s: float) -> None:
+        """Store a prediction of :meth:`predicted` (possibly widened) as the state of ``slots``
+        at ``stamp_s``: :meth:`set` (the IMM bank's counterpart keeps its modes)."""
+        self.set(slots, x, P, stamp_s)
 
     def predicted(
         self,
