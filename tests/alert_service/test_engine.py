@@ -102,6 +102,34 @@ def test_a_track_that_disappears_clears_at_once() -> None:
     assert engine.active() == []
 
 
+def test_an_alert_starts_only_on_a_measured_track_not_a_coasting_one() -> None:
+    # Fast throughout; the track coasts over [0.9, 1.3): the hold is met at 1.0 while coasting,
+    # so the alert waits for the next measured batch (1.3), its onset still the hold's start.
+    engine = only(AlertType.SPEEDING)
+
+    def coasting_between(start_s: float, end_s: float) -> Callable[[float], list[Track]]:
+        def tracks(t: float) -> list[Track]:
+            status = (TrackStatus.COASTING if start_s - 1e-9 <= t < end_s - 1e-9
+                      else TrackStatus.CONFIRMED)  # fmt: skip
+            return [make_track(1, 500.0, FAST, status=status)]
+
+        return tracks
+
+    events = run(engine, stamps(3.0), coasting_between(0.9, 1.3))
+    assert phases(events) == [("start", 1.3)]
+    assert events[0].onset_stamp == 0.0
+    # A track that meets the hold while coasting and is then deleted never alerts: the
+    # short-lived track a wrong camera-radar pairing starts, coasting to its end.
+    events = run(only(AlertType.SPEEDING), stamps(3.0), lambda t: (
+        [] if t >= 1.5 - 1e-9
+        else [make_track(1, 500.0, FAST, status=TrackStatus.COASTING if t >= 0.6 - 1e-9
+                         else TrackStatus.CONFIRMED)]))  # fmt: skip
+    assert events == []
+    # Once open, coasting neither clears nor holds back the episode.
+    events = run(only(AlertType.SPEEDING), stamps(3.0), coasting_between(1.5, 2.5))
+    assert phases(events) == [("start", 1.0)]
+
+
 def test_tentative_tracks_are_not_evaluated() -> None:
     engine = only(AlertType.SPEEDING)
     tentative = make_track(1, 500.0, FAST, status=TrackStatus.TENTATIVE)

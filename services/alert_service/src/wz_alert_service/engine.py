@@ -21,7 +21,13 @@ returns :class:`AlertEvent` s. Time is the batches' stamps (capture time), never
 
 - *pending*: the condition (at its enter threshold) must hold on every batch for ``hold_s``;
   one batch without it and the key is idle again. The start alert's ``onset_stamp`` is the
-  first batch of the hold.
+  first batch of the hold. The alert starts on the first batch after the hold where the track
+  is *measured* (status ``confirmed``), not ``coasting``: a coasting track is the tracker's
+  prediction, and an alert's evidence must be a sensor's. On the 600 s `wz eval` run the only
+  two false speeding alerts both started on coasting tracks, and none of the 35 true ones did:
+  each was a short-lived track that a camera box paired with the radar echo of the car one
+  lane over had started (at that car's speed, in the other lane), and it met the hold while
+  coasting to its deletion.
 - *open*: the rule is asked with ``active=True``, i.e. at its exit threshold, looser than the
   enter threshold, so a measurement hovering at the threshold keeps one episode. A batch
   where the severity band rises above the episode's peak emits an update (at most two per
@@ -334,10 +340,11 @@ class AlertEngine:
         track_leaders = leaders(tracks)
         for track in tracks:
             context = self._context(track, track_leaders.get(track.track_id), t)
+            measured = track.status is not TrackStatus.COASTING
             for alert_type, rule in self._track_rules:
                 key: EpisodeKey = (track.track_id, alert_type)
                 finding = rule(track, context, self.zone, self.rules, self._is_open(key))
-                events.extend(self._step(key, finding, t))
+                events.extend(self._step(key, finding, t, measured))
         if self.rules.queue.enabled:
             key = (None, AlertType.QUEUE)
             finding = queue(tracks, self.zone, self.rules.queue, active=self._is_open(key))
@@ -412,7 +419,11 @@ class AlertEngine:
 
     # --- the episode state machine --------------------------------------------------------
 
-    def _step(self, key: EpisodeKey, finding: Finding | None, t: float) -> list[AlertEvent]:
+    def _step(
+        self, key: EpisodeKey, finding: Finding | None, t: float, measured: bool = True
+    ) -> list[AlertEvent]:
+        """Advance ``key``'s episode by one batch; ``measured``: its track was updated by a
+        sensor (not coasting), without which a pending hold does not start an alert yet."""
         timing = rule_timing(self.rules, key[1])
         episode = self._episodes.get(key)
         if episode is None:
@@ -425,7 +436,7 @@ class AlertEngine:
                 del self._episodes[key]
                 return []
             episode.finding = finding
-            if t - episode.onset_s >= timing.hold_s - TIME_EPS_S:
+            if measured and t - episode.onset_s >= timing.hold_s - TIME_EPS_S:
                 return [self._start(key, episode, t)]
             return []
         if finding is not None:
