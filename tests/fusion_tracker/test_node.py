@@ -70,6 +70,27 @@ def test_core_publishes_a_batch_per_output_period_with_road_coordinates() -> Non
         assert track.status == TrackStatus.CONFIRMED and track.sources == ["lidar-mast"]
 
 
+def test_the_imm_motion_model_is_chosen_from_the_environment_and_tracks(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setenv("WZ_FUSION_TRACKER__MOTION_MODEL", "imm")
+    settings = FusionTrackerSettings()
+    assert settings.tracker.motion_model == "imm"
+    rng = np.random.default_rng(2)
+    core = FusionCore(SITE, settings, report=lambda r, d: None)
+    outputs: list[TrackBatch] = []
+    for k in range(60):
+        outputs += core.add(batch("lidar-mast", k, 0.05 * k, rng, 0.2))
+    last = outputs[-1]
+    assert len(last.tracks) == 2
+    for track, (x, y) in zip(sorted(last.tracks, key=lambda t: t.x_m), truth_at(last.stamp),
+                             strict=True):  # fmt: skip
+        assert math.hypot(track.x_m - x, track.y_m - y) < 0.5
+    monkeypatch.setenv("WZ_FUSION_TRACKER__MOTION_MODEL", "kalman")
+    with pytest.raises(ValueError, match="motion_model"):
+        FusionTrackerSettings()
+
+
 def test_core_starts_a_new_run_when_a_sensor_starts_again() -> None:
     """A restarted simulation counts from its start again: the sensors' stamps go back. The
     first batches of the new run are late; from the third, a new run: tracks again, their ids
