@@ -20,7 +20,8 @@ processed by sensor id, so that too does not depend on arrival order.
    not updated for ``max_coast_s``;
 2. *predict* every live track from its own last update to ``t`` (``dt`` may be 0); a track's
    stored state only ever changes at an update, so a prediction for gating costs nothing when
-   the track is not matched;
+   the track is not matched; one constant-velocity model (:class:`~wz_fusion_tracker.kalman.TrackStateBank`)
+   or, with ``motion_model="imm"``, two mixed (:class:`~wz_fusion_tracker.imm.IMMStateBank`);
 3. *gate*: squared Mahalanobis distance of each (track, measurement) pair,
    ``d^2 = y^T S^-1 y``, ``y = z - H x_p``, ``S = H P_p H^T + R`` (vectorised, (T, M));
    pairs with ``d^2 > gate_chi2`` are forbidden. Mahalanobis rather than metres because the
