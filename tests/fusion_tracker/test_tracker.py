@@ -570,6 +570,44 @@ def test_radar_speed_along_a_road_heading_sharpens_the_velocity() -> None:
     assert along @ with_radar.P[2:, 2:] @ along < 0.5 * (along @ without.P[2:, 2:] @ along)
 
 
+def test_a_box_whose_radar_speed_is_another_vehicles_is_not_taken_by_the_near_track() -> None:
+    """A car at 20 m/s in the near lane, tracked; a speeder at 32 m/s (the next lane, 3.6 m
+    over) is seen for the first time at the car's position: a camera box merged with the car's
+    that carries the speeder's radar speed. Without the speed in the association the car's
+    track takes it (its speed refused) and the speeder gets no track; with it, the box is not
+    the car's and starts the speeder's track, and the car's track keeps its speed."""
+
+    def run(chi2: float) -> list[TrackState]:
+        tracker = MultiTargetTracker(
+            TrackerSettings(reorder_window_s=0.0, speed_association_chi2=chi2),
+            heading_at=lambda x, y: 0.0,
+        )
+        for k in range(40):  # the car alone for 2 s, then the merged box 5 times
+            t = 0.05 * k
+            car = Measurement(x_m=20.0 * t, y_m=0.0, covariance_m2=np.eye(2) * 0.04,
+                              speed_mps=20.0)  # fmt: skip
+            tracker.add(LIDAR if k < 35 else CAMERA, t, [car] if k < 35 else [
+                Measurement(x_m=20.0 * t, y_m=0.6, covariance_m2=np.diag([0.3, 0.3]),
+                            speed_mps=32.0)])  # fmt: skip
+        tracker.flush()
+        return tracker.tracks()
+
+    without = run(0.0)
+    assert len(without) == 1 and without[0].speed_mps == pytest.approx(20.0, abs=0.5)
+    with_speed = run(SETTINGS.speed_association_chi2)
+    car, speeder = sorted(with_speed, key=lambda track: track.track_id)
+    assert car.speed_mps == pytest.approx(20.0, abs=0.5)
+    assert speeder.speed_mps == pytest.approx(32.0, abs=1.0)
+    # a radar speed within the gate (braking: 3 m/s below the track) is still the track's
+    tracker = MultiTargetTracker(TrackerSettings(reorder_window_s=0.0), heading_at=lambda x, y: 0.0)
+    for k in range(40):
+        t = 0.05 * k
+        tracker.add(LIDAR, t, [Measurement(x_m=20.0 * t, y_m=0.0, covariance_m2=np.eye(2) * 0.04,
+                                           speed_mps=20.0 if k < 35 else 17.0)])  # fmt: skip
+    tracker.flush()
+    assert len(tracker.tracks()) == 1 and tracker.counters.tracks_started == 1
+
+
 @BOTH_MODELS
 def test_the_history_is_the_filters_and_rts_smoothing_it_lowers_the_error(settings: TrackerSettings) -> None:
     vehicles = [Vehicle(0.0, 0.0, 25.0, local_id=1)]
