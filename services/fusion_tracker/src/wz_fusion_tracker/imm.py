@@ -227,8 +227,8 @@ class IMMStateBank(SlotBank):
         sigma_along_mps2: npt.ArrayLike,
         sigma_across_mps2: npt.ArrayLike,
         heading_rad: npt.ArrayLike,
-    ) -> tuple[F64, F64, F64, F64]:
-        """Mix and predict each mode of ``index`` to ``stamp_s``: ``dt``, ``x_j``, ``P_j``, ``c_j``."""
+    ) -> tuple[F64, F64, F64]:
+        """Mix and predict each mode of ``index`` to ``stamp_s``: ``x_j``, ``P_j``, ``c_j``."""
         k, m = len(index), self.modes
         dt = np.broadcast_to(np.asarray(stamp_s, dtype=np.float64), index.shape) - (
             self._stamp_s[index]
@@ -253,7 +253,7 @@ class IMMStateBank(SlotBank):
             across.reshape(-1),
             np.repeat(heading, m),
         )
-        return dt, x_p.reshape(k, m, STATE_DIM), P_p.reshape(k, m, STATE_DIM, STATE_DIM), c
+        return x_p.reshape(k, m, STATE_DIM), P_p.reshape(k, m, STATE_DIM, STATE_DIM), c
 
     def predicted(
         self,
@@ -284,7 +284,7 @@ class IMMStateBank(SlotBank):
             Shapes (K, 4), (K, 4, 4).
         """
         index = np.asarray(slots, dtype=np.intp)
-        _, xm, Pm, c = self._predict_modes(
+        xm, Pm, c = self._predict_modes(
             index, stamp_s, sigma_along_mps2, sigma_across_mps2, heading_rad
         )
         x_p, P_p = mixture_moments(c, xm, Pm)
@@ -309,7 +309,7 @@ class IMMStateBank(SlotBank):
     ) -> None:
         """Predict ``slots`` to ``stamp_s`` [s] and store (see :meth:`predicted`)."""
         index = np.asarray(slots, dtype=np.intp)
-        _, xm, Pm, c = self._predict_modes(
+        xm, Pm, c = self._predict_modes(
             index, stamp_s, sigma_along_mps2, sigma_across_mps2, heading_rad
         )
         self._xm[index], self._Pm[index], self._mu[index] = xm, Pm, c
@@ -343,15 +343,6 @@ class IMMStateBank(SlotBank):
                 mu = mu.copy()
                 mu[ok] = last_c[r]
         self._xm[index], self._Pm[index], self._mu[index] = xm, Pm, mu
-        self._stamp_s[index] = stamp_s
-        self._changed(index)
-
-    def set(self, slots: npt.ArrayLike, x: F64, P: F64, stamp_s: npt.ArrayLike) -> None:
-        """Overwrite ``slots`` with ``x`` (K, 4), ``P`` (K, 4, 4) in every mode at ``stamp_s``
-        (mode probabilities kept)."""
-        index = np.asarray(slots, dtype=np.intp)
-        self._xm[index] = np.asarray(x, dtype=np.float64)[:, None, :]
-        self._Pm[index] = np.asarray(P, dtype=np.float64)[:, None, :, :]
         self._stamp_s[index] = stamp_s
         self._changed(index)
 

@@ -46,6 +46,7 @@ Nothing here does I/O.
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
 import numpy as np
@@ -518,7 +519,7 @@ def update_position_blocks(x: F64, P: F64, z: F64, R: F64) -> tuple[F64, F64]:
     return x_post, _symmetrise(P_post)
 
 
-class SlotBank:
+class SlotBank(ABC):
     """Slot bookkeeping shared by the state banks: which rows are in use, and their stamps.
 
     Each target occupies a *slot*, a row of the bank's arrays and of ``stamp_s (capacity,)``,
@@ -561,9 +562,9 @@ class SlotBank:
         self._live[slot] = True
         return slot
 
+    @abstractmethod
     def _grow_arrays(self, added: int) -> None:
         """Append ``added`` rows to the subclass's state arrays."""
-        raise NotImplementedError
 
     def remove(self, slot: int) -> None:
         """Free ``slot`` for reuse."""

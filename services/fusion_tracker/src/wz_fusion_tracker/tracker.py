@@ -1181,9 +1181,11 @@ class MultiTargetTracker:
         settings = self.settings
         columns = np.array([j for j, m in enumerate(measurements) if m.speed_mps is not None],
                            dtype=np.intp)  # fmt: skip
+        if not len(columns):
+            return d2
         rows = np.array([i for i, t in enumerate(live) if t.road_heading_rad is not None],
                         dtype=np.intp)  # fmt: skip
-        if not len(columns) or not len(rows):
+        if not len(rows):
             return d2
         h = np.array([live[i].road_heading_rad for i in rows.tolist()], dtype=np.float64)
         u = np.stack([np.cos(h), np.sin(h)], axis=1)
