@@ -258,15 +258,31 @@ def test_link_cuts_and_a_router_restart_lose_and_duplicate_no_alert(
             trailer.stop_file.touch()
         time.sleep(3.0)  # the last cars' clears
         for trailer in trailers:
-            eventually(lambda t=trailer: sorted(centre.alert_ids(t.site)) == sorted(t.alert_ids())
-                       or None,
-                       f"the centre to hold exactly {trailer.site}'s alerts", 30.0)  # fmt: skip
+            try:
+                eventually(lambda t=trailer: sorted(centre.alert_ids(t.site))
+                           == sorted(t.alert_ids()) or None,
+                           f"the centre to hold exactly {trailer.site}'s alerts", 30.0)  # fmt: skip
+            except BaseException:
+                at_centre, on_trailer = centre.alert_ids(trailer.site), trailer.alert_ids()
+                print(f"{trailer.site}: {len(on_trailer)} alerts on the trailer, "
+                      f"{len(at_centre)} at the centre; only on the trailer (in its order): "
+                      f"{[(on_trailer.index(i), i) for i in set(on_trailer) - set(at_centre)]}; "
+                      f"only at the centre: {sorted(set(at_centre) - set(on_trailer))}; "
+                      f"repeated at the centre: {len(at_centre) - len(set(at_centre))}")
+                print("centre bus counters:\n" + "\n".join(
+                    line for line in centre.http.get("/metrics").text.splitlines()
+                    if line.startswith(("wz_gateway_bus_invalid", "wz_gateway_bus_received",
+                                        "wz_gateway_bus_gaps"))))
+                raise
             ids = centre.alert_ids(trailer.site)
             assert len(ids) == len(set(ids)) >= 40, (trailer.site, len(ids))
-        # Every gap was filled from the alert service's history: none counted as missed.
+        # Every gap Zenoh's own recovery gave up on was re-fetched from the alert services'
+        # caches (the equality above is the proof); how many there were, for the log.
         metrics = centre.http.get("/metrics").text
+        print("gaps re-fetched at the centre:", [line for line in metrics.splitlines()
+                                                 if line.startswith("wz_gateway_bus_gaps")])
         assert not [line for line in metrics.splitlines()
-                    if line.startswith("wz_gateway_bus_invalid") and "missed" in line]
+                    if line.startswith("wz_gateway_bus_invalid") and "alerts" in line]
         tapped = set(re.findall(r'"alert_id":\s*"([^"]+)"', tap_log.read_text()))
         missed = b_during_cut - tapped
         print(f"of trailer B's {len(b_during_cut)} alerts raised during its 25 s cut, a plain "

@@ -268,31 +268,40 @@ def test_a_sensor_silent_for_two_seconds_the_tracks_continue_on_the_other(settin
 
 
 def test_both_sensors_silent_longer_than_max_coast_deletes_the_tracks() -> None:
+    """A 2 s blackout of both sensors: the tracks coast, then are deleted (published no more).
+    Without a lost-track memory the vehicles come back under new ids and the old tracks'
+    histories are handed out as ended; with it (the default, 3 s) their young tracks hand
+    them their old ids back. A sensor outage with no batches at all (``advance_to``) lets the
+    tracks coast through ``max_outage_coast_s``."""
     vehicles = [Vehicle(0.0, 0.0, 25.0, local_id=1), Vehicle(0.0, 10.0, 20.0, local_id=2)]
+    no_memory = SETTINGS.model_copy(update={"lost_memory_s": 0.0})
 
-    def blackout(sensor: str, t: float) -> bool:
-        return 3.0 <= t < 5.0
+    def blackout(settings: TrackerSettings) -> tuple[list[int], list[int], MultiTargetTracker]:
+        # Sensors that still publish, empty batches: time advances, the tracks coast then go.
+        tracker = MultiTargetTracker(settings)
+        before: list[int] = []
+        for sensor, stamp, measurements in scene(vehicles, duration_s=8.0, seed=3):
+            tracker.add(sensor, stamp, [] if 3.0 <= stamp < 5.0 else measurements)
+            if stamp == pytest.approx(3.0):
+                before = [t.track_id for t in tracker.tracks(3.0) if t.status == "confirmed"]
+            if stamp == pytest.approx(3.5):
+                assert [t.status for t in tracker.tracks(3.5)] == ["coasting", "coasting"]
+            if stamp == pytest.approx(4.8):
+                assert tracker.tracks(4.8) == []
+        tracker.flush()
+        assert len(before) == 2
+        return before, [t.track_id for t in tracker.tracks() if t.status == "confirmed"], tracker
 
-    # Sensors that still publish, empty batches: time advances, the tracks coast then go.
-    tracker = MultiTargetTracker(SETTINGS)
-    before: list[int] = []
-    for sensor, stamp, measurements in scene(vehicles, duration_s=8.0, seed=3):
-        tracker.add(sensor, stamp, [] if blackout(sensor, stamp) else measurements)
-        if stamp == pytest.approx(3.0):
-            before = [t.track_id for t in tracker.tracks(3.0) if t.status == "confirmed"]
-        if stamp == pytest.approx(3.5):
-            assert [t.status for t in tracker.tracks(3.5)] == ["coasting", "coasting"]
-        if stamp == pytest.approx(4.8):
-            assert tracker.tracks(4.8) == []
-    tracker.flush()
-    assert len(before) == 2
+    before, after, tracker = blackout(no_memory)
     assert set(before) <= {h.track_id for h in tracker.pop_finished_histories()}
     assert tracker.pop_finished_histories() == []
-    after = [t.track_id for t in tracker.tracks() if t.status == "confirmed"]
     assert len(after) == 2 and min(after) > max(before)  # new ids, never reused
+    before, after, tracker = blackout(SETTINGS)
+    assert after == before and tracker.counters.tracks_resumed == 2
+    assert tracker.pop_finished_histories() == []
     # Sensors that publish nothing at all (an outage): the node tells the time with
     # advance_to; the tracks coast through max_outage_coast_s, not max_coast_s, then go.
-    tracker = MultiTargetTracker(SETTINGS)
+    tracker = MultiTargetTracker(no_memory)
     feed(tracker, scene(vehicles, duration_s=3.0, seed=3))
     before = [t.track_id for t in tracker.tracks() if t.status == "confirmed"]
     assert len(before) == 2
@@ -714,6 +723,46 @@ def test_a_vehicle_back_from_a_gap_keeps_its_identity() -> None:
     assert handed == {1} and counters.tracks_handed_over == 1
     split, _ = ids(reacquire_along_m=0.0, hand_over_along_m=0.0)
     assert split == {1, 2}
+
+
+def test_a_vehicle_hidden_past_its_coast_resumes_its_id_when_it_comes_back() -> None:
+    """A car hidden behind a truck for 2.5 s (longer than ``max_coast_s``) comes back 3 m
+    ahead of its old track's prediction. The old track is deleted, lost but remembered: not
+    published while lost; the young track of the car hands it back, before it is confirmed, so
+    no second id is ever published. Without the memory the car comes back as track 2; a car
+    that comes back after the memory has run out is a new track too, and the old track's
+    history is then handed out as ended."""
+    cov = np.eye(2) * 1e-4
+
+    def run(hidden_s: float, **changes: float) -> tuple[list[set[int]], MultiTargetTracker]:
+        tracker = MultiTargetTracker(TrackerSettings(reorder_window_s=0.0, **changes),
+                                     heading_at=lambda x, y: 0.0)  # fmt: skip
+        published: list[set[int]] = []
+        for k in range(int((4.0 + hidden_s) / 0.05)):
+            t = 0.05 * k
+            hidden = 1.0 <= t < 1.0 + hidden_s
+            jump = 3.0 if t >= 1.0 + hidden_s else 0.0
+            tracker.add(LIDAR, t, [] if hidden else [
+                Measurement(x_m=30.0 * t + jump, y_m=0.0, covariance_m2=cov)])  # fmt: skip
+            published.append({s.track_id for s in tracker.tracks() if s.status != "tentative"})
+        return published, tracker
+
+    published, tracker = run(2.5)
+    assert set().union(*published) == {1}
+    assert set() in published  # unpublished while lost
+    assert published[-1] == {1}
+    assert tracker.counters.tracks_resumed == 1
+    assert tracker.pop_finished_histories() == []
+    (car,) = [s for s in tracker.tracks() if s.track_id == 1]
+    assert car.x_m == pytest.approx(30.0 * 0.05 * (len(published) - 1) + 3.0, abs=0.2)
+    assert car.speed_mps == pytest.approx(30.0, abs=0.5)
+
+    published, tracker = run(2.5, lost_memory_s=0.0)
+    assert published[-1] == {2} and tracker.counters.tracks_resumed == 0
+    published, tracker = run(5.0)  # 1.5 s coasting + 3 s lost < 5 s
+    assert published[-1] == {2} and tracker.counters.tracks_resumed == 0
+    (ended,) = tracker.pop_finished_histories()
+    assert ended.track_id == 1 and ended.stamps_s[-1] == pytest.approx(0.95)
 
 
 def test_a_stray_young_track_behind_a_briefly_unseen_vehicle_takes_nothing_over() -> None:

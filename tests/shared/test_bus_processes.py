@@ -9,6 +9,7 @@ import time
 from collections import Counter
 from collections.abc import Iterator
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -172,4 +173,35 @@ def test_a_late_subscriber_with_recovery_gets_the_history_then_the_live_samples(
     finish_peer(bus, peer)
     assert recovered == [f"early-{i}" for i in range(40)] + [f"live-{i}" for i in range(40)]
     assert plain == [f"live-{i}" for i in range(40)]
-    assert not bus.stats.invalid  # nothing counted missed
+    assert not bus.stats.invalid and not bus.stats.gaps
+
+
+def test_a_gap_zenoh_gave_up_on_is_filled_from_the_publishers_cache(bus: Bus, port: int) -> None:
+    """Zenoh's recovery reports a gap it gave up on (its query ended without the samples: a
+    race after a link cut that no loopback test provokes at will, so the report is made here
+    by hand, as Zenoh makes it). The subscription fetches the publisher's whole cache: every
+    alert reaches the callback again, the gap is counted, and nothing is counted invalid."""
+    peer = start_peer(port, "history", "40", stdout=subprocess.PIPE)
+    assert peer.stdout is not None
+    assert peer.stdout.readline().strip() == b"published"
+    received: list[str] = []
+    subscription = bus.on(bus.keys.alerts_all, Alert,
+                          lambda _, a: received.append(a.alert_id), recover=True)  # fmt: skip
+    early = [f"early-{i}" for i in range(40)]
+    deadline = time.monotonic() + 15.0
+    while len(received) < 40 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert received == early
+    subscription._on_miss(SimpleNamespace(nb=3, source="the peer's publisher"))
+    while len(received) < 80 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert received == early + early
+    assert bus.stats.gaps == {bus.keys.alerts_all: 1}
+    more = bus.publisher(f"{bus.keys.prefix}/test/more", Alert)
+    assert more.wait_for_subscribers(10.0)
+    more.put_bytes(b"more")
+    while len(received) < 120 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    finish_peer(bus, peer)
+    assert received[80:] == [f"live-{i}" for i in range(40)]
+    assert not bus.stats.invalid

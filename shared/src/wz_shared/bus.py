@@ -91,6 +91,8 @@ class BusStats:
     received: collections.Counter[str] = field(default_factory=collections.Counter)
     invalid: collections.Counter[tuple[str, str]] = field(default_factory=collections.Counter)
     dropped: collections.Counter[str] = field(default_factory=collections.Counter)
+    #: Gaps a recovering subscription found and re-fetched (:class:`CallbackSubscription`).
+    gaps: collections.Counter[str] = field(default_factory=collections.Counter)
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
     _logged: set[tuple[str, str]] = field(default_factory=set, repr=False)
 
@@ -105,6 +107,12 @@ class BusStats:
     def count_dropped(self, key: str, n: int = 1) -> None:
         with self._lock:
             self.dropped[key] += n
+
+    def count_gap(self, key: str, detail: str) -> None:
+        with self._lock:
+            self.gaps[key] += 1
+        log.info("gap on %s (%s): fetching the publishers' caches", key, detail,
+                 extra={"key": key})  # fmt: skip
 
     def count_invalid(self, key: str, reason: str, detail: str) -> None:
         """Count a rejected message; log the first of each (key, reason) only."""
@@ -128,6 +136,7 @@ class BusStats:
                 "received": dict(self.received),
                 "invalid": {f"{k}|{r}": n for (k, r), n in self.invalid.items()},
                 "dropped": dict(self.dropped),
+                "gaps": dict(self.gaps),
             }
 
 
@@ -356,8 +365,15 @@ class CallbackSubscription(Generic[T]):
     it starts or when one of them appears (a trailer whose link came back), and the samples
     lost in a gap, which it finds from their sequence numbers and heartbeats. A sample may then
     arrive twice (once live, once again from a cache after a reconnection): the callback must
-    be idempotent (the gateway stores an alert once per ``alert_id``). Gaps it could not fill
-    (the publisher's cache no longer had them) are counted under ``(key, "missed")``.
+    be idempotent (the gateway stores an alert once per ``alert_id``).
+
+    Zenoh's own recovery gives a gap up when its query ends, even when the samples are in the
+    cache but were not in that query's answer (a sample published while the routes were coming
+    back after a link cut, with the next one already received). So every gap Zenoh reports is
+    counted (``stats.gaps``) and then filled here: a plain query of the publishers' caches
+    (``<key>/@adv/pub/**``, zenoh-ext's cache queryables) on a worker thread, every cached
+    sample handed to the callback. Only what a cache no longer holds (more than its ``history``
+    samples since) stays lost.
     """
 
     def __init__(
@@ -383,10 +399,12 @@ class CallbackSubscription(Generic[T]):
             recovery=zenoh.ext.RecoveryConfig(periodic_queries=None, heartbeat=True),
             subscriber_detection=True,
         )  # fmt: skip
+        self._refetch = _CacheRefetch(bus.session, key, self._on_sample)
         self._miss_listener = self._subscriber.sample_miss_listener(self._on_miss)
 
     def _on_miss(self, miss: Any) -> None:
-        self._stats.count_invalid(self.key, "missed", f"{miss.nb} samples from {miss.source}")
+        self._stats.count_gap(self.key, f"{miss.nb} samples from {miss.source}")
+        self._refetch.request()
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         self._stats.count_received(self.key)
@@ -408,7 +426,62 @@ class CallbackSubscription(Generic[T]):
         listener = getattr(self, "_miss_listener", None)
         if listener is not None:
             listener.undeclare()
+            self._refetch.close()
         self._subscriber.undeclare()
+
+
+#: Longest wait for the publishers' caches to answer a re-fetch [s].
+REFETCH_TIMEOUT_S = 5.0
+
+
+class _CacheRefetch:
+    """Fetches every sample the advanced publishers on ``key`` hold, on its own thread, when
+    asked (a gap); requests that come while a fetch runs make one more fetch after it."""
+
+    def __init__(self, session: zenoh.Session, key: str,
+                 on_sample: Callable[[zenoh.Sample], None]) -> None:  # fmt: skip
+        self._session = session
+        self._selector = f"{key}/@adv/pub/**"
+        self._on_sample = on_sample
+        self._wanted = threading.Event()
+        self._closed = False
+        self._thread: threading.Thread | None = None
+        self._lock = threading.Lock()
+
+    def request(self) -> None:
+        with self._lock:
+            if self._closed:
+                return
+            self._wanted.set()
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._run, daemon=True,
+                                                name=f"refetch {self._selector}")  # fmt: skip
+                self._thread.start()
+
+    def _run(self) -> None:
+        while True:
+            self._wanted.wait()
+            if self._closed:
+                return
+            self._wanted.clear()
+            try:
+                replies = self._session.get(
+                    self._selector, timeout=REFETCH_TIMEOUT_S,
+                    accept_replies=zenoh.ReplyKeyExpr.ANY,  # a cache answers with the key itself
+                    consolidation=zenoh.ConsolidationMode.NONE,  # every sample, not the newest
+                )  # fmt: skip
+                for reply in replies:
+                    if self._closed:
+                        return
+                    if reply.ok is not None:
+                        self._on_sample(reply.ok)
+            except Exception:  # a closing session; the next gap asks again
+                log.debug("re-fetch of %s failed", self._selector, exc_info=True)
+
+    def close(self) -> None:
+        with self._lock:
+            self._closed = True
+            self._wanted.set()
 
 
 def json_decoder(cls: type[M]) -> Decoder[M]:

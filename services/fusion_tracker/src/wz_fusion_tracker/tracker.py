@@ -42,7 +42,9 @@ processed by sensor id, so that too does not depend on arrival order.
 7. *life cycle*: tentative -> confirmed after ``confirm_hits`` updates within
    ``confirm_window_s``, and no sooner than ``confirm_min_age_s`` after its first detection;
    a confirmed track not updated for ``coasting_after_s`` reports
-   "coasting", and is deleted after ``max_coast_s``. Ids increase from 1 and are never reused.
+   "coasting", and is deleted after ``max_coast_s``. Ids increase from 1 and are never reused;
+   a deleted confirmed track is *lost* for ``lost_memory_s`` more (not published), and resumes
+   its id if its vehicle comes back as a new track (:meth:`MultiTargetTracker._hand_over`).
 
 **Identity prior.** Each sensor has its own tracker and tags detections with a
 ``local_track_id``. When a measurement's ``(sensor_id, local_track_id)`` last updated track T,
@@ -180,6 +182,12 @@ class TrackerSettings(BaseModel):
     #: (a sensor outage, a network drop): then it coasts up to this [s].
     max_outage_coast_s: float = Field(default=5.0, gt=0.0)
     sensor_silent_after_s: float = Field(default=0.5, gt=0.0)
+    #: A confirmed track past its coast is kept this long more as *lost* [s]: not published,
+    #: taking no measurement, but a young track of its vehicle come back (the hand-over's
+    #: tests, ``hand_over_*``) gives the vehicle its old id back. A car hidden behind a truck
+    #: at 100-120 m for 3 s (the LiDAR and camera both in its shadow) otherwise comes back
+    #: under a new id. 0 turns it off.
+    lost_memory_s: float = Field(default=3.0, ge=0.0)
 
     # --- timing ---
     #: Batches are held this long behind the newest stamp seen, then processed in order [s].
@@ -411,6 +419,8 @@ class TrackerCounters:
     tracks_reacquired: int = 0
     #: Young tracks that handed their vehicle back to a coasting track (:meth:`_hand_over`).
     tracks_handed_over: int = 0
+    #: ... of which to a lost track (``lost_memory_s``), which then lived again.
+    tracks_resumed: int = 0
     #: Unmatched measurements that started no track, being near a confirmed one
     #: (:attr:`TrackerSettings.spawn_gate_chi2`).
     measurements_suppressed: int = 0
@@ -758,6 +768,8 @@ class _Track:
     widths_m: deque[float] = field(init=False)
     last_update_s_by_sensor: dict[str, float] = field(default_factory=dict)
     history: deque[_HistoryEntry] = field(init=False)
+    #: When it was lost (``TrackerSettings.lost_memory_s``) [s].
+    lost_s: float = math.nan
 
     _sizes_cache: tuple[float | None, float | None] | None = None
     _length_quantile_cache: float | None = None
@@ -890,6 +902,8 @@ class MultiTargetTracker:
             else TrackStateBank()
         )
         self._tracks: dict[int, _Track] = {}  # by track id, in creation (= id) order
+        # Confirmed tracks past their coast, kept lost_memory_s (their slots too): id -> track
+        self._lost: dict[int, _Track] = {}
         if first_track_id < 1:
             raise ValueError(f"track ids start at 1 or more, got {first_track_id}")
         self._next_id = first_track_id
@@ -1085,7 +1099,8 @@ class MultiTargetTracker:
         return self._tracks[track_id].to_history()
 
     def pop_finished_histories(self) -> list[TrackHistory]:
-        """Histories of the confirmed tracks deleted since the last call, oldest first."""
+        """Histories of the confirmed tracks ended since the last call, oldest first (a
+        confirmed track ends ``lost_memory_s`` after it is deleted, unless it resumes)."""
         finished = list(self._finished)
         self._finished.clear()
         return finished
@@ -1525,15 +1540,19 @@ class MultiTargetTracker:
         :meth:`_reacquire` (a long gap, a bent velocity), a new track starts on it. While the
         new track is young (``hand_over_age_s``) and the old one coasts just behind or ahead of
         it (``hand_over_along_m``, ``hand_over_across_m``: the same lane or the next), moving alike,
-        and the new one was updated after the old one last was, they are one vehicle: the old track takes the new one's state and the new one goes, so the
-        vehicle keeps its identity.
+        and the new one was updated after the old one last was, they are one vehicle: the old
+        track takes the new one's state and the new one goes, so the vehicle keeps its identity.
+        The old track may also be a lost one (past its coast, within ``lost_memory_s``): it
+        lives again. The hand-over runs every ``_MERGE_PERIOD_S``, so it usually comes while
+        the new track is still tentative, and the new id is never published.
         """
         settings = self.settings
-        if settings.hand_over_along_m <= 0.0 or len(self._tracks) < 2:
+        if settings.hand_over_along_m <= 0.0 or len(self._tracks) + len(self._lost) < 2:
             return
         live = list(self._tracks.values())
         coasting = [t for t in live if t.confirmed
                     and stamp_s - t.updated_s >= settings.reacquire_after_s]  # fmt: skip
+        coasting += self._lost.values()
         young = [t for t in live if stamp_s - t.born_s <= settings.hand_over_age_s
                  and t.updated_s > t.born_s]  # fmt: skip
         if not coasting or not young:
@@ -1564,9 +1583,16 @@ class MultiTargetTracker:
                    & (speed[:, None] >= 0.0) & took_up)  # fmt: skip
         if not allowed.any():
             return
+        resumed = False
         for row, column in gnn_assign(np.abs(along) + np.abs(across), allowed):
             old, new = coasting[row], young[column]
-            if old.track_id not in self._tracks or new.track_id not in self._tracks:
+            if new.track_id not in self._tracks:
+                continue
+            if old.track_id in self._lost:
+                self._tracks[old.track_id] = self._lost.pop(old.track_id)
+                self._counters.tracks_resumed += 1
+                resumed = True
+            elif old.track_id not in self._tracks:
                 continue
             self._bank.copy_slot(new.slot, old.slot)
             old.updated_s = new.updated_s
@@ -1580,6 +1606,8 @@ class MultiTargetTracker:
             self._counters.tracks_handed_over += 1
             self._local_ids = {k: (old.track_id if v == new.track_id else v)
                                for k, v in self._local_ids.items()}  # fmt: skip
+        if resumed:  # back in id order
+            self._tracks = dict(sorted(self._tracks.items()))
 
     def _merge_duplicates(self, stamp_s: float) -> None:
         """Delete the younger of two tracks that are one vehicle (``merge_distance_m``).
@@ -1588,7 +1616,7 @@ class MultiTargetTracker:
         removed as if expired, its sensor local ids handed to the survivor.
         """
         settings = self.settings
-        if settings.merge_distance_m <= 0.0 or len(self._tracks) < 2:
+        if settings.merge_distance_m <= 0.0 or len(self._tracks) + len(self._lost) < 2:
             return
         if stamp_s < self._next_merge_s:
             return
@@ -1644,11 +1672,21 @@ class MultiTargetTracker:
 
     def _prune(self, stamp_s: float) -> None:
         expired = [t for t in self._tracks.values() if self._expired(t, stamp_s)]
+        memory_s = self.settings.lost_memory_s
         for track in expired:
             del self._tracks[track.track_id]
-            self._bank.remove(track.slot)
             self._counters.tracks_deleted += 1
+            if track.confirmed and memory_s > 0.0:
+                track.lost_s = stamp_s  # its slot stays, for the hand-over's prediction
+                self._lost[track.track_id] = track
+                continue
+            self._bank.remove(track.slot)
             if track.confirmed:
+                self._finished.append(track.to_history())
+        if self._lost:
+            for track in [t for t in self._lost.values() if stamp_s - t.lost_s > memory_s]:
+                del self._lost[track.track_id]
+                self._bank.remove(track.slot)
                 self._finished.append(track.to_history())
         if expired:
             gone = {t.track_id for t in expired}

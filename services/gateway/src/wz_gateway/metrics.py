@@ -13,7 +13,7 @@ BusSnapshot = Callable[[], dict[str, dict[str, int]]]
 
 
 class _BusCollector(Collector):
-    """The bus's own counters (received, invalid and dropped per key), read at scrape time."""
+    """The bus's own counters (received, invalid, gaps per key), read at scrape time."""
 
     def __init__(self, snapshot: BusSnapshot) -> None:
         self._snapshot = snapshot
@@ -31,8 +31,15 @@ class _BusCollector(Collector):
         for name, n in snap.get("invalid", {}).items():
             key, _, reason = name.partition("|")
             invalid.add_metric([key, reason], n)
+        gaps = CounterMetricFamily(
+            "wz_gateway_bus_gaps", "Gaps in a recovering subscription, re-fetched from the "
+            "publishers' caches, per key", labels=["key"],
+        )  # fmt: skip
+        for key, n in snap.get("gaps", {}).items():
+            gaps.add_metric([key], n)
         yield received
         yield invalid
+        yield gaps
 
 
 class GatewayMetrics:
