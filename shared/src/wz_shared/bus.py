@@ -370,10 +370,11 @@ class CallbackSubscription(Generic[T]):
     Zenoh's own recovery gives a gap up when its query ends, even when the samples are in the
     cache but were not in that query's answer (a sample published while the routes were coming
     back after a link cut, with the next one already received). So every gap Zenoh reports is
-    counted (``stats.gaps``) and then filled here: a plain query of the publishers' caches
-    (``<key>/@adv/pub/**``, zenoh-ext's cache queryables) on a worker thread, every cached
-    sample handed to the callback. Only what a cache no longer holds (more than its ``history``
-    samples since) stays lost.
+    counted (``stats.gaps``) and then filled here: a plain query of the cache of the publisher
+    Zenoh names (``<key>/@adv/pub/<zid>/<eid>/**``, zenoh-ext's cache queryable; every
+    publisher's when it names none) on a worker thread, every cached sample handed to the
+    callback. Only what a cache no longer holds (more than its ``history`` samples since) stays
+    lost.
     """
 
     def __init__(
@@ -404,7 +405,8 @@ class CallbackSubscription(Generic[T]):
 
     def _on_miss(self, miss: Any) -> None:
         self._stats.count_gap(self.key, f"{miss.nb} samples from {miss.source}")
-        self._refetch.request()
+        zid, eid = getattr(miss.source, "zid", None), getattr(miss.source, "eid", None)
+        self._refetch.request(None if zid is None or eid is None else f"{zid}/{eid}")
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         self._stats.count_received(self.key)
@@ -435,53 +437,62 @@ REFETCH_TIMEOUT_S = 5.0
 
 
 class _CacheRefetch:
-    """Fetches every sample the advanced publishers on ``key`` hold, on its own thread, when
-    asked (a gap); requests that come while a fetch runs make one more fetch after it."""
+    """Fetches every sample an advanced publisher on ``key`` holds, on its own thread, when
+    asked (a gap): the publisher named ``"<zid>/<eid>"``, or all of them (None). Requests that
+    come while a fetch runs are served by the next one."""
 
     def __init__(self, session: zenoh.Session, key: str,
                  on_sample: Callable[[zenoh.Sample], None]) -> None:  # fmt: skip
         self._session = session
-        self._selector = f"{key}/@adv/pub/**"
+        self._key = key
         self._on_sample = on_sample
-        self._wanted = threading.Event()
+        self._wanted: set[str | None] = set()
+        self._cond = threading.Condition()
         self._closed = False
         self._thread: threading.Thread | None = None
-        self._lock = threading.Lock()
 
-    def request(self) -> None:
-        with self._lock:
+    def request(self, publisher: str | None) -> None:
+        with self._cond:
             if self._closed:
                 return
-            self._wanted.set()
+            self._wanted.add(publisher)
+            self._cond.notify()
             if self._thread is None:
                 self._thread = threading.Thread(target=self._run, daemon=True,
-                                                name=f"refetch {self._selector}")  # fmt: skip
+                                                name=f"refetch {self._key}")  # fmt: skip
                 self._thread.start()
 
     def _run(self) -> None:
         while True:
-            self._wanted.wait()
-            if self._closed:
-                return
-            self._wanted.clear()
-            try:
-                replies = self._session.get(
-                    self._selector, timeout=REFETCH_TIMEOUT_S,
-                    accept_replies=zenoh.ReplyKeyExpr.ANY,  # a cache answers with the key itself
-                    consolidation=zenoh.ConsolidationMode.NONE,  # every sample, not the newest
-                )  # fmt: skip
-                for reply in replies:
-                    if self._closed:
-                        return
-                    if reply.ok is not None:
-                        self._on_sample(reply.ok)
-            except Exception:  # a closing session; the next gap asks again
-                log.debug("re-fetch of %s failed", self._selector, exc_info=True)
+            with self._cond:
+                while not self._wanted and not self._closed:
+                    self._cond.wait()
+                if self._closed:
+                    return
+                wanted, self._wanted = self._wanted, set()
+            # one query of every publisher's cache covers each named one
+            for publisher in [None] if None in wanted else sorted(p for p in wanted if p):
+                self._fetch(f"{self._key}/@adv/pub/" + (f"{publisher}/**" if publisher else "**"))
+
+    def _fetch(self, selector: str) -> None:
+        try:
+            replies = self._session.get(
+                selector, timeout=REFETCH_TIMEOUT_S,
+                accept_replies=zenoh.ReplyKeyExpr.ANY,  # a cache answers with the key itself
+                consolidation=zenoh.ConsolidationMode.NONE,  # every sample, not the newest
+            )  # fmt: skip
+            for reply in replies:
+                if self._closed:
+                    return
+                if reply.ok is not None:
+                    self._on_sample(reply.ok)
+        except Exception:  # a closing session; the next gap asks again
+            log.debug("re-fetch of %s failed", selector, exc_info=True)
 
     def close(self) -> None:
-        with self._lock:
+        with self._cond:
             self._closed = True
-            self._wanted.set()
+            self._cond.notify()
 
 
 def json_decoder(cls: type[M]) -> Decoder[M]:
