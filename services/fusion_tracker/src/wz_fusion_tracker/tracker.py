@@ -1209,6 +1209,9 @@ class MultiTargetTracker:
         speeds = np.array([measurements[j].speed_mps for j in columns.tolist()], dtype=np.float64)
         y = speeds[None, :] - predicted[:, None]
         bad = y * y > settings.speed_association_chi2 * variance[:, None]
+        # Only pairs within a gate are ever looked at again (association, spawn suppression):
+        # forbidding the far ones too would only cost time (most pairs of a full batch).
+        bad &= d2[np.ix_(rows, columns)] <= max(settings.gate_chi2, settings.spawn_gate_chi2)
         if not bad.any():
             return d2
         d2 = d2.copy()
