@@ -50,6 +50,19 @@ def finish_peer(bus: Bus, peer: subprocess.Popen[bytes]) -> None:
     assert peer.wait() == 0
 
 
+def wait_for(items: list[str], count: int, deadline: float) -> None:
+    while len(items) < count and time.monotonic() < deadline:
+        time.sleep(0.05)
+
+
+def ask_for_more(bus: Bus, items: list[str], count: int, deadline: float) -> None:
+    """Tell the ``history`` peer to publish its live alerts; wait until ``count`` are in."""
+    more = bus.publisher(f"{bus.keys.prefix}/test/more", Alert)
+    assert more.wait_for_subscribers(10.0)
+    more.put_bytes(b"more")
+    wait_for(items, count, deadline)
+
+
 def test_every_message_type_between_processes(bus: Bus, port: int) -> None:
     count = 25
     subscriptions = {
@@ -162,14 +175,9 @@ def test_a_late_subscriber_with_recovery_gets_the_history_then_the_live_samples(
     bus.on(bus.keys.alerts_all, Alert, lambda _, a: recovered.append(a.alert_id), recover=True)
     bus.on(bus.keys.alerts_all, Alert, lambda _, a: plain.append(a.alert_id))
     deadline = time.monotonic() + 15.0
-    while len(recovered) < 40 and time.monotonic() < deadline:
-        time.sleep(0.05)
+    wait_for(recovered, 40, deadline)
     assert recovered == [f"early-{i}" for i in range(40)]
-    more = bus.publisher(f"{bus.keys.prefix}/test/more", Alert)
-    assert more.wait_for_subscribers(10.0)
-    more.put_bytes(b"more")
-    while len(recovered) < 80 and time.monotonic() < deadline:
-        time.sleep(0.05)
+    ask_for_more(bus, recovered, 80, deadline)
     finish_peer(bus, peer)
     assert recovered == [f"early-{i}" for i in range(40)] + [f"live-{i}" for i in range(40)]
     assert plain == [f"live-{i}" for i in range(40)]
@@ -190,8 +198,7 @@ def test_a_gap_zenoh_gave_up_on_is_filled_from_the_publishers_cache(bus: Bus, po
                           lambda _, a: received.append(a.alert_id), recover=True)  # fmt: skip
     early = [f"early-{i}" for i in range(40)]
     deadline = time.monotonic() + 15.0
-    while len(received) < 40 and time.monotonic() < deadline:
-        time.sleep(0.05)
+    wait_for(received, 40, deadline)
     assert received == early
     # the publisher as Zenoh names it in a miss: its session's id and its entity id, read
     # from the liveliness token it declares (zenoh-ext: <key>/@adv/pub/<zid>/<eid>/...)
@@ -201,16 +208,11 @@ def test_a_gap_zenoh_gave_up_on_is_filled_from_the_publishers_cache(bus: Bus, po
     stranger = SimpleNamespace(zid="0" * 32, eid=int(eid))
     subscription._on_miss(SimpleNamespace(nb=3, source=stranger))  # no such publisher
     subscription._on_miss(SimpleNamespace(nb=3, source=SimpleNamespace(zid=zid, eid=int(eid))))
-    while len(received) < 80 and time.monotonic() < deadline:
-        time.sleep(0.05)
+    wait_for(received, 80, deadline)
     time.sleep(0.5)  # nothing more comes
     assert received == early + early
     assert bus.stats.gaps == {bus.keys.alerts_all: 2}
-    more = bus.publisher(f"{bus.keys.prefix}/test/more", Alert)
-    assert more.wait_for_subscribers(10.0)
-    more.put_bytes(b"more")
-    while len(received) < 120 and time.monotonic() < deadline:
-        time.sleep(0.05)
+    ask_for_more(bus, received, 120, deadline)
     finish_peer(bus, peer)
     assert received[80:] == [f"live-{i}" for i in range(40)]
     assert not bus.stats.invalid
