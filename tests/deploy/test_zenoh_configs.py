@@ -178,21 +178,33 @@ def client_session(router_endpoint: str) -> zenoh.Session:
 
 
 def relay(publisher_session: zenoh.Session, subscriber_session: zenoh.Session, key: str) -> None:
-    """Publish N_SAMPLES on ``key`` once the subscriber is known; all arrive, in order."""
+    """Once a probe has crossed the mesh, N_SAMPLES published on ``key`` all arrive, in order.
+
+    The publisher's matching status alone is not enough: under load in CI it turned true while
+    a router on the path had no route yet, and all five samples put at once were lost. So the
+    probe is put every 50 ms until one arrives; probes come before the samples from one
+    publisher, and are left out of the comparison.
+    """
     subscriber = subscriber_session.declare_subscriber(key)
     publisher = publisher_session.declare_publisher(key)
     wait_for(lambda: publisher.matching_status.matching, 15.0, f"a subscriber of {key}")
-    for index in range(N_SAMPLES):
-        publisher.put(f"sample {index}")
     received: list[str] = []
 
-    def all_received() -> bool:
+    def drain() -> list[str]:
         while (sample := subscriber.try_recv()) is not None:
             received.append(sample.payload.to_string())
-        return len(received) >= N_SAMPLES
+        return [text for text in received if text != "probe"]
 
-    wait_for(all_received, 10.0, f"{N_SAMPLES} samples on {key}")
-    assert received == [f"sample {index}" for index in range(N_SAMPLES)]
+    def probe_arrived() -> bool:
+        publisher.put("probe")
+        drain()
+        return "probe" in received
+
+    wait_for(probe_arrived, 15.0, f"a probe on {key} across the mesh")
+    for index in range(N_SAMPLES):
+        publisher.put(f"sample {index}")
+    wait_for(lambda: len(drain()) >= N_SAMPLES, 10.0, f"{N_SAMPLES} samples on {key}")
+    assert drain() == [f"sample {index}" for index in range(N_SAMPLES)]
     publisher.undeclare()
     subscriber.undeclare()
 
