@@ -16,9 +16,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-import signal
 import sys
-import threading
 import time
 from collections.abc import Callable
 
@@ -34,6 +32,7 @@ from wz_shared.messages import (
     Message,
 )
 from wz_shared.settings import BusSettings
+from wz_shared.signals import stop_on_signals
 
 KEYS = Keys(SITE)
 JUNK_KEY = f"{KEYS.prefix}/test/junk"
@@ -122,8 +121,7 @@ def publish(endpoint: str, samples: list[Sample]) -> None:
 
 def stream(endpoint: str, rate_hz: float) -> None:
     """Ground truth at ``rate_hz`` until SIGTERM (for the crash-while-recording test)."""
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    stop = stop_on_signals()
     with Bus.open(_settings(endpoint), site=SITE, service="streamer") as bus:
         truth = bus.publisher(KEYS.truth, GroundTruth)
         template = next(m for m in json_samples() if isinstance(m, GroundTruth))

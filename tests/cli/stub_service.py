@@ -9,15 +9,15 @@ from __future__ import annotations
 import os
 import signal
 import sys
-import threading
 import time
+
+from wz_shared.signals import stop_on_signals
 
 
 def main() -> None:
     behaviour = sys.argv[1]
     if behaviour == "serve":
-        stop = threading.Event()
-        signal.signal(signal.SIGTERM, lambda *_: stop.set())
+        stop = stop_on_signals()
         sys.stdout.write(f"serving: pid {os.getpid()}, args {sys.argv[1:]}\n")
         sys.stdout.flush()
         stop.wait()

@@ -1,18 +1,16 @@
-"""What the `wz` subcommands share: endpoints, bus sessions, stop signals, terminal output."""
+"""What the `wz` subcommands share: endpoints, bus sessions, terminal output."""
 
 from __future__ import annotations
 
 import logging
 import os
 import re
-import signal
 import socket
 import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from types import FrameType
 
 import zenoh
 
@@ -147,22 +145,6 @@ DEFAULT_CONNECT_HELP = (
     "router endpoint to connect to (repeatable, or comma-separated); default: "
     f"WZ_BUS_CONNECT_ENDPOINTS or {DEFAULT_ROUTER_ENDPOINT}"
 )
-
-
-# --- process control ------------------------------------------------------------------------
-
-
-def stop_on_signals() -> threading.Event:
-    """An event set by SIGINT or SIGTERM (install from the main thread)."""
-    stop = threading.Event()
-
-    def on_signal(signum: int, _frame: FrameType | None) -> None:
-        log.info("%s: stopping", signal.Signals(signum).name)
-        stop.set()
-
-    signal.signal(signal.SIGINT, on_signal)
-    signal.signal(signal.SIGTERM, on_signal)
-    return stop
 
 
 # --- output ---------------------------------------------------------------------------------

@@ -27,10 +27,10 @@ from wz_cli.common import (
     emit,
     open_bus,
     site_file_from_env,
-    stop_on_signals,
 )
 from wz_shared.logs import configure_logging
 from wz_shared.settings import DEFAULT_ROUTER_ENDPOINT
+from wz_shared.signals import stop_on_signals
 from wz_shared.site import SiteFileError, load_site
 
 log = logging.getLogger("wz_cli")

@@ -17,17 +17,16 @@ from __future__ import annotations
 
 import logging
 import os
-import signal
 import threading
 import time
 from pathlib import Path
-from types import FrameType
 from typing import Any
 
 from wz_shared import health
 from wz_shared.bus import Bus, BusStats
 from wz_shared.messages import ServiceState, ServiceStatus
 from wz_shared.settings import BusSettings
+from wz_shared.signals import stop_on_signals
 
 log = logging.getLogger(__name__)
 
@@ -91,15 +90,8 @@ class ServiceRuntime:
         log.info("service %s stopped", self.service)
 
     def _install_signal_handlers(self) -> None:
-        if threading.current_thread() is not threading.main_thread():
-            return
-
-        def on_signal(signum: int, _frame: FrameType | None) -> None:
-            log.info("signal %s: stopping", signal.Signals(signum).name)
-            self.stop.set()
-
-        signal.signal(signal.SIGTERM, on_signal)
-        signal.signal(signal.SIGINT, on_signal)
+        if threading.current_thread() is threading.main_thread():
+            stop_on_signals(self.stop)  # (wz_shared.signals: no lock taken in the handler)
 
     def status_message(
         self,
