@@ -73,3 +73,24 @@ def test_handlers_are_installed_from_the_main_thread_only() -> None:
     thread.start()
     thread.join()
     assert len(errors) == 1 and "main thread" in str(errors[0])
+
+
+def test_a_forked_child_stops_itself_not_its_parent() -> None:
+    previous = {signum: signal.getsignal(signum) for signum in (signal.SIGTERM, signal.SIGINT)}
+    try:
+        stop = stop_on_signals()
+        pid = os.fork()
+        if pid == 0:  # the child: its SIGTERM sets its own copy of the event
+            code = 1
+            try:
+                os.kill(os.getpid(), signal.SIGTERM)
+                code = 0 if stop.wait(5.0) else 1
+            finally:
+                os._exit(code)
+        _, status = os.waitpid(pid, 0)
+        assert os.waitstatus_to_exitcode(status) == 0
+        time.sleep(0.2)  # a byte the parent's thread wrongly read would have set it by now
+        assert not stop.is_set()
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)

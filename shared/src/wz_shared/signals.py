@@ -35,6 +35,8 @@ STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT)
 
 _lock = threading.Lock()
 _write_fd: int | None = None
+#: The process whose thread reads the pipe (a forked child has the pipe, not the thread).
+_owner_pid: int | None = None
 #: The event the next signal sets (the last one given to :func:`stop_on_signals`).
 _target: threading.Event | None = None
 
@@ -55,19 +57,23 @@ def _on_signal(signum: int, _frame: FrameType | None) -> None:
     fd = _write_fd
     if fd is None:
         return
+    if os.getpid() != _owner_pid:  # a forked child: its parent's thread would read the byte
+        if _target is not None:
+            _target.set()  # the plain way, the child's own copy of the event
+        return
     with contextlib.suppress(OSError):  # a full pipe: the thread has signals to read already
         os.write(fd, bytes((signum,)))
 
 
 def _start_watcher() -> int:
     """The pipe's write end; the pipe and its thread are made on the first call."""
-    global _write_fd
+    global _write_fd, _owner_pid
     with _lock:
-        if _write_fd is None:
+        if _write_fd is None or _owner_pid != os.getpid():
             read_fd, write_fd = os.pipe()
             os.set_blocking(write_fd, False)  # a handler must never block
             threading.Thread(target=_watch, args=(read_fd,), name="signals", daemon=True).start()
-            _write_fd = write_fd
+            _write_fd, _owner_pid = write_fd, os.getpid()
         return _write_fd
 
 
