@@ -4,9 +4,9 @@ A Python signal handler runs in the main thread between two bytecodes, wherever 
 is: inside ``Event.wait`` holding the event's lock, or inside another signal's handler. The
 obvious handler, ``stop.set()``, takes the event's lock, which is not reentrant. When the
 thread it interrupts already holds that lock, the thread waits on itself for good. Seen: a
-fusion-tracker node that got three SIGTERMs at once (``wz up`` stopping it, then the
-supervisor's death) hung with three handlers on its stack, and outlived the test that started
-it.
+fusion-tracker node of a ``wz up`` test, run on a loaded machine, hung with three SIGTERM
+handlers on its main thread's stack, the last one waiting in ``Event.set``, and outlived the
+test.
 
 So the handler here only writes the signal's number to a pipe. ``os.write`` takes no Python
 lock. A daemon thread reads the pipe, logs the signal and sets the event. One pipe and one
