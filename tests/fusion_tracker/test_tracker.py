@@ -157,6 +157,43 @@ def test_mahalanobis_matches_a_hand_computed_value() -> None:
     assert d2[0, 0] == pytest.approx(y @ np.linalg.inv(S) @ y)
 
 
+@pytest.mark.parametrize("with_offsets", [False, True], ids=["no-offsets", "offsets"])
+def test_the_pre_gate_of_many_pairs_loses_no_pair_within_its_bound(with_offsets: bool) -> None:
+    """Above 2000 pairs only the pairs that can be within ``max_d2`` are computed: every pair
+    whose exact d2 (all pairs computed, a small batch at a time) is within it must come out
+    the same; the others beyond it. 300 tracks on a 4-lane road, their covariances random
+    (long along the road, some uncertain ones), 280 measurements, offsets up to 0.1 s."""
+    rng = np.random.default_rng(3)
+    n_tracks, n_meas = 300, 280
+    x = np.column_stack([rng.uniform(0, 1500, n_tracks), rng.integers(0, 4, n_tracks) * 3.6,
+                         rng.uniform(15, 35, n_tracks), rng.normal(0, 0.5, n_tracks)])  # fmt: skip
+    A = rng.normal(0, 1, (n_tracks, 4, 4)) * rng.choice([0.2, 1.0, 4.0], n_tracks)[:, None, None]
+    P = A @ A.transpose(0, 2, 1) + np.diag([0.5, 0.05, 1.0, 0.1])
+    near = rng.integers(0, n_tracks, n_meas)  # each measurement near some track
+    z = x[near, :2] + rng.normal(0, 1.5, (n_meas, 2))
+    B = rng.normal(0, 0.5, (n_meas, 2, 2))
+    R = B @ B.transpose(0, 2, 1) + 0.04 * np.eye(2)
+    offsets = rng.uniform(-0.1, 0.1, n_meas) if with_offsets else None
+    for max_d2 in (13.8, 60.0, 1e3):
+        d2, log_det = tracker_module.innovation_statistics(x, P, z, R, offsets, max_d2)
+        # the same, 5 x 56 = 280 pairs at a time: below 2000, every pair computed
+        exact_d2 = np.empty_like(d2)
+        exact_log_det = np.empty_like(d2)
+        for lo in range(0, n_tracks, 5):
+            for mlo in range(0, n_meas, 56):
+                block = slice(lo, lo + 5), slice(mlo, mlo + 56)
+                b_off = None if offsets is None else offsets[mlo:mlo + 56]
+                exact_d2[block], exact_log_det[block] = tracker_module.innovation_statistics(
+                    x[lo:lo + 5], P[lo:lo + 5], z[mlo:mlo + 56], R[mlo:mlo + 56], b_off)
+        within = exact_d2 <= max_d2
+        assert within.any() and (~within).any()
+        np.testing.assert_allclose(d2[within], exact_d2[within], rtol=1e-12)
+        np.testing.assert_allclose(log_det[within], exact_log_det[within], rtol=1e-12, atol=1e-12)
+        assert np.all(d2[~within] > max_d2)
+        # and it does prune: most pairs beyond the bound were never computed
+        assert np.count_nonzero(d2 == tracker_module._FAR_D2) > 0.8 * np.count_nonzero(~within)
+
+
 def test_gnn_is_globally_optimal_and_gated() -> None:
     # Greedy would take (0, 0) at 1.0 and leave (1, 1) at 9.0; the optimum is 2.0 + 2.0.
     cost = np.array([[1.0, 2.0], [2.0, 9.0]])
@@ -526,6 +563,43 @@ def test_class_vote_size_median_speed_and_heading() -> None:
     assert track.hits == 4 and track.age_s == pytest.approx(0.3)
     assert track.speed_mps == pytest.approx(math.hypot(track.vx_mps, track.vy_mps))
     assert track.heading_rad == pytest.approx(math.atan2(4.0, 3.0), abs=0.05)
+
+
+def test_class_ties_go_to_the_latest_vote_sizes_keep_a_window_and_a_new_track_starts_clean() -> None:
+    """The per-track bookkeeping held as arrays over slots: a tie in the class vote goes to
+    the class voted last; sizes are the median of the last ``size_window`` (an even count
+    averages the middle two); a deleted track's slot, taken by a new track, carries nothing
+    of the old one over (hits, class, sizes, sensors)."""
+    settings = TrackerSettings(reorder_window_s=0.0, size_window=4, lost_memory_s=0.0,
+                               confirm_hits=2, confirm_min_age_s=0.0)  # fmt: skip
+    tracker = MultiTargetTracker(settings)
+    votes = [("car", 0.5, 4.0), ("truck", 0.5, 10.0), ("car", 0.5, 4.2), ("truck", 0.5, 9.0),
+             ("truck", 0.0, 8.0), ("car", 0.0, 6.0)]  # fmt: skip
+    for k, (object_class, score, length) in enumerate(votes):
+        t = 0.1 * k
+        tracker.add(LIDAR, t, [Measurement(x_m=20.0 * t, y_m=0.0, covariance_m2=np.eye(2) * 0.01,
+                                           object_class=object_class, score=score,
+                                           length_m=length, width_m=2.0 + k)])  # fmt: skip
+    (track,) = tracker.tracks()
+    # car 1.0 and truck 1.0 (the zero-score votes add nothing): the latest vote, car, wins
+    assert track.object_class == "car"
+    # the last four lengths, 4.2, 9.0, 8.0, 6.0: (6.0 + 8.0) / 2; widths 4, 5, 6, 7: 5.5
+    assert track.length_m == pytest.approx(7.0)
+    assert track.width_m == pytest.approx(5.5)
+    assert track.hits == 6
+    old_id = track.track_id
+    # silent past the longest coast (its sensor silent too: max_outage_coast_s): deleted; a
+    # new vehicle elsewhere, seen by another sensor with no class and no size, takes the
+    # freed slot
+    tracker.advance_to(settings.max_outage_coast_s + 1.0)
+    assert tracker.tracks() == [] and tracker.counters.tracks_deleted == 1
+    t = settings.max_outage_coast_s + 1.1
+    tracker.add(CAMERA, t, [Measurement(x_m=500.0, y_m=3.6, covariance_m2=np.eye(2) * 0.01)])
+    (new,) = tracker.tracks()
+    assert new.track_id != old_id
+    assert (new.object_class, new.length_m, new.width_m, new.hits) == ("unknown", None, None, 1)
+    assert dict(new.last_update_s_by_sensor) == {CAMERA: t}
+    assert new.sources == (CAMERA,) and new.status == "tentative"
 
 
 def test_snapshots_predicted_to_a_time_leave_the_tracker_unchanged() -> None:
