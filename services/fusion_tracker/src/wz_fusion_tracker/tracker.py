@@ -23,8 +23,9 @@ processed by sensor id, so that too does not depend on arrival order.
    the track is not matched; one constant-velocity model (:class:`~wz_fusion_tracker.kalman.TrackStateBank`)
    or, with ``motion_model="imm"``, two mixed (:class:`~wz_fusion_tracker.imm.IMMStateBank`);
 3. *gate*: squared Mahalanobis distance of each (track, measurement) pair,
-   ``d^2 = y^T S^-1 y``, ``y = z - H x_p``, ``S = H P_p H^T + R`` (vectorised, (T, M));
-   pairs with ``d^2 > gate_chi2`` are forbidden. Mahalanobis rather than metres because the
+   ``d^2 = y^T S^-1 y``, ``y = z - H x_p``, ``S = H P_p H^T + R`` (vectorised, and only for
+   the pairs a cheap bound cannot rule out: :func:`_candidate_pairs`); pairs with
+   ``d^2 > gate_chi2`` are forbidden. Mahalanobis rather than metres because the
    sensors' errors are far from round: a camera ranges badly along its line of sight and well
    across it, and a track's predicted uncertainty is long along the road (``road_aligned_q``),
    so a fixed radius in metres would be too tight one way and too loose the other;
@@ -504,7 +505,52 @@ _FAR_D2 = 1e12
 def _sparse_innovation_statistics(
     x_pred: F64, P_pred: F64, z: F64, R: F64, time_offset_s: F64 | None, max_d2: float
 ) -> tuple[F64, F64]:
-    """:func:`innovation_statistics` on the pairs that can be near: the rest get ``_FAR_D2``.
+    """:func:`innovation_statistics` on the pairs that can be near (:func:`_candidate_pairs`):
+    the rest get ``_FAR_D2``."""
+    rows, cols = _candidate_pairs(x_pred, P_pred, z, R, time_offset_s, max_d2)
+    d2 = np.full((len(x_pred), len(z)), _FAR_D2)
+    log_det = np.zeros((len(x_pred), len(z)))
+    if len(rows):
+        offsets = None if time_offset_s is None else time_offset_s[cols]
+        pair_d2, pair_log_det = _pair_statistics(x_pred[rows], P_pred[rows], z[cols], R[cols],
+                                                 offsets)  # fmt: skip
+        d2[rows, cols] = pair_d2
+        log_det[rows, cols] = pair_log_det
+    return d2, log_det
+
+
+def _gated_pairs(
+    x_pred: F64, P_pred: F64, z: F64, R: F64, time_offset_s: F64 | None, max_d2: float
+) -> tuple[IntP, IntP, F64, F64]:
+    """The (track, measurement) pairs with ``d^2 <= max_d2``, as arrays: what
+    :func:`innovation_statistics` gives, without the (T, M) matrices.
+
+    The tracker's cycle works on these: with 200 tracks and 200 measurements a track has a
+    handful of pairs within any gate, and each (T, M) operation (fill, add, compare, search)
+    costs more than all the pair-wise work.
+
+    Returns
+    -------
+    rows, columns, d2, log_det_S
+        Track rows, measurement columns, squared Mahalanobis distances and ``ln det S``, shape
+        (K,) each, by increasing row.
+    """
+    if len(x_pred) * len(z) > _SPARSE_GATE_MIN_PAIRS:
+        rows, cols = _candidate_pairs(x_pred, P_pred, z, R, time_offset_s, max_d2)
+        offsets = None if time_offset_s is None else time_offset_s[cols]
+        d2, log_det = _pair_statistics(x_pred[rows], P_pred[rows], z[cols], R[cols], offsets)
+    else:
+        d2_all, log_det_all = innovation_statistics(x_pred, P_pred, z, R, time_offset_s)
+        rows, cols = _allowed_pairs(d2_all <= max_d2)
+        d2, log_det = d2_all[rows, cols], log_det_all[rows, cols]
+    within = d2 <= max_d2
+    return rows[within], cols[within], d2[within], log_det[within]
+
+
+def _candidate_pairs(
+    x_pred: F64, P_pred: F64, z: F64, R: F64, time_offset_s: F64 | None, max_d2: float
+) -> tuple[IntP, IntP]:
+    """The (track, measurement) pairs that can have ``d^2 <= max_d2``, by increasing row.
 
     A pair can be within ``d^2 <= g`` only if ``|y|^2 <= g lambda_max(S) <= g tr(S)``, since
     ``d^2 >= |y|^2 / lambda_max(S)``. That bound is cheap for all pairs: with capture-time
@@ -514,7 +560,7 @@ def _sparse_innovation_statistics(
     only the rest are computed exactly. With a hundred vehicles along a road a track has a
     handful of candidates, so this is a fraction of the (T, M) work.
     """
-    n_tracks, n_meas = len(x_pred), len(z)
+    n_tracks = len(x_pred)
     pos_trace = P_pred[:, 0, 0] + P_pred[:, 1, 1]
     if time_offset_s is None:
         reach, track_trace = np.zeros(n_tracks), pos_trace
@@ -525,7 +571,7 @@ def _sparse_innovation_statistics(
         track_trace = (np.sqrt(pos_trace) + delta * np.sqrt(vel_trace)) ** 2
     meas_trace = R[:, 0, 0] + R[:, 1, 1]
     # Candidates along the axis the measurements spread most (the road's): a sorted sweep.
-    axis = int(np.argmax(np.ptp(z, axis=0)))
+    axis = int(np.argmax(z.max(axis=0) - z.min(axis=0)))
     order = np.argsort(z[:, axis], kind="stable")
     sorted_z = z[order, axis]
     radius = np.sqrt(max_d2 * (track_trace + meas_trace.max())) + reach  # (T,)
@@ -535,7 +581,7 @@ def _sparse_innovation_statistics(
     total = int(counts.sum())
     rows = np.repeat(np.arange(n_tracks), counts)
     starts = np.repeat(lo - (np.cumsum(counts) - counts), counts)
-    cols = order[np.arange(total) + starts] if total else np.zeros(0, dtype=np.intp)
+    cols = order[np.arange(total) + starts] if total else _NO_INDEX
     if total:
         dx = z[cols, 0] - x_pred[rows, 0]
         dy = z[cols, 1] - x_pred[rows, 1]
@@ -543,15 +589,7 @@ def _sparse_innovation_statistics(
         near = (distance <= 0.0) | (
             distance * distance <= max_d2 * (track_trace[rows] + meas_trace[cols]))
         rows, cols = rows[near], cols[near]
-    d2 = np.full((n_tracks, n_meas), _FAR_D2)
-    log_det = np.zeros((n_tracks, n_meas))
-    if len(rows):
-        offsets = None if time_offset_s is None else time_offset_s[cols]
-        pair_d2, pair_log_det = _pair_statistics(x_pred[rows], P_pred[rows], z[cols], R[cols],
-                                                 offsets)  # fmt: skip
-        d2[rows, cols] = pair_d2
-        log_det[rows, cols] = pair_log_det
-    return d2, log_det
+    return rows, cols
 
 
 def _pair_statistics(
@@ -597,14 +635,14 @@ def association_cost(d2: F64, log_det_S: F64, bonus: F64 | None = None) -> F64:
     Parameters
     ----------
     d2, log_det_S
-        From :func:`innovation_statistics`, (T, M).
+        From :func:`innovation_statistics`, (T, M), or of a list of pairs, (K,).
     bonus
-        Cost reductions (T, M) >= 0 (local-track-id continuity), or None.
+        Cost reductions of the same shape, >= 0 (local-track-id continuity), or None.
 
     Returns
     -------
     cost
-        Shape (T, M).
+        The shape of ``d2``.
     """
     cost = d2 + log_det_S
     return cost if bonus is None else cost - bonus
@@ -641,7 +679,9 @@ def _gnn_assign_arrays(cost: F64, allowed: npt.NDArray[np.bool_]) -> tuple[IntP,
     """
     if cost.size == 0:
         return _NO_INDEX, _NO_INDEX
-    return _gnn_assign_pairs(cost, *_allowed_pairs(allowed))
+    rows, columns = _allowed_pairs(allowed)
+    picked = _gnn_assign_pairs(cost[rows, columns], rows, columns)
+    return rows[picked], columns[picked]
 
 
 def _allowed_pairs(allowed: npt.NDArray[np.bool_]) -> tuple[IntP, IntP]:
@@ -651,38 +691,32 @@ def _allowed_pairs(allowed: npt.NDArray[np.bool_]) -> tuple[IntP, IntP]:
     return rows, columns
 
 
-def _gnn_assign_pairs(cost: F64, rows: IntP, columns: IntP) -> tuple[IntP, IntP]:
-    """:func:`gnn_assign` with the allowed pairs given as index arrays (distinct pairs)."""
+def _gnn_assign_pairs(cost: F64, rows: IntP, columns: IntP) -> IntP:
+    """:func:`gnn_assign` on allowed pairs given as arrays (distinct pairs, their costs (K,)):
+    the indices of the pairs chosen, by increasing row."""
     if not len(rows):
-        return _NO_INDEX, _NO_INDEX
+        return _NO_INDEX
     # Only rows and columns with an allowed pair take part. A row whose one allowed column has
     # no other allowed row is a component of its own: that pair is in every optimal pairing.
     # On a road, where gates rarely overlap, that leaves a small problem for the solver.
-    row_degree = np.bincount(rows, minlength=cost.shape[0])
-    column_degree = np.bincount(columns, minlength=cost.shape[1])
+    row_degree = np.bincount(rows)
+    column_degree = np.bincount(columns)
     isolated = (row_degree[rows] == 1) & (column_degree[columns] == 1)
-    pair_rows, pair_columns = [rows[isolated]], [columns[isolated]]
+    picked = [np.flatnonzero(isolated)]
     if not isolated.all():
         # the other rows and columns with an allowed pair, increasing, and their pairs
-        shared_rows, shared_columns = rows[~isolated], columns[~isolated]
-        block_rows, in_rows = np.unique(shared_rows, return_inverse=True)
-        block_columns, in_columns = np.unique(shared_columns, return_inverse=True)
-        block_allowed = np.zeros((len(block_rows), len(block_columns)), dtype=bool)
-        block_allowed[in_rows, in_columns] = True
-        block_cost = np.full(block_allowed.shape, _FORBIDDEN_COST)
-        block_cost[in_rows, in_columns] = cost[shared_rows, shared_columns]
-        solved_rows, solved_columns = linear_sum_assignment(block_cost)
-        kept = block_allowed[solved_rows, solved_columns]
-        pair_rows.append(block_rows[solved_rows[kept]])
-        pair_columns.append(block_columns[solved_columns[kept]])
-    return _by_row(pair_rows, pair_columns)
-
-
-def _by_row(rows: list[IntP], columns: list[IntP]) -> tuple[IntP, IntP]:
-    """Pairs given in parts, concatenated and ordered by row (each row is in one pair)."""
-    all_rows, all_columns = np.concatenate(rows), np.concatenate(columns)
-    order = np.argsort(all_rows)
-    return all_rows[order], all_columns[order]
+        shared = np.flatnonzero(~isolated)
+        block_rows, block_columns = np.unique(rows[shared]), np.unique(columns[shared])
+        in_rows = np.searchsorted(block_rows, rows[shared])
+        in_columns = np.searchsorted(block_columns, columns[shared])
+        pair_of = np.full((len(block_rows), len(block_columns)), -1)  # -1: forbidden
+        pair_of[in_rows, in_columns] = shared
+        block_cost = np.full(pair_of.shape, _FORBIDDEN_COST)
+        block_cost[in_rows, in_columns] = cost[shared]
+        solved = pair_of[linear_sum_assignment(block_cost)]
+        picked.append(solved[solved >= 0])
+    chosen = np.concatenate(picked)
+    return chosen[np.argsort(rows[chosen])]
 
 
 def cascade_assign(
@@ -712,25 +746,34 @@ def _cascade_assign_arrays(
     cost: F64, allowed: npt.NDArray[np.bool_], first_rows: npt.NDArray[np.bool_]
 ) -> tuple[IntP, IntP]:
     """:func:`cascade_assign` as a row and a column index array, by increasing row."""
-    found_rows, found_columns = [_NO_INDEX], [_NO_INDEX]
-    free_columns = np.ones(cost.shape[1], dtype=bool)
     rows, columns = _allowed_pairs(allowed)
+    picked = _cascade_assign_pairs(cost[rows, columns], rows, columns, first_rows)
+    return rows[picked], columns[picked]
+
+
+def _cascade_assign_pairs(cost: F64, rows: IntP, columns: IntP, first_rows: npt.NDArray[np.bool_],
+                          ) -> IntP:  # fmt: skip
+    """:func:`cascade_assign` on allowed pairs given as arrays (as :func:`_gnn_assign_pairs`):
+    the indices of the pairs chosen, by increasing row."""
+    if not len(rows):
+        return _NO_INDEX
+    picked = [_NO_INDEX]
+    free_columns = np.ones(int(columns.max()) + 1, dtype=bool)
     first = first_rows[rows]
     for stage in (first, ~first):
         if not stage.any():
             continue  # e.g. no tentative track: nothing to assign
         # the stage's allowed pairs whose measurement no earlier stage took
-        stage = stage & free_columns[columns]
-        stage_rows, stage_columns = _gnn_assign_pairs(cost, rows[stage], columns[stage])
-        free_columns[stage_columns] = False
-        found_rows.append(stage_rows)
-        found_columns.append(stage_columns)
-    return _by_row(found_rows, found_columns)
+        candidates = np.flatnonzero(stage & free_columns[columns])
+        chosen = candidates[_gnn_assign_pairs(cost[candidates], rows[candidates],
+                                              columns[candidates])]  # fmt: skip
+        free_columns[columns[chosen]] = False
+        picked.append(chosen)
+    chosen = np.concatenate(picked)
+    return chosen[np.argsort(rows[chosen])]
 
 
-def _huber_inflated(
-    R: F64, pairs: Sequence[tuple[int, int]], d2: F64, huber_k: float
-) -> F64:
+def _huber_inflated(R: F64, columns: IntP, d2: F64, huber_k: float) -> F64:
     """Measurement covariances of the matched pairs, widened where the innovation is large.
 
     A detector's errors have heavy tails (a box fitted to half a vehicle, an echo off the wrong
@@ -740,16 +783,21 @@ def _huber_inflated(
     Mahalanobis distance), so an outlier moves the track by about ``k`` sigmas and no more,
     while ordinary measurements are untouched. ``huber_k = 0`` turns it off.
 
+    Parameters
+    ----------
+    R
+        All measurement covariances (M, 2, 2).
+    columns, d2
+        The matched pairs' measurement columns and squared distances, (K,).
+
     Returns
     -------
     R_used
         ``R`` (M, 2, 2) with the matched columns' covariances scaled (a copy when any is).
     """
-    if huber_k <= 0.0 or not pairs:
+    if huber_k <= 0.0 or not len(columns):
         return R
-    rows = np.array([row for row, _ in pairs], dtype=np.intp)
-    columns = np.array([column for _, column in pairs], dtype=np.intp)
-    d = np.sqrt(np.maximum(d2[rows, columns], 0.0))
+    d = np.sqrt(np.maximum(d2, 0.0))
     scale = np.maximum(1.0, d / huber_k)
     if not np.any(scale > 1.0):
         return R
@@ -1309,18 +1357,21 @@ class MultiTargetTracker:
         pairs: list[tuple[int, int]] = []
         if live:
             x_pred, P_pred = self._predicted(slots, stamp_s)
-            d2, log_det_S = innovation_statistics(x_pred, P_pred, z, R, time_offset_s,
-                                                  self._widest_gate_chi2)  # fmt: skip
+            # the (track, measurement) pairs within the widest gate, as arrays
+            pair_rows, pair_columns, d2, log_det_S = _gated_pairs(
+                x_pred, P_pred, z, R, time_offset_s, self._widest_gate_chi2)  # fmt: skip
             if settings.speed_association_chi2 > 0.0 and self._heading_at is not None:
-                d2 = self._speed_gated(slots, x_pred, P_pred, d2, speeds)
-            cost = association_cost(
-                d2, log_det_S, self._local_id_bonus(live, sensor_id, measurements)
-            )
-            confirmed = self._table.confirmed[slots]
-            rows, columns = _cascade_assign_arrays(cost, d2 <= settings.gate_chi2, confirmed)
+                d2 = self._speed_gated(slots, x_pred, P_pred, pair_rows, pair_columns, d2, speeds)
+            cost = association_cost(d2, log_det_S, self._local_id_bonus(
+                live, sensor_id, measurements, pair_rows, pair_columns))  # fmt: skip
+            allowed = np.flatnonzero(d2 <= settings.gate_chi2)
+            picked = allowed[_cascade_assign_pairs(
+                cost[allowed], pair_rows[allowed], pair_columns[allowed],
+                self._table.confirmed[slots])]  # fmt: skip
+            rows, columns = pair_rows[picked], pair_columns[picked]
             if len(rows):
                 pairs = list(zip(rows.tolist(), columns.tolist(), strict=True))
-                R_used = _huber_inflated(R, pairs, d2, settings.huber_k)
+                R_used = _huber_inflated(R, columns, d2[picked], settings.huber_k)
                 z_used = self._reference_point(slots, rows, columns, z, sensor_id, measurements)
                 self._update_matched(
                     [live[row] for row in rows.tolist()],
@@ -1348,11 +1399,10 @@ class MultiTargetTracker:
             unmatched[[column for _, column in pairs]] = False
             candidates = np.flatnonzero(unmatched)  # by increasing column
             if live and settings.spawn_gate_chi2 > 0.0 and len(candidates):
-                # Only the few unmatched columns of d2 matter, and the few tracks near them
-                # (confirmed as of now: the update may have confirmed some).
-                near = d2[:, candidates] < settings.spawn_gate_chi2
-                near &= self._table.confirmed[slots][:, None]
-                near_confirmed = near.any(axis=0)
+                # the measurements near a track confirmed as of now (the update may have
+                # confirmed some)
+                near = (d2 < settings.spawn_gate_chi2) & self._table.confirmed[slots[pair_rows]]
+                near_confirmed = np.isin(candidates, pair_columns[near])
                 self._counters.measurements_suppressed += int(np.count_nonzero(near_confirmed))
                 candidates = candidates[~near_confirmed]
             if settings.spawn_max_std_m > 0.0 and len(candidates):
@@ -1366,8 +1416,10 @@ class MultiTargetTracker:
                 self._spawn(measurements[column], R[column], sensor_id, stamp_s)
         self._merge_duplicates(stamp_s)
 
-    def _speed_gated(self, slots: IntP, x_pred: F64, P_pred: F64, d2: F64, speeds: F64) -> F64:
-        """``d2`` with the pairs whose radar speed misses the track's speed gate set to inf.
+    def _speed_gated(self, slots: IntP, x_pred: F64, P_pred: F64, pair_rows: IntP,
+                     pair_columns: IntP, d2: F64, speeds: F64) -> F64:  # fmt: skip
+        """``d2`` of the pairs (``pair_rows``, ``pair_columns``) with those whose radar speed
+        misses the track's speed gate set to inf.
 
         ``y = s - u . v``, ``S = u^T P_v u + sigma_s^2`` with ``u`` the track's road heading;
         forbidden when ``y^2 > speed_association_chi2 S``.
@@ -1375,11 +1427,11 @@ class MultiTargetTracker:
         settings = self.settings
         if not np.isfinite(speeds).any():
             return d2
-        # Only pairs within a gate are ever looked at again (association, spawn suppression):
-        # forbidding the far ones too would only cost time (most pairs of a full batch).
-        rows, columns = _allowed_pairs(d2 <= max(settings.gate_chi2, settings.spawn_gate_chi2))
+        # Only pairs within a gate are ever looked at again (association, spawn suppression).
+        rows, columns = pair_rows, pair_columns
         road = self._table.heading_rad[slots[rows]]
-        known = np.isfinite(road) & np.isfinite(speeds[columns])
+        known = np.flatnonzero(np.isfinite(road) & np.isfinite(speeds[columns])
+                               & (d2 <= max(settings.gate_chi2, settings.spawn_gate_chi2)))  # fmt: skip
         rows, columns, road = rows[known], columns[known], road[known]
         if not len(rows):
             return d2
@@ -1393,7 +1445,7 @@ class MultiTargetTracker:
         if not bad.any():
             return d2
         d2 = d2.copy()
-        d2[rows[bad], columns[bad]] = np.inf
+        d2[known[bad]] = np.inf
         return d2
 
     def _reference_point(
@@ -1521,22 +1573,27 @@ class MultiTargetTracker:
         return self._bank.predicted(slots, stamp_s, along, across, heading)
 
     def _local_id_bonus(
-        self, live: Sequence[_Track], sensor_id: str, measurements: Sequence[Measurement]
-    ) -> F64 | None:
+        self, live: Sequence[_Track], sensor_id: str, measurements: Sequence[Measurement],
+        pair_rows: IntP, pair_columns: IntP,
+    ) -> F64 | None:  # fmt: skip
+        """The cost reduction of each pair (``local_track_id_bonus`` where the measurement's
+        (sensor, local id) last updated the pair's track), or None when no pair has one."""
         bonus_value = self.settings.local_track_id_bonus
         if bonus_value == 0.0:
             return None
         if all(measurement.local_track_id is None for measurement in measurements):
-            return None  # a sensor without a tracker of its own: no (T, M) zeros to build
+            return None  # a sensor without a tracker of its own
         row_of = {track.track_id: row for row, track in enumerate(live)}
-        bonus = np.zeros((len(live), len(measurements)))
+        # per measurement, the row of the track its local id last updated (-1: none)
+        continued = np.full(len(measurements), -1)
         for column, measurement in enumerate(measurements):
             if measurement.local_track_id is None:
                 continue
             track_id = self._local_ids.get((sensor_id, measurement.local_track_id))
             if track_id is not None and track_id in row_of:
-                bonus[row_of[track_id], column] = bonus_value
-        return bonus if bonus.any() else None
+                continued[column] = row_of[track_id]
+        same = continued[pair_columns] == pair_rows
+        return np.where(same, bonus_value, 0.0) if same.any() else None
 
     def _update_matched(
         self,
