@@ -111,12 +111,16 @@ def test_simulator_node_publishes_every_sensor_at_its_rate(port: int, tmp_path: 
         radar_scans = radar.drain()
         truths = truth.drain()
     # Subscribers were declared first, but the node's publishers need a moment to match: the
-    # first frames may be missed. After that, every frame arrives, in order, at its own stamps.
+    # first frames may be missed. After that, frames arrive in order, at their own stamps;
+    # sensor frames are published with congestion control "drop" (a stale frame is worthless,
+    # `Bus.publisher`), so on a loaded machine one may go missing (CI lost LiDAR frame 1 of
+    # 80 once), but hardly any. Radar scans and truth are never dropped.
     assert len(truths) >= 70
     for frames, rate_hz in ((lidar_frames, 20.0), (camera_frames, 10.0)):
         indices = [frame.meta.frame_index for frame in frames]
         assert len(indices) >= 0.8 * 4 * rate_hz
-        assert indices == list(range(indices[0], indices[0] + len(indices)))
+        assert indices == sorted(set(indices))
+        assert len(indices) >= 0.9 * (indices[-1] - indices[0] + 1)
         for frame in frames:
             assert abs(frame.meta.stamp - frame.meta.frame_index / rate_hz) < 1e-9
     scans = [scan.scan_index for scan in radar_scans]
