@@ -18,7 +18,7 @@ import pytest
 from tests.purity import top_level_imports
 from wz_fusion_tracker import tracker as tracker_module
 from wz_fusion_tracker.kalman import ProcessNoise
-from wz_fusion_tracker.smoothing import rts_smooth
+from wz_fusion_tracker.smoothing import history_segments, rts_smooth, smooth_history
 from wz_fusion_tracker.tracker import (
     Measurement,
     MultiTargetTracker,
@@ -837,6 +837,44 @@ def test_a_vehicle_hidden_past_its_coast_resumes_its_id_when_it_comes_back() -> 
     assert published[-1] == {2} and tracker.counters.tracks_resumed == 0
     (ended,) = tracker.pop_finished_histories()
     assert ended.track_id == 1 and ended.stamps_s[-1] == pytest.approx(0.95)
+
+
+def test_a_resumed_track_is_smoothed_run_by_run_and_a_lost_one_is_still_unfinished() -> None:
+    """A hand-over appends the young track's updates to the old track's history; the young
+    track's first entry starts from its detection, not from a prediction of the entry before,
+    so the history is two runs and is smoothed run by run. A track lost (past its coast, within
+    ``lost_memory_s``) when a run stops is neither live nor ended: ``unfinished_histories``
+    still gives it, so an evaluation that stops then smooths it too."""
+    cov = np.eye(2) * 1e-4
+    tracker = MultiTargetTracker(TrackerSettings(reorder_window_s=0.0), heading_at=lambda x, y: 0.0)
+    for k in range(int(6.5 / 0.05)):
+        t = 0.05 * k
+        hidden = 1.0 <= t < 3.5
+        tracker.add(LIDAR, t, [] if hidden else [
+            Measurement(x_m=30.0 * t + (3.0 if t >= 3.5 else 0.0), y_m=0.0, covariance_m2=cov)])  # fmt: skip
+    assert tracker.counters.tracks_resumed == 1
+    (history,) = tracker.unfinished_histories()
+    assert history.track_id == 1
+    first, second = history_segments(history)
+    assert history.stamps_s[first.stop - 1] == pytest.approx(0.95)
+    assert history.stamps_s[second.start] == pytest.approx(3.5)
+    x_smooth, P_smooth = smooth_history(history)
+    for run in (first, second):
+        x_run, P_run = rts_smooth(history.stamps_s[run], history.x_filt[run], history.P_filt[run],
+                                  None, x_pred=history.x_pred[run], P_pred=history.P_pred[run])  # fmt: skip
+        np.testing.assert_array_equal(x_smooth[run], x_run)
+        np.testing.assert_array_equal(P_smooth[run], P_run)
+    # nothing of the young track (3 m ahead of the old one's prediction) leaks back
+    assert x_smooth[first.stop - 1, 0] == pytest.approx(30.0 * 0.95, abs=0.05)
+
+    lost = MultiTargetTracker(TrackerSettings(reorder_window_s=0.0))
+    for k in range(int(3.5 / 0.05)):  # seen 1 s, then 2.5 s of empty frames: coast, then lost
+        t = 0.05 * k
+        lost.add(LIDAR, t, [Measurement(x_m=30.0 * t, y_m=0.0, covariance_m2=cov)] if t < 1.0
+                 else [])  # fmt: skip
+    assert lost.tracks() == [] and lost.pop_finished_histories() == []
+    (unfinished,) = lost.unfinished_histories()
+    assert unfinished.track_id == 1 and unfinished.stamps_s[-1] == pytest.approx(0.95)
 
 
 def test_a_stray_young_track_behind_a_briefly_unseen_vehicle_takes_nothing_over() -> None:

@@ -20,7 +20,10 @@ and scores, for vehicles within ``--max-range-m`` of the mast, each source at it
 the road frame (:mod:`wz_eval.metrics`): ``camera`` (camera alone: the calibrated pinhole
 position before radar fusion), ``lidar`` (the LiDAR detector's boxes), ``radar`` (radar echo
 points alone), ``camera_radar`` (the camera channel's published detections), ``average``,
-``paper_kf`` and ``fused``.
+``paper_kf`` and ``fused``; and two hindsight versions of the fused tracks: ``fused_smoothed``
+(Rauch-Tung-Striebel over each track's own update history, the best a smoother of these
+updates gives) and ``fused_stored`` (the 10 Hz published states smoothed as the gateway smooths
+an ended track: what ``/v1/trajectories`` serves).
 
 Multi-object tracking scores of ``fused`` (py-motmetrics: MOTA, IDF1, identity switches) use
 the confirmed and coasting tracks against the vehicles in range, matched within 3 m.
@@ -76,13 +79,14 @@ from wz_fusion_tracker.paper import (
     PaperFusionSettings,
     run_paper_pipeline,
 )
-from wz_fusion_tracker.smoothing import rts_smooth
+from wz_fusion_tracker.smoothing import smooth_history
 from wz_fusion_tracker.tracker import (
     MultiTargetTracker,
     TrackerSettings,
     TrackHistory,
     TrackState,
 )
+from wz_gateway.smoothing import rts_smooth as gateway_rts_smooth
 from wz_lidar_detector.settings import lidar_mount
 from wz_shared.logs import configure_logging
 from wz_shared.messages import DetectionBatch, TrackBatch, VehicleTruth
@@ -92,7 +96,7 @@ from wz_simulator.settings import SimulatorSettings
 log = logging.getLogger("wz_eval.fusion")
 
 SOURCES = ("camera", "lidar", "radar", "camera_radar", "average", "paper_kf", "fused",
-           "fused_smoothed")
+           "fused_smoothed", "fused_stored")
 #: Gate for matching a source's estimate to a vehicle [m] (the MOT metrics use 3 m).
 SOURCE_GATE_M = 5.0
 MOT_GATE_M = 3.0
@@ -259,6 +263,8 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
     scored_ids: list[tuple[float, list[int], list[VehicleTruth]]] = []
     alert_batches: list[TrackBatch] = []
     histories: list[TrackHistory] = []
+    # what the gateway stores: every published state, per track id
+    stored: dict[int, list[TrackState]] = defaultdict(list)
     for sample_s in sample_times:
         t0 = time.perf_counter()
         while position < len(batches) and batches[position].stamp <= sample_s + 1e-9:
@@ -268,6 +274,8 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
         tracker.flush()
         tracker.advance_to(sample_s)
         published = [s for s in tracker.tracks(sample_s) if s.status != "tentative"]
+        for state in published:
+            stored[state.track_id].append(state)
         tracker_s += time.perf_counter() - t0
         # what the node would publish, for the alert service
         alert_batches.append(TrackBatch(
@@ -288,14 +296,20 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
         scored_ids.append((sample_s, [s.track_id for s in states], vehicles))
         histories.extend(tracker.pop_finished_histories())
 
-    # --- the same tracks, RTS-smoothed over their whole history (the stored trajectories)
+    # --- the same tracks, RTS-smoothed over their whole update history
     histories.extend(tracker.pop_finished_histories())
-    histories.extend(tracker.history(s.track_id) for s in tracker.tracks())
+    histories.extend(tracker.unfinished_histories())
     smoothed = smoothed_positions(histories)
     for sample_s, track_ids, scored_vehicles in scored_ids:
         smoothed_estimates = [xy for track_id in track_ids
                               if (xy := smoothed_at(smoothed, track_id, sample_s)) is not None]  # fmt: skip
         scores.add(site, "fused_smoothed", sample_s, smoothed_estimates, scored_vehicles)
+    # --- the published states as the gateway smooths them when a track ends
+    stored_smoothed = gateway_smoothed(stored, options.tracker)
+    for sample_s, track_ids, scored_vehicles in scored_ids:
+        stored_estimates = [xy for track_id in track_ids
+                            if (xy := smoothed_at(stored_smoothed, track_id, sample_s)) is not None]  # fmt: skip
+        scores.add(site, "fused_stored", sample_s, stored_estimates, scored_vehicles)
 
     # --- the paper's method, with oracle per-sensor identities
     ids: dict[str, int] = {}
@@ -362,15 +376,32 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
 
 
 def smoothed_positions(histories: Sequence[TrackHistory]) -> dict[int, tuple[F64, F64]]:
-    """Per track id: its update stamps and RTS-smoothed states (``rts_smooth`` with the
-    priors the tracker stored)."""
+    """Per track id: its update stamps and RTS-smoothed states (``smooth_history``: the
+    priors the tracker stored, each run of one filter's updates on its own)."""
     out: dict[int, tuple[F64, F64]] = {}
     for history in histories:
         if len(history.stamps_s) == 0 or np.any(np.diff(history.stamps_s) < 0.0):
             continue
-        x_smooth, _ = rts_smooth(history.stamps_s, history.x_filt, history.P_filt, None,
-                                 x_pred=history.x_pred, P_pred=history.P_pred)  # fmt: skip
+        x_smooth, _ = smooth_history(history)
         out[history.track_id] = (history.stamps_s, x_smooth)
+    return out
+
+
+def gateway_smoothed(stored: dict[int, list[TrackState]],
+                     settings: TrackerSettings) -> dict[int, tuple[F64, F64]]:  # fmt: skip
+    """Per track id: the stamps and states of its published snapshots smoothed as the gateway
+    smooths a stored trajectory (:func:`wz_gateway.smoothing.rts_smooth`, the priors
+    recomputed with the tracker's process noise): what a researcher gets from
+    ``/v1/trajectories``. Unlike ``fused_smoothed`` (RTS over the tracker's own update
+    history), the snapshots are 10 Hz predictions from the latest update, not every update."""
+    out: dict[int, tuple[F64, F64]] = {}
+    for track_id, states in stored.items():
+        stamps = np.array([s.stamp_s for s in states])
+        x = np.array([[s.x_m, s.y_m, s.vx_mps, s.vy_mps] for s in states])
+        P = np.array([s.P for s in states])
+        x_smooth, _ = gateway_rts_smooth(stamps, x, P, sigma_along_mps2=settings.sigma_along_mps2,
+                                         sigma_across_mps2=settings.sigma_across_mps2)  # fmt: skip
+        out[track_id] = (stamps, x_smooth)
     return out
 
 
@@ -489,7 +520,8 @@ def paper_table(site: Site, scores: Scores, centre: tuple[float, float],
     """Per vehicle: cumulative |error| over the window's common times, per source (Tables 1-2)."""
     mast_station = float(site.road_frame.to_road(*centre)[0])
     lo, hi = mast_station - window_upstream_m[1], mast_station - window_upstream_m[0]
-    compared = ("camera", "lidar", "average", "paper_kf", "fused", "fused_smoothed")
+    compared = ("camera", "lidar", "average", "paper_kf", "fused", "fused_smoothed",
+                "fused_stored")
     rows = []
     for vehicle_id, by_source in sorted(scores.per_vehicle.items()):
         common: set[float] | None = None
@@ -516,7 +548,7 @@ def _table_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
         for axis in ("longitudinal_m", "lateral_m"):
             wins = sum(1 for r in rows if r["fused"][axis] < r[other][axis])
             out[f"fused_below_{other}_{axis}"] = wins
-    for fused in ("fused", "fused_smoothed"):
+    for fused in ("fused", "fused_smoothed", "fused_stored"):
         out[f"{fused}_below_camera_lidar_average_both_axes"] = sum(
             1 for r in rows
             if all(r[fused][a] < r[o][a] for o in ("camera", "lidar", "average")
@@ -550,11 +582,13 @@ def markdown(report: dict[str, Any]) -> str:
     summary = report["paper_table_summary"]
     lines += ["", f"Paper-style table ({summary['vehicles']} vehicles through the window; "
               "cumulative absolute error [m] over the common samples; lon / lat):", "",
-              "| vehicle | samples | camera | LiDAR | average | paper KF | fused | fused, smoothed |",
-              "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+              "| vehicle | samples | camera | LiDAR | average | paper KF | fused | fused, smoothed "
+              "| fused, stored |",
+              "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for row in report["paper_table"][:25]:
         cells = [f"{row[s]['longitudinal_m']:.1f} / {row[s]['lateral_m']:.1f}"
-                 for s in ("camera", "lidar", "average", "paper_kf", "fused", "fused_smoothed")]  # fmt: skip
+                 for s in ("camera", "lidar", "average", "paper_kf", "fused", "fused_smoothed",
+                           "fused_stored")]  # fmt: skip
         lines.append(f"| {row['vehicle_id']} | {row['samples']} | " + " | ".join(cells) + " |")
     lines += ["", "Fused below the other sources (vehicles): " + ", ".join(
         f"{k.removeprefix('fused_below_')} {v}" for k, v in summary.items() if k != "vehicles"),

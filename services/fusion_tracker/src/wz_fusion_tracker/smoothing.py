@@ -14,15 +14,26 @@ with ``F_k = F(t_{k+1} - t_k)``. The priors are either recomputed from a :class:
 (a road-aligned ``Q`` follows the road's heading), taken as stored by the filter: the
 multi-target tracker records the prior it used at every update.
 
+A tracker's history can join two filters' updates: when a young track hands its vehicle back
+to the old track that lost it (``MultiTargetTracker._hand_over``), the young track's updates
+are appended to the old one's, and the first of them starts from a detection, not from a
+prediction of the entry before. :func:`smooth_history` smooths each such run on its own.
+
 Nothing here does I/O.
 """
 
 from __future__ import annotations
 
+from itertools import pairwise
+from typing import TYPE_CHECKING
+
 import numpy as np
 import numpy.typing as npt
 
 from wz_fusion_tracker.kalman import F64, STATE_DIM, ProcessNoise, cv_transition
+
+if TYPE_CHECKING:
+    from wz_fusion_tracker.tracker import TrackHistory
 
 
 def rts_smooth(
@@ -102,4 +113,37 @@ def rts_smooth(
         # P_k|n = P_k|k + C (P_{k+1|n} - P_{k+1|k}) C'
         P_k = P[k] + C @ (P_smooth[k + 1] - P_prior[k + 1]) @ C.T
         P_smooth[k] = (P_k + P_k.T) / 2.0
+    return x_smooth, P_smooth
+
+
+def history_segments(history: TrackHistory) -> list[slice]:
+    """The runs of ``history`` that are one filter's updates, in order.
+
+    A run starts at a track's first detection, an entry whose prior is its posterior (no
+    prediction came before it: :meth:`MultiTargetTracker._spawn` stores it so); any other update
+    changes the state's covariance. The first run starts at entry 0; a hand-over starts another.
+    """
+    n = len(history.stamps_s)
+    fresh = np.all(history.x_pred == history.x_filt, axis=1) & np.all(
+        history.P_pred == history.P_filt, axis=(1, 2))  # fmt: skip
+    starts = [0, *(np.flatnonzero(fresh[1:]) + 1).tolist(), n]
+    return [slice(a, b) for a, b in pairwise(starts) if b > a]
+
+
+def smooth_history(history: TrackHistory) -> tuple[F64, F64]:
+    """:func:`rts_smooth` of a tracker history with its stored priors, run by run
+    (:func:`history_segments`): a later run's start is not a prediction of the run before, so
+    nothing is passed back across the join.
+
+    Returns
+    -------
+    x_smooth, P_smooth
+        Shapes (n, 4) and (n, 4, 4), entry k for the history's entry k.
+    """
+    x_smooth = np.empty_like(history.x_filt)
+    P_smooth = np.empty_like(history.P_filt)
+    for run in history_segments(history):
+        x_smooth[run], P_smooth[run] = rts_smooth(
+            history.stamps_s[run], history.x_filt[run], history.P_filt[run], None,
+            x_pred=history.x_pred[run], P_pred=history.P_pred[run])  # fmt: skip
     return x_smooth, P_smooth

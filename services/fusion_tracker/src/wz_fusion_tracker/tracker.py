@@ -1321,6 +1321,15 @@ class MultiTargetTracker:
         """The stored updates of live track ``track_id`` (KeyError when it is not live)."""
         return self._tracks[track_id].to_history()
 
+    def unfinished_histories(self) -> list[TrackHistory]:
+        """Histories of the confirmed tracks not ended yet, by id: the live ones (confirmed or
+        coasting) and the lost ones (``lost_memory_s``), which :meth:`pop_finished_histories`
+        gives only once they end. For a run that stops now; the tracker is not changed."""
+        confirmed = self._table.confirmed
+        unfinished = [t for t in self._tracks.values() if confirmed[t.slot]]
+        unfinished += self._lost.values()
+        return [t.to_history() for t in sorted(unfinished, key=lambda t: t.track_id)]
+
     def pop_finished_histories(self) -> list[TrackHistory]:
         """Histories of the confirmed tracks ended since the last call, oldest first (a
         confirmed track ends ``lost_memory_s`` after it is deleted, unless it resumes)."""
