@@ -507,16 +507,23 @@ def _sparse_innovation_statistics(
 ) -> tuple[F64, F64]:
     """:func:`innovation_statistics` on the pairs that can be near (:func:`_candidate_pairs`):
     the rest get ``_FAR_D2``."""
-    rows, cols = _candidate_pairs(x_pred, P_pred, z, R, time_offset_s, max_d2)
+    rows, cols, pair_d2, pair_log_det = _candidate_statistics(x_pred, P_pred, z, R,
+                                                              time_offset_s, max_d2)  # fmt: skip
     d2 = np.full((len(x_pred), len(z)), _FAR_D2)
     log_det = np.zeros((len(x_pred), len(z)))
-    if len(rows):
-        offsets = None if time_offset_s is None else time_offset_s[cols]
-        pair_d2, pair_log_det = _pair_statistics(x_pred[rows], P_pred[rows], z[cols], R[cols],
-                                                 offsets)  # fmt: skip
-        d2[rows, cols] = pair_d2
-        log_det[rows, cols] = pair_log_det
+    d2[rows, cols] = pair_d2
+    log_det[rows, cols] = pair_log_det
     return d2, log_det
+
+
+def _candidate_statistics(
+    x_pred: F64, P_pred: F64, z: F64, R: F64, time_offset_s: F64 | None, max_d2: float
+) -> tuple[IntP, IntP, F64, F64]:
+    """The pairs of :func:`_candidate_pairs` with their d2 and ln det S, (K,) each."""
+    rows, cols = _candidate_pairs(x_pred, P_pred, z, R, time_offset_s, max_d2)
+    offsets = None if time_offset_s is None else time_offset_s[cols]
+    d2, log_det = _pair_statistics(x_pred[rows], P_pred[rows], z[cols], R[cols], offsets)
+    return rows, cols, d2, log_det
 
 
 def _gated_pairs(
@@ -536,9 +543,8 @@ def _gated_pairs(
         (K,) each, by increasing row.
     """
     if len(x_pred) * len(z) > _SPARSE_GATE_MIN_PAIRS:
-        rows, cols = _candidate_pairs(x_pred, P_pred, z, R, time_offset_s, max_d2)
-        offsets = None if time_offset_s is None else time_offset_s[cols]
-        d2, log_det = _pair_statistics(x_pred[rows], P_pred[rows], z[cols], R[cols], offsets)
+        rows, cols, d2, log_det = _candidate_statistics(x_pred, P_pred, z, R, time_offset_s,
+                                                        max_d2)  # fmt: skip
     else:
         d2_all, log_det_all = innovation_statistics(x_pred, P_pred, z, R, time_offset_s)
         rows, cols = _allowed_pairs(d2_all <= max_d2)
