@@ -864,6 +864,11 @@ def _tracker_cycle(result: dict[str, Any]) -> list[str]:
     if imm:  # the IMM motion model (an option), same batches
         for label, key in (("all batches, IMM option", "cycle"), ("snapshot, IMM option", "snapshot")):
             rows.append(row(label, imm[key]))
+    correction = result.get("bias_map_correction")
+    if correction:  # in the node, before the tracker, with a lateral bias map
+        for size in (10, 200):
+            rows.append(row(f"lateral bias map on a batch of {size} (node, before `add`)",
+                            correction[f"batch_of_{size}"]))  # fmt: skip
     lines += _table(["Step", "median", "mean", "p99", "max", "samples"], rows)
     return [*lines, ""]
 

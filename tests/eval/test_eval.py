@@ -11,8 +11,10 @@ from pathlib import Path
 import pytest
 
 from wz_eval.fusion import SOURCES, Dropout
+from wz_fusion_tracker.calibration import load_bias_map
 
 ROOT = Path(__file__).resolve().parents[2]
+BIAS_MAP = ROOT / "deploy" / "sites" / "us75-lincoln.bias-map.json"
 
 
 def wz(*args: str) -> subprocess.CompletedProcess[str]:
@@ -24,9 +26,16 @@ def test_wz_eval_writes_the_report_json_markdown_and_plots(tmp_path: Path) -> No
     out = tmp_path / "eval"
     result = wz("eval", "--duration-s", "25", "--warmup-s", "45", "--seed", "3",
                 "--max-range-m", "150", "--drop", "lidar-mast@10+2", "--json",
-                str(tmp_path / "report.json"), "--out", str(out))  # fmt: skip
+                str(tmp_path / "report.json"), "--out", str(out), "--bias-map", str(BIAS_MAP),
+                "--write-bias-map", str(tmp_path / "measured.json"))  # fmt: skip
     assert result.returncode == 0, result.stderr[-3000:]
     report = json.loads((tmp_path / "report.json").read_text())
+    # The shipped map (seed 11) was applied; this run's own map written, both sensors in it.
+    assert report["bias_map"] == load_bias_map(BIAS_MAP).source
+    measured = load_bias_map(tmp_path / "measured.json")
+    assert measured.source == "wz eval seed 3, 25 s"
+    assert set(measured.sensors) == {"lidar-mast", "camera-mast"}
+    assert all(cell.samples >= 30 for cells in measured.sensors.values() for cell in cells)
     for axis in ("rmse_longitudinal_m", "rmse_lateral_m", "rmse_speed_mps"):
         assert set(report[axis]) == set(SOURCES)
     assert report["vehicles"] >= 5
@@ -62,6 +71,14 @@ def test_wz_eval_writes_the_report_json_markdown_and_plots(tmp_path: Path) -> No
     assert "MOTA" in markdown and "| fused |" in markdown and "hidden ones included" in markdown
     assert all((out / name).stat().st_size > 10_000 for name in report.get("plots", []))
     assert "simulating" in result.stderr  # the progress lines
+
+
+def test_wz_eval_refuses_a_bad_bias_map_before_it_simulates(tmp_path: Path) -> None:
+    bad = tmp_path / "bias.json"
+    bad.write_text(BIAS_MAP.read_text().replace('"us75-lincoln"', '"elsewhere"'))
+    result = wz("eval", "--bias-map", str(bad), "--out", str(tmp_path / "eval"))
+    assert result.returncode == 2
+    assert "for site 'elsewhere'" in result.stderr and "simulating" not in result.stderr
 
 
 def test_dropout_parsing() -> None:

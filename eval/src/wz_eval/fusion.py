@@ -3,7 +3,8 @@
 Usage::
 
     wz eval [--site FILE] [--duration-s 600] [--seed 7] [--max-range-m 150]
-            [--drop SENSOR@START+SECONDS ...] [--json FILE] [--out DIR]
+            [--drop SENSOR@START+SECONDS ...] [--bias-map FILE] [--write-bias-map FILE]
+            [--json FILE] [--out DIR]
 
 Runs SUMO, the three sensors and both detectors in one process (:mod:`wz_eval.pipeline`), then
 feeds the detections, in stamp order, to
@@ -38,6 +39,14 @@ with :func:`wz_eval.alerts.score_alerts` against the same rules run on the truth
 vehicles within 200 m of the mast that a sensor saw (:func:`wz_eval.alerts.observed_truth`);
 ``alerts_all_in_range`` scores them against every vehicle within 200 m, hidden ones included.
 
+``--write-bias-map FILE`` writes the lateral bias of the LiDAR's and the camera-radar channel's
+detections this run measured (:func:`~wz_fusion_tracker.calibration.fit_bias_map`; also in the
+report as ``measured_bias_map``); ``--bias-map FILE`` removes such a map's bias from the
+detections before the tracker takes them (as the fusion node does with
+``WZ_FUSION_BIAS_MAP``). Take the map from a run of another seed: fitted and scored on the same
+run, it would be scored on its own training data. The sources scored alone (``camera``,
+``lidar``, ``average``, ...) are the detectors' outputs as published, uncorrected.
+
 ``--drop lidar-mast@300+2`` removes that sensor's batches from 300 s to 302 s after the warm-up
 (a dropout); the report then gives, per dropout, the fused error and identity switches inside
 the window.
@@ -65,6 +74,14 @@ from wz_camera_detector.settings import camera_mount
 from wz_eval.alerts import observed_truth, run_alert_engine, score_alerts, track_follows
 from wz_eval.metrics import AxisErrors, TruthIndex, in_range, match, score_instant
 from wz_eval.pipeline import PipelineOptions, PipelineRecord, run_pipeline
+from wz_fusion_tracker.calibration import (
+    BiasMap,
+    BiasMapError,
+    LateralBiasCorrector,
+    fit_bias_map,
+    load_bias_map,
+    write_bias_map,
+)
 from wz_fusion_tracker.kalman import F64
 from wz_fusion_tracker.node import (
     road_heading_hook,
@@ -136,6 +153,9 @@ class EvalOptions:
     vehicles_per_hour: float = 1400.0
     tracker: TrackerSettings = field(default_factory=TrackerSettings)
     paper: PaperFusionSettings = field(default_factory=PaperFusionSettings)
+    #: Each sensor's lateral bias, removed from its detections before the tracker takes them
+    #: (as the fusion node does with ``WZ_FUSION_BIAS_MAP``); None: none removed.
+    bias_map: BiasMap | None = None
 
 
 def _progress(sim_s: float, total_s: float) -> None:
@@ -253,6 +273,7 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
     tracker = MultiTargetTracker(options.tracker, heading_at=road_heading_hook(site),
                                  sensor_positions=sensor_positions(site),
                                  headings_at=road_headings_hook(site))  # fmt: skip
+    bias = None if options.bias_map is None else LateralBiasCorrector(site, options.bias_map)
     mot = _MotAccumulator()
     sample_times = [stamp for stamp, _ in record.camera_only]
     batches = [b for b in record.batches if not _dropped(b, options.dropouts, options.warmup_s)]
@@ -269,7 +290,10 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
         t0 = time.perf_counter()
         while position < len(batches) and batches[position].stamp <= sample_s + 1e-9:
             batch = batches[position]
-            tracker.add(batch.source_id, batch.stamp, to_measurements(batch, lambda r, d: None))
+            measurements = to_measurements(batch, lambda r, d: None)
+            if bias is not None:
+                measurements = bias.correct(batch.source_id, measurements)
+            tracker.add(batch.source_id, batch.stamp, measurements)
             position += 1
         tracker.flush()
         tracker.advance_to(sample_s)
@@ -368,11 +392,26 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
                    "scoring_wall_s": round(time.perf_counter() - started, 1)},
     }  # fmt: skip
     report["paper_table_summary"] = _table_summary(report["paper_table"])
+    report["bias_map"] = None if options.bias_map is None else options.bias_map.source
+    report["measured_bias_map"] = fit_bias_map(
+        site, _sensor_errors(scores, {"lidar": lidar_id, "camera_radar": cam_id}),
+        source=f"wz eval seed {options.seed}, {options.duration_s:g} s",
+    ).model_dump(mode="json")  # fmt: skip
     if plots_dir is not None:
         from wz_eval.plots import write_plots
 
         report["plots"] = write_plots(plots_dir, site, record, scores, report)
     return report
+
+
+def _sensor_errors(scores: Scores, sensor_of_source: dict[str, str]
+                   ) -> list[tuple[str, float, float, float]]:  # fmt: skip
+    """``(sensor id, true station, true offset, lateral error)`` of every matched detection of
+    the given sources (as scored, uncorrected), for :func:`fit_bias_map`."""
+    return [(sensor_of_source[source], station, offset, lateral)
+            for by_source in scores.per_vehicle.values()
+            for source, samples in by_source.items() if source in sensor_of_source
+            for _, lateral, station, offset in samples.values()]  # fmt: skip
 
 
 def smoothed_positions(histories: Sequence[TrackHistory]) -> dict[int, tuple[F64, F64]]:
@@ -569,7 +608,8 @@ def markdown(report: dict[str, Any]) -> str:
         "",
         f"{report['vehicles']} vehicles. MOTA **{report['mota']:.3f}**, IDF1 "
         f"**{report['idf1']:.3f}**, identity switches {report['id_switches']} "
-        f"({report['id_switches_per_100_vehicles']:.2f} per 100 vehicles).",
+        f"({report['id_switches_per_100_vehicles']:.2f} per 100 vehicles). Lateral bias map "
+        f"given to the tracker: {report.get('bias_map') or 'none'}.",
         "",
         "| source | RMSE longitudinal [m] | RMSE lateral [m] | RMSE speed [m/s] | matched | "
         "missed |",
@@ -629,6 +669,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--drop", action="append", default=[], metavar="SENSOR@START+SECONDS",
                         help="silence a sensor (repeatable)")  # fmt: skip
     parser.add_argument("--model", type=Path, default=None, help="camera model (.onnx)")
+    parser.add_argument("--bias-map", type=Path, default=None, metavar="FILE",
+                        help="remove each sensor's calibrated lateral bias (a map written by "
+                        "--write-bias-map from a run of another seed) before the tracker")
+    parser.add_argument("--write-bias-map", type=Path, default=None, metavar="FILE",
+                        help="write the lateral bias map this run measured")
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--out", type=Path, default=Path("runs/eval"))
     args = parser.parse_args(argv)
@@ -637,12 +682,21 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         parser.error(str(exc))
     site = load_site(args.site)
+    bias_map = None
+    if args.bias_map is not None:
+        try:
+            bias_map = load_bias_map(args.bias_map)
+            LateralBiasCorrector(site, bias_map)
+        except BiasMapError as exc:
+            parser.error(str(exc))
     configure_logging(service="eval", site=site.site_id, level="WARNING")
     options = EvalOptions(seed=args.seed, duration_s=args.duration_s, warmup_s=args.warmup_s,
                           max_range_m=args.max_range_m, dropouts=dropouts,
-                          camera_model=args.model)  # fmt: skip
+                          camera_model=args.model, bias_map=bias_map)  # fmt: skip
     args.out.mkdir(parents=True, exist_ok=True)
     report = evaluate(site, options, plots_dir=args.out)
+    if args.write_bias_map is not None:
+        write_bias_map(args.write_bias_map, BiasMap.model_validate(report["measured_bias_map"]))
     text = json.dumps(report, indent=2, default=str)
     (args.json or args.out / "eval.json").write_text(text + "\n")
     summary = markdown(report)

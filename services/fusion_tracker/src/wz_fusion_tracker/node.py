@@ -21,6 +21,10 @@ Run it as ``python -m wz_fusion_tracker.node`` (settings: ``WZ_FUSION_*``, bus `
   from the new stamps. Without it every batch of the new run would be dropped as late until
   its stamps passed the old run's. The batches before the new run is certain are late.
 
+With ``WZ_FUSION_BIAS_MAP=FILE`` (a bias map of the site, :mod:`wz_fusion_tracker.calibration`)
+each sensor's calibrated lateral bias is removed from its detections before the tracker takes
+them; a map that cannot be read or is another site's stops the start with what is wrong.
+
 Bad input never stops it; each problem is counted in the status message's ``invalid_counts``
 under ``<detections key>|<reason>``: ``wrong_site``, ``bad_detection`` (a covariance that is not
 symmetric positive definite), ``late`` (a batch older than the reorder window: dropped by the
@@ -33,12 +37,14 @@ import logging
 import math
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Annotated
 
 import numpy as np
 from pydantic import Field, ValidationError
 from pydantic_settings import SettingsConfigDict
 
+from wz_fusion_tracker.calibration import LateralBiasCorrector, load_bias_map
 from wz_fusion_tracker.kalman import F64
 from wz_fusion_tracker.tracker import Measurement, MultiTargetTracker, TrackerSettings, TrackState
 from wz_shared.codec import encode_json
@@ -73,6 +79,9 @@ class FusionTrackerSettings(ServiceSettings):
     publish_tentative: bool = False
     #: With no batch for this long (wall time), the tracker's clock moves on by itself [s].
     idle_advance_after_s: Annotated[float, Field(gt=0.0)] = 0.5
+    #: A bias map (:mod:`wz_fusion_tracker.calibration`, JSON) of this site: each sensor's
+    #: calibrated lateral bias is removed from its detections. None: none removed.
+    bias_map: Path | None = None
     tracker: TrackerSettings = Field(default_factory=TrackerSettings)
 
 
@@ -147,6 +156,12 @@ class FusionCore:
         self.site = site
         self.settings = settings
         self.report = report
+        #: Removes each sensor's calibrated lateral bias (``settings.bias_map``); None: none.
+        self.bias: LateralBiasCorrector | None = None
+        if settings.bias_map is not None:
+            self.bias = LateralBiasCorrector(site, load_bias_map(settings.bias_map))
+            log.info("lateral bias map %s: corrects %s", settings.bias_map,
+                     ", ".join(self.bias.sensors()) or "no sensor of this site")  # fmt: skip
         self.tracker = self._new_tracker(first_track_id=1)
         self._next_output_s: float | None = None
         self._cycle = 0
@@ -182,7 +197,10 @@ class FusionCore:
         if watch.observe(batch.stamp) == "new_run":
             self._start_new_run(batch)
         late_before = self.tracker.counters.batches_late
-        self.tracker.add(batch.source_id, batch.stamp, to_measurements(batch, self.report))
+        measurements = to_measurements(batch, self.report)
+        if self.bias is not None:
+            measurements = self.bias.correct(batch.source_id, measurements)
+        self.tracker.add(batch.source_id, batch.stamp, measurements)
         if self.tracker.counters.batches_late > late_before:
             self.report("late", f"{batch.source_id} batch at {batch.stamp:.3f} s is too late")
         return self._outputs()
@@ -269,6 +287,11 @@ def main() -> None:
         raise SystemExit(f"{SERVICE}: invalid settings: {exc}") from exc
     site = load_site(settings.site_file)
     configure_logging(service=SERVICE, site=site.site_id, level=settings.log_level)
+    if settings.bias_map is not None:  # a bad map stops the start, with what is wrong
+        try:
+            LateralBiasCorrector(site, load_bias_map(settings.bias_map))
+        except ValueError as exc:
+            raise SystemExit(f"{SERVICE}: {exc}") from exc
     clock = SimClock()
     with ServiceRuntime(SERVICE, site.site_id, BusSettings(),
                         status_period_s=settings.status_period_s,
