@@ -4,6 +4,7 @@ damaged on purpose. The real freeway LiDAR frame goes through a field log's PCD 
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -21,6 +22,7 @@ from wz_drivers.records import FieldDataError, Problems
 from wz_drivers.sources import merged
 from wz_eval.field_log import UNIT_CLOCK_AHEAD_S, SampleOptions, write_sample_log
 from wz_eval.field_run import FUSED, evaluate_log
+from wz_fusion_tracker.calibration import load_bias_map
 from wz_shared import codec
 from wz_shared.bus import Bus
 from wz_shared.messages import LidarFrameMeta, TrackBatch
@@ -64,6 +66,37 @@ def test_field_validation_on_the_sample_log(tmp_path: Path) -> None:
     assert fused["rmse_distance_m"] < min(lidar["rmse_distance_m"], unit["rmse_distance_m"])
     assert fused["rmse_lateral_m"] < unit["rmse_lateral_m"]
     assert fused["rmse_lateral_m"] < 0.2  # (the LiDAR's alone: 0.05 m; see docs/field-data.md)
+
+
+def test_a_calibration_drive_gives_a_bias_map_the_tracker_takes(tmp_path: Path) -> None:
+    """``wz eval --log LOG --write-bias-map FILE``: each sensor's lateral bias against the
+    probe, per lane and 10 m of station; given back (``--bias-map``), it is removed from the
+    detections before the tracker, so the fused track moves onto the probe's line (on the
+    drive it was measured on: a check of the plumbing, not of how well a map carries over)."""
+    out, path = tmp_path / "measured", tmp_path / "bias.json"
+    result = subprocess.run(
+        [sys.executable, "-m", "wz_cli.main", "eval", "--log", str(SAMPLE), "--out", str(out),
+         "--write-bias-map", str(path), "--bias-min-samples", "2"],
+        cwd=ROOT, capture_output=True, text=True, timeout=600, check=False)  # fmt: skip
+    assert result.returncode == 0, result.stderr[-3000:]
+    measured = load_bias_map(path)
+    assert set(measured.sensors) == {LIDAR, UNIT}
+    assert all(cell.samples >= 2 for cells in measured.sensors.values() for cell in cells)
+    plain = json.loads((out / "field-eval.json").read_text())
+    assert plain["bias_map"] is None
+    mapped = evaluate_log(load_log(SAMPLE), bias_map=measured)
+    assert mapped["bias_map"] == measured.source
+    before = plain["result"]["sources"][FUSED]
+    after = mapped["result"]["sources"][FUSED]
+    assert abs(after["bias_lateral_m"]) < abs(before["bias_lateral_m"])
+    assert after["rmse_lateral_m"] < before["rmse_lateral_m"]
+    # another site's map is refused before anything is read
+    path.write_text(path.read_text().replace('"us75-lincoln"', '"elsewhere"'))
+    refused = subprocess.run(
+        [sys.executable, "-m", "wz_cli.main", "eval", "--log", str(SAMPLE), "--out", str(out),
+         "--bias-map", str(path)],
+        cwd=ROOT, capture_output=True, text=True, timeout=600, check=False)  # fmt: skip
+    assert refused.returncode == 1 and "for site 'elsewhere'" in refused.stderr
 
 
 def _damaged_copy(tmp_path: Path) -> Path:

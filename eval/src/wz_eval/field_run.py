@@ -37,6 +37,14 @@ from wz_eval.field import (
     markdown_table,
     plot_field,
 )
+from wz_fusion_tracker.calibration import (
+    BiasMap,
+    BiasMapError,
+    LateralBiasCorrector,
+    fit_bias_map,
+    load_bias_map,
+    write_bias_map,
+)
 from wz_fusion_tracker.node import (
     road_heading_hook,
     road_headings_hook,
@@ -122,10 +130,13 @@ def detect(field_log: FieldLog, *, learn_frames: int = 20) -> FieldRun:
 
 
 def fuse(field_log: FieldLog, run: FieldRun, offsets_s: Mapping[str, float] | None = None,
-         tracker_settings: TrackerSettings | None = None) -> list[Observation]:  # fmt: skip
+         tracker_settings: TrackerSettings | None = None,
+         bias_map: BiasMap | None = None) -> list[Observation]:  # fmt: skip
     """The production tracker over every source's detections, stamps corrected by
-    ``offsets_s``; the confirmed tracks every 1/``SAMPLE_HZ`` s (reference clock)."""
+    ``offsets_s`` and, with a ``bias_map``, each sensor's lateral bias removed; the confirmed
+    tracks every 1/``SAMPLE_HZ`` s (reference clock)."""
     site = field_log.site
+    bias = None if bias_map is None else LateralBiasCorrector(site, bias_map)
     offsets = dict(offsets_s or {})
     batches = sorted(
         (b.model_copy(update={"stamp": b.stamp - offsets.get(sensor, 0.0)})
@@ -144,7 +155,10 @@ def fuse(field_log: FieldLog, run: FieldRun, offsets_s: Mapping[str, float] | No
         sample_s = first + k / SAMPLE_HZ
         while position < len(batches) and batches[position].stamp <= sample_s + 1e-9:
             batch = batches[position]
-            tracker.add(batch.source_id, batch.stamp, to_measurements(batch, lambda r, d: None))
+            measurements = to_measurements(batch, lambda r, d: None)
+            if bias is not None:
+                measurements = bias.correct(batch.source_id, measurements)
+            tracker.add(batch.source_id, batch.stamp, measurements)
             position += 1
         tracker.flush()
         tracker.advance_to(sample_s)
@@ -163,14 +177,18 @@ def _observations(items: list[Observation]) -> SourceObservations:
 
 
 def evaluate_log(field_log: FieldLog, truth_path: Path | None = None, *,
-                 out_dir: Path | None = None,
-                 settings: FieldSettings | None = None) -> dict[str, Any]:  # fmt: skip
+                 out_dir: Path | None = None, settings: FieldSettings | None = None,
+                 bias_map: BiasMap | None = None,
+                 bias_min_samples: int = 30) -> dict[str, Any]:  # fmt: skip
     """The paper's field validation on a log: each source and the fused tracks against the
     GPS track; the report as a dict (``table``: markdown), the plot under ``out_dir``.
 
     Each source's clock offset to the GPS is estimated from its own detections first; the
-    tracker then fuses the detections with those offsets taken off, and the fused track is
-    scored on the GPS clock (offset 0, given).
+    tracker then fuses the detections with those offsets taken off (and ``bias_map``'s
+    lateral bias removed, when given), and the fused track is scored on the GPS clock (offset
+    0, given). ``measured_bias_map`` in the report is each sensor's lateral bias against the
+    probe (:func:`~wz_fusion_tracker.calibration.fit_bias_map`, cells of at least
+    ``bias_min_samples`` errors): a calibration drive's map, for the fusion node.
     """
     truth_path = truth_path or field_log.truth_path()
     if truth_path is None:
@@ -186,10 +204,17 @@ def evaluate_log(field_log: FieldLog, truth_path: Path | None = None, *,
                   for source in field_log.sources}  # fmt: skip
     offsets = {name: estimate_clock_offset(track, observations, road, settings).offset_s
                for name, observations in per_source.items() if len(observations.times_s)}  # fmt: skip
-    run.fused = fuse(field_log, run, offsets)
+    run.fused = fuse(field_log, run, offsets, bias_map=bias_map)
     sources = {**per_source, FUSED: _observations(run.fused)}
     result = evaluate_field(track, sources, road, settings,
                             clock_offsets_s={FUSED: 0.0})  # fmt: skip
+    measured = fit_bias_map(field_log.site, [
+        (name, float(station), float(offset), float(error))
+        for name, source in result.sources.items() if name != FUSED
+        for station, offset, error in zip(source.association.truth_station_m,
+                                          source.association.truth_offset_m,
+                                          source.association.lateral_error_m, strict=True)
+    ], min_samples=bias_min_samples, source=f"field log {field_log.folder}")  # fmt: skip
     # The same, on the stretch every source saw the probe on: each on the same ground.
     spans = []
     for name, observations in sources.items():
@@ -216,6 +241,8 @@ def evaluate_log(field_log: FieldLog, truth_path: Path | None = None, *,
         "common": None if common is None else common.to_dict(),
         "common_table": None if common is None else markdown_table(common),
         "wall_s": run.wall_s,
+        "bias_map": None if bias_map is None else bias_map.source,
+        "measured_bias_map": measured.model_dump(mode="json"),
     }  # fmt: skip
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -252,14 +279,28 @@ def main(argv: list[str] | None = None) -> int:
                         help="NMEA or CSV (default: the log's truth)")
     parser.add_argument("--out", type=Path, default=Path("runs/field-eval"))
     parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--bias-map", type=Path, default=None, metavar="FILE",
+                        help="remove each sensor's lateral bias (a map of this site) before "
+                        "the tracker")  # fmt: skip
+    parser.add_argument("--write-bias-map", type=Path, default=None, metavar="FILE",
+                        help="write each sensor's lateral bias against the probe: a "
+                        "calibration drive's map")  # fmt: skip
+    parser.add_argument("--bias-min-samples", type=int, default=30, metavar="N",
+                        help="a map's cell needs at least N errors (default 30)")
     args = parser.parse_args(argv)
     configure_logging(service="eval", site="-", level="WARNING")
     try:
         field_log = load_log(args.log)
-        report = evaluate_log(field_log, args.truth, out_dir=args.out)
-    except FieldDataError as exc:
+        bias_map = None if args.bias_map is None else load_bias_map(args.bias_map)
+        if bias_map is not None:
+            LateralBiasCorrector(field_log.site, bias_map)  # another site's: refused here
+        report = evaluate_log(field_log, args.truth, out_dir=args.out, bias_map=bias_map,
+                              bias_min_samples=args.bias_min_samples)  # fmt: skip
+    except (FieldDataError, BiasMapError) as exc:
         sys.stderr.write(f"wz eval: {exc}\n")
         return 1
+    if args.write_bias_map is not None:
+        write_bias_map(args.write_bias_map, BiasMap.model_validate(report["measured_bias_map"]))
     (args.json or args.out / "field-eval.json").write_text(
         json.dumps(report, indent=2, default=str) + "\n")
     text = markdown(report)
