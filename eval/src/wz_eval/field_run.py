@@ -155,10 +155,8 @@ def fuse(field_log: FieldLog, run: FieldRun, offsets_s: Mapping[str, float] | No
         sample_s = first + k / SAMPLE_HZ
         while position < len(batches) and batches[position].stamp <= sample_s + 1e-9:
             batch = batches[position]
-            measurements = to_measurements(batch, lambda r, d: None)
-            if bias is not None:
-                measurements = bias.correct(batch.source_id, measurements)
-            tracker.add(batch.source_id, batch.stamp, measurements)
+            tracker.add(batch.source_id, batch.stamp,
+                        to_measurements(batch, lambda r, d: None, bias))  # fmt: skip
             position += 1
         tracker.flush()
         tracker.advance_to(sample_s)
@@ -291,9 +289,8 @@ def main(argv: list[str] | None = None) -> int:
     configure_logging(service="eval", site="-", level="WARNING")
     try:
         field_log = load_log(args.log)
-        bias_map = None if args.bias_map is None else load_bias_map(args.bias_map)
-        if bias_map is not None:
-            LateralBiasCorrector(field_log.site, bias_map)  # another site's: refused here
+        bias_map = (None if args.bias_map is None
+                    else load_bias_map(args.bias_map, field_log.site))  # fmt: skip
         report = evaluate_log(field_log, args.truth, out_dir=args.out, bias_map=bias_map,
                               bias_min_samples=args.bias_min_samples)  # fmt: skip
     except (FieldDataError, BiasMapError) as exc:

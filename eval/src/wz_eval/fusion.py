@@ -290,10 +290,8 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
         t0 = time.perf_counter()
         while position < len(batches) and batches[position].stamp <= sample_s + 1e-9:
             batch = batches[position]
-            measurements = to_measurements(batch, lambda r, d: None)
-            if bias is not None:
-                measurements = bias.correct(batch.source_id, measurements)
-            tracker.add(batch.source_id, batch.stamp, measurements)
+            tracker.add(batch.source_id, batch.stamp,
+                        to_measurements(batch, lambda r, d: None, bias))  # fmt: skip
             position += 1
         tracker.flush()
         tracker.advance_to(sample_s)
@@ -685,8 +683,7 @@ def main(argv: list[str] | None = None) -> int:
     bias_map = None
     if args.bias_map is not None:
         try:
-            bias_map = load_bias_map(args.bias_map)
-            LateralBiasCorrector(site, bias_map)
+            bias_map = load_bias_map(args.bias_map, site)
         except BiasMapError as exc:
             parser.error(str(exc))
     configure_logging(service="eval", site=site.site_id, level="WARNING")

@@ -147,10 +147,7 @@ class LateralBiasCorrector:
     """Removes a :class:`BiasMap`'s lateral bias from a sensor's measurements (pure)."""
 
     def __init__(self, site: Site, bias_map: BiasMap) -> None:
-        if bias_map.site_id != site.site_id:
-            raise BiasMapError(
-                f"the bias map is for site {bias_map.site_id!r}, this is {site.site_id!r}"
-            )
+        _check_site(bias_map, site)
         self._site = site
         self._frame = site.road_frame
         self._bin_m = bias_map.bin_m
@@ -182,7 +179,7 @@ class LateralBiasCorrector:
         bins = np.floor((station - sensor_station) / self._bin_m).astype(np.intp)
         bias = np.array([cells.get((int(lane), int(b)), 0.0)
                          for lane, b in zip(lanes, bins, strict=True)])  # fmt: skip
-        moved = np.flatnonzero((bias != 0.0) & (lanes >= 0))
+        moved = np.flatnonzero(bias != 0.0)  # no cell has lane -1 (off every lane)
         if len(moved) == 0:
             return list(measurements)
         new_x, new_y = self._frame.to_site(station[moved], offset[moved] - bias[moved])
@@ -191,6 +188,13 @@ class LateralBiasCorrector:
         for k, i in enumerate(moved):
             out[i] = replace(out[i], x_m=float(new_x[k]), y_m=float(new_y[k]))
         return out
+
+
+def _check_site(bias_map: BiasMap, site: Site) -> None:
+    if bias_map.site_id != site.site_id:
+        raise BiasMapError(
+            f"the bias map is for site {bias_map.site_id!r}, this is {site.site_id!r}"
+        )
 
 
 def _sensor_stations(site: Site) -> dict[str, float]:
@@ -202,19 +206,23 @@ def _sensor_stations(site: Site) -> dict[str, float]:
     }
 
 
-def load_bias_map(path: str | Path) -> BiasMap:
-    """Read a bias map (JSON); :class:`BiasMapError` says what is wrong with a bad one."""
+def load_bias_map(path: str | Path, site: Site | None = None) -> BiasMap:
+    """Read a bias map (JSON), of ``site`` when given; :class:`BiasMapError` says what is wrong
+    with a bad one or another site's."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise BiasMapError(f"bias map {path}: cannot read it ({exc})") from exc
     try:
-        return BiasMap.model_validate(json.loads(text))
+        bias_map = BiasMap.model_validate(json.loads(text))
     except json.JSONDecodeError as exc:
         raise BiasMapError(f"bias map {path}: not JSON ({exc})") from exc
     except ValidationError as exc:
         raise BiasMapError(f"bias map {path}: {exc}") from exc
+    if site is not None:
+        _check_site(bias_map, site)
+    return bias_map
 
 
 def write_bias_map(path: str | Path, bias_map: BiasMap) -> None:

@@ -44,7 +44,7 @@ import numpy as np
 from pydantic import Field, ValidationError
 from pydantic_settings import SettingsConfigDict
 
-from wz_fusion_tracker.calibration import LateralBiasCorrector, load_bias_map
+from wz_fusion_tracker.calibration import BiasMapError, LateralBiasCorrector, load_bias_map
 from wz_fusion_tracker.kalman import F64
 from wz_fusion_tracker.tracker import Measurement, MultiTargetTracker, TrackerSettings, TrackState
 from wz_shared.codec import encode_json
@@ -106,8 +106,10 @@ def sensor_positions(site: Site) -> dict[str, tuple[float, float]]:
     return {mount.sensor_id: (mount.pose.x_m, mount.pose.y_m) for mount in site.sensors}
 
 
-def to_measurements(batch: DetectionBatch, report: Report) -> list[Measurement]:
-    """The batch's detections as tracker measurements; bad covariances reported and dropped."""
+def to_measurements(batch: DetectionBatch, report: Report,
+                    bias: LateralBiasCorrector | None = None) -> list[Measurement]:  # fmt: skip
+    """The batch's detections as tracker measurements; bad covariances reported and dropped;
+    with ``bias``, each sensor's calibrated lateral bias removed."""
     out = []
     for index, detection in enumerate(batch.detections):
         covariance = np.asarray(detection.covariance_m2, dtype=np.float64).reshape(2, 2)
@@ -124,7 +126,18 @@ def to_measurements(batch: DetectionBatch, report: Report) -> list[Measurement]:
             speed_mps=detection.speed_mps, local_track_id=detection.local_track_id,
             time_offset_s=detection.time_offset_s or 0.0,
         ))  # fmt: skip
-    return out
+    return out if bias is None else bias.correct(batch.source_id, out)
+
+
+def bias_corrector(site: Site, settings: FusionTrackerSettings) -> LateralBiasCorrector | None:
+    """The corrector of ``settings.bias_map`` (read once); None without a map. A map that
+    cannot be used raises :class:`~wz_fusion_tracker.calibration.BiasMapError`."""
+    if settings.bias_map is None:
+        return None
+    bias = LateralBiasCorrector(site, load_bias_map(settings.bias_map, site))
+    log.info("lateral bias map %s: corrects %s", settings.bias_map,
+             ", ".join(bias.sensors()) or "no sensor of this site")  # fmt: skip
+    return bias
 
 
 def to_track(site: Site, state: TrackState) -> Track:
@@ -152,16 +165,14 @@ def to_track(site: Site, state: TrackState) -> Track:
 class FusionCore:
     """What the node does without the bus: batches in, a track batch per output cycle out."""
 
-    def __init__(self, site: Site, settings: FusionTrackerSettings, report: Report) -> None:
+    def __init__(self, site: Site, settings: FusionTrackerSettings, report: Report,
+                 bias: LateralBiasCorrector | None = None) -> None:  # fmt: skip
         self.site = site
         self.settings = settings
         self.report = report
-        #: Removes each sensor's calibrated lateral bias (``settings.bias_map``); None: none.
-        self.bias: LateralBiasCorrector | None = None
-        if settings.bias_map is not None:
-            self.bias = LateralBiasCorrector(site, load_bias_map(settings.bias_map))
-            log.info("lateral bias map %s: corrects %s", settings.bias_map,
-                     ", ".join(self.bias.sensors()) or "no sensor of this site")  # fmt: skip
+        #: Removes each sensor's calibrated lateral bias: ``bias`` when given (the node's,
+        #: read at start), else read from ``settings.bias_map``; None: none removed.
+        self.bias = bias if bias is not None else bias_corrector(site, settings)
         self.tracker = self._new_tracker(first_track_id=1)
         self._next_output_s: float | None = None
         self._cycle = 0
@@ -197,10 +208,8 @@ class FusionCore:
         if watch.observe(batch.stamp) == "new_run":
             self._start_new_run(batch)
         late_before = self.tracker.counters.batches_late
-        measurements = to_measurements(batch, self.report)
-        if self.bias is not None:
-            measurements = self.bias.correct(batch.source_id, measurements)
-        self.tracker.add(batch.source_id, batch.stamp, measurements)
+        self.tracker.add(batch.source_id, batch.stamp,
+                         to_measurements(batch, self.report, self.bias))  # fmt: skip
         if self.tracker.counters.batches_late > late_before:
             self.report("late", f"{batch.source_id} batch at {batch.stamp:.3f} s is too late")
         return self._outputs()
@@ -237,7 +246,7 @@ class FusionCore:
 
 
 def run(runtime: ServiceRuntime, site: Site, settings: FusionTrackerSettings,
-        clock: SimClock) -> int:  # fmt: skip
+        clock: SimClock, bias: LateralBiasCorrector | None = None) -> int:  # fmt: skip
     """Track until ``runtime.stop``; the number of track batches published."""
     bus = runtime.bus
     detections_key = bus.keys.detections_all
@@ -245,7 +254,7 @@ def run(runtime: ServiceRuntime, site: Site, settings: FusionTrackerSettings,
     def report(reason: str, detail: str) -> None:
         bus.stats.count_invalid(detections_key, reason, detail)
 
-    core = FusionCore(site, settings, report)
+    core = FusionCore(site, settings, report, bias)
     batches = bus.subscribe(detections_key, DetectionBatch)
     publisher = bus.publisher(bus.keys.tracks, TrackBatch)
     latest: list[bytes] = []
@@ -287,17 +296,16 @@ def main() -> None:
         raise SystemExit(f"{SERVICE}: invalid settings: {exc}") from exc
     site = load_site(settings.site_file)
     configure_logging(service=SERVICE, site=site.site_id, level=settings.log_level)
-    if settings.bias_map is not None:  # a bad map stops the start, with what is wrong
-        try:
-            LateralBiasCorrector(site, load_bias_map(settings.bias_map))
-        except ValueError as exc:
-            raise SystemExit(f"{SERVICE}: {exc}") from exc
+    try:  # a bad map stops the start, with what is wrong
+        bias = bias_corrector(site, settings)
+    except BiasMapError as exc:
+        raise SystemExit(f"{SERVICE}: {exc}") from exc
     clock = SimClock()
     with ServiceRuntime(SERVICE, site.site_id, BusSettings(),
                         status_period_s=settings.status_period_s,
                         clock_stamp=clock.now,
                         health_file=settings.health_file) as runtime:  # fmt: skip
-        published = run(runtime, site, settings, clock)
+        published = run(runtime, site, settings, clock, bias)
     log.info("stopped after %d track batches", published)
 
 
