@@ -67,8 +67,15 @@ def test_wz_eval_writes_the_report_json_markdown_and_plots(tmp_path: Path) -> No
         assert {"speeding", "late_merge"} <= set(report[key])
     for alert_type, seen in report["alerts"].items():
         assert seen["alerts"] == report["alerts_all_in_range"][alert_type]["alerts"]
+    # issue 6's targets, checked on the run: every one has a row, the dropout's included
+    checks = {row["check"]: row for row in report["must_show"]}
+    assert checks["MOTA"]["value"] == report["mota"]
+    assert checks["lidar-mast silent 2 s: identity switches to 2 s after"]["value"] == (
+        dropout["id_switches_from_start_to_2s_after"])
+    assert sum(1 for check in checks if check.startswith("paper table")) == 3
     markdown = (out / "eval.md").read_text()
     assert "MOTA" in markdown and "| fused |" in markdown and "hidden ones included" in markdown
+    assert "Issue 6's targets on this run" in markdown
     assert all((out / name).stat().st_size > 10_000 for name in report.get("plots", []))
     assert "simulating" in result.stderr  # the progress lines
 

@@ -122,6 +122,17 @@ MOT_GATE_M = 3.0
 ALERT_TRUTH_RANGE_M = 200.0
 #: Width of the "don't care" band at the scored region's edge [m] (see :func:`scored_region`).
 EDGE_MARGIN_M = 10.0
+#: A lateral loss to the average by less than this per sample is a tie at the centimetre
+#: (reported apart in the paper table's summary) [m].
+TIE_M_PER_SAMPLE = 0.01
+#: Issue 6's must-show targets, checked by :func:`must_show`. The issue names no number for a
+#: dropout's "bounded error": these bounds are this project's reading (about 30 % above what
+#: seed 7 measured: 0.78 / 0.23 m with the LiDAR silent, 0.75 / 0.09 m with the camera).
+TARGETS: dict[str, float] = {
+    "rmse_longitudinal_m": 0.5, "rmse_lateral_m": 0.3, "rmse_speed_mps": 0.5, "mota": 0.95,
+    "id_switches_per_100_vehicles": 1.0, "paper_table_vehicles": 10, "paper_table_share": 0.9,
+    "dropout_rmse_longitudinal_m": 1.0, "dropout_rmse_lateral_m": 0.3,
+}
 
 
 @dataclass(frozen=True)
@@ -390,6 +401,7 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
                    "scoring_wall_s": round(time.perf_counter() - started, 1)},
     }  # fmt: skip
     report["paper_table_summary"] = _table_summary(report["paper_table"])
+    report["must_show"] = must_show(report)
     report["bias_map"] = None if options.bias_map is None else options.bias_map.source
     report["measured_bias_map"] = fit_bias_map(
         site, _sensor_errors(scores, {"lidar": lidar_id, "camera_radar": cam_id}),
@@ -579,7 +591,8 @@ def paper_table(site: Site, scores: Scores, centre: tuple[float, float],
 
 
 def _table_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    """How often the fused track beats each other source, per axis."""
+    """How often the fused track beats each other source, per axis; and, of its lateral losses
+    to the average, how many are by less than :data:`TIE_M_PER_SAMPLE` per sample."""
     out: dict[str, Any] = {"vehicles": len(rows)}
     for other in ("camera", "lidar", "average", "paper_kf"):
         for axis in ("longitudinal_m", "lateral_m"):
@@ -590,7 +603,60 @@ def _table_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
             1 for r in rows
             if all(r[fused][a] < r[o][a] for o in ("camera", "lidar", "average")
                    for a in ("longitudinal_m", "lateral_m")))  # fmt: skip
+        out[f"{fused}_lateral_losses_to_average_within_1cm"] = sum(
+            1 for r in rows
+            if 0.0 <= r[fused]["lateral_m"] - r["average"]["lateral_m"]
+            < TIE_M_PER_SAMPLE * r["samples"])  # fmt: skip
     return out
+
+
+def must_show(report: dict[str, Any]) -> list[dict[str, Any]]:
+    """Issue 6's targets (:data:`TARGETS`) checked on this report: one row per check, with
+    ``value``, ``target`` and ``holds`` (None where the run cannot tell: no dropout asked for,
+    a range other than 150 m). The paper table is checked for the live track and for the two
+    hindsight versions, each on its own row."""
+    rows: list[dict[str, Any]] = []
+
+    def add(check: str, value: float | None, target: str, holds: bool | None) -> None:
+        rows.append({"check": check, "value": value, "target": target, "holds": holds})
+
+    at_150 = abs(report["max_range_m"] - 150.0) < 1e-9
+    fused = report["sources"]["fused"]
+    for axis, limit in (("longitudinal_m", TARGETS["rmse_longitudinal_m"]),
+                        ("lateral_m", TARGETS["rmse_lateral_m"]),
+                        ("speed_mps", TARGETS["rmse_speed_mps"])):  # fmt: skip
+        value = fused[f"rmse_{axis}"]
+        add(f"fused RMSE {axis.split('_')[0]} within 150 m", value, f"<= {limit:g}",
+            None if not at_150 or value is None else value <= limit)
+    add("MOTA", report["mota"], f">= {TARGETS['mota']:g}", report["mota"] >= TARGETS["mota"])
+    per_100 = report["id_switches_per_100_vehicles"]
+    add("identity switches per 100 vehicles", per_100,
+        f"<= {TARGETS['id_switches_per_100_vehicles']:g}",
+        per_100 <= TARGETS["id_switches_per_100_vehicles"])  # fmt: skip
+    summary = report["paper_table_summary"]
+    vehicles = summary["vehicles"]
+    for fused_source, label in (("fused", "live"), ("fused_stored", "stored"),
+                                ("fused_smoothed", "smoothed")):  # fmt: skip
+        wins = summary[f"{fused_source}_below_camera_lidar_average_both_axes"]
+        share = wins / vehicles if vehicles else None
+        add(f"paper table, {label} track below camera, LiDAR and average on both axes "
+            f"({wins} of {vehicles} vehicles)", share,
+            f">= {TARGETS['paper_table_share']:g} of >= {TARGETS['paper_table_vehicles']}",
+            None if share is None
+            else vehicles >= TARGETS["paper_table_vehicles"]
+            and share >= TARGETS["paper_table_share"])  # fmt: skip
+    for dropout in report["dropouts"]:
+        name = f"{dropout['sensor_id']} silent {dropout['duration_s']:g} s"
+        lon, lat = dropout["fused_rmse_longitudinal_m"], dropout["fused_rmse_lateral_m"]
+        bounded = (lon is not None and lat is not None
+                   and lon <= TARGETS["dropout_rmse_longitudinal_m"]
+                   and lat <= TARGETS["dropout_rmse_lateral_m"])  # fmt: skip
+        add(f"{name}: fused RMSE lon / lat inside it", None if lon is None else max(lon, lat),
+            f"<= {TARGETS['dropout_rmse_longitudinal_m']:g} / "
+            f"{TARGETS['dropout_rmse_lateral_m']:g}", bounded)
+        switches = dropout["id_switches_from_start_to_2s_after"]
+        add(f"{name}: identity switches to 2 s after", switches, "0", switches == 0)
+    return rows
 
 
 def markdown(report: dict[str, Any]) -> str:
@@ -631,6 +697,13 @@ def markdown(report: dict[str, Any]) -> str:
     lines += ["", "Fused below the other sources (vehicles): " + ", ".join(
         f"{k.removeprefix('fused_below_')} {v}" for k, v in summary.items() if k != "vehicles"),
         ""]  # fmt: skip
+    lines += ["", "Issue 6's targets on this run (`must_show`; - : this run cannot tell):", "",
+              "| check | value | target | holds |", "|---|---|---|---|"]
+    for row in report.get("must_show", []):
+        holds = {True: "yes", False: "**no**", None: "-"}[row["holds"]]
+        value = row["value"]
+        shown = str(value) if isinstance(value, int) else ratio(value)
+        lines.append(f"| {row['check']} | {shown} | {row['target']} | {holds} |")
     lines += ["", "Alerts (the alert service on the fused tracks against the same rules on the "
               "truth of the vehicles a sensor saw; in brackets, on every vehicle within "
               f"{ALERT_TRUTH_RANGE_M:.0f} m, hidden ones included):", "",
