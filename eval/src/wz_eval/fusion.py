@@ -34,6 +34,9 @@ window (default 40-100 m upstream of the mast, like the paper's short segment), 
 absolute longitudinal and lateral error over the camera frames in the window where every
 source has the vehicle, per source.
 
+``must_show``: issue 6's targets (:data:`TARGETS`) checked on this run, one row each
+(:func:`must_show`), also in ``eval.md``.
+
 ``alerts``: the alert service run on the fused tracks (as the node publishes them) and scored
 with :func:`wz_eval.alerts.score_alerts` against the same rules run on the truth of the
 vehicles within 200 m of the mast that a sensor saw (:func:`wz_eval.alerts.observed_truth`);
