@@ -903,3 +903,26 @@ def test_a_stray_young_track_behind_a_briefly_unseen_vehicle_takes_nothing_over(
     assert truck.status == "confirmed"
     assert truck.speed_mps == pytest.approx(25.0, abs=0.5)
     assert truck.x_m == pytest.approx(25.0 * 2.95, abs=0.3)
+
+
+def test_huber_update_limits_an_outlier_and_leaves_ordinary_measurements_alone() -> None:
+    """A LiDAR box 0.75 m off across the road (about 3.4 sigma of the innovation, inside the
+    gate) moves a converged track less with Huber's update (``huber_k`` 2.5, the default) than
+    without it; a measurement within ``huber_k`` sigmas moves it exactly as much either way."""
+    cov = np.eye(2) * LIDAR_STD_M**2
+
+    def last_y(offset_m: float, huber_k: float) -> float:
+        tracker = MultiTargetTracker(TrackerSettings(reorder_window_s=0.0, huber_k=huber_k),
+                                     heading_at=lambda x, y: 0.0)  # fmt: skip
+        for k in range(41):
+            t = 0.05 * k
+            y = offset_m if k == 40 else 0.0
+            tracker.add(LIDAR, t, [Measurement(x_m=30.0 * t, y_m=y, covariance_m2=cov)])
+        (car,) = tracker.tracks()
+        assert car.hits == 41  # the outlier was taken, not gated out
+        return car.y_m
+
+    assert SETTINGS.huber_k == 2.5
+    plain, robust = last_y(0.75, 0.0), last_y(0.75, 2.5)
+    assert 0.0 < robust < 0.9 * plain  # 0.145 against 0.180 m
+    assert last_y(0.1, 2.5) == pytest.approx(last_y(0.1, 0.0), abs=1e-12)

@@ -158,8 +158,13 @@ class TrackerSettings(BaseModel):
     local_track_id_bonus: float = Field(default=4.0, ge=0.0)
     #: Huber's threshold on the Mahalanobis distance ``d`` of a matched pair [sigmas]: beyond
     #: it the measurement's covariance is scaled by ``d / huber_k`` (a heavy-tailed outlier
-    #: moves the track by about ``huber_k`` sigmas); 0 turns it off.
-    huber_k: float = Field(default=0.0, ge=0.0)
+    #: moves the track by about ``huber_k`` sigmas); 0 turns it off. Both detectors' errors
+    #: are heavy-tailed (camera-radar across the road at 60-100 m: std 0.12-0.24 m, robust std
+    #: 0.05-0.12 m). Measured with ``wz eval`` on four 600 s recordings (seeds 7, 11, 13, 17,
+    #: a bias map from another seed), 2.5 against off: identity switches 8 against 10, the
+    #: stored trajectories' paper table 9 in 10 on all four seeds against three, position RMSE
+    #: within 0.006 m, speed RMSE 0.004-0.009 m/s higher (docs/fusion-tracker.md).
+    huber_k: float = Field(default=2.5, ge=0.0)
 
     # --- channels ---
     #: Sensor ids whose unmatched detections start tracks; None: every sensor.
