@@ -625,10 +625,8 @@ def must_show(report: dict[str, Any]) -> list[dict[str, Any]]:
 
     at_150 = abs(report["max_range_m"] - 150.0) < 1e-9
     fused = report["sources"]["fused"]
-    for axis, limit in (("longitudinal_m", TARGETS["rmse_longitudinal_m"]),
-                        ("lateral_m", TARGETS["rmse_lateral_m"]),
-                        ("speed_mps", TARGETS["rmse_speed_mps"])):  # fmt: skip
-        value = fused[f"rmse_{axis}"]
+    for axis in ("longitudinal_m", "lateral_m", "speed_mps"):
+        value, limit = fused[f"rmse_{axis}"], TARGETS[f"rmse_{axis}"]
         add(f"fused RMSE {axis.split('_')[0]} within 150 m", value, f"<= {limit:g}",
             None if not at_150 or value is None else value <= limit)
     add("MOTA", report["mota"], f">= {TARGETS['mota']:g}", report["mota"] >= TARGETS["mota"])
