@@ -839,6 +839,40 @@ def test_a_vehicle_hidden_past_its_coast_resumes_its_id_when_it_comes_back() -> 
     assert ended.track_id == 1 and ended.stamps_s[-1] == pytest.approx(0.95)
 
 
+def test_a_vehicle_that_braked_while_hidden_keeps_its_id_and_an_impossible_one_does_not() -> None:
+    """A car at 30 m/s brakes at 2.5 m/s^2 while hidden for 2 s (past ``max_coast_s``): it
+    comes back 5 m/s slower and 5 m behind its old track's prediction, beyond the speed test
+    ``merge_velocity_difference_mps`` (4 m/s). A change of speed within
+    ``hand_over_max_accel_mps2`` explains both, so its young track hands it back before it is
+    confirmed and no second id is ever published. A car that came back as slow but *ahead* of
+    the prediction cannot have braked to get there: it is another vehicle, a new track; and
+    with the kinematic test off, the braking car is a new track too."""
+    cov = np.eye(2) * 1e-4
+
+    def x_of(t: float, ahead: bool) -> float:
+        if t < 1.0:
+            return 30.0 * t
+        if not ahead:  # braked at 2.5 m/s^2 from 1 s to 3 s, then 25 m/s
+            return 85.0 + 25.0 * (t - 3.0)
+        return 93.0 + 25.0 * (t - 3.0)  # 3 m ahead of the old track's 90 m, 25 m/s
+
+    def published_ids(ahead: bool = False, **changes: float) -> set[int]:
+        tracker = MultiTargetTracker(TrackerSettings(reorder_window_s=0.0, **changes),
+                                     heading_at=lambda x, y: 0.0)  # fmt: skip
+        seen: set[int] = set()
+        for k in range(int(5.0 / 0.05)):
+            t = 0.05 * k
+            hidden = 1.0 <= t < 3.0
+            tracker.add(LIDAR, t, [] if hidden else [
+                Measurement(x_m=x_of(t, ahead), y_m=0.0, covariance_m2=cov)])  # fmt: skip
+            seen |= {s.track_id for s in tracker.tracks() if s.status != "tentative"}
+        return seen
+
+    assert published_ids() == {1}
+    assert published_ids(ahead=True) == {1, 2}
+    assert published_ids(hand_over_max_accel_mps2=0.0) == {1, 2}
+
+
 def test_a_resumed_track_is_smoothed_run_by_run_and_a_lost_one_is_still_unfinished() -> None:
     """A hand-over appends the young track's updates to the old track's history; the young
     track's first entry starts from its detection, not from a prediction of the entry before,
