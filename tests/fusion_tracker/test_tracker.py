@@ -873,6 +873,30 @@ def test_a_vehicle_that_braked_while_hidden_keeps_its_id_and_an_impossible_one_d
     assert published_ids(hand_over_max_accel_mps2=0.0) == {1, 2}
 
 
+def test_a_published_young_track_keeps_the_vehicle_and_the_old_track_ends() -> None:
+    """A camera ranging a car 5 m ahead of the LiDAR starts a second track on it (far outside
+    the LiDAR track's gate, too far apart to merge), confirmed and published while the LiDAR
+    still updates the first. The LiDAR then loses the car; the camera's track carries on. Its
+    id has been published, so the hand-over leaves it: the old track ends (its history handed
+    out) instead of taking the car back, which would change the car's id a second time."""
+    tracker = MultiTargetTracker(TrackerSettings(reorder_window_s=0.0), heading_at=lambda x, y: 0.0)
+    published: list[list[int]] = []
+    for k in range(int(2.5 / 0.05)):
+        t = 0.05 * k
+        if t < 1.0:
+            tracker.add(LIDAR, t, [Measurement(x_m=30.0 * t, y_m=0.0, covariance_m2=np.eye(2) * 1e-4)])
+        if t >= 0.5:
+            tracker.add(CAMERA, t + 0.001, [
+                Measurement(x_m=30.0 * t + 5.0, y_m=0.0, covariance_m2=np.eye(2) * 0.04)])  # fmt: skip
+        published.append(sorted(s.track_id for s in tracker.tracks() if s.status != "tentative"))
+    assert [1, 2] in published  # both published while the LiDAR still saw the car
+    assert published[-1] == [2]
+    assert all(ids != [1] for ids in published[published.index([1, 2]):])  # never back to 1
+    assert tracker.counters.tracks_superseded == 1 and tracker.counters.tracks_handed_over == 0
+    (ended,) = tracker.pop_finished_histories()
+    assert ended.track_id == 1 and ended.stamps_s[-1] == pytest.approx(0.95)
+
+
 def test_a_resumed_track_is_smoothed_run_by_run_and_a_lost_one_is_still_unfinished() -> None:
     """A hand-over appends the young track's updates to the old track's history; the young
     track's first entry starts from its detection, not from a prediction of the entry before,

@@ -439,6 +439,9 @@ class TrackerCounters:
     tracks_handed_over: int = 0
     #: ... of which to a lost track (``lost_memory_s``), which then lived again.
     tracks_resumed: int = 0
+    #: Coasting or lost tracks ended because a confirmed young track had taken their vehicle
+    #: up (:meth:`_hand_over`: the published young id stays).
+    tracks_superseded: int = 0
     #: Unmatched measurements that started no track, being near a confirmed one
     #: (:attr:`TrackerSettings.spawn_gate_chi2`).
     measurements_suppressed: int = 0
@@ -511,6 +514,9 @@ def innovation_statistics(
 
 #: Duplicate tracks are looked for at most this often (data time) [s].
 _MERGE_PERIOD_S = 0.1
+#: A track confirmed this long ago [s] has been in a published snapshot (the node publishes
+#: at 10 Hz): see :meth:`MultiTargetTracker._hand_over`.
+_PUBLISHED_AFTER_S = 0.1
 
 #: Above this many (track, measurement) pairs, gating first discards the pairs that cannot pass.
 _SPARSE_GATE_MIN_PAIRS = 2000
@@ -892,8 +898,9 @@ class _TrackTable:
     ----------------------
     born_s, updated_s
         First and latest update [s].
-    confirmed, hits
-        Life cycle: confirmed yet, number of updates (the first detection included).
+    confirmed, confirmed_s, hits
+        Life cycle: confirmed yet, when [s] (NaN: not yet), number of updates (the first
+        detection included).
     heading_rad
         The road's heading at the latest update [rad], NaN where there is no road.
     sensor_updated_s
@@ -915,6 +922,7 @@ class _TrackTable:
         self.born_s = np.zeros(capacity)
         self.updated_s = np.zeros(capacity)
         self.confirmed = np.zeros(capacity, dtype=bool)
+        self.confirmed_s = np.full(capacity, math.nan)
         self.hits = np.zeros(capacity, dtype=np.int64)
         self.heading_rad = np.full(capacity, math.nan)
         self.sensor_updated_s = np.full((capacity, 0), -math.inf)
@@ -936,6 +944,7 @@ class _TrackTable:
             self._grow()
         self.born_s[slot] = self.updated_s[slot] = stamp_s
         self.confirmed[slot] = False
+        self.confirmed_s[slot] = math.nan
         self.hits[slot] = 0
         self.heading_rad[slot] = math.nan if heading_rad is None else heading_rad
         self.sensor_updated_s[slot] = -math.inf
@@ -948,7 +957,7 @@ class _TrackTable:
 
     def _grow(self) -> None:
         """Double the rows (new rows are reset when their slot is taken)."""
-        for name in ("born_s", "updated_s", "confirmed", "hits", "heading_rad",
+        for name in ("born_s", "updated_s", "confirmed", "confirmed_s", "hits", "heading_rad",
                      "sensor_updated_s", "class_weight", "class_last_vote", "lengths_m",
                      "widths_m", "length_count", "width_count", "_sizes", "_sizes_stale"):  # fmt: skip
             array = getattr(self, name)
@@ -1791,6 +1800,7 @@ class MultiTargetTracker:
             and stamp_s - table.born_s[track.slot] >= self.settings.confirm_min_age_s
         ):
             table.confirmed[track.slot] = True
+            table.confirmed_s[track.slot] = stamp_s
             track.hit_stamps_s.clear()  # only needed until confirmation
             self._counters.tracks_confirmed += 1
 
@@ -1833,7 +1843,11 @@ class MultiTargetTracker:
         goes, so the vehicle keeps its identity.
         The old track may also be a lost one (past its coast, within ``lost_memory_s``): it
         lives again. The hand-over runs every ``_MERGE_PERIOD_S``, so it usually comes while
-        the new track is still tentative, and the new id is never published.
+        the new track is still tentative, and the new id is never published. When the new track
+        was confirmed ``_PUBLISHED_AFTER_S`` ago or more (its id published: it started while the
+        old one was still being updated, a duplicate that took the vehicle over), the vehicle
+        keeps the new id and the old track ends: handing it back would change the vehicle's id
+        twice.
         """
         settings, table = self.settings, self._table
         if settings.hand_over_along_m <= 0.0 or len(self._tracks) + len(self._lost) < 2:
@@ -1882,6 +1896,12 @@ class MultiTargetTracker:
             old, new = coasting[row], young[column]
             if new.track_id not in self._tracks:
                 continue
+            if stamp_s - table.confirmed_s[new.slot] >= _PUBLISHED_AFTER_S:  # False for NaN
+                # The young id is published already: giving the vehicle its old id back would
+                # rename it a second time. The young track keeps it; the old one ends.
+                if self._retire(old, successor_id=new.track_id):
+                    self._counters.tracks_superseded += 1
+                continue
             if old.track_id in self._lost:
                 self._tracks[old.track_id] = self._lost.pop(old.track_id)
                 self._counters.tracks_resumed += 1
@@ -1901,6 +1921,23 @@ class MultiTargetTracker:
         if resumed:  # back in id order
             self._tracks = dict(sorted(self._tracks.items()))
             self._tracks_changed()
+
+    def _retire(self, track: _Track, successor_id: int) -> bool:
+        """End ``track`` (live or lost) now, as a confirmed track ends, its sensor local ids
+        handed to ``successor_id``; False if it is gone already."""
+        if track.track_id in self._lost:
+            del self._lost[track.track_id]
+        elif track.track_id in self._tracks:
+            del self._tracks[track.track_id]
+            self._tracks_changed()
+            self._counters.tracks_deleted += 1
+        else:
+            return False
+        self._bank.remove(track.slot)
+        self._finished.append(track.to_history())
+        self._local_ids = {k: (successor_id if v == track.track_id else v)
+                           for k, v in self._local_ids.items()}  # fmt: skip
+        return True
 
     def _speed_change_explains(self, along: F64, dv_along: F64, unseen_s: F64,
                                started_after: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:  # fmt: skip
