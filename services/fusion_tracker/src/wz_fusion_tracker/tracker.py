@@ -1923,8 +1923,8 @@ class MultiTargetTracker:
             self._tracks_changed()
 
     def _retire(self, track: _Track, successor_id: int) -> bool:
-        """End ``track`` (live or lost) now, as a confirmed track ends, its sensor local ids
-        handed to ``successor_id``; False if it is gone already."""
+        """End ``track`` (live or lost) now, its history handed out if it was confirmed, its
+        sensor local ids handed to ``successor_id``; False if it is gone already."""
         if track.track_id in self._lost:
             del self._lost[track.track_id]
         elif track.track_id in self._tracks:
@@ -1934,7 +1934,8 @@ class MultiTargetTracker:
         else:
             return False
         self._bank.remove(track.slot)
-        self._finished.append(track.to_history())
+        if self._table.confirmed[track.slot]:
+            self._finished.append(track.to_history())
         self._local_ids = {k: (successor_id if v == track.track_id else v)
                            for k, v in self._local_ids.items()}  # fmt: skip
         return True
@@ -2007,17 +2008,9 @@ class MultiTargetTracker:
                 other = live[int(j)]
                 if other.track_id not in removed and other.track_id != live[i].track_id:
                     removed[other.track_id] = live[i].track_id
-        confirmed = self._table.confirmed
         for track_id, survivor in removed.items():
-            track = self._tracks.pop(track_id)
-            self._tracks_changed()
-            self._bank.remove(track.slot)
-            self._counters.tracks_deleted += 1
+            self._retire(self._tracks[track_id], successor_id=survivor)
             self._counters.tracks_merged += 1
-            if confirmed[track.slot]:
-                self._finished.append(track.to_history())
-            self._local_ids = {k: (survivor if v == track_id else v)
-                               for k, v in self._local_ids.items()}  # fmt: skip
 
     def _prune(self, stamp_s: float) -> None:
         live, slots = self._live()
