@@ -873,6 +873,61 @@ def test_a_vehicle_that_braked_while_hidden_keeps_its_id_and_an_impossible_one_d
     assert published_ids(hand_over_max_accel_mps2=0.0) == {1, 2}
 
 
+def test_a_vehicle_that_changed_lanes_while_hidden_keeps_its_id() -> None:
+    """A car drifting towards the shoulder at 1 m/s is hidden for 2.5 s (past
+    ``max_coast_s``: its track is lost) and comes back one lane (3.6 m) over from where it was
+    last seen: it merged while a truck hid it. Carried forward, its track's lateral velocity
+    would put it 5-6 m from where it comes back, beyond ``hand_over_across_m``; predicted along
+    the road from where it was last seen, it is one lane over, and it keeps id 1."""
+    tracker = MultiTargetTracker(TrackerSettings(reorder_window_s=0.0), heading_at=lambda x, y: 0.0)
+    cov = np.eye(2) * 1e-4
+    seen: set[int] = set()
+    velocity_y = []
+    for k in range(int(5.0 / 0.05)):
+        t = 0.05 * k
+        if 1.0 <= t < 3.5:
+            tracker.add(LIDAR, t, [])
+        else:
+            y = -t if t < 1.0 else -1.0 + 3.6
+            tracker.add(LIDAR, t, [Measurement(x_m=30.0 * t, y_m=y, covariance_m2=cov)])
+        states = tracker.tracks()
+        if k == int(0.95 / 0.05):
+            velocity_y = [s.vy_mps for s in states]
+        seen |= {s.track_id for s in states if s.status != "tentative"}
+    assert velocity_y and velocity_y[0] < -0.8  # the drift that would be carried forward
+    assert seen == {1}
+    assert tracker.counters.tracks_resumed == 1
+    (car,) = tracker.tracks()
+    assert car.y_m == pytest.approx(2.6, abs=0.1)
+
+
+def test_a_lost_track_sliding_across_the_road_is_not_handed_a_vehicle() -> None:
+    """A ghost track sliding across the road at 3.4 m/s (no vehicle does; a lane change peaks
+    at 1-1.5 m/s) is lost; detections then come at its held offset along the road. Beyond
+    ``hand_over_max_lateral_speed_mps`` (2.5) they start a track of their own, id 2, and the
+    ghost's id is never published again; with the limit at 5 m/s the ghost lives again as
+    id 1. The same track moving across at 1 m/s (a lane change) is handed the vehicle."""
+
+    def published_ids(lateral_mps: float, **changes: float) -> set[int]:
+        tracker = MultiTargetTracker(TrackerSettings(reorder_window_s=0.0, **changes),
+                                     heading_at=lambda x, y: 0.0)  # fmt: skip
+        cov = np.eye(2) * 1e-4
+        seen: set[int] = set()
+        for k in range(int(4.0 / 0.05)):
+            t = 0.05 * k
+            hidden = 1.0 <= t < 2.8
+            y = -lateral_mps * min(t, 1.0)
+            tracker.add(LIDAR, t, [] if hidden else [
+                Measurement(x_m=30.0 * t, y_m=y, covariance_m2=cov)])  # fmt: skip
+            if t >= 2.6:
+                seen |= {s.track_id for s in tracker.tracks() if s.status != "tentative"}
+        return seen
+
+    assert published_ids(3.4) == {2}
+    assert published_ids(3.4, hand_over_max_lateral_speed_mps=5.0) == {1}
+    assert published_ids(1.0) == {1}
+
+
 def test_a_published_young_track_keeps_the_vehicle_and_the_old_track_ends() -> None:
     """A camera ranging a car 5 m ahead of the LiDAR starts a second track on it (far outside
     the LiDAR track's gate, too far apart to merge), confirmed and published while the LiDAR
