@@ -445,8 +445,9 @@ class TrackerCounters:
     tracks_handed_over: int = 0
     #: ... of which to a lost track (``lost_memory_s``), which then lived again.
     tracks_resumed: int = 0
-    #: Coasting or lost tracks ended because a confirmed young track had taken their vehicle
-    #: up (:meth:`_hand_over`: the published young id stays).
+    #: Coasting or lost tracks ended by :meth:`_hand_over` in favour of the young track that
+    #: took their vehicle up: its id was published already, or the old track slid across the
+    #: road (``hand_over_max_lateral_speed_mps``).
     tracks_superseded: int = 0
     #: Unmatched measurements that started no track, being near a confirmed one
     #: (:attr:`TrackerSettings.spawn_gate_chi2`).
@@ -1851,8 +1852,9 @@ class MultiTargetTracker:
         road held, so the lane test measures from where the vehicle was last seen.
         The old track may also be a lost one (past its coast, within ``lost_memory_s``): it
         lives again. An old track sliding across the road (``hand_over_max_lateral_speed_mps``)
-        is no vehicle's: it ends, and the young track carries on. The hand-over runs every ``_MERGE_PERIOD_S``, so it usually comes while
-        the new track is still tentative, and the new id is never published. When the new track
+        is no vehicle's: it ends, and the young track carries on. The hand-over runs every
+        ``_MERGE_PERIOD_S``, so it usually comes while the new track is still tentative, and
+        the new id is never published. When the new track
         was confirmed ``_PUBLISHED_AFTER_S`` ago or more (its id published: it started while the
         old one was still being updated, a duplicate that took the vehicle over), the vehicle
         keeps the new id and the old track ends: handing it back would change the vehicle's id
