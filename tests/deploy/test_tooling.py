@@ -67,3 +67,22 @@ def test_pytest_measures_coverage_against_the_floor() -> None:
     (command,) = makefile_recipe("pytest")
     assert "--cov" in shlex.split(command)
     assert "--cov-fail-under=$(COV_FLOOR)" in shlex.split(command)
+
+
+def test_vendored_wzdx_schemas_are_the_recorded_files() -> None:
+    """Each vendored WZDx file is the one its README records (name and sha256), so an edit or
+    a file added without its source and licence stated shows here."""
+    import hashlib
+
+    folder = ROOT / "deploy" / "schemas" / "wzdx-4.2"
+    readme = (folder / "README.md").read_text(encoding="utf-8")
+    recorded = dict(re.findall(r"^\| `([^`]+)` \| `([0-9a-f]{64})` \|$", readme, re.MULTILINE))
+    present = {
+        str(path.relative_to(folder)): hashlib.sha256(path.read_bytes()).hexdigest()
+        for path in folder.rglob("*")
+        if path.suffix in {".json", ".geojson"}
+    }
+    assert present == recorded
+    assert (folder / "LICENSE-CC0.txt").read_text(encoding="utf-8").startswith(
+        "Creative Commons Legal Code"
+    )
