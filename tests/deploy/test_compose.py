@@ -2,7 +2,8 @@
 
 The file is validated against the Compose Specification's JSON schema (vendored in
 deploy/schemas/, so the check runs offline), then against the code it deploys: the services of
-``wz up``, their settings classes, their Dockerfiles and their health probes.
+``wz up``, their settings classes, their images (deploy/Dockerfile as each service's build args
+make it) and their health probes.
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from wz_shared.settings import BusSettings, ServiceSettings
 
 ROOT = Path(__file__).resolve().parents[2]
 COMPOSE_FILE = ROOT / "docker-compose.yml"
+DOCKERFILE = ROOT / "deploy" / "Dockerfile"
 SCHEMA_FILE = ROOT / "deploy" / "schemas" / "compose-spec.json"
 
 #: A stand-in for the variable .env must set; the other ${VAR:-default} take their defaults.
@@ -102,16 +104,35 @@ def interpolate(value: Any, env: Mapping[str, str]) -> Any:
     return _VARIABLE.sub(replace, value)
 
 
+_ARG_REFERENCE = re.compile(
+    r"\$(?:\{(?P<braced>[A-Za-z_][A-Za-z0-9_]*)\}|(?P<bare>[A-Za-z_][A-Za-z0-9_]*))"
+)
+
+
+def _substitute(text: str, values: Mapping[str, str]) -> str:
+    """``text`` with ``$NAME`` and ``${NAME}`` of ``values`` replaced; other names kept."""
+    return _ARG_REFERENCE.sub(
+        lambda match: values.get(match["braced"] or match["bare"], match.group(0)), text
+    )
+
+
 @dataclass
 class Dockerfile:
-    """A Dockerfile's instructions, grouped by stage (continuation lines joined)."""
+    """A Dockerfile's instructions as one image's build sees them: grouped by stage,
+    continuation lines joined, and its ``ARG`` values (the defaults, or the build args compose
+    gives) put in where the stage has declared them, as Docker and the build's shell do."""
 
     path: Path
+    build_args: Mapping[str, str] = field(default_factory=dict)
     stages: list[list[tuple[str, str]]] = field(default_factory=list)
+    #: Every ARG name the file declares (a build arg it does not declare is never used).
+    declared_args: set[str] = field(default_factory=set)
 
     @classmethod
-    def read(cls, path: Path) -> Dockerfile:
-        dockerfile = cls(path)
+    def read(cls, path: Path, build_args: Mapping[str, str] | None = None) -> Dockerfile:
+        dockerfile = cls(path, dict(build_args or {}))
+        global_args: dict[str, str] = {}  # before the first FROM: seen by FROM lines only
+        scope: dict[str, str] = {}
         logical = ""
         for raw in path.read_text(encoding="utf-8").splitlines():
             line = raw.strip()
@@ -124,11 +145,27 @@ class Dockerfile:
                 continue
             logical += line
             instruction, _, rest = logical.partition(" ")
-            instruction = instruction.upper()
+            instruction, rest, logical = instruction.upper(), rest.strip(), ""
+            if instruction == "ARG":
+                name, has_default, default = rest.partition("=")
+                dockerfile.declared_args.add(name)
+                if name in dockerfile.build_args:
+                    value = dockerfile.build_args[name]
+                elif has_default:
+                    value = shlex.split(default)[0] if shlex.split(default) else ""
+                else:
+                    value = global_args.get(name, "")
+                (scope if dockerfile.stages else global_args)[name] = value
+                continue
             if instruction == "FROM":
                 dockerfile.stages.append([])
-            dockerfile.stages[-1].append((instruction, rest.strip()))
-            logical = ""
+                scope = {}
+                rest = _substitute(rest, global_args)
+            elif instruction == "ENV":  # Docker substitutes each KEY=value word on its own
+                rest = " ".join(shlex.quote(_substitute(word, scope)) for word in shlex.split(rest))
+            elif not rest.startswith("["):  # exec form (JSON) is taken as written
+                rest = _substitute(rest, scope)
+            dockerfile.stages[-1].append((instruction, rest))
         return dockerfile
 
     def instructions(self, name: str, stage: int = -1) -> list[str]:
@@ -186,16 +223,23 @@ def compose() -> dict[str, Any]:
     return interpolated
 
 
+def image_of(compose_file: Path, name: str, config: Mapping[str, Any]) -> Dockerfile:
+    """The Dockerfile of a compose service, read with the service's build args."""
+    build = config.get("build")
+    assert isinstance(build, dict), f"{name}: build: {{context, dockerfile, args}} expected"
+    path = (compose_file.parent / build.get("context", ".") / build["dockerfile"]).resolve()
+    assert path == DOCKERFILE, f"{name}: every image is built from {DOCKERFILE.relative_to(ROOT)}"
+    args = build.get("args", {})
+    assert isinstance(args, dict), f"{name}: write build args as a mapping"
+    return Dockerfile.read(path, {key: str(value) for key, value in args.items()})
+
+
 @pytest.fixture(scope="module")
 def services(compose: dict[str, Any]) -> dict[str, Service]:
-    found: dict[str, Service] = {}
-    for name, config in compose["services"].items():
-        build = config.get("build")
-        assert isinstance(build, dict), f"{name}: build: {{context, dockerfile}} expected"
-        path = (COMPOSE_FILE.parent / build.get("context", ".") / build["dockerfile"]).resolve()
-        assert path.is_file(), f"{name}: its Dockerfile {path} does not exist"
-        found[name] = Service(name, config, Dockerfile.read(path))
-    return found
+    return {
+        name: Service(name, config, image_of(COMPOSE_FILE, name, config))
+        for name, config in compose["services"].items()
+    }
 
 
 def schema_errors(document: Any) -> list[str]:
@@ -261,15 +305,63 @@ def test_services_are_the_stack_of_wz_up(services: dict[str, Service]) -> None:
     assert set(services) == {ROUTER.name} | {spec.name for spec in STACK}
 
 
+#: The image's ENTRYPOINT: a shell that becomes SERVICE_COMMAND (the build arg COMMAND, split
+#: into words) with compose's ``command:`` as its arguments.
+ENTRYPOINT = ["/bin/sh", "-c", 'exec $SERVICE_COMMAND "$@"', "sh"]
+
+
+def program(service: Service) -> list[str]:
+    """What the container runs: the image's COMMAND, then compose's ``command:``."""
+    assert service.dockerfile.exec_form("ENTRYPOINT") == ENTRYPOINT, service.name
+    assert "entrypoint" not in service.config, f"{service.name}: the image's entrypoint is bypassed"
+    assert not service.dockerfile.instructions("CMD"), "compose's command: gives the arguments"
+    command = service.config.get("command", [])
+    assert isinstance(command, list), f"{service.name}: command in exec (list) form"
+    return shlex.split(service.dockerfile.env()["SERVICE_COMMAND"]) + [str(w) for w in command]
+
+
 def test_each_image_runs_its_stack_module(services: dict[str, Service]) -> None:
     for spec in STACK:
-        service = services[spec.name]
-        command = service.config.get("command") or service.dockerfile.exec_form("CMD")
-        assert command == ["python", "-m", spec.module], spec.name
-    router = services[ROUTER.name]
-    assert router.dockerfile.exec_form("ENTRYPOINT") == ["wz"]
-    assert router.config["command"][: len(ROUTER.args)] == list(ROUTER.args)
+        assert program(services[spec.name]) == ["python", "-m", spec.module], spec.name
+    router = program(services[ROUTER.name])
+    assert router[0] == "wz"
+    assert router[1 : 1 + len(ROUTER.args)] == list(ROUTER.args)
     assert ROUTER.module == "wz_cli.main"
+
+
+def _workspace_members() -> dict[str, dict[str, Any]]:
+    """The workspace's members: project name -> its ``[project]`` table."""
+    root = tomllib.loads((ROOT / "pyproject.toml").read_text("utf-8"))
+    members: dict[str, dict[str, Any]] = {}
+    for pattern in root["tool"]["uv"]["workspace"]["members"]:
+        for folder in sorted(ROOT.glob(pattern)):
+            if (folder / "pyproject.toml").is_file():
+                project = tomllib.loads((folder / "pyproject.toml").read_text("utf-8"))["project"]
+                members[str(project["name"])] = project
+    return members
+
+
+def test_build_args_name_a_member_and_its_program(services: dict[str, Service]) -> None:
+    """PACKAGE is a workspace member; COMMAND runs a module or a script that member installs;
+    every build arg given is one the Dockerfile declares (Docker ignores any other)."""
+    members = _workspace_members()
+    for service in services.values():
+        image = service.dockerfile
+        assert set(image.build_args) <= image.declared_args, (
+            f"{service.name}: build args {set(image.build_args) - image.declared_args} are unused"
+        )
+        package = image.build_args.get("PACKAGE", "")
+        assert package in members, f"{service.name}: PACKAGE={package!r} is no workspace member"
+        command = shlex.split(image.build_args.get("COMMAND", ""))
+        if command[:2] == ["python", "-m"]:
+            assert _distribution_of(command[2])[0] == package, (
+                f"{service.name}: {command[2]} is not in {package}"
+            )
+        else:
+            scripts = members[package].get("scripts", {})
+            assert command[0] in scripts, f"{service.name}: {package} installs no {command[0]}"
+            module = scripts[command[0]].split(":")[0]
+            assert module == service.spec.module, service.name
 
 
 def _distribution_of(module: str) -> tuple[str, list[str]]:
@@ -293,6 +385,24 @@ def _synced_package(dockerfile: Dockerfile) -> str:
 
 
 # --- Dockerfiles --------------------------------------------------------------------------
+
+
+def test_dockerfile_without_build_args_is_refused() -> None:
+    """Without PACKAGE (build stage) or COMMAND (run stage) the build stops at that stage's
+    first step, with a message, instead of an image that runs nothing."""
+    bare = Dockerfile.read(DOCKERFILE)
+    given = Dockerfile.read(DOCKERFILE, {"PACKAGE": "wz-cli", "COMMAND": "wz"})
+    for stage in (0, -1):
+        assert bare.instructions("RUN", stage=stage)[0].startswith('test -n "" || ')
+        assert given.instructions("RUN", stage=stage)[0].startswith('test -n "wz')
+
+
+def test_the_per_service_dockerfiles_are_gone() -> None:
+    """One Dockerfile: one a service folder kept for itself would drift from it."""
+    found = [path for top in ("shared", "services", "cli", "eval", "deploy", "tests")
+             for path in (ROOT / top).rglob("*Dockerfile*")]  # fmt: skip
+    assert found == [DOCKERFILE]
+    assert not (ROOT / "Dockerfile").exists()
 
 
 def test_dockerfiles_are_multi_stage_non_root_and_locked(services: dict[str, Service]) -> None:
@@ -336,8 +446,10 @@ def _probe(service: Service) -> list[str]:
 
 
 def test_every_service_has_a_real_health_probe(services: dict[str, Service]) -> None:
-    """Each probe runs something that exists in the image and looks where the service is."""
+    """Each probe runs something that exists in the image and looks where the service is. The
+    image has no HEALTHCHECK of its own: compose's is the only one, so none can disagree."""
     for service in services.values():
+        assert not service.dockerfile.instructions("HEALTHCHECK"), service.name
         probe = _probe(service)
         assert probe[0] == "python", service.name
         if probe[1] == "-m":
@@ -350,10 +462,6 @@ def test_every_service_has_a_real_health_probe(services: dict[str, Service]) -> 
             max_age_s = float(probe[probe.index("--max-age-s") + 1])
             status_period_s = float(service.environment.get("WZ_STATUS_PERIOD_S", "1.0"))
             assert max_age_s >= 3 * status_period_s, f"{service.name}: a late status is unhealthy"
-            image_probe = service.dockerfile.instructions("HEALTHCHECK")
-            assert image_probe and json.loads(image_probe[-1].split("CMD", 1)[1]) == probe, (
-                f"{service.name}: the image's HEALTHCHECK and compose's differ"
-            )
         else:
             assert probe[1] == "-c", service.name
             compile(probe[2], f"<{service.name} healthcheck>", "exec")
@@ -512,11 +620,17 @@ def test_named_volumes_are_declared_and_writable_by_the_image_user(
     declared = set(compose.get("volumes", {}))
     for service in services.values():
         user = service.dockerfile.instructions("USER")[-1]
+        runs = " ".join(service.dockerfile.instructions("RUN"))
+        owned = {
+            folder
+            for owner, folders in re.findall(r"chown (\S+) ([^;&|]+)", runs)
+            if owner.split(":")[0] == user
+            for folder in folders.split()
+        }
         for volume, target in _named_volumes(service).items():
             assert volume in declared, f"{service.name}: volume {volume} is not declared"
-            runs = " ".join(service.dockerfile.instructions("RUN"))
-            assert re.search(rf"chown {re.escape(user)}\S* {re.escape(target)}(\s|$)", runs), (
-                f"{service.name}: {target} is not made {user}'s in the Dockerfile"
+            assert target in owned, (
+                f"{service.name}: {target} is not made {user}'s in the image (STATE_DIRS)"
             )
 
 
@@ -731,3 +845,14 @@ def test_regional_file_is_valid_compose_and_serves_every_site() -> None:
     unknown = [name for name in env if name not in READ_BY_LOGGING
                and not is_setting(name, GatewaySettings) and not is_setting(name, BusSettings)]
     assert unknown == []
+
+
+def test_regional_images_are_the_edge_box_images(services: dict[str, Service]) -> None:
+    """The centre's router and gateway are built as the edge box builds the images of the
+    same tag (deploy/Dockerfile, the same args): one tag, one image, whichever file built it."""
+    raw = interpolate(yaml.safe_load(REGIONAL_FILE.read_text(encoding="utf-8")), STAND_IN_ENV)
+    for name, config in raw["services"].items():
+        image = image_of(REGIONAL_FILE, name, config)
+        edge = services[name]
+        assert config["image"] == edge.config["image"], name
+        assert image.build_args == edge.dockerfile.build_args, name

@@ -42,7 +42,8 @@ __all__ = ["SITE", "batch", "make_track"]
 
 READ_KEY = "rk-4f9Qz7Lm2Xv8Tb3Nc6Wd1Ys5"
 ADMIN_KEY = "ak-8Hj2Kp5Rt9Uw3Ye6Za1Bc4Dq7"
-SPEC_DIR = Path(__file__).resolve().parents[3] / "shared" / "specs" / "wzdx-4.2"
+#: The WZDx 4.2 schemas (CC0), vendored: deploy/schemas/wzdx-4.2/README.md.
+SPEC_DIR = Path(__file__).resolve().parents[2] / "deploy" / "schemas" / "wzdx-4.2"
 
 
 def gateway_settings(tmp_path: Path, **overrides: Any) -> GatewaySettings:

@@ -1,7 +1,7 @@
 """Road-frame and WGS84 geometry of a site: pure numpy and pyproj, no I/O.
 
-Frames (see ARCHITECTURE.md, "Frames of reference")
----------------------------------------------------
+Frames (see docs/architecture.md, "Frames of reference and time")
+-----------------------------------------------------------------
 - Site frame: local ENU metres (x east, y north, z up) at the site's WGS84 origin.
 - Road frame: station ``s`` [m] along the centerline polyline, in the order of its vertices, and
   offset ``d`` [m] from it, positive to the left of the direction of travel.

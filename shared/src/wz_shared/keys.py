@@ -1,7 +1,7 @@
 """The key-expression registry: every Zenoh key of the stack, built from the site id.
 
 No service writes a key expression by hand; it asks :class:`Keys` for one. The layout follows
-ARCHITECTURE.md::
+docs/architecture.md, "Keys"::
 
     wz/<site>/raw/lidar/<sensor>      LiDAR frames           (ring)
     wz/<site>/raw/camera/<sensor>     camera frames (JPEG)   (ring)
