@@ -842,6 +842,27 @@ def test_a_vehicle_hidden_past_its_coast_resumes_its_id_when_it_comes_back() -> 
     assert ended.track_id == 1 and ended.stamps_s[-1] == pytest.approx(0.95)
 
 
+def test_the_hand_over_does_not_depend_on_duplicate_merging() -> None:
+    """With duplicate merging off (``merge_distance_m = 0``), a car hidden for 2.5 s (past
+    ``max_coast_s``, its track lost) that comes back 3 m ahead of its old track's prediction
+    still gets its id back: the hand-over is a step of its own. (It once ran only inside the
+    merging, so turning merging off turned it off too and the car came back as track 2.)"""
+    tracker = MultiTargetTracker(TrackerSettings(reorder_window_s=0.0, merge_distance_m=0.0),
+                                 heading_at=lambda x, y: 0.0)  # fmt: skip
+    cov = np.eye(2) * 1e-4
+    published: set[int] = set()
+    for k in range(int(6.5 / 0.05)):
+        t = 0.05 * k
+        hidden = 1.0 <= t < 3.5
+        jump = 3.0 if t >= 3.5 else 0.0
+        tracker.add(LIDAR, t, [] if hidden else [
+            Measurement(x_m=30.0 * t + jump, y_m=0.0, covariance_m2=cov)])  # fmt: skip
+        published |= {s.track_id for s in tracker.tracks() if s.status != "tentative"}
+    assert published == {1}
+    assert tracker.counters.tracks_resumed == 1 and tracker.counters.tracks_handed_over == 1
+    assert tracker.counters.tracks_merged == 0
+
+
 def test_a_vehicle_that_braked_while_hidden_keeps_its_id_and_an_impossible_one_does_not() -> None:
     """A car at 30 m/s brakes at 2.5 m/s^2 while hidden for 2 s (past ``max_coast_s``): it
     comes back 5 m/s slower and 5 m behind its old track's prediction, beyond the speed test
