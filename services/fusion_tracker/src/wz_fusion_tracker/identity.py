@@ -38,8 +38,8 @@ def reacquisitions(
     store: TrackStore, settings: TrackerSettings, slots: IntP, x_pred: F64, P_pred: F64, z: F64,
     pairs: Sequence[tuple[int, int]], stamp_s: float, time_offset_s: F64 | None,
 ) -> tuple[list[tuple[int, int]], F64]:  # fmt: skip
-    """Re-acquisition: take up a confirmed track that has missed updates with a measurement near it on the
-    road, outside its (by then overconfident) gate.
+    """Re-acquisition: a confirmed track that has missed updates takes up a measurement near
+    it on the road, outside its (by then overconfident) gate.
 
     A vehicle lost for a few tenths of a second (the LiDAR's blind spot under the mast, an
     occlusion) often comes back a couple of metres from its prediction: biased detections

@@ -212,8 +212,8 @@ class TrackTable:
         """Median measured length and width and the lengths' upper quartile of ``slots`` [m],
         shape (K, 3), NaN where not measured (the quartile: fewer than three lengths).
 
-        The upper quartile is what :meth:`~wz_fusion_tracker.tracker.MultiTargetTracker._reference_point` takes as the
-        track's length: a partial view only shortens a box.
+        The upper quartile is what the tracker's reference point takes as the track's length
+        (``MultiTargetTracker._reference_point``): a partial view only shortens a box.
         """
         stale = slots[self._sizes_stale[slots]]
         if len(stale):

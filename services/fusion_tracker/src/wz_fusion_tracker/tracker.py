@@ -638,7 +638,7 @@ class MultiTargetTracker:
         settings = self.settings
         sensor_id, stamp_s, measurements = batch.sensor_id, batch.stamp_s, batch.measurements
         speeds, time_offset_s = batch.speeds, batch.time_offset_s
-        table = self._store.table
+        table, bank = self._store.table, self._store.bank
         matched_slots = slots[rows]
         # the prior: each matched track predicted to the batch's stamp
         x_prior, P_prior = x_pred[rows], P_pred[rows]
@@ -675,13 +675,13 @@ class MultiTargetTracker:
                 # would drag the velocity by metres per second in one update.
                 # y = s - H x,  S = H P H^T + R,  kept when y^2 / S <= speed_gate_chi2.
                 speed_slots = matched_slots[speed_rows]
-                x_now, P_now = self._store.bank.states(speed_slots), self._store.bank.covariances(speed_slots)
+                x_now, P_now = bank.states(speed_slots), bank.covariances(speed_slots)
                 y = measured[:, 0] - np.einsum("mj,mj->m", H[:, 0, :], x_now)
                 S = np.einsum("mi,mij,mj->m", H[:, 0, :], P_now, H[:, 0, :]) + R_speed[:, 0, 0]
                 keep = y * y <= settings.speed_gate_chi2 * S
                 self._store.counters.speeds_rejected += int(np.count_nonzero(~keep))
                 if keep.any():
-                    self._store.bank.update(speed_slots[keep], measured[keep], R_speed[keep], H[keep])
+                    bank.update(speed_slots[keep], measured[keep], R_speed[keep], H[keep])
 
         # the hits: class vote, sizes, per-sensor stamps, all matched tracks at once
         columns_list = columns.tolist()  # Python ints index the measurements faster
@@ -698,7 +698,6 @@ class MultiTargetTracker:
         )  # fmt: skip
         # The batch's priors and posteriors, copied once (fancy indexing copies); each track's
         # history entry is this record and its row (not four views and an object per track).
-        bank = self._store.bank
         record: UpdateRecord = (stamp_s, x_prior, P_prior, bank.states(matched_slots),
                                 bank.covariances(matched_slots))  # fmt: skip
         for i, track in enumerate(tracks):
@@ -845,4 +844,5 @@ class MultiTargetTracker:
                 self._store.finished.append(track.to_history())
         if expired:
             gone = {t.track_id for t in expired}
-            self._store.local_ids = {k: v for k, v in self._store.local_ids.items() if v not in gone}
+            local_ids = self._store.local_ids
+            self._store.local_ids = {k: v for k, v in local_ids.items() if v not in gone}

@@ -161,15 +161,17 @@ class TrackerCounters:
     tracks_deleted: int = 0
     #: Deleted as the duplicate of an older track (:attr:`TrackerSettings.merge_distance_m`).
     tracks_merged: int = 0
-    #: Measurements that took up a track outside its gate (:func:`~wz_fusion_tracker.identity.reacquisitions`).
+    #: Measurements that took up a track outside its gate
+    #: (:func:`~wz_fusion_tracker.identity.reacquisitions`).
     tracks_reacquired: int = 0
-    #: Young tracks that handed their vehicle back to a coasting track (:func:`~wz_fusion_tracker.identity.hand_over`).
+    #: Young tracks that handed their vehicle back to a coasting track
+    #: (:func:`~wz_fusion_tracker.identity.hand_over`).
     tracks_handed_over: int = 0
     #: ... of which to a lost track (``lost_memory_s``), which then lived again.
     tracks_resumed: int = 0
-    #: Coasting or lost tracks ended by :func:`~wz_fusion_tracker.identity.hand_over` in favour of the young track that
-    #: took their vehicle up: its id was published already, or the old track slid across the
-    #: road (``hand_over_max_lateral_speed_mps``).
+    #: Coasting or lost tracks ended by :func:`~wz_fusion_tracker.identity.hand_over` in
+    #: favour of the young track that took their vehicle up: its id was published already, or
+    #: the old track slid across the road (``hand_over_max_lateral_speed_mps``).
     tracks_superseded: int = 0
     #: Unmatched measurements that started no track, being near a confirmed one
     #: (:attr:`TrackerSettings.spawn_gate_chi2`).
