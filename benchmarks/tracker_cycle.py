@@ -30,7 +30,9 @@ from typing import Any
 import numpy as np
 
 from wz_fusion_tracker.calibration import LateralBiasCorrector, load_bias_map
-from wz_fusion_tracker.tracker import Measurement, MultiTargetTracker, TrackerSettings
+from wz_fusion_tracker.settings import TrackerSettings
+from wz_fusion_tracker.tracker import MultiTargetTracker
+from wz_fusion_tracker.types import Measurement
 from wz_shared.site import DEFAULT_SITE_PATH, load_site
 
 VEHICLES = 200

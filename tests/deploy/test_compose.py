@@ -47,7 +47,7 @@ SETTINGS_CLASSES = {
     "simulator": "wz_simulator.settings:SimulatorSettings",
     "lidar-detector": "wz_lidar_detector.settings:LidarDetectorSettings",
     "camera-detector": "wz_camera_detector.settings:CameraDetectorSettings",
-    "fusion-tracker": "wz_fusion_tracker.node:FusionTrackerSettings",
+    "fusion-tracker": "wz_fusion_tracker.settings:FusionTrackerSettings",
     "alert-service": "wz_alert_service.node:AlertServiceSettings",
     "gateway": "wz_gateway.settings:GatewaySettings",
     "drivers": "wz_drivers.node:DriversSettings",

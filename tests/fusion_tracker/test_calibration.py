@@ -22,8 +22,9 @@ from wz_fusion_tracker.calibration import (
     load_bias_map,
     write_bias_map,
 )
-from wz_fusion_tracker.node import FusionCore, FusionTrackerSettings
-from wz_fusion_tracker.tracker import Measurement
+from wz_fusion_tracker.node import FusionCore
+from wz_fusion_tracker.settings import FusionTrackerSettings
+from wz_fusion_tracker.types import Measurement
 from wz_shared.messages import Detection, DetectionBatch, TrackBatch
 from wz_shared.site import DEFAULT_SITE_PATH, load_site
 

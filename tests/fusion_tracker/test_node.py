@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wz_fusion_tracker.node import FusionCore, FusionTrackerSettings
+from wz_fusion_tracker.node import FusionCore
+from wz_fusion_tracker.settings import FusionTrackerSettings
 from wz_shared.bus import Bus
 from wz_shared.messages import (
     Detection,

@@ -11,25 +11,25 @@ import math
 from collections import defaultdict
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
+from types import ModuleType
 
 import numpy as np
 import pytest
 
 from tests.purity import top_level_imports
+from wz_fusion_tracker import association, identity, track_table, types
 from wz_fusion_tracker import tracker as tracker_module
-from wz_fusion_tracker.kalman import ProcessNoise
-from wz_fusion_tracker.smoothing import history_segments, rts_smooth, smooth_history
-from wz_fusion_tracker.tracker import (
-    Measurement,
-    MultiTargetTracker,
-    TrackerCounters,
-    TrackerSettings,
-    TrackState,
+from wz_fusion_tracker.association import (
     association_cost,
     cascade_assign,
     gnn_assign,
     mahalanobis_squared,
 )
+from wz_fusion_tracker.kalman import ProcessNoise
+from wz_fusion_tracker.settings import TrackerSettings
+from wz_fusion_tracker.smoothing import history_segments, rts_smooth, smooth_history
+from wz_fusion_tracker.tracker import MultiTargetTracker
+from wz_fusion_tracker.types import Measurement, TrackerCounters, TrackState
 
 LIDAR, CAMERA = "lidar-mast", "camera-mast"
 LIDAR_STD_M = 0.2
@@ -127,8 +127,11 @@ def ids_by_vehicle(
     return ids
 
 
-def test_core_imports_no_io_library() -> None:
-    assert top_level_imports(tracker_module).isdisjoint(
+@pytest.mark.parametrize(
+    "module", [tracker_module, association, identity, track_table, types], ids=lambda m: m.__name__
+)
+def test_core_imports_no_io_library(module: ModuleType) -> None:
+    assert top_level_imports(module).isdisjoint(
         {"zenoh", "fastapi", "uvicorn", "requests", "io", "wz_shared"}
     )
 
@@ -175,7 +178,7 @@ def test_the_pre_gate_of_many_pairs_loses_no_pair_within_its_bound(with_offsets:
     R = B @ B.transpose(0, 2, 1) + 0.04 * np.eye(2)
     offsets = rng.uniform(-0.1, 0.1, n_meas) if with_offsets else None
     for max_d2 in (13.8, 60.0, 1e3):
-        d2, log_det = tracker_module.innovation_statistics(x, P, z, R, offsets, max_d2)
+        d2, log_det = association.innovation_statistics(x, P, z, R, offsets, max_d2)
         # the same, 5 x 56 = 280 pairs at a time: below 2000, every pair computed
         exact_d2 = np.empty_like(d2)
         exact_log_det = np.empty_like(d2)
@@ -183,7 +186,7 @@ def test_the_pre_gate_of_many_pairs_loses_no_pair_within_its_bound(with_offsets:
             for mlo in range(0, n_meas, 56):
                 block = slice(lo, lo + 5), slice(mlo, mlo + 56)
                 b_off = None if offsets is None else offsets[mlo:mlo + 56]
-                exact_d2[block], exact_log_det[block] = tracker_module.innovation_statistics(
+                exact_d2[block], exact_log_det[block] = association.innovation_statistics(
                     x[lo:lo + 5], P[lo:lo + 5], z[mlo:mlo + 56], R[mlo:mlo + 56], b_off)
         within = exact_d2 <= max_d2
         assert within.any() and (~within).any()
@@ -191,7 +194,7 @@ def test_the_pre_gate_of_many_pairs_loses_no_pair_within_its_bound(with_offsets:
         np.testing.assert_allclose(log_det[within], exact_log_det[within], rtol=1e-12, atol=1e-12)
         assert np.all(d2[~within] > max_d2)
         # and it does prune: most pairs beyond the bound were never computed
-        assert np.count_nonzero(d2 == tracker_module._FAR_D2) > 0.8 * np.count_nonzero(~within)
+        assert np.count_nonzero(d2 == association._FAR_D2) > 0.8 * np.count_nonzero(~within)
 
 
 def test_gnn_is_globally_optimal_and_gated() -> None:
@@ -837,6 +840,27 @@ def test_a_vehicle_hidden_past_its_coast_resumes_its_id_when_it_comes_back() -> 
     assert published[-1] == {2} and tracker.counters.tracks_resumed == 0
     (ended,) = tracker.pop_finished_histories()
     assert ended.track_id == 1 and ended.stamps_s[-1] == pytest.approx(0.95)
+
+
+def test_the_hand_over_does_not_depend_on_duplicate_merging() -> None:
+    """With duplicate merging off (``merge_distance_m = 0``), a car hidden for 2.5 s (past
+    ``max_coast_s``, its track lost) that comes back 3 m ahead of its old track's prediction
+    still gets its id back: the hand-over is a step of its own. (It once ran only inside the
+    merging, so turning merging off turned it off too and the car came back as track 2.)"""
+    tracker = MultiTargetTracker(TrackerSettings(reorder_window_s=0.0, merge_distance_m=0.0),
+                                 heading_at=lambda x, y: 0.0)  # fmt: skip
+    cov = np.eye(2) * 1e-4
+    published: set[int] = set()
+    for k in range(int(6.5 / 0.05)):
+        t = 0.05 * k
+        hidden = 1.0 <= t < 3.5
+        jump = 3.0 if t >= 3.5 else 0.0
+        tracker.add(LIDAR, t, [] if hidden else [
+            Measurement(x_m=30.0 * t + jump, y_m=0.0, covariance_m2=cov)])  # fmt: skip
+        published |= {s.track_id for s in tracker.tracks() if s.status != "tentative"}
+    assert published == {1}
+    assert tracker.counters.tracks_resumed == 1 and tracker.counters.tracks_handed_over == 1
+    assert tracker.counters.tracks_merged == 0
 
 
 def test_a_vehicle_that_braked_while_hidden_keeps_its_id_and_an_impossible_one_does_not() -> None:

@@ -51,7 +51,8 @@ from wz_fusion_tracker.node import (
     sensor_positions,
     to_measurements,
 )
-from wz_fusion_tracker.tracker import MultiTargetTracker, TrackerSettings
+from wz_fusion_tracker.settings import TrackerSettings
+from wz_fusion_tracker.tracker import MultiTargetTracker
 from wz_lidar_detector.node import LidarDetector
 from wz_lidar_detector.settings import LidarDetectorSettings
 from wz_shared.logs import configure_logging

@@ -99,13 +99,10 @@ from wz_fusion_tracker.paper import (
     PaperFusionSettings,
     run_paper_pipeline,
 )
+from wz_fusion_tracker.settings import TrackerSettings
 from wz_fusion_tracker.smoothing import smooth_history
-from wz_fusion_tracker.tracker import (
-    MultiTargetTracker,
-    TrackerSettings,
-    TrackHistory,
-    TrackState,
-)
+from wz_fusion_tracker.tracker import MultiTargetTracker
+from wz_fusion_tracker.types import TrackHistory, TrackState
 from wz_gateway.smoothing import rts_smooth as gateway_rts_smooth
 from wz_lidar_detector.settings import lidar_mount
 from wz_shared.logs import configure_logging

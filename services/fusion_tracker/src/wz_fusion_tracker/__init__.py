@@ -6,7 +6,10 @@ The pure core, no I/O:
   process noise) and the Kalman filter as functions, one filter, and a vectorised bank;
 * :mod:`wz_fusion_tracker.paper`: the paper's method (per-sensor smoothing, nearest matching,
   sequential camera-then-LiDAR updates, the simple-average baseline) for reruns;
-* :mod:`wz_fusion_tracker.tracker`: the product's multi-target tracker (reorder window,
-  Mahalanobis gating, global nearest neighbour, life cycle);
+* the product's multi-target tracker: :mod:`wz_fusion_tracker.tracker` (reorder window and
+  cycle), :mod:`~wz_fusion_tracker.settings`, :mod:`~wz_fusion_tracker.types`,
+  :mod:`~wz_fusion_tracker.association` (gating, global nearest neighbour),
+  :mod:`~wz_fusion_tracker.track_table` (bookkeeping), :mod:`~wz_fusion_tracker.identity`
+  (re-acquisition, hand-over, merging);
 * :mod:`wz_fusion_tracker.smoothing`: RTS smoothing of a stored track history.
 """

@@ -38,7 +38,7 @@ from typing import Annotated
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from wz_fusion_tracker.tracker import Measurement
+from wz_fusion_tracker.types import Measurement
 from wz_shared.site import Site
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]

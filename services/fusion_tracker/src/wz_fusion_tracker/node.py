@@ -37,16 +37,15 @@ import logging
 import math
 import time
 from collections.abc import Callable
-from pathlib import Path
-from typing import Annotated
 
 import numpy as np
-from pydantic import Field, ValidationError
-from pydantic_settings import SettingsConfigDict
+from pydantic import ValidationError
 
 from wz_fusion_tracker.calibration import BiasMapError, LateralBiasCorrector, load_bias_map
 from wz_fusion_tracker.kalman import F64
-from wz_fusion_tracker.tracker import Measurement, MultiTargetTracker, TrackerSettings, TrackState
+from wz_fusion_tracker.settings import FusionTrackerSettings
+from wz_fusion_tracker.tracker import MultiTargetTracker
+from wz_fusion_tracker.types import Measurement, TrackState
 from wz_shared.codec import encode_json
 from wz_shared.logs import configure_logging
 from wz_shared.messages import (
@@ -57,32 +56,13 @@ from wz_shared.messages import (
     VehicleClass,
 )
 from wz_shared.service import ServiceRuntime
-from wz_shared.settings import BusSettings, ServiceSettings
+from wz_shared.settings import BusSettings
 from wz_shared.site import Site, load_site
 from wz_shared.timebase import RunWatch, SimClock
 
 SERVICE = "fusion-tracker"
 log = logging.getLogger("wz_fusion_tracker.node")
 Report = Callable[[str, str], None]
-
-
-class FusionTrackerSettings(ServiceSettings):
-    """The node's settings; the tracker's own under ``tracker`` (``WZ_FUSION_TRACKER__*``)."""
-
-    model_config = SettingsConfigDict(
-        env_prefix="WZ_FUSION_", extra="ignore", env_nested_delimiter="__"
-    )
-
-    #: Data time between two published track batches [s].
-    output_period_s: Annotated[float, Field(gt=0.0, le=10.0)] = 0.1
-    #: Publish tentative tracks too (default: confirmed and coasting only).
-    publish_tentative: bool = False
-    #: With no batch for this long (wall time), the tracker's clock moves on by itself [s].
-    idle_advance_after_s: Annotated[float, Field(gt=0.0)] = 0.5
-    #: A bias map (:mod:`wz_fusion_tracker.calibration`, JSON) of this site: each sensor's
-    #: calibrated lateral bias is removed from its detections. None: none removed.
-    bias_map: Path | None = None
-    tracker: TrackerSettings = Field(default_factory=TrackerSettings)
 
 
 def road_heading_hook(site: Site) -> Callable[[float, float], float]:

@@ -1,0 +1,307 @@
+"""Identity: the steps that keep a vehicle's track id through gaps, duplicates and hand-overs.
+
+Each step works on the :class:`~wz_fusion_tracker.track_table.TrackStore` at a batch's stamp;
+the tracker's cycle calls them in this order:
+
+- :func:`reacquisitions` (after the update): a confirmed track that missed a few updates takes
+  up an unmatched measurement near it on the road, outside its gate;
+- :func:`hand_over` (every :data:`IDENTITY_PERIOD_S`): a young track that took up a coasting
+  or lost track's vehicle hands its state to the old track, so the vehicle keeps its old id;
+- :func:`merge_duplicates` (right after): of two tracks that are one vehicle, the younger goes;
+- :func:`retire`: how the hand-over and the merging end a track in favour of another.
+
+A confirmed track past its coast is deleted by the tracker's prune but kept *lost* for
+``lost_memory_s`` (not published, taking no measurement): the hand-over may resume it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import numpy.typing as npt
+
+from wz_fusion_tracker.association import gnn_assign
+from wz_fusion_tracker.kalman import F64
+from wz_fusion_tracker.settings import TrackerSettings
+from wz_fusion_tracker.track_table import Track, TrackStore
+from wz_fusion_tracker.types import IntP
+
+#: The hand-over and duplicate merging run at most this often (data time) [s].
+IDENTITY_PERIOD_S = 0.1
+#: A track confirmed this long ago [s] has been in a published snapshot (the node publishes
+#: at 10 Hz): see :func:`hand_over`.
+_PUBLISHED_AFTER_S = 0.1
+
+
+def reacquisitions(
+    store: TrackStore, settings: TrackerSettings, slots: IntP, x_pred: F64, P_pred: F64, z: F64,
+    pairs: Sequence[tuple[int, int]], stamp_s: float, time_offset_s: F64 | None,
+) -> tuple[list[tuple[int, int]], F64]:  # fmt: skip
+    """Re-acquisition: a confirmed track that has missed updates takes up a measurement near
+    it on the road, outside its (by then overconfident) gate.
+
+    A vehicle lost for a few tenths of a second (the LiDAR's blind spot under the mast, an
+    occlusion) often comes back a couple of metres from its prediction: biased detections
+    before the gap bent its velocity. Rather than start a second track, a measurement left
+    unmatched within ``reacquire_along_m`` along and ``reacquire_across_m`` across the
+    track's direction updates it, its prior widened by the innovation ``y``
+    (``P_pos += y y^T``, ``P_vel += y y^T / gap^2``) so the update can follow.
+
+    Parameters
+    ----------
+    slots, x_pred, P_pred
+        The live tracks' slots (T,) and predicted states (T, 4) and covariances (T, 4, 4).
+    z
+        The batch's measured positions (M, 2) [m].
+    pairs
+        The (track row, measurement column) pairs the association matched.
+    time_offset_s
+        Each measurement's capture time after the stamp (M,) [s], or None for all zero.
+
+    Returns
+    -------
+    new_pairs, P_wide
+        The (track row, measurement column) pairs re-acquired, and ``P_pred`` with their
+        priors widened: the caller updates those tracks with them.
+    """
+    table = store.table
+    waiting = table.confirmed[slots] & (
+        stamp_s - table.updated_s[slots] >= settings.reacquire_after_s)  # fmt: skip
+    free = np.ones(len(z), dtype=bool)
+    if pairs:
+        matched_rows, matched_columns = zip(*pairs, strict=True)
+        waiting[list(matched_rows)] = False
+        free[list(matched_columns)] = False
+    rows, columns = np.flatnonzero(waiting), np.flatnonzero(free)
+    if len(rows) == 0 or len(columns) == 0:
+        return [], P_pred
+    delta = time_offset_s[columns] if time_offset_s is not None else np.zeros(len(columns))
+    xr = x_pred[rows]
+    y = z[columns][None, :, :] - (xr[:, None, :2] + xr[:, None, 2:] * delta[None, :, None])
+    speed = np.hypot(xr[:, 2], xr[:, 3])
+    heading = table.heading_rad[slots[rows]]
+    own = np.arctan2(xr[:, 3], xr[:, 2])
+    heading = np.where(np.isfinite(heading) & (speed <= settings.heading_min_speed_mps),
+                       heading, own)  # fmt: skip
+    u = np.stack([np.cos(heading), np.sin(heading)], axis=1)
+    along = np.einsum("tmi,ti->tm", y, u)
+    across = y[..., 1] * u[:, None, 0] - y[..., 0] * u[:, None, 1]
+    allowed = (np.abs(along) <= settings.reacquire_along_m) & (
+        np.abs(across) <= settings.reacquire_across_m)  # fmt: skip
+    if not allowed.any():
+        return [], P_pred
+    found = gnn_assign(np.hypot(along, across), allowed)
+    if not found:
+        return [], P_pred
+    new_pairs = [(int(rows[r]), int(columns[c])) for r, c in found]
+    P_wide = P_pred.copy()
+    for (row, _column), (r, c) in zip(new_pairs, found, strict=True):
+        gap_s = max(stamp_s - float(table.updated_s[slots[row]]), 0.1)
+        outer = np.outer(y[r, c], y[r, c])
+        P_wide[row, :2, :2] += outer
+        P_wide[row, 2:, 2:] += outer / gap_s**2
+    store.counters.tracks_reacquired += len(new_pairs)
+    return new_pairs, P_wide
+
+
+
+def hand_over(store: TrackStore, settings: TrackerSettings, stamp_s: float) -> None:
+    """Hand-over: a young track that took up a coasting track's vehicle hands its state to it.
+
+    When a vehicle comes back too far from its coasting track's prediction even for
+    :func:`reacquisitions` (a long gap, a bent velocity), a new track starts on it. While the
+    new track is young (``hand_over_age_s``) and the old one coasts just behind or ahead of
+    it (``hand_over_along_m``, ``hand_over_across_m``: the same lane or the next), moving alike
+    (or at a speed and place that braking or speeding up while unseen explains:
+    :func:`_speed_change_explains`), and the new one was updated after the old one last
+    was, they are one vehicle: the old track takes the new one's state and the new one
+    goes, so the vehicle keeps its identity.
+    The old track is predicted along the road at its speed there, its offset across the
+    road held, so the lane test measures from where the vehicle was last seen.
+    The old track may also be a lost one (past its coast, within ``lost_memory_s``): it
+    lives again. An old track sliding across the road (``hand_over_max_lateral_speed_mps``)
+    is no vehicle's: it ends, and the young track carries on. The hand-over runs every
+    ``IDENTITY_PERIOD_S``, so it usually comes while the new track is still tentative, and
+    the new id is never published. When the new track
+    was confirmed ``_PUBLISHED_AFTER_S`` ago or more (its id published: it started while the
+    old one was still being updated, a duplicate that took the vehicle over), the vehicle
+    keeps the new id and the old track ends: handing it back would change the vehicle's id
+    twice.
+    """
+    table = store.table
+    if settings.hand_over_along_m <= 0.0 or len(store.tracks) + len(store.lost) < 2:
+        return
+    live, slots = store.live()
+    updated_s = table.updated_s[slots]
+    waiting = table.confirmed[slots] & (stamp_s - updated_s >= settings.reacquire_after_s)
+    coasting = [live[i] for i in np.flatnonzero(waiting).tolist()]
+    coasting += store.lost.values()
+    born_s = table.born_s[slots]
+    is_young = (stamp_s - born_s <= settings.hand_over_age_s) & (updated_s > born_s)
+    young = [live[i] for i in np.flatnonzero(is_young).tolist()]
+    if not coasting or not young:
+        return
+    old_slots = np.array([t.slot for t in coasting], dtype=np.intp)
+    new_slots = np.array([t.slot for t in young], dtype=np.intp)
+    x_old = store.bank.states(old_slots)
+    heading = table.heading_rad[old_slots]
+    heading = np.where(np.isfinite(heading), heading, np.arctan2(x_old[:, 3], x_old[:, 2]))
+    u = np.stack([np.cos(heading), np.sin(heading)], axis=1)
+    # The old track is predicted along the road (its speed along the road's heading, its
+    # offset across held): seconds of a lateral velocity carried forward would put it off
+    # the road. A vehicle that changed lanes while hidden (a late merge behind a truck)
+    # comes back one lane over from where it was last seen, not from that drift.
+    along_speed = np.einsum("ok,ok->o", x_old[:, 2:], u)
+    x_old[:, :2] += u * (along_speed * (stamp_s - store.bank.stamps_s(old_slots)))[:, None]
+    x_new = store.bank.states(new_slots)
+    x_new[:, :2] += x_new[:, 2:] * (stamp_s - store.bank.stamps_s(new_slots))[:, None]
+    d = x_new[None, :, :2] - x_old[:, None, :2]  # (old, new, 2)
+    along = np.einsum("onk,ok->on", d, u)
+    across = d[..., 1] * u[:, None, 0] - d[..., 0] * u[:, None, 1]
+    dv = np.hypot(x_new[None, :, 2] - x_old[:, None, 2], x_new[None, :, 3] - x_old[:, None, 3])
+    # The young track must have taken the vehicle up: updated after the old one last was.
+    # A stray young track (a box split off a truck's trailer, 7 m behind it) whose last
+    # update is older than the coasting track's is not its vehicle come back.
+    took_up = table.updated_s[new_slots][None, :] > table.updated_s[old_slots][:, None]
+    alike = dv < settings.merge_velocity_difference_mps
+    if settings.hand_over_max_accel_mps2 > 0.0:
+        alike |= _speed_change_explains(
+            settings, along, np.einsum("onk,ok->on", x_new[None, :, 2:] - x_old[:, None, 2:], u),
+            stamp_s - table.updated_s[old_slots],
+            table.born_s[new_slots][None, :] > table.updated_s[old_slots][:, None])  # fmt: skip
+    sliding = np.abs(x_old[:, 3] * u[:, 0] - x_old[:, 2] * u[:, 1]) > (
+        settings.hand_over_max_lateral_speed_mps)  # fmt: skip
+    allowed = ((np.abs(along) <= settings.hand_over_along_m)
+               & (np.abs(across) <= settings.hand_over_across_m)
+               & alike & took_up)  # fmt: skip
+    if not allowed.any():
+        return
+    resumed = False
+    for row, column in gnn_assign(np.abs(along) + np.abs(across), allowed):
+        old, new = coasting[row], young[column]
+        if new.track_id not in store.tracks:
+            continue
+        published = stamp_s - table.confirmed_s[new.slot] >= _PUBLISHED_AFTER_S  # NaN: no
+        if published or sliding[row]:
+            # The young id is published already: giving the vehicle its old id back would
+            # rename it a second time. Or the old track slides across the road, no
+            # vehicle's. The young track keeps the vehicle; the old one ends.
+            if retire(store, old, successor_id=new.track_id):
+                store.counters.tracks_superseded += 1
+            continue
+        if old.track_id in store.lost:
+            store.tracks[old.track_id] = store.lost.pop(old.track_id)
+            store.counters.tracks_resumed += 1
+            resumed = True
+        elif old.track_id not in store.tracks:
+            continue
+        store.bank.copy_slot(new.slot, old.slot)
+        table.absorb(old.slot, new.slot)
+        old.history.extend(new.history)
+        del store.tracks[new.track_id]
+        store.changed()
+        store.bank.remove(new.slot)
+        store.counters.tracks_deleted += 1
+        store.counters.tracks_handed_over += 1
+        store.local_ids = {k: (old.track_id if v == new.track_id else v)
+                           for k, v in store.local_ids.items()}  # fmt: skip
+    if resumed:  # back in id order
+        store.tracks = dict(sorted(store.tracks.items()))
+        store.changed()
+
+
+
+def retire(store: TrackStore, track: Track, successor_id: int) -> bool:
+    """Retirement: end ``track`` (live or lost) now, in favour of track ``successor_id`` that
+    follows its vehicle from here on; False if it is gone already.
+
+    Its history is handed out if it was confirmed (its trajectory ends here), and its sensors'
+    local ids are handed to the successor, so a sensor that goes on tracking the vehicle under
+    the same local id keeps pointing at the vehicle's track.
+    """
+    if track.track_id in store.lost:
+        del store.lost[track.track_id]
+    elif track.track_id in store.tracks:
+        del store.tracks[track.track_id]
+        store.changed()
+        store.counters.tracks_deleted += 1
+    else:
+        return False
+    store.bank.remove(track.slot)
+    if store.table.confirmed[track.slot]:
+        store.finished.append(track.to_history())
+    store.local_ids = {k: (successor_id if v == track.track_id else v)
+                       for k, v in store.local_ids.items()}  # fmt: skip
+    return True
+
+
+
+def _speed_change_explains(settings: TrackerSettings, along: F64, dv_along: F64, unseen_s: F64,
+                           started_after: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:  # fmt: skip
+    """Which (old, new) pairs a change of speed while unseen explains, shape (O, N).
+
+    ``along``: the young track ahead of the old one's constant-velocity prediction [m];
+    ``dv_along``: its velocity minus the old one's, along the old one's heading [m/s];
+    ``unseen_s`` (O,): time since the old track's last update. With the acceleration at
+    most ``a`` in size and of one sign, the vehicle's speed changed by ``dv`` in
+    ``|dv| / a`` at least, so ``|dv| <= a T``, and the young track is displaced in the
+    direction of ``dv`` by between ``dv^2 / (2 a)`` and ``|dv| T - dv^2 / (2 a)``."""
+    a, slack = settings.hand_over_max_accel_mps2, settings.hand_over_kinematic_slack_m
+    change = np.abs(dv_along)
+    shift = np.sign(dv_along) * along  # displacement in the direction of the change
+    least = change**2 / (2.0 * a)
+    most = change * unseen_s[:, None] - least
+    return (started_after & (change <= a * unseen_s[:, None])
+            & (shift >= least - slack) & (shift <= most + slack))  # fmt: skip
+
+
+
+def merge_duplicates(store: TrackStore, settings: TrackerSettings, stamp_s: float) -> None:
+    """Duplicate merging: two live tracks closer than ``merge_distance_m``, their velocities
+    within ``merge_velocity_difference_mps``, are one vehicle tracked twice (a sensor's biased
+    detection that missed the gate started a second track); the younger is retired.
+
+    Adjacent lanes are 3.6 m apart and a following car is at least ~5 m behind, so no two
+    vehicles are that close. The older track (more updates; then the lower id) keeps the
+    identity; the other is removed as if expired, its sensor local ids handed to the survivor.
+    """
+    if settings.merge_distance_m <= 0.0 or len(store.tracks) < 2:
+        return
+    live, slots = store.live()
+    x = store.bank.states(slots)
+    dt = stamp_s - store.bank.stamps_s(slots)
+    x[:, :2] += x[:, 2:] * dt[:, None]  # positions at the stamp (constant velocity)
+    # Sorted along x, a duplicate is within merge_distance_m in x: the candidates of the
+    # i-th are the next ones up to hi[i] (exclusive). The close pairs are collected as index
+    # arrays; a (T, T) matrix only when there are any.
+    order_x = np.argsort(x[:, 0])
+    xs = x[order_x, 0]
+    n = len(live)
+    counts = np.searchsorted(xs, xs + settings.merge_distance_m, side="left") - np.arange(n) - 1
+    first = np.repeat(np.arange(n), counts)
+    # the k-th candidate of i is i + k + 1
+    second = first + np.arange(len(first)) - np.repeat(np.cumsum(counts) - counts, counts) + 1
+    a, b = order_x[first], order_x[second]
+    near = np.hypot(x[a, 0] - x[b, 0], x[a, 1] - x[b, 1]) < settings.merge_distance_m
+    pairs_i, pairs_j = a[near], b[near]
+    slow = np.hypot(x[pairs_i, 2] - x[pairs_j, 2], x[pairs_i, 3] - x[pairs_j, 3]) >= (
+        settings.merge_velocity_difference_mps)  # fmt: skip
+    pairs_i, pairs_j = pairs_i[~slow], pairs_j[~slow]
+    if not len(pairs_i):
+        return
+    close = np.zeros((len(live), len(live)), dtype=bool)
+    close[pairs_i, pairs_j] = close[pairs_j, pairs_i] = True
+    hits = store.table.hits[slots].tolist()
+    order = sorted(range(len(live)), key=lambda i: (-hits[i], live[i].track_id))
+    removed: dict[int, int] = {}  # removed track id -> survivor id
+    for i in order:
+        if live[i].track_id in removed:
+            continue
+        for j in np.flatnonzero(close[i]):
+            other = live[int(j)]
+            if other.track_id not in removed and other.track_id != live[i].track_id:
+                removed[other.track_id] = live[i].track_id
+    for track_id, survivor in removed.items():
+        retire(store, store.tracks[track_id], successor_id=survivor)
+        store.counters.tracks_merged += 1
