@@ -6,7 +6,8 @@ from __future__ import annotations
 import pytest
 
 from tests.alert_service.helpers import SITE, batch, make_track, stamps
-from wz_alert_service.node import AlertCore, AlertOutputs, AlertServiceSettings
+from wz_alert_service.node import AlertCore, AlertOutputs
+from wz_alert_service.settings import AlertServiceSettings
 from wz_shared import codec
 from wz_shared.messages import ActiveAlerts, Alert, AlertType, TrackBatch
 from wz_shared.site import MPH_TO_MPS

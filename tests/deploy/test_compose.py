@@ -48,9 +48,9 @@ SETTINGS_CLASSES = {
     "lidar-detector": "wz_lidar_detector.settings:LidarDetectorSettings",
     "camera-detector": "wz_camera_detector.settings:CameraDetectorSettings",
     "fusion-tracker": "wz_fusion_tracker.settings:FusionTrackerSettings",
-    "alert-service": "wz_alert_service.node:AlertServiceSettings",
+    "alert-service": "wz_alert_service.settings:AlertServiceSettings",
     "gateway": "wz_gateway.settings:GatewaySettings",
-    "drivers": "wz_drivers.node:DriversSettings",
+    "drivers": "wz_drivers.settings:DriversSettings",
 }
 
 #: Users that are root inside a container.

@@ -4,6 +4,7 @@ counted and the node alive."""
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import signal
@@ -164,23 +165,26 @@ def test_node_process_tracks_two_sensors_and_survives_bad_input(port: int) -> No
             (latest,) = bus.query(bus.keys.tracks_latest, TrackBatch)
             assert latest.stamp >= last.stamp
 
-            def counted(reason: str) -> None:
+            def counted(reason: str, times: int = 1) -> None:
                 name = f"{bus.keys.detections_all}|{reason}"
                 deadline = time.monotonic() + 20.0
                 while time.monotonic() < deadline:
                     message = status.recv(0.5)
-                    if message is not None and message.invalid_counts.get(name, 0) >= 1:
+                    if message is not None and message.invalid_counts.get(name, 0) >= times:
                         return
                 pytest.fail(f"{name} never counted")
 
-            lidar.put(batch("lidar-mast", 100, 3.05, rng, 0.2, covariance=[1.0, 0.0, 0.0, -1.0]))
-            counted("bad_detection")
+            # A covariance that is not one: the bus refuses the batch (Covariance2 checks it).
+            bad = batch("lidar-mast", 100, 3.05, rng, 0.2).model_dump(mode="json")
+            bad["detections"][0]["covariance_m2"] = [1.0, 0.0, 0.0, -1.0]
+            lidar.put_bytes(json.dumps(bad).encode())
+            counted("invalid")
             lidar.put(batch("lidar-mast", 101, 3.1, rng, 0.2, site="elsewhere"))
             counted("wrong_site")
             lidar.put(batch("lidar-mast", 5, 0.25, rng, 0.2))  # long past the reorder window
             counted("late")
             lidar.put_bytes(b'{"kind": "detection_batch", "detections": "garbage"}')
-            counted("invalid")
+            counted("invalid", times=2)
             # Still tracking. The wall time spent above moved the tracker's clock on (no
             # detections came): within max_outage_coast_s of data time the tracks coasted
             # through the silence and keep their ids; beyond it they ended and the vehicles get

@@ -29,6 +29,10 @@ finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
 
 
 IDENT = st.from_regex(r"[A-Za-z0-9][A-Za-z0-9_.:-]{0,20}", fullmatch=True)
+#: A 2x2 covariance (Covariance2 must be symmetric positive definite): variances, correlation.
+COVARIANCE2 = st.tuples(st.floats(1e-3, 1e6), st.floats(1e-3, 1e6), st.floats(-0.99, 0.99)).map(
+    lambda v: [v[0], v[2] * (v[0] * v[1]) ** 0.5, v[2] * (v[0] * v[1]) ** 0.5, v[1]]
+)
 
 
 def _has_pattern(annotation: object) -> bool:
@@ -48,6 +52,8 @@ def _strategy_for(cls: type[BaseModel]) -> st.SearchStrategy[BaseModel]:
             continue
         if any(getattr(meta, "pattern", None) for meta in field.metadata):
             overrides[name] = IDENT
+        elif name == "covariance_m2":
+            overrides[name] = COVARIANCE2
         elif isinstance(field.annotation, type) and issubclass(field.annotation, BaseModel):
             overrides[name] = _strategy_for(field.annotation)
         elif get_origin(field.annotation) is list:

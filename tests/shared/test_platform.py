@@ -19,7 +19,7 @@ from wz_shared.keys import Keys, site_of_key
 from wz_shared.logs import JsonFormatter, configure_logging
 from wz_shared.messages import Alert
 from wz_shared.settings import BusSettings
-from wz_shared.timebase import Pacer, RunWatch, SimClock
+from wz_shared.timebase import NEW_RUN_STEP_BACK_S, Pacer, RunWatch, SimClock, stamp_went_back
 
 ROOT = Path(__file__).resolve().parents[2]
 ALERT = next(m for m in json_samples() if isinstance(m, Alert))
@@ -177,6 +177,19 @@ def test_run_watch_tells_a_new_run_from_a_stray_late_message() -> None:
     watch.observe(50.0)
     assert [watch.observe(t) for t in (5.0, 4.0, 3.0, 2.0)] == ["behind"] * 4
     assert watch.newest_s == 50.0
+
+
+def test_stamp_went_back_is_runwatchs_step_back() -> None:
+    """One test of "the stamps went back", the gateway's (one stamp) and RunWatch's alike."""
+    assert not stamp_went_back(None, 0.0)  # nothing yet
+    assert not stamp_went_back(10.0, 10.0 - NEW_RUN_STEP_BACK_S)  # at the step: late only
+    assert stamp_went_back(10.0, 8.9)
+    assert not stamp_went_back(10.0, 11.0)
+    assert stamp_went_back(10.0, 9.4, step_back_s=0.5)
+    for stamp in (9.0, 8.99):
+        watch = RunWatch(confirm=1)
+        watch.observe(10.0)
+        assert (watch.observe(stamp) == "new_run") == stamp_went_back(10.0, stamp)
 
 
 def test_pacer_holds_simulation_to_a_multiple_of_real_time() -> None:

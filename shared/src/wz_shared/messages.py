@@ -10,10 +10,11 @@ JSON, then the raw bytes (see :mod:`wz_shared.codec`). Everything else travels a
 
 from __future__ import annotations
 
+import math
 from enum import StrEnum
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 
 SCHEMA_VERSION: Literal[1] = 1
 
@@ -21,8 +22,45 @@ FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 NonNegFloat = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
 PosFloat = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
 Identifier = Annotated[str, Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9_.:-]{0,127}$")]
-# A 2x2 covariance [[sxx, sxy], [sxy, syy]] in the site frame [m^2], flattened row-major.
-Covariance2 = Annotated[list[FiniteFloat], Field(min_length=4, max_length=4)]
+#: The largest variance a position covariance may hold [m^2]: a standard deviation of 1000 km,
+#: beyond any site, so a larger one is a producer's fault (an information matrix inverted near
+#: zero), not a measurement. It also keeps the trackers' products (``H P H^T + R``, its
+#: determinant, Mahalanobis distances) far from overflowing.
+MAX_VARIANCE_M2 = 1e12
+#: How far the two off-diagonal entries may differ, relative to the larger (or 1 m^2) [-].
+SYMMETRY_TOLERANCE = 1e-9
+
+
+def _symmetric_positive_definite(values: list[float]) -> list[float]:
+    """``[sxx, sxy, syx, syy]`` unchanged if symmetric positive definite, else ValueError.
+
+    A 2x2 symmetric matrix is positive definite when both diagonal entries are positive and
+    ``sxy^2 < sxx syy``. That is tested as ``|sxy| < sqrt(sxx) sqrt(syy)``: the product of the
+    square roots cannot overflow where ``sxx syy`` (or a determinant) can, and an overflowing
+    determinant (``1e308 * 1e308 = inf > 0``) would pass a matrix that is not a covariance.
+    """
+    sxx, sxy, syx, syy = values
+    if not (0.0 < sxx <= MAX_VARIANCE_M2 and 0.0 < syy <= MAX_VARIANCE_M2):
+        raise ValueError(
+            f"covariance {values}: the variances (entries 0 and 3) must be positive and at "
+            f"most {MAX_VARIANCE_M2:g} m^2"
+        )
+    if abs(sxy - syx) > SYMMETRY_TOLERANCE * max(1.0, abs(sxy), abs(syx)):
+        raise ValueError(f"covariance {values}: not symmetric (entries 1 and 2 differ)")
+    if not abs(0.5 * sxy + 0.5 * syx) < math.sqrt(sxx) * math.sqrt(syy):
+        raise ValueError(
+            f"covariance {values}: not positive definite (|sxy| must be below sqrt(sxx*syy))"
+        )
+    return values
+
+
+#: A 2x2 covariance [[sxx, sxy], [syx, syy]] in the site frame [m^2], flattened row-major:
+#: finite, symmetric, positive definite, variances at most :data:`MAX_VARIANCE_M2`.
+Covariance2 = Annotated[
+    list[FiniteFloat],
+    Field(min_length=4, max_length=4),
+    AfterValidator(_symmetric_positive_definite),
+]
 
 
 class Message(BaseModel):

@@ -11,6 +11,16 @@ publishing a :class:`ServiceStatus` there every ``status_period_s`` (message rat
 invalid and dropped counts). With a ``health_file`` (``WZ_HEALTH_FILE``), each status published
 also touches that file, which a container healthcheck reads (``python -m wz_shared.health``).
 SIGTERM and SIGINT set ``stop``; leaving the block closes the bus.
+
+:class:`NodeApp` is the rest of every ``main()``: settings read (or the process stops saying
+what is wrong), the site file read, logging configured with site/service/sensor, start-up
+problems turned into an exit with their message, then the runtime around the node's loop::
+
+    def main() -> None:
+        node = NodeApp(SERVICE, AlertServiceSettings)
+        site = node.load_site()
+        published = node.serve(lambda runtime: run(runtime, site, node.settings, node.clock))
+        log.info("stopped after %d alerts", published)
 """
 
 from __future__ import annotations
@@ -19,14 +29,21 @@ import logging
 import os
 import threading
 import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, Generic, TypeVar
+
+from pydantic import ValidationError
 
 from wz_shared import health
 from wz_shared.bus import Bus, BusStats
+from wz_shared.logs import configure_logging
 from wz_shared.messages import ServiceState, ServiceStatus
-from wz_shared.settings import BusSettings
+from wz_shared.settings import BusSettings, ServiceSettings
 from wz_shared.signals import stop_on_signals
+from wz_shared.site import Site, SiteFileError, load_site
+from wz_shared.timebase import SimClock
 
 log = logging.getLogger(__name__)
 
@@ -132,3 +149,99 @@ class ServiceRuntime:
                     return
                 log.exception("could not publish health")
             last = now
+
+
+SettingsT = TypeVar("SettingsT", bound=ServiceSettings)
+T = TypeVar("T")
+
+
+class NodeApp(Generic[SettingsT]):
+    """The start and stop every service's ``main()`` shares, around its own loop.
+
+    In order: the constructor reads the settings; :meth:`load_site` reads the site file and
+    :meth:`start_logging` configures the logs (:meth:`load_site` does both, for a node with no
+    sensor of its own); :meth:`fatal` wraps the node's own start-up checks; :meth:`serve` runs
+    the loop inside a :class:`ServiceRuntime`. Every start-up problem ends the process with
+    ``SystemExit("<service>: <what is wrong>")``, for an operator, not a traceback.
+
+    Parameters
+    ----------
+    service : str
+        The service's name (``alert-service``): the logs', the status key's and the exits'.
+    settings_type : type of ServiceSettings
+        Built here, from the environment.
+
+    Attributes
+    ----------
+    settings : ServiceSettings
+        The settings read.
+    clock : SimClock
+        The node's time, advanced by its loop from the stamps of what it handles; the status
+        messages carry it when :meth:`serve` is given ``sim_clock=True``.
+    """
+
+    def __init__(self, service: str, settings_type: type[SettingsT]) -> None:
+        self.service = service
+        try:
+            self.settings: SettingsT = settings_type()
+        except ValidationError as exc:
+            raise SystemExit(f"{service}: invalid settings: {exc}") from exc
+        self.clock = SimClock()
+        self.site_id: str | None = None
+
+    @contextmanager
+    def fatal(self, *errors: type[Exception]) -> Iterator[None]:
+        """Turn ``errors`` raised in the block into the process's exit, with their message."""
+        try:
+            yield
+        except errors as exc:
+            raise SystemExit(f"{self.service}: {exc}") from exc
+
+    def read_site(self) -> Site:
+        """The settings' site file (``WZ_SITE_FILE``); logging is not configured yet."""
+        with self.fatal(SiteFileError):
+            return load_site(self.settings.site_file)
+
+    def load_site(self) -> Site:
+        """The settings' site file, and logging configured for it (no sensor)."""
+        site = self.read_site()
+        self.start_logging(site.site_id)
+        return site
+
+    def start_logging(self, site_id: str, sensor: str | None = None) -> None:
+        """Structured logs with site, service (and sensor) on every line; the site is the one
+        :meth:`serve` reports under."""
+        configure_logging(service=self.service, site=site_id, sensor=sensor,
+                          level=self.settings.log_level)  # fmt: skip
+        self.site_id = site_id
+
+    def serve(
+        self,
+        loop: Callable[[ServiceRuntime], T],
+        *,
+        sim_clock: bool = True,
+        health_file: bool = True,
+    ) -> T:
+        """Run ``loop(runtime)`` inside a :class:`ServiceRuntime`; what it returns.
+
+        Parameters
+        ----------
+        loop : callable
+            The node's loop, until ``runtime.stop``.
+        sim_clock : bool
+            Stamp status messages with :attr:`clock` (stream time); False: the wall clock.
+        health_file : bool
+            Touch the settings' ``health_file`` with each status message.
+        """
+        if self.site_id is None:
+            raise RuntimeError("start_logging (or load_site) comes before serve")
+        settings = self.settings
+        with ServiceRuntime(
+            self.service,
+            self.site_id,
+            BusSettings(),
+            status_period_s=settings.status_period_s,
+            clock_stamp=self.clock.now if sim_clock else None,
+            health_file=settings.health_file if health_file else None,
+        ) as runtime:
+            return loop(runtime)

@@ -20,6 +20,19 @@ NEW_RUN_CONFIRM_MESSAGES = 3
 RunVerdict = Literal["run", "behind", "new_run"]
 
 
+def stamp_went_back(
+    newest_s: float | None, stamp_s: float, step_back_s: float = NEW_RUN_STEP_BACK_S
+) -> bool:
+    """Whether ``stamp_s`` is further back than ``step_back_s`` from a stream's newest stamp.
+
+    The one test of "the stamps went back" (a restarted simulation or replay counts from its
+    start again); None: no stamp yet. :class:`RunWatch` calls a new run only after
+    ``confirm`` such stamps in a row; a consumer that must decide on the first one (the
+    gateway's store) calls this directly.
+    """
+    return newest_s is not None and stamp_s < newest_s - step_back_s
+
+
 class Clock(Protocol):
     def now(self) -> float:
         """Current time [s]."""
@@ -123,7 +136,7 @@ class RunWatch:
 
     def observe(self, stamp_s: float) -> RunVerdict:
         newest = self.newest_s
-        if newest is None or stamp_s >= newest - self.step_back_s:
+        if not stamp_went_back(newest, stamp_s, self.step_back_s):
             self._behind.clear()
             self.newest_s = stamp_s if newest is None else max(newest, stamp_s)
             return "run"

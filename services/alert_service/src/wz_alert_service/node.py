@@ -26,55 +26,22 @@ and ``out_of_order`` (a batch older than the last one: the engine moves forward 
 from __future__ import annotations
 
 import logging
-import re
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Annotated
-
-from pydantic import Field, ValidationError, field_validator
-from pydantic_settings import SettingsConfigDict
 
 from wz_alert_service.devices import roadside_devices
 from wz_alert_service.engine import AlertEngine
+from wz_alert_service.settings import AlertServiceSettings
 from wz_shared.codec import encode_json
-from wz_shared.logs import configure_logging
 from wz_shared.messages import ActiveAlerts, Alert, AlertType, RoadsideDeviceState, TrackBatch
-from wz_shared.service import ServiceRuntime
-from wz_shared.settings import BusSettings, ServiceSettings
-from wz_shared.site import Site, load_site
+from wz_shared.service import NodeApp, ServiceRuntime
+from wz_shared.site import Site
 from wz_shared.timebase import RunWatch, SimClock
 
 SERVICE = "alert-service"
 log = logging.getLogger("wz_alert_service.node")
 Report = Callable[[str, str], None]
-_PREFIX = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.:-]{0,63}$")
-
-
-class AlertServiceSettings(ServiceSettings):
-    """The node's settings (``WZ_ALERT_*``); the rules' thresholds live in the site file."""
-
-    model_config = SettingsConfigDict(env_prefix="WZ_ALERT_", extra="ignore")
-
-    #: Put before every episode id so ids stay unique across restarts; None: the service's
-    #: start time, UTC, ``YYYYmmddTHHMMSS``.
-    episode_id_prefix: str | None = None
-    #: Track batches queued for the engine; beyond it the tracker's publisher waits.
-    queue_capacity: Annotated[int, Field(ge=1, le=1_000_000)] = 1024
-    #: Alerts of each type kept in memory for subscribers that missed them (store and forward:
-    #: a central gateway whose link to the trailer was down fetches them when it comes back).
-    #: About 2 kB each; 2000 of each type is hours of alerts at a busy site.
-    history_per_type: Annotated[int, Field(ge=1, le=100_000)] = 2000
-
-    @field_validator("episode_id_prefix")
-    @classmethod
-    def _prefix(cls, value: str | None) -> str | None:
-        if value is not None and not _PREFIX.match(value):
-            raise ValueError(
-                f"{value!r}: use letters, digits and '_', '.', ':', '-' (64 characters at most, "
-                "starting with a letter or digit)"
-            )
-        return value
 
 
 @dataclass(frozen=True)
@@ -239,19 +206,11 @@ def run(runtime: ServiceRuntime, site: Site, settings: AlertServiceSettings,
 
 
 def main() -> None:
-    try:
-        settings = AlertServiceSettings()
-    except ValidationError as exc:
-        raise SystemExit(f"{SERVICE}: invalid settings: {exc}") from exc
-    site = load_site(settings.site_file)
-    configure_logging(service=SERVICE, site=site.site_id, level=settings.log_level)
+    node = NodeApp(SERVICE, AlertServiceSettings)
+    site = node.load_site()
+    settings = node.settings
     id_prefix = settings.episode_id_prefix or time.strftime("%Y%m%dT%H%M%S", time.gmtime())
-    clock = SimClock()
-    with ServiceRuntime(SERVICE, site.site_id, BusSettings(),
-                        status_period_s=settings.status_period_s,
-                        clock_stamp=clock.now,
-                        health_file=settings.health_file) as runtime:  # fmt: skip
-        published = run(runtime, site, settings, clock, id_prefix)
+    published = node.serve(lambda runtime: run(runtime, site, settings, node.clock, id_prefix))
     log.info("stopped after %d alerts", published)
 
 

@@ -80,7 +80,6 @@ from wz_camera_detector.world import VehicleShape, box_to_ground, fit_box_to_gro
 from wz_camera_detector.yolo import ImageDetection, ModelLoadError, YoloOnnxDetector
 from wz_shared.camera_geometry import PinholeCamera, camera_intrinsics
 from wz_shared.codec import Frame
-from wz_shared.logs import configure_logging
 from wz_shared.messages import (
     CameraFrameMeta,
     Detection,
@@ -89,9 +88,8 @@ from wz_shared.messages import (
     ServiceState,
     VehicleClass,
 )
-from wz_shared.service import ServiceRuntime
-from wz_shared.settings import BusSettings
-from wz_shared.site import SensorMount, Site, load_site
+from wz_shared.service import NodeApp, ServiceRuntime
+from wz_shared.site import SensorMount, Site
 from wz_shared.timebase import RunWatch, SimClock
 
 SERVICE = "camera-detector"
@@ -529,28 +527,12 @@ def run(
 
 
 def main() -> None:
-    try:
-        settings = CameraDetectorSettings()
-    except ValidationError as exc:
-        raise SystemExit(f"{SERVICE}: invalid settings: {exc}") from exc
-    site = load_site(settings.site_file)
-    try:
-        camera_id = camera_mount(site, settings.camera_id).sensor_id
-    except ValueError as exc:
-        raise SystemExit(f"{SERVICE}: {exc}") from exc
-    configure_logging(
-        service=SERVICE, site=site.site_id, sensor=camera_id, level=settings.log_level
-    )
-    clock = SimClock()
-    with ServiceRuntime(
-        SERVICE,
-        site.site_id,
-        BusSettings(),
-        status_period_s=settings.status_period_s,
-        clock_stamp=clock.now,
-        health_file=settings.health_file,
-    ) as runtime:
-        processed = run(runtime, site, settings, clock)
+    node = NodeApp(SERVICE, CameraDetectorSettings)
+    site = node.read_site()
+    with node.fatal(ValueError):
+        camera_id = camera_mount(site, node.settings.camera_id).sensor_id
+    node.start_logging(site.site_id, sensor=camera_id)
+    processed = node.serve(lambda runtime: run(runtime, site, node.settings, node.clock))
     log.info("stopped after %d frames", processed)
 
 

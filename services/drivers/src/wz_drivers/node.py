@@ -17,37 +17,18 @@ from __future__ import annotations
 
 import logging
 import threading
-from pathlib import Path
-from typing import Annotated, Any
-
-from pydantic import Field, ValidationError
-from pydantic_settings import SettingsConfigDict
+from typing import Any
 
 from wz_drivers.log import FieldLog, LogSource, load_log
 from wz_drivers.records import FieldDataError, Problems
 from wz_drivers.replay import MESSAGE_CLASS, replay_log
+from wz_drivers.settings import DriversSettings
 from wz_drivers.sources import key_of, source_messages
 from wz_shared.bus import Bus, Publisher
-from wz_shared.logs import configure_logging
-from wz_shared.service import ServiceRuntime
-from wz_shared.settings import BusSettings, ServiceSettings
+from wz_shared.service import NodeApp, ServiceRuntime
 
 SERVICE = "drivers"
 log = logging.getLogger(__name__)
-
-
-class DriversSettings(ServiceSettings):
-    """``WZ_DRIVERS_*``."""
-
-    model_config = SettingsConfigDict(env_prefix="WZ_DRIVERS_", extra="ignore")
-
-    #: The manifest (a field log's ``log.yaml``, or its folder) of the sources to read.
-    sources: Path
-    #: Recordings only: their pace (1 = as recorded; 0 = as fast as possible), and looping.
-    rate: Annotated[float, Field(ge=0.0, le=100.0)] = 1.0
-    loop: bool = False
-    #: A live device that failed is opened again after this long [s].
-    retry_s: Annotated[float, Field(gt=0.0, le=3600.0)] = 5.0
 
 
 class _Reporter(Problems):
@@ -106,20 +87,12 @@ def run(runtime: ServiceRuntime, field_log: FieldLog, settings: DriversSettings)
 
 
 def main() -> None:
-    try:
-        settings = DriversSettings()
-    except ValidationError as exc:
-        raise SystemExit(f"{SERVICE}: invalid settings: {exc}") from exc
-    folder = settings.sources.parent if settings.sources.is_file() else settings.sources
-    try:
-        field_log = load_log(folder)
-    except FieldDataError as exc:
-        raise SystemExit(f"{SERVICE}: {exc}") from exc
-    configure_logging(service=SERVICE, site=field_log.site.site_id, level=settings.log_level)
-    with ServiceRuntime(SERVICE, field_log.site.site_id, BusSettings(),
-                        status_period_s=settings.status_period_s,
-                        health_file=settings.health_file) as runtime:  # fmt: skip
-        run(runtime, field_log, settings)
+    node = NodeApp(SERVICE, DriversSettings)
+    sources = node.settings.sources
+    with node.fatal(FieldDataError):  # the site is the field log's
+        field_log = load_log(sources.parent if sources.is_file() else sources)
+    node.start_logging(field_log.site.site_id)
+    node.serve(lambda runtime: run(runtime, field_log, node.settings), sim_clock=False)
 
 
 if __name__ == "__main__":

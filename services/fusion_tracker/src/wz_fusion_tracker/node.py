@@ -39,7 +39,6 @@ import time
 from collections.abc import Callable
 
 import numpy as np
-from pydantic import ValidationError
 
 from wz_fusion_tracker.calibration import BiasMapError, LateralBiasCorrector, load_bias_map
 from wz_fusion_tracker.kalman import F64
@@ -47,7 +46,6 @@ from wz_fusion_tracker.settings import FusionTrackerSettings
 from wz_fusion_tracker.tracker import MultiTargetTracker
 from wz_fusion_tracker.types import Measurement, TrackState
 from wz_shared.codec import encode_json
-from wz_shared.logs import configure_logging
 from wz_shared.messages import (
     DetectionBatch,
     Track,
@@ -55,9 +53,8 @@ from wz_shared.messages import (
     TrackStatus,
     VehicleClass,
 )
-from wz_shared.service import ServiceRuntime
-from wz_shared.settings import BusSettings
-from wz_shared.site import Site, load_site
+from wz_shared.service import NodeApp, ServiceRuntime
+from wz_shared.site import Site
 from wz_shared.timebase import RunWatch, SimClock
 
 SERVICE = "fusion-tracker"
@@ -270,22 +267,11 @@ def run(runtime: ServiceRuntime, site: Site, settings: FusionTrackerSettings,
 
 
 def main() -> None:
-    try:
-        settings = FusionTrackerSettings()
-    except ValidationError as exc:
-        raise SystemExit(f"{SERVICE}: invalid settings: {exc}") from exc
-    site = load_site(settings.site_file)
-    configure_logging(service=SERVICE, site=site.site_id, level=settings.log_level)
-    try:  # a bad map stops the start, with what is wrong
-        bias = bias_corrector(site, settings)
-    except BiasMapError as exc:
-        raise SystemExit(f"{SERVICE}: {exc}") from exc
-    clock = SimClock()
-    with ServiceRuntime(SERVICE, site.site_id, BusSettings(),
-                        status_period_s=settings.status_period_s,
-                        clock_stamp=clock.now,
-                        health_file=settings.health_file) as runtime:  # fmt: skip
-        published = run(runtime, site, settings, clock, bias)
+    node = NodeApp(SERVICE, FusionTrackerSettings)
+    site = node.load_site()
+    with node.fatal(BiasMapError):  # a bad map stops the start, with what is wrong
+        bias = bias_corrector(site, node.settings)
+    published = node.serve(lambda runtime: run(runtime, site, node.settings, node.clock, bias))
     log.info("stopped after %d track batches", published)
 
 

@@ -37,7 +37,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import uvicorn
-from pydantic import ValidationError
 
 from wz_gateway.app import create_app
 from wz_gateway.auth import new_secret, parse_configured_key
@@ -50,10 +49,8 @@ from wz_gateway.storage import Storage, StorageError
 from wz_gateway.track_ends import SiteFinishers, TrackFinisher
 from wz_gateway.webhook_store import WebhookStore
 from wz_shared.keys import site_of_key
-from wz_shared.logs import configure_logging
 from wz_shared.messages import Alert, Message, RoadsideDeviceState, ServiceStatus, TrackBatch
-from wz_shared.service import ServiceRuntime
-from wz_shared.settings import BusSettings
+from wz_shared.service import NodeApp, ServiceRuntime
 from wz_shared.site import Site, SiteFileError
 
 SERVICE = "gateway"
@@ -293,29 +290,23 @@ def run(runtime: ServiceRuntime, site: Site | Sites, settings: GatewaySettings,
 
 
 def main() -> None:
-    try:
-        settings = GatewaySettings()
-    except ValidationError as exc:
-        raise SystemExit(f"{SERVICE}: invalid settings: {exc}") from exc
-    try:
+    node = NodeApp(SERVICE, GatewaySettings)
+    settings = node.settings
+    with node.fatal(SiteFileError):
         sites = load_sites(settings.site_entries)
-    except SiteFileError as exc:
-        raise SystemExit(f"{SERVICE}: {exc}") from exc
-    site_id = sites.default.site_id
-    configure_logging(service=SERVICE, site=site_id, level=settings.log_level)
+    node.start_logging(sites.default.site_id)
     for name in ("uvicorn", "uvicorn.error"):
         logging.getLogger(name).addFilter(_PlainUvicorn())
-    try:
+    with node.fatal(StorageError):
         storage = Storage.open(settings.resolved_database_url())
-    except StorageError as exc:
-        raise SystemExit(f"{SERVICE}: {exc}") from exc
     try:
         dev_secret = prepare_keys(storage, settings, time.time())
         if dev_secret is not None:
             log.warning("dev mode: reads need no key; admin key for this run: %s", dev_secret)
-        with ServiceRuntime(SERVICE, site_id, BusSettings(),
-                            status_period_s=settings.status_period_s) as runtime:  # fmt: skip
-            written = run(runtime, sites, settings, storage, GatewayMetrics())
+        # Status on the wall clock; its health is /readyz, not a file.
+        written = node.serve(lambda runtime: run(runtime, sites, settings, storage,
+                                                 GatewayMetrics()),
+                             sim_clock=False, health_file=False)  # fmt: skip
         log.info("stopped after storing %d messages", written)
     finally:
         storage.close()

@@ -59,11 +59,9 @@ from wz_lidar_detector.reference import ReferencePipeline
 from wz_lidar_detector.settings import LidarDetectorSettings, lidar_mount
 from wz_lidar_detector.transform import box_to_site, to_detection
 from wz_shared.codec import Frame
-from wz_shared.logs import configure_logging
 from wz_shared.messages import Detection, DetectionBatch, LidarFrameMeta, ServiceState
-from wz_shared.service import ServiceRuntime
-from wz_shared.settings import BusSettings
-from wz_shared.site import LidarIntrinsics, SensorMount, Site, load_site
+from wz_shared.service import NodeApp, ServiceRuntime
+from wz_shared.site import LidarIntrinsics, SensorMount, Site
 from wz_shared.timebase import SimClock
 
 SERVICE = "lidar-detector"
@@ -493,15 +491,12 @@ def road_heading_in_sensor_frame(site: Site, mount: SensorMount) -> float:
 
 
 def main() -> None:
-    settings = LidarDetectorSettings()
-    site = load_site(settings.site_file)
-    try:
-        mount = lidar_mount(site, settings.sensor_id)
-    except ValueError as exc:
-        raise SystemExit(f"lidar-detector: {exc}") from exc
-    configure_logging(
-        service=SERVICE, site=site.site_id, sensor=mount.sensor_id, level=settings.log_level
-    )
+    node = NodeApp(SERVICE, LidarDetectorSettings)
+    site = node.read_site()
+    with node.fatal(ValueError):
+        mount = lidar_mount(site, node.settings.sensor_id)
+    node.start_logging(site.site_id, sensor=mount.sensor_id)
+    settings = node.settings
     if settings.fast.heading_prior_rad is None:
         prior = road_heading_in_sensor_frame(site, mount)
         settings = settings.model_copy(
@@ -509,16 +504,7 @@ def main() -> None:
         )
         log.info("heading prior from the site's road: %.1f deg in the sensor frame",
                  math.degrees(prior))  # fmt: skip
-    clock = SimClock()
-    with ServiceRuntime(
-        SERVICE,
-        site.site_id,
-        BusSettings(),
-        status_period_s=settings.status_period_s,
-        clock_stamp=clock.now,
-        health_file=settings.health_file,
-    ) as runtime:
-        processed = run(runtime, site.site_id, mount, settings, clock)
+    processed = node.serve(lambda runtime: run(runtime, site.site_id, mount, settings, node.clock))
     log.info("stopped after %d frames", processed)
 
 

@@ -26,7 +26,6 @@ from collections.abc import Callable
 
 from wz_shared.bus import Bus, Publisher
 from wz_shared.codec import encode_camera_frame, encode_lidar_frame
-from wz_shared.logs import configure_logging
 from wz_shared.messages import (
     CameraFrameMeta,
     GroundTruth,
@@ -34,9 +33,8 @@ from wz_shared.messages import (
     RadarScan,
     ServiceState,
 )
-from wz_shared.service import ServiceRuntime
-from wz_shared.settings import BusSettings
-from wz_shared.site import Site, load_site
+from wz_shared.service import NodeApp, ServiceRuntime
+from wz_shared.site import Site
 from wz_shared.timebase import Pacer, SimClock
 from wz_simulator.sensors.rig import (
     CameraOutput,
@@ -131,22 +129,16 @@ def warm_up(world: TrafficWorld, until_s: float, stop: threading.Event) -> int:
 
 
 def main() -> None:
-    settings = SimulatorSettings()
-    site = load_site(settings.site_file)
-    configure_logging(service=SERVICE, site=site.site_id, level=settings.log_level)
-    clock = SimClock()
+    node = NodeApp(SERVICE, SimulatorSettings)
+    site = node.load_site()
     site_json = site.model_dump_json().encode()
-    with ServiceRuntime(
-        SERVICE,
-        site.site_id,
-        BusSettings(),
-        status_period_s=settings.status_period_s,
-        clock_stamp=clock.now,
-        health_file=settings.health_file,
-    ) as runtime:
+
+    def loop(runtime: ServiceRuntime) -> None:
         runtime.state = ServiceState.STARTING  # until it publishes
-        with TrafficWorld(site, settings) as world:
-            simulate(runtime, site, settings, world, clock, site_json)
+        with TrafficWorld(site, node.settings) as world:
+            simulate(runtime, site, node.settings, world, node.clock, site_json)
+
+    node.serve(loop)
 
 
 def simulate(runtime: ServiceRuntime, site: Site, settings: SimulatorSettings,
