@@ -1,1 +1,2 @@
-"""One router per resource; :func:`wz_gateway.app.create_app` includes them in this order."""
+"""One router per resource (``router``, module level); :mod:`wz_gateway.api.main` includes
+them in the order they are matched."""
