@@ -25,6 +25,7 @@ from tests.gateway.helpers import (
     open_storage,
     sample_alert,
 )
+from wz_gateway.key_store import KeyStore
 from wz_gateway.metrics import GatewayMetrics
 from wz_gateway.models import TRACK_POINT_FIELDS
 from wz_gateway.settings import GatewaySettings
@@ -120,14 +121,14 @@ def test_admin_routes_need_the_admin_scope_and_keys_can_be_made_and_revoked(api:
     assert_problem(api.client.delete(f"/v1/admin/api-keys/{key['key_id']}", headers=ADMIN),
                    404, key["key_id"])  # fmt: skip
     # A bad body is refused and nothing is made.
-    before = len(api.storage.api_keys(include_revoked=True))
+    before = len(KeyStore(api.storage.engine).all(include_revoked=True))
     bad = api.client.post("/v1/admin/api-keys", headers=ADMIN, json={"scope": "root", "name": ""})
     body = assert_problem(bad, 422, "body field 'scope'")
     assert {e["location"] for e in body["errors"]} == {"body.scope", "body.name"}
     not_json = api.client.post("/v1/admin/api-keys", content=b"{not json",
                                headers={**ADMIN, "Content-Type": "application/json"})  # fmt: skip
     assert_problem(not_json, 422, "the request body", "JSON")
-    assert len(api.storage.api_keys(include_revoked=True)) == before
+    assert len(KeyStore(api.storage.engine).all(include_revoked=True)) == before
 
 
 def test_oversize_bodies_get_413_announced_or_streamed(api: Api) -> None:
@@ -294,7 +295,7 @@ def test_dev_mode_reads_without_a_key_but_not_admin(tmp_path: Path) -> None:
     with live_server(settings, storage) as url:
         assert httpx.get(f"{url}/v1/tracks/live").json()["tracks"] == []
         assert httpx.get(f"{url}/v1/admin/api-keys").status_code == 401
-    dev_keys = [k for k in storage.api_keys() if k.origin == "dev"]
+    dev_keys = [k for k in KeyStore(storage.engine).all() if k.origin == "dev"]
     assert len(dev_keys) == 1 and dev_keys[0].scope == "admin"
     storage.close()
 

@@ -29,11 +29,13 @@ from tests.gateway.tracking import car_tracks, filtered_car, merged_batches
 from tests.gateway.webhook_receiver import Receiver, eventually
 from wz_gateway import auth, webhooks
 from wz_gateway.delivery import WebhookDeliverer
+from wz_gateway.key_store import KeyStore
 from wz_gateway.metrics import GatewayMetrics
 from wz_gateway.smoothing import rts_smooth
 from wz_gateway.storage import AlertQuery, PointQuery, Storage
 from wz_gateway.tables import SCHEMA_VERSION
 from wz_gateway.track_ends import TrackFinisher
+from wz_gateway.track_lives import TrackLifeStore
 from wz_gateway.webhook_store import WebhookStore
 
 NOW = 1_750_000_000.0
@@ -89,7 +91,7 @@ def test_storage_round_trip_on_postgresql(postgres_url: str) -> None:
     result = storage.ingest([*batches, alert, alert], geo=SITE.geo_frame, received_at=NOW)
     assert (result.points, result.alerts, result.duplicate_alerts) == (40, 1, 1)
     secret = auth.new_secret()
-    info = storage.add_api_key("admin", secret, name="pg", origin="api", now=NOW)
+    info = KeyStore(storage.engine).add("admin", secret, name="pg", origin="api", now=NOW)
     storage.close()
 
     reopened = Storage.open(postgres_url)  # nothing to migrate, everything still there
@@ -105,7 +107,7 @@ def test_storage_round_trip_on_postgresql(postgres_url: str) -> None:
             cursor = page.next_cursor
         assert len(seen) == 40 == len(set(seen))
         assert reopened.alerts(AlertQuery(site=SITE.site_id)).items == [alert]
-        assert reopened.find_api_key(secret) == info
+        assert KeyStore(reopened.engine).find(secret) == info
         live = reopened.latest(SITE.site_id, "tracks")
         assert live is not None and live.stamp == pytest.approx(1.9)
         deleted = reopened.purge(NOW + 31 * 86400.0, retention_days=30.0,
@@ -189,6 +191,6 @@ def test_track_smoothing_on_postgresql(postgres_url: str, tmp_path: Path) -> Non
                             sigma_across_mps2=settings.smoothing_sigma_across_mps2)  # fmt: skip
         np.testing.assert_allclose([[p.x_m, p.y_m, p.vx_mps, p.vy_mps] for p in stored], x_s,
                                    rtol=0.0, atol=1e-9)  # fmt: skip
-        assert [lv.track_id for lv in storage.unfinished_track_lives(site.site_id)] == [72]
+        assert [lv.track_id for lv in TrackLifeStore(storage.engine).unfinished(site.site_id)] == [72]
     finally:
         storage.close()

@@ -29,6 +29,7 @@ from wz_gateway.sites import Sites, load_sites
 from wz_gateway.storage import AlertQuery, PointQuery, Storage
 from wz_gateway.tables import MIGRATIONS, SCHEMA_VERSION, alerts, schema_version
 from wz_gateway.track_ends import SiteFinishers
+from wz_gateway.track_lives import TrackLifeStore
 from wz_shared.messages import Alert, TrackBatch
 from wz_shared.site import SiteFileError
 
@@ -105,7 +106,7 @@ def test_two_sites_stored_apart_same_alert_ids_and_foreign_sites_refused(
         york = storage.points(PointQuery(site=OTHER.site_id, limit=1)).items[0]
         assert york.latitude_deg - lincoln.latitude_deg == pytest.approx(0.36, abs=1e-3)
         assert len(storage.alerts(AlertQuery(site=None)).items) == 4
-        assert storage.unfinished_track_lives(OTHER.site_id)  # each site's lives recorded
+        assert TrackLifeStore(storage.engine).unfinished(OTHER.site_id)  # each site's lives recorded
     finally:
         storage.close()
 

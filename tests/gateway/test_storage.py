@@ -22,6 +22,7 @@ from tests.gateway.helpers import (
     service_status,
 )
 from wz_gateway import auth
+from wz_gateway.key_store import KeyStore
 from wz_gateway.storage import (
     AlertQuery,
     CursorError,
@@ -228,22 +229,23 @@ def test_retention_deletes_only_what_is_older(tmp_path: Path) -> None:
 def test_keys_are_stored_hashed_found_and_revoked(tmp_path: Path) -> None:
     path = tmp_path / "g.sqlite3"
     storage = Storage.open(url_of(path))
+    keys = KeyStore(storage.engine)
     secret = auth.new_secret()
-    info = storage.add_api_key("read", secret, name="dashboard", origin="api", now=NOW)
-    found = storage.find_api_key(secret)
+    info = keys.add("read", secret, name="dashboard", origin="api", now=NOW)
+    found = keys.find(secret)
     assert found == info and found.scope == "read"
-    assert storage.find_api_key(secret + "x") is None
-    assert storage.find_api_key(auth.new_secret()) is None
+    assert keys.find(secret + "x") is None
+    assert keys.find(auth.new_secret()) is None
     configured = [("admin", "configured-admin-secret-0123456789")]
-    assert storage.sync_configured_keys(configured, NOW) == (1, 0)  # type: ignore[arg-type]
-    assert storage.sync_configured_keys(configured, NOW) == (0, 0)  # type: ignore[arg-type]
+    assert keys.sync_configured(configured, NOW) == (1, 0)  # type: ignore[arg-type]
+    assert keys.sync_configured(configured, NOW) == (0, 0)  # type: ignore[arg-type]
     replaced = [("admin", "another-admin-secret-9876543210")]
-    assert storage.sync_configured_keys(replaced, NOW) == (1, 1)  # type: ignore[arg-type]
-    assert storage.find_api_key(configured[0][1]) is None
-    assert storage.revoke_api_key(info.key_id, NOW) and storage.find_api_key(secret) is None
-    assert not storage.revoke_api_key(info.key_id, NOW)  # already revoked
-    assert [k.name for k in storage.api_keys()] == ["settings key 1"]
-    assert len(storage.api_keys(include_revoked=True)) == 3
+    assert keys.sync_configured(replaced, NOW) == (1, 1)  # type: ignore[arg-type]
+    assert keys.find(configured[0][1]) is None
+    assert keys.revoke(info.key_id, NOW) and keys.find(secret) is None
+    assert not keys.revoke(info.key_id, NOW)  # already revoked
+    assert [k.name for k in keys.all()] == ["settings key 1"]
+    assert len(keys.all(include_revoked=True)) == 3
     storage.close()
     raw = b"".join(p.read_bytes() for p in tmp_path.glob("g.sqlite3*"))
     for plain in (secret, configured[0][1], replaced[0][1]):

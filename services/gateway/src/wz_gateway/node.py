@@ -41,6 +41,7 @@ import uvicorn
 from wz_gateway.app import create_app
 from wz_gateway.auth import new_secret, parse_configured_key
 from wz_gateway.delivery import WebhookDeliverer
+from wz_gateway.key_store import KeyStore
 from wz_gateway.live import Broadcaster, broadcaster_for
 from wz_gateway.metrics import GatewayMetrics
 from wz_gateway.settings import GatewaySettings
@@ -208,15 +209,16 @@ def prepare_keys(storage: Storage, settings: GatewaySettings, now: float) -> str
     """Make the stored ``settings`` keys match the configuration; in dev mode without an
     admin key, make one for this run. The dev key's secret, or None."""
     configured = [parse_configured_key(entry) for entry in settings.api_keys]
-    added, revoked = storage.sync_configured_keys(configured, now)
+    keys = KeyStore(storage.engine)
+    added, revoked = keys.sync_configured(configured, now)
     if added or revoked:
         log.info("API keys from the settings: %d added, %d revoked", added, revoked)
-    for info in storage.api_keys():
+    for info in keys.all():
         if info.origin == "dev":
-            storage.revoke_api_key(info.key_id, now)
+            keys.revoke(info.key_id, now)
     if settings.dev_mode and not any(scope == "admin" for scope, _ in configured):
         secret = new_secret()
-        storage.add_api_key("admin", secret, name="dev mode admin key", origin="dev", now=now)
+        keys.add("admin", secret, name="dev mode admin key", origin="dev", now=now)
         return secret
     return None
 

@@ -31,7 +31,8 @@ from dataclasses import dataclass
 from wz_gateway.metrics import GatewayMetrics
 from wz_gateway.settings import GatewaySettings
 from wz_gateway.smoothing import smooth_trajectory
-from wz_gateway.storage import RESTART_TOLERANCE_S, Storage, TrackLife
+from wz_gateway.storage import RESTART_TOLERANCE_S, Storage
+from wz_gateway.track_lives import TrackLife, TrackLifeStore
 from wz_shared.messages import Message, TrackBatch
 from wz_shared.site import Site
 
@@ -152,6 +153,7 @@ class TrackFinisher:
     clock: Callable[[], float] = time.time
 
     def __post_init__(self) -> None:
+        self.lives = TrackLifeStore(self.storage.engine)
         self.pending: deque[TrackLife] = deque()
         self._failures: dict[int, int] = {}  # by id() of a pending life
 
@@ -168,7 +170,7 @@ class TrackFinisher:
         """Take up what the previous process left: its unfinished lives, as of its newest
         batch. The lives queued for smoothing."""
         try:
-            lives = self.storage.unfinished_track_lives(self.site.site_id)
+            lives = self.lives.unfinished(self.site.site_id)
             newest = self.storage.latest(self.site.site_id, "tracks")
         except Exception:  # they stay unfinished in the database, for the next start
             log.exception("could not read the track lives left unfinished")
@@ -195,7 +197,7 @@ class TrackFinisher:
         if not started:
             return
         try:
-            self.storage.record_track_lives(self.site.site_id, started)
+            self.lives.record(self.site.site_id, started)
         except Exception:  # the life is recorded when it ends instead (life_id stays None)
             log.exception("could not record %d new track lives", len(started))
 
@@ -226,13 +228,12 @@ class TrackFinisher:
     def finish(self, life: TrackLife) -> int:
         """Smooth one ended life and store it, marked ended, in one transaction; its points."""
         started = time.perf_counter()
-        points = self.storage.track_life_points(self.site.site_id, life)
+        points = self.lives.points(self.site.site_id, life)
         smoothed = None
         if len(points):
             smoothed = smooth_trajectory(points, self.site, sigma_along_mps2=self.sigma_along_mps2,
                                          sigma_across_mps2=self.sigma_across_mps2)  # fmt: skip
-        written = self.storage.finish_track_life(self.site.site_id, life, smoothed,
-                                                 ended_at=self.clock())  # fmt: skip
+        written = self.lives.finish(self.site.site_id, life, smoothed, ended_at=self.clock())
         if written:
             self.metrics.smoothed_tracks.inc()
             self.metrics.smoothed_points.inc(len(points))

@@ -1,0 +1,15 @@
+"""Every router of the API, in the order they are matched (and listed in the OpenAPI document),
+and the live page's files."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter
+
+from wz_gateway.api.routes import alerts, health, keys, live, metrics, sites, tracks, webhooks, wzdx
+
+api_router = APIRouter()
+for _router in (sites.router, tracks.router, alerts.router, wzdx.router, keys.router,
+                webhooks.router, live.router, live.page_router, health.router, metrics.router):  # fmt: skip
+    api_router.include_router(_router)
+
+static_files = live.static_files
