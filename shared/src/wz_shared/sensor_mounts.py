@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
-from wz_shared.site import SensorMount, Site
+from typing import TypeVar
+
+from wz_shared.site import CameraIntrinsics, LidarIntrinsics, RadarIntrinsics, SensorMount, Site
+
+IntrinsicsT = TypeVar("IntrinsicsT", CameraIntrinsics, LidarIntrinsics, RadarIntrinsics)
 
 
 def mount_of_kind(
@@ -46,3 +50,15 @@ def mount_of_kind(
             f"sensor {sensor_id!r} of site {site.site_id} is a {mount.kind}, not a {name}"
         )
     return mount
+
+
+def intrinsics_of(mount: SensorMount, kind: type[IntrinsicsT], why: str) -> IntrinsicsT:
+    """The mount's intrinsics when they are of ``kind``, else a ValueError naming the sensor.
+
+    ``why`` ends the message: who needs these intrinsics (e.g. "RadarModel needs radar
+    intrinsics"), so the operator sees both what the sensor is and what wanted another kind.
+    """
+    if not isinstance(mount.intrinsics, kind):
+        wanted = kind.model_fields["kind"].default
+        raise ValueError(f"sensor {mount.sensor_id!r} is a {mount.kind}, not a {wanted}: {why}")
+    return mount.intrinsics

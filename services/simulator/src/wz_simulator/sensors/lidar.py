@@ -78,6 +78,7 @@ import numpy.typing as npt
 import open3d as o3d
 
 from wz_shared.messages import LidarFrameMeta, VehicleTruth
+from wz_shared.sensor_mounts import intrinsics_of
 from wz_shared.site import LidarIntrinsics, SensorMount
 
 # Re-exported (``X as X``): these moved to the lidar_* rooms, their names stay here.
@@ -193,15 +194,11 @@ class LidarModel:
         site_id: str = "sim",
         physics: LidarPhysics | None = None,
     ) -> None:
-        if not isinstance(mount.intrinsics, LidarIntrinsics):
-            raise ValueError(
-                f"sensor {mount.sensor_id!r} is a {mount.kind}, not a lidar: "
-                "LidarModel needs lidar intrinsics"
-            )
+        intrinsics = intrinsics_of(mount, LidarIntrinsics, "LidarModel needs lidar intrinsics")
         self.physics = physics if physics is not None else LidarPhysics()
-        self.physics.validate(mount.intrinsics)
+        self.physics.validate(intrinsics)
         self.mount = mount
-        self.intrinsics: LidarIntrinsics = mount.intrinsics
+        self.intrinsics = intrinsics
         self.weather = weather
         self.seed = seed
         self.site_id = site_id
