@@ -4,6 +4,7 @@ truth labels from the id buffer, occlusion, clipping, weather, determinism."""
 from __future__ import annotations
 
 import math
+from types import ModuleType
 
 import cv2
 import numpy as np
@@ -15,6 +16,13 @@ from tests.purity import top_level_imports
 from wz_shared.messages import VehicleClass
 from wz_shared.site import CameraIntrinsics, LidarIntrinsics, Pose, SensorMount
 from wz_simulator.sensors import camera as camera_module
+from wz_simulator.sensors import (
+    camera_effects,
+    camera_frame,
+    camera_light,
+    camera_paint,
+    camera_projection,
+)
 from wz_simulator.sensors.camera import (
     CameraModel,
     PinholeCamera,
@@ -513,6 +521,18 @@ def test_jpeg_and_truth_drawing() -> None:
     assert drawn.shape == frame.image.shape and not np.array_equal(drawn, frame.image)
 
 
-def test_core_imports_no_io_library() -> None:
-    imported = top_level_imports(camera_module)
+@pytest.mark.parametrize(
+    "module",
+    [
+        camera_module,
+        camera_effects,
+        camera_frame,
+        camera_light,
+        camera_paint,
+        camera_projection,
+    ],
+    ids=lambda m: m.__name__,
+)
+def test_core_imports_no_io_library(module: ModuleType) -> None:
+    imported = top_level_imports(module)
     assert not imported & {"zenoh", "fastapi", "pathlib", "os", "io", "socket", "requests"}

@@ -7,6 +7,7 @@ import ast
 import inspect
 import math
 from collections.abc import Sequence
+from types import ModuleType
 
 import numpy as np
 import open3d as o3d
@@ -17,6 +18,7 @@ from wz_shared.codec import decode_frame, encode_lidar_frame
 from wz_shared.messages import LidarFrameMeta, VehicleTruth
 from wz_shared.site import LidarIntrinsics, Pose, RadarIntrinsics, SensorMount, Site
 from wz_simulator.sensors import lidar as lidar_module
+from wz_simulator.sensors import lidar_frame, lidar_geometry, lidar_physics
 from wz_simulator.sensors.lidar import (
     BOX_TRIANGLES,
     MATERIAL_RESPONSE,
@@ -655,14 +657,17 @@ def test_box_triangles_cover_the_faces() -> None:
     }
 
 
-def test_the_core_does_no_io() -> None:
+@pytest.mark.parametrize(
+    "module", [lidar_module, lidar_frame, lidar_geometry, lidar_physics], ids=lambda m: m.__name__
+)
+def test_the_core_does_no_io(module: ModuleType) -> None:
     """A pure core: numpy, open3d and the shared models only; no bus, web or files."""
-    imported = top_level_imports(lidar_module)
+    imported = top_level_imports(module)
     assert imported <= {
         "__future__", "math", "collections", "dataclasses", "types", "typing",
         "numpy", "open3d", "wz_shared", "wz_simulator",
     }  # fmt: skip
-    tree = ast.parse(inspect.getsource(lidar_module))
+    tree = ast.parse(inspect.getsource(module))
     calls = {
         node.func.id
         for node in ast.walk(tree)

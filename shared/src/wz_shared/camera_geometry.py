@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from wz_shared.sensor_mounts import intrinsics_of
 from wz_shared.site import CameraIntrinsics, SensorMount
 
 F64 = npt.NDArray[np.float64]
@@ -48,12 +49,11 @@ UNDISTORT_MAX_ITERATIONS = 20
 
 def camera_intrinsics(mount: SensorMount) -> CameraIntrinsics:
     """The mount's camera intrinsics, or a ValueError naming the sensor if it is not a camera."""
-    if not isinstance(mount.intrinsics, CameraIntrinsics):
-        raise ValueError(
-            f"sensor {mount.sensor_id!r} is a {mount.kind}, not a camera: a camera model needs "
-            "camera intrinsics (width_px, height_px, horizontal_fov_deg)"
-        )
-    return mount.intrinsics
+    return intrinsics_of(
+        mount,
+        CameraIntrinsics,
+        "a camera model needs camera intrinsics (width_px, height_px, horizontal_fov_deg)",
+    )
 
 
 @dataclass(frozen=True, slots=True)

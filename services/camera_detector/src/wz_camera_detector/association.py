@@ -102,6 +102,7 @@ from scipy.optimize import linear_sum_assignment
 
 from wz_shared.geometry import polar_covariance
 from wz_shared.messages import Detection, RadarScan, RadarTarget, VehicleClass
+from wz_shared.sensor_mounts import intrinsics_of
 from wz_shared.site import RadarIntrinsics, SensorMount
 
 F64 = npt.NDArray[np.float64]
@@ -259,12 +260,9 @@ class FusedObject:
 
 
 def _radar_intrinsics(mount: SensorMount) -> RadarIntrinsics:
-    if not isinstance(mount.intrinsics, RadarIntrinsics):
-        raise ValueError(
-            f"sensor {mount.sensor_id!r} is a {mount.kind}, not a radar: "
-            "camera-radar association needs the radar's mount"
-        )
-    return mount.intrinsics
+    return intrinsics_of(
+        mount, RadarIntrinsics, "camera-radar association needs the radar's mount"
+    )
 
 
 def _unit(bearing_rad: float) -> tuple[F64, F64]:

@@ -16,6 +16,7 @@ from pydantic_settings import SettingsConfigDict
 from wz_camera_detector.association import AssociationSettings
 from wz_camera_detector.background import BackgroundSubtractionSettings
 from wz_camera_detector.tracker import ImageTrackerSettings
+from wz_shared.sensor_mounts import mount_of_kind
 from wz_shared.settings import ServiceSettings
 from wz_shared.site import SensorMount, Site
 
@@ -94,26 +95,6 @@ class CameraDetectorSettings(ServiceSettings):
         return self
 
 
-def _mount_of_kind(site: Site, sensor_id: str | None, kind: str, env: str) -> SensorMount:
-    mounts = [mount for mount in site.sensors if mount.kind == kind]
-    if sensor_id is None:
-        if not mounts:
-            raise ValueError(f"site {site.site_id} has no {kind}: set {env}")
-        return mounts[0]
-    try:
-        mount = site.sensor(sensor_id)
-    except KeyError:
-        known = ", ".join(m.sensor_id for m in mounts) or "none"
-        raise ValueError(
-            f"site {site.site_id} has no sensor {sensor_id!r} (its {kind}s: {known})"
-        ) from None
-    if mount.kind != kind:
-        raise ValueError(
-            f"sensor {sensor_id!r} of site {site.site_id} is a {mount.kind}, not a {kind}"
-        )
-    return mount
-
-
 def camera_mount(site: Site, camera_id: str | None) -> SensorMount:
     """The mount of ``camera_id`` (default: the site's first camera).
 
@@ -122,7 +103,7 @@ def camera_mount(site: Site, camera_id: str | None) -> SensorMount:
     ValueError
         When the site has no such sensor, or it is not a camera, in words for the operator.
     """
-    return _mount_of_kind(site, camera_id, "camera", "WZ_CAMERA_CAMERA_ID")
+    return mount_of_kind(site, camera_id, "camera", "WZ_CAMERA_CAMERA_ID")
 
 
 def radar_mount(site: Site, radar_id: str | None) -> SensorMount | None:
@@ -138,4 +119,4 @@ def radar_mount(site: Site, radar_id: str | None) -> SensorMount | None:
         return None
     if radar_id is None and not any(mount.kind == "radar" for mount in site.sensors):
         return None
-    return _mount_of_kind(site, radar_id, "radar", "WZ_CAMERA_RADAR_ID")
+    return mount_of_kind(site, radar_id, "radar", "WZ_CAMERA_RADAR_ID")

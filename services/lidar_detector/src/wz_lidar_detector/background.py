@@ -291,7 +291,16 @@ def _ranges(xyz: Float32Array) -> Float32Array:
     return ranges
 
 
-def _write_npz(path: PathLike, arrays: dict[str, npt.NDArray[np.generic]]) -> None:
+def _write_model(
+    path: PathLike, kind: str, arrays: dict[str, npt.NDArray[np.generic]], ground: GroundGrid | None
+) -> None:
+    """Write a model's file: format version and kind, the model's ``arrays``, then its ground."""
+    arrays = {
+        "format_version": np.array(FORMAT_VERSION),
+        "kind": np.array(kind),
+        **arrays,
+        **_ground_arrays(ground),
+    }
     # Through a file object so that numpy does not append ".npz" to the caller's path.
     with open(path, "wb") as stream:
         np.savez(stream, **arrays)  # type: ignore[arg-type]
@@ -349,6 +358,13 @@ def _ground_arrays(ground: GroundGrid | None) -> dict[str, npt.NDArray[np.generi
         "ground_search_radius_m": np.array(ground.search_radius_m),
         "ground_neighbours": np.array(ground.neighbours),
     }
+
+
+def _ground_height(ground: GroundGrid | None, xy_m: FloatArray) -> FloatArray:
+    """Ground height [m] under ``(K, 2)`` x, y [m]; NaN where unknown (everywhere: no ground)."""
+    if ground is None:
+        return np.full(len(np.asarray(xy_m).reshape(-1, 2)), np.nan)
+    return ground.lookup(xy_m)
 
 
 def _ground_from(arrays: dict[str, npt.NDArray[np.generic]]) -> GroundGrid | None:
@@ -577,24 +593,17 @@ class RangeImageBackground:
 
     def ground_z_m(self, xy_m: FloatArray) -> FloatArray:
         """Ground height [m] under ``(K, 2)`` x, y [m]; NaN where unknown."""
-        if self.ground is None:
-            return np.full(len(np.asarray(xy_m).reshape(-1, 2)), np.nan)
-        return self.ground.lookup(xy_m)
+        return _ground_height(self.ground, xy_m)
 
     def save(self, path: PathLike) -> None:
         """Write the model to ``path`` (``.npz``; the name is used as given)."""
-        _write_npz(
-            path,
-            {
-                "format_version": np.array(FORMAT_VERSION),
-                "kind": np.array(self.kind),
-                "rows": np.array(self.rows),
-                "columns": np.array(self.columns),
-                "background_range_m": self._range_m.reshape(self._shape),
-                "settings_json": np.array(self.settings.model_dump_json()),
-                **_ground_arrays(self.ground),
-            },
-        )
+        arrays = {
+            "rows": np.array(self.rows),
+            "columns": np.array(self.columns),
+            "background_range_m": self._range_m.reshape(self._shape),
+            "settings_json": np.array(self.settings.model_dump_json()),
+        }
+        _write_model(path, self.kind, arrays, self.ground)
 
     @classmethod
     def load(
@@ -830,22 +839,12 @@ class VoxelBackground:
 
     def ground_z_m(self, xy_m: FloatArray) -> FloatArray:
         """Ground height [m] under ``(K, 2)`` x, y [m]; NaN where unknown."""
-        if self.ground is None:
-            return np.full(len(np.asarray(xy_m).reshape(-1, 2)), np.nan)
-        return self.ground.lookup(xy_m)
+        return _ground_height(self.ground, xy_m)
 
     def save(self, path: PathLike) -> None:
         """Write the model to ``path`` (``.npz``; the name is used as given)."""
-        _write_npz(
-            path,
-            {
-                "format_version": np.array(FORMAT_VERSION),
-                "kind": np.array(self.kind),
-                "voxel_m": np.array(self.voxel_m),
-                "keys": self.keys,
-                **_ground_arrays(self.ground),
-            },
-        )
+        arrays = {"voxel_m": np.array(self.voxel_m), "keys": self.keys}
+        _write_model(path, self.kind, arrays, self.ground)
 
     @classmethod
     def load(cls, path: PathLike, *, voxel_m: float | None = None) -> VoxelBackground:

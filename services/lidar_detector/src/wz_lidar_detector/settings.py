@@ -16,6 +16,7 @@ from pydantic_settings import SettingsConfigDict
 from wz_lidar_detector.background import RangeBackgroundSettings
 from wz_lidar_detector.fast import FastSettings
 from wz_lidar_detector.reference import ReferenceSettings
+from wz_shared.sensor_mounts import mount_of_kind
 from wz_shared.settings import ServiceSettings
 from wz_shared.site import SensorMount, Site
 
@@ -67,20 +68,4 @@ def lidar_mount(site: Site, sensor_id: str | None) -> SensorMount:
     ValueError
         When the site has no such sensor, or it is not a LiDAR, in words for the operator.
     """
-    lidars = [mount for mount in site.sensors if mount.kind == "lidar"]
-    if sensor_id is None:
-        if not lidars:
-            raise ValueError(f"site {site.site_id} has no LiDAR: set WZ_LIDAR_SENSOR_ID")
-        return lidars[0]
-    try:
-        mount = site.sensor(sensor_id)
-    except KeyError:
-        known = ", ".join(m.sensor_id for m in lidars) or "none"
-        raise ValueError(
-            f"site {site.site_id} has no sensor {sensor_id!r} (its LiDARs: {known})"
-        ) from None
-    if mount.kind != "lidar":
-        raise ValueError(
-            f"sensor {sensor_id!r} of site {site.site_id} is a {mount.kind}, not a LiDAR"
-        )
-    return mount
+    return mount_of_kind(site, sensor_id, "lidar", "WZ_LIDAR_SENSOR_ID", kind_name="LiDAR")

@@ -49,49 +49,18 @@ volume (from its corners) gives the columns, and the exact elevation interval of
 sweeps during the whole sweep (corners and the apexes of its edges' great-circle arcs) gives the
 beams. On a work-zone approach this casts about 1.6 rays per vehicle return.
 
-Physics of one return
----------------------
-For a first hit at range ``r`` [m] on a surface of material ``m`` at incidence ``theta``:
-
-1. Apparent reflectivity, reported as the point's intensity (0..1, range-compensated like the
-   calibrated reflectivity channel of common sensors)::
-
-       intensity = rho_m * cos(theta)^k_m * exp(-2 alpha r)
-
-   with ``rho_m`` the material's diffuse reflectivity at 905 nm and ``k_m`` its angular exponent
-   (:data:`MATERIAL_RESPONSE`: 1 for Lambertian surfaces; close to 0 for retroreflective
-   marking paint, drums and signs, which send light back towards the source at any incidence).
-   ``exp(-2 alpha r)`` is the two-way transmission through fog and rain, which the sensor
-   cannot compensate.
-2. Detection: the received power follows the LiDAR equation for an extended target,
-   ``P ~ intensity / r^2``. Sensors are specified by the range at which a target of a given
-   reflectivity is just detected (datasheet convention: 80 % at ``max_range_m``), so a return is
-   detected when ``intensity * (max_range / r)^2 >= range_spec_reflectivity``, and when
-   ``min_range_m <= r <= max_range_m``. In clear weather a 10 % target is thus seen to about
-   ``max_range / sqrt(8)`` (71 m at 200 m), a grazing road surface much less far.
-3. Dropouts: a detected return is lost with probability ``dropout_probability`` + a grazing
-   term rising linearly in ``cos(theta)`` from 0 at ``grazing_onset_deg`` to
-   ``grazing_dropout_probability`` at 90 deg incidence + the material's extra (glass transmits
-   or mirrors most of the beam).
-4. Range noise: Gaussian, ``range_noise_std_m`` of the intrinsics, along the beam (Box-Muller
-   on float32 uniforms, exact to 5.8 standard deviations).
-
-Weather (``alpha`` [1/m], the sum of both terms):
-
-- Fog: Koschmieder, ``alpha = 3.912 / V * (lambda / 550 nm)^-q`` for visibility V, with the
-  size-distribution exponent q of Kim et al. (2001): q = 1.6 (V > 50 km), 1.3 (6-50 km),
-  0.16 V + 0.34 (1-6 km), V - 0.5 (0.5-1 km), 0 below 0.5 km (fog droplets scatter all
-  wavelengths alike). At 100 m visibility alpha = 0.039 /m: a 35 % target (concrete) at
-  normal incidence is lost beyond 34 m.
-- Rain: the empirical rain attenuation of free-space-optics link budgets, ``gamma = 1.076
-  R^0.67`` dB/km for rain rate R [mm/h] (as commonly cited from Carbonneau and Wisely, 1998),
-  ``alpha = gamma / 4343``: 1.0e-3 /m at 8 mm/h, where an 80 % target is seen to 169 m
-  instead of 200 and a 10 % one to 66 m instead of 71: rain hurts a LiDAR far less than fog.
-  The coefficients are settings (power laws such as ``0.01 R^0.6`` are used elsewhere, with
-  various units). Raindrops close to the sensor also return light: a Poisson number of spurious
-  points per frame, mean ``rain_clutter_per_mm_h * R``, on uniformly drawn beams at ranges
-  uniform in ``[rain_clutter_min_range_m, rain_clutter_max_range_m]``, weak (intensity uniform
-  in 0.01-0.1), labelled 0; each replaces its beam's return when nearer.
+Rooms
+-----
+- :mod:`~wz_simulator.sensors.lidar_geometry`: box triangles, ground polygons (ear clipping),
+  the static mesh, and the exact azimuth/elevation extents behind the ray culling.
+- :mod:`~wz_simulator.sensors.lidar_physics`: the physics of one return (material response,
+  fog and rain extinction, detection threshold, dropouts, range noise) and the settings
+  (:class:`LidarPhysics`).
+- :mod:`~wz_simulator.sensors.lidar_frame`: what a sweep hands on (:class:`LidarScan`, truth
+  boxes).
+- here, :class:`LidarModel`: the beam pattern (rows, columns, timing, sectors), the static cast
+  once, and each sweep: vehicle bodies, culled rays cast in per-vehicle universes, dropouts,
+  noise, rain clutter, the organized frame.
 
 Randomness: every frame draws from ``numpy.random.default_rng((seed, frame_index))``, so a frame
 depends only on the seed, its index and its inputs, never on the frames before it (a replay or a
@@ -100,10 +69,8 @@ rebuilt model reproduces it). Draw order: dropouts, range noise, rain clutter.
 
 from __future__ import annotations
 
-import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from types import MappingProxyType
 from typing import Protocol
 
 import numpy as np
@@ -111,16 +78,37 @@ import numpy.typing as npt
 import open3d as o3d
 
 from wz_shared.messages import LidarFrameMeta, VehicleTruth
+from wz_shared.sensor_mounts import intrinsics_of
 from wz_shared.site import LidarIntrinsics, SensorMount
-from wz_simulator.sensors.scene import (
-    BOX_CORNER_SIGNS,
-    BOX_FACES,
-    STATIC_LABEL,
-    Box,
-    GroundPolygon,
-    Material,
-    Weather,
+
+# Re-exported (``X as X``): these moved to the lidar_* rooms, their names stay here.
+from wz_simulator.sensors.lidar_frame import LidarScan as LidarScan
+from wz_simulator.sensors.lidar_frame import LidarTruthBox as LidarTruthBox
+from wz_simulator.sensors.lidar_geometry import (
+    BOX_FACE_CORNERS,
+    SWEPT_BOX_EDGES,
+    azimuth_extent,
+    centred_grid,
+    elevation_extent,
+    static_mesh,
 )
+from wz_simulator.sensors.lidar_geometry import BOX_TRIANGLES as BOX_TRIANGLES
+from wz_simulator.sensors.lidar_geometry import box_corners as box_corners
+from wz_simulator.sensors.lidar_geometry import triangulate_polygon as triangulate_polygon
+from wz_simulator.sensors.lidar_physics import KOSCHMIEDER as KOSCHMIEDER
+from wz_simulator.sensors.lidar_physics import MATERIAL_RESPONSE as MATERIAL_RESPONSE
+from wz_simulator.sensors.lidar_physics import LidarPhysics as LidarPhysics
+from wz_simulator.sensors.lidar_physics import (
+    ReturnPhysics,
+    Returns,
+    empty_returns,
+    incidence_cosine,
+    standard_normal,
+)
+from wz_simulator.sensors.lidar_physics import SurfaceResponse as SurfaceResponse
+from wz_simulator.sensors.lidar_physics import fog_extinction_per_m as fog_extinction_per_m
+from wz_simulator.sensors.lidar_physics import rain_extinction_per_m as rain_extinction_per_m
+from wz_simulator.sensors.scene import STATIC_LABEL, Box, GroundPolygon, Weather
 
 FloatArray = npt.NDArray[np.float64]
 Float32Array = npt.NDArray[np.float32]
@@ -132,154 +120,9 @@ BoolArray = npt.NDArray[np.bool_]
 #: truth's stamp, each labelled with the 1-based index of its vehicle (``scene.vehicle_boxes``).
 BoxesFor = Callable[[Sequence[VehicleTruth], float], list[Box]]
 
-
-@dataclass(frozen=True)
-class SurfaceResponse:
-    """How a material returns a 905 nm beam.
-
-    Attributes
-    ----------
-    reflectivity
-        Diffuse reflectivity at normal incidence, 0..1 (retroreflectors are given 1).
-    angular_exponent
-        The return scales as ``cos(incidence) ** angular_exponent``: 1 for a Lambertian surface,
-        near 0 for a retroreflector.
-    extra_dropout_probability
-        Added to the dropout probability of every return from this material.
-    """
-
-    reflectivity: float
-    angular_exponent: float = 1.0
-    extra_dropout_probability: float = 0.0
-
-
-#: Response per material: typical NIR reflectivities (asphalt 5-15 %, paint 20-50 %, vegetation
-#: and grass 30-50 %, retroreflective sheeting and beads far above any diffuse surface).
-MATERIAL_RESPONSE: Mapping[Material, SurfaceResponse] = MappingProxyType(
-    {
-        Material.ASPHALT: SurfaceResponse(0.08),
-        Material.MARKING: SurfaceResponse(0.7, angular_exponent=0.1),
-        Material.GRASS: SurfaceResponse(0.35),
-        Material.CAR_PAINT: SurfaceResponse(0.3),
-        Material.GLASS: SurfaceResponse(0.05, extra_dropout_probability=0.5),
-        Material.TIRE: SurfaceResponse(0.03),
-        Material.TRUCK_BODY: SurfaceResponse(0.45),
-        Material.LIGHT: SurfaceResponse(0.6, angular_exponent=0.3),
-        Material.DRUM: SurfaceResponse(0.9, angular_exponent=0.2),
-        Material.CONCRETE: SurfaceResponse(0.35),
-        Material.SIGN: SurfaceResponse(1.0, angular_exponent=0.2),
-        Material.METAL: SurfaceResponse(0.4),
-        Material.VEGETATION: SurfaceResponse(0.45),
-    }
-)
-
-#: Koschmieder's constant: visibility is where contrast falls to 2 % (-ln 0.02).
-KOSCHMIEDER = 3.912
-#: dB per neper-ish: ``gamma [dB/km] / (10 log10 e) / 1000 = alpha [1/m]``.
-_DB_PER_KM_TO_PER_M = 1.0 / (10.0 * math.log10(math.e) * 1000.0)
-
-#: Corner indices of the 6 faces of a box (``BOX_FACES``), shape (6, 4).
-_BOX_FACE_CORNERS = np.array(BOX_FACES, dtype=np.intp)
-#: The 12 triangles of a box (two per face of ``BOX_FACES``, in face order), as corner indices.
-BOX_TRIANGLES = np.array(
-    [tri for a, b, c, d in BOX_FACES for tri in ((a, b, c), (a, c, d))], dtype=np.uint32
-)
-_TRIANGLES_PER_BOX = len(BOX_TRIANGLES)
-#: The 12 edges of a box as pairs of corner indices (:meth:`Box.corners` order).
-_BOX_EDGES = np.array(
-    [[0, 1], [1, 2], [2, 3], [3, 0], [4, 5], [5, 6], [6, 7], [7, 4], [0, 4], [1, 5], [2, 6], [3, 7]]
-)
-#: Edges of the volume a box sweeps along a segment (corners 0-7 at the start, 8-15 at the end):
-#: every edge of its convex hull is an edge of either box or joins a corner to its copy.
-_SWEPT_BOX_EDGES = np.concatenate(
-    [_BOX_EDGES, _BOX_EDGES + 8, np.column_stack([np.arange(8), np.arange(8) + 8])]
-)
 #: Slack on interval ends (columns, radians) against float round-off in the ray culling.
 _COLUMN_SLACK = 0.01
 _ELEVATION_SLACK_RAD = 1e-4
-
-
-@dataclass(frozen=True)
-class LidarPhysics:
-    """Settings of the LiDAR model (units in the names).
-
-    Attributes
-    ----------
-    sectors
-        Equal runs of columns over which the rays that may meet each vehicle are chosen
-        (1..azimuth_steps): more sectors give tighter windows, and more of them.
-    min_range_m
-        Blind zone: geometry nearer than this is not seen (rays start there).
-    dropout_probability
-        Chance that any detected return is lost.
-    grazing_dropout_probability
-        Extra chance of loss at 90 deg incidence, falling linearly in cos(incidence) to 0 at
-        ``grazing_onset_deg``.
-    grazing_onset_deg
-        Incidence angle where the grazing dropout starts [deg].
-    range_spec_reflectivity
-        Reflectivity detected just at ``max_range_m`` (datasheet convention, 0.8); 0 turns the
-        detection threshold off (every hit within range returns).
-    wavelength_nm
-        Laser wavelength (fog extinction depends on it above 0.5 km visibility).
-    rain_attenuation_db_per_km
-        ``a`` of the rain attenuation ``gamma = a R^b`` [dB/km], R in mm/h.
-    rain_attenuation_exponent
-        ``b`` of the same.
-    rain_clutter_per_mm_h
-        Mean spurious raindrop returns per frame per mm/h of rain.
-    rain_clutter_min_range_m, rain_clutter_max_range_m
-        Range interval of the spurious returns [m].
-    raycast_threads
-        Threads open3d may use per cast (0: all cores).
-    base_ground_material
-        Material of the base ground plane (seen where no ground polygon lies).
-    """
-
-    sectors: int = 32
-    min_range_m: float = 0.5
-    dropout_probability: float = 0.001
-    grazing_dropout_probability: float = 0.5
-    grazing_onset_deg: float = 75.0
-    range_spec_reflectivity: float = 0.8
-    wavelength_nm: float = 905.0
-    rain_attenuation_db_per_km: float = 1.076
-    rain_attenuation_exponent: float = 0.67
-    rain_clutter_per_mm_h: float = 1.0
-    rain_clutter_min_range_m: float = 5.0
-    rain_clutter_max_range_m: float = 15.0
-    raycast_threads: int = 0
-    base_ground_material: Material = Material.GRASS
-
-    @classmethod
-    def ideal(cls, sectors: int = 32) -> LidarPhysics:
-        """Geometry only: no dropouts, no detection threshold, no rain clutter.
-
-        Weather extinction still scales the intensity; range noise comes from the intrinsics.
-        """
-        return cls(
-            sectors=sectors,
-            dropout_probability=0.0,
-            grazing_dropout_probability=0.0,
-            range_spec_reflectivity=0.0,
-            rain_clutter_per_mm_h=0.0,
-        )
-
-    def validate(self, intrinsics: LidarIntrinsics) -> None:
-        """Raise ValueError naming the first setting that does not fit these intrinsics."""
-        if not 1 <= self.sectors <= intrinsics.azimuth_steps:
-            raise ValueError(f"sectors must lie in [1, {intrinsics.azimuth_steps}]")
-        if not 0.0 <= self.min_range_m < intrinsics.max_range_m:
-            raise ValueError("min_range_m must lie in [0, max_range_m)")
-        for name in ("dropout_probability", "grazing_dropout_probability"):
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                raise ValueError(f"{name} must lie in [0, 1]")
-        if not 0.0 <= self.grazing_onset_deg < 90.0:
-            raise ValueError("grazing_onset_deg must lie in [0, 90)")
-        if self.range_spec_reflectivity < 0 or self.rain_clutter_per_mm_h < 0:
-            raise ValueError("range_spec_reflectivity and rain_clutter_per_mm_h must be >= 0")
-        if not 0.0 <= self.rain_clutter_min_range_m <= self.rain_clutter_max_range_m:
-            raise ValueError("rain clutter ranges must satisfy 0 <= min <= max")
 
 
 class StaticSceneLike(Protocol):
@@ -290,199 +133,6 @@ class StaticSceneLike(Protocol):
 
     @property
     def ground(self) -> Sequence[GroundPolygon]: ...
-
-
-@dataclass(frozen=True)
-class LidarTruthBox:
-    """A vehicle's true 3D box for one sweep, when the sweep's beam crossed its centre.
-
-    The box is the vehicle's body (the union of its ``boxes_for`` boxes) aligned with its
-    heading; ``stamp_s`` is the firing time of the column that points at its centre.
-
-    Attributes
-    ----------
-    label
-        1-based index of the vehicle in the frame's truth (its points' label).
-    vehicle_id
-        The vehicle's id.
-    stamp_s
-        Time the box is given at [s].
-    center_site_m, yaw_site_rad
-        Centre [m] and heading (CCW from east) [rad] in the site frame.
-    center_sensor_m, yaw_sensor_rad
-        Centre [m] and heading (CCW from the sensor's x axis, about its z axis) [rad] in the
-        sensor frame.
-    size_lwh_m
-        Length (along the heading), width, height [m].
-    num_points
-        Points of the frame labelled with this vehicle.
-    """
-
-    label: int
-    vehicle_id: str
-    stamp_s: float
-    center_site_m: tuple[float, float, float]
-    yaw_site_rad: float
-    center_sensor_m: tuple[float, float, float]
-    yaw_sensor_rad: float
-    size_lwh_m: tuple[float, float, float]
-    num_points: int
-
-
-@dataclass(frozen=True)
-class LidarScan:
-    """One simulated sweep.
-
-    Attributes
-    ----------
-    points
-        ``(rows * columns, 4)`` float32: x, y, z [m] in the sensor frame and intensity (0..1);
-        organized, row-major by beam then column (see the module docstring); NaN rows where the
-        beam got no return.
-    labels
-        ``(rows * columns,)`` int32: 0 for the static scene, rain clutter and no return; k for
-        vehicle k (1-based index into the frame's truth).
-    vehicle_ids
-        ``vehicle_ids[k - 1]`` is the id of the vehicle labelled k.
-    boxes
-        Truth boxes of the vehicles that have a body, in label order.
-    meta
-        The frame's metadata message (stamp: the sweep start).
-    """
-
-    points: Float32Array
-    labels: Int32Array
-    vehicle_ids: tuple[str, ...]
-    boxes: tuple[LidarTruthBox, ...]
-    meta: LidarFrameMeta
-
-    @property
-    def range_image(self) -> Float32Array:
-        """The points as a ``(rows, columns, 4)`` view."""
-        image: Float32Array = self.points.reshape(self.meta.rows, self.meta.columns, 4)
-        return image
-
-
-def fog_extinction_per_m(visibility_m: float, wavelength_nm: float = 905.0) -> float:
-    """Fog extinction coefficient [1/m] from the meteorological visibility [m].
-
-    Koschmieder with Kim et al.'s (2001) wavelength exponent q(V); 0 for infinite visibility.
-    """
-    if not math.isfinite(visibility_m):
-        return 0.0
-    if visibility_m <= 0:
-        raise ValueError("fog visibility must be positive")
-    v_km = visibility_m / 1000.0
-    if v_km > 50.0:
-        q = 1.6
-    elif v_km > 6.0:
-        q = 1.3
-    elif v_km > 1.0:
-        q = 0.16 * v_km + 0.34
-    elif v_km > 0.5:
-        q = v_km - 0.5
-    else:
-        q = 0.0
-    return float(KOSCHMIEDER / visibility_m * (wavelength_nm / 550.0) ** -q)
-
-
-def rain_extinction_per_m(
-    rain_mm_per_h: float, coefficient_db_per_km: float = 1.076, exponent: float = 0.67
-) -> float:
-    """Rain extinction coefficient [1/m]: ``gamma = a R^b`` [dB/km] converted to nepers per m."""
-    if rain_mm_per_h <= 0:
-        return 0.0
-    return float(coefficient_db_per_km * rain_mm_per_h**exponent * _DB_PER_KM_TO_PER_M)
-
-
-def box_corners(centers_m: FloatArray, sizes_lwh_m: FloatArray, yaws_rad: FloatArray) -> FloatArray:
-    """Corners of many boxes at once, in :meth:`Box.corners` order.
-
-    Parameters
-    ----------
-    centers_m : ndarray, shape (n, 3)
-        Box centres [m].
-    sizes_lwh_m : ndarray, shape (n, 3)
-        Length (along the yaw), width, height [m].
-    yaws_rad : ndarray, shape (n,)
-        Yaw, counter-clockwise about z [rad].
-
-    Returns
-    -------
-    ndarray, shape (n, 8, 3)
-    """
-    local = 0.5 * sizes_lwh_m[:, None, :] * BOX_CORNER_SIGNS[None, :, :]
-    cos_yaw, sin_yaw = np.cos(yaws_rad)[:, None], np.sin(yaws_rad)[:, None]
-    corners = np.empty_like(local)
-    corners[..., 0] = cos_yaw * local[..., 0] - sin_yaw * local[..., 1]
-    corners[..., 1] = sin_yaw * local[..., 0] + cos_yaw * local[..., 1]
-    corners[..., 2] = local[..., 2]
-    corners += centers_m[:, None, :]
-    return corners
-
-
-def triangulate_polygon(vertices_xy: npt.ArrayLike) -> npt.NDArray[np.uint32]:
-    """Triangulate a simple polygon by ear clipping.
-
-    Parameters
-    ----------
-    vertices_xy : array_like, shape (n, 2)
-        Vertices in order (either orientation; a repeated closing vertex is dropped).
-
-    Returns
-    -------
-    ndarray of uint32, shape (m, 3)
-        Triangles as vertex indices, counter-clockwise; collinear vertices yield no triangle.
-
-    Raises
-    ------
-    ValueError
-        Fewer than 3 vertices, or no ear found (a self-intersecting polygon).
-    """
-    points = np.asarray(vertices_xy, dtype=np.float64)
-    count = len(points)
-    if count >= 2 and np.allclose(points[0], points[-1]):
-        count -= 1
-    if count < 3:
-        raise ValueError(f"a ground polygon needs at least 3 vertices, got {count}")
-    x, y = points[:count, 0], points[:count, 1]
-    twice_area = float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
-    remaining = list(range(count)) if twice_area >= 0 else list(range(count - 1, -1, -1))
-    scale = float(np.ptp(points[:count], axis=0).max()) or 1.0
-    eps = 1e-12 * scale * scale
-    triangles: list[tuple[int, int, int]] = []
-    while len(remaining) > 3:
-        ring = np.asarray(remaining)
-        prev_pts, cur_pts, next_pts = (
-            points[np.roll(ring, 1)],
-            points[ring],
-            points[np.roll(ring, -1)],
-        )
-        edge_a, edge_b = cur_pts - prev_pts, next_pts - cur_pts
-        cross = edge_a[:, 0] * edge_b[:, 1] - edge_a[:, 1] * edge_b[:, 0]
-        collinear = np.flatnonzero(np.abs(cross) <= eps)
-        if len(collinear):
-            remaining.pop(int(collinear[0]))
-            continue
-        for i in np.flatnonzero(cross > eps).tolist():
-            a, b, c = prev_pts[i], cur_pts[i], next_pts[i]
-            others = points[np.delete(ring, [(i - 1) % len(ring), i, (i + 1) % len(ring)])]
-            # Inside (or on the edge of) triangle abc: all three edge cross products >= 0.
-            inside = np.ones(len(others), dtype=bool)
-            for p, q in ((a, b), (b, c), (c, a)):
-                inside &= (q[0] - p[0]) * (others[:, 1] - p[1]) - (q[1] - p[1]) * (
-                    others[:, 0] - p[0]
-                ) >= -eps
-            if not inside.any():
-                m = len(remaining)
-                triangles.append((remaining[(i - 1) % m], remaining[i], remaining[(i + 1) % m]))
-                remaining.pop(i)
-                break
-        else:
-            raise ValueError("ground polygon has no ear: is it self-intersecting?")
-    if len(remaining) == 3:
-        triangles.append((remaining[0], remaining[1], remaining[2]))
-    return np.asarray(triangles, dtype=np.uint32).reshape(-1, 3)
 
 
 @dataclass(frozen=True)
@@ -504,17 +154,6 @@ class _VehicleBodies:
     heading_rad: FloatArray  # (m,)
     velocity_mps: FloatArray  # (m, 3)
 
-
-@dataclass(frozen=True)
-class _Returns:
-    """Returns of a subset of rays: indices into the frame and their physics."""
-
-    ray_index: IntArray
-    range_m: Float32Array
-    intensity: Float32Array
-    detected: BoolArray
-    dropout_probability: Float32Array
-    labels: Int32Array
 
 
 class LidarModel:
@@ -555,15 +194,11 @@ class LidarModel:
         site_id: str = "sim",
         physics: LidarPhysics | None = None,
     ) -> None:
-        if not isinstance(mount.intrinsics, LidarIntrinsics):
-            raise ValueError(
-                f"sensor {mount.sensor_id!r} is a {mount.kind}, not a lidar: "
-                "LidarModel needs lidar intrinsics"
-            )
+        intrinsics = intrinsics_of(mount, LidarIntrinsics, "LidarModel needs lidar intrinsics")
         self.physics = physics if physics is not None else LidarPhysics()
-        self.physics.validate(mount.intrinsics)
+        self.physics.validate(intrinsics)
         self.mount = mount
-        self.intrinsics: LidarIntrinsics = mount.intrinsics
+        self.intrinsics = intrinsics
         self.weather = weather
         self.seed = seed
         self.site_id = site_id
@@ -628,17 +263,14 @@ class LidarModel:
         self._sector_last_column: IntArray = last
 
         # --- static scene, cast once ----------------------------------------------------------
-        self._material_reflectivity = np.array(
-            [MATERIAL_RESPONSE[m].reflectivity for m in Material], dtype=np.float32
+        self._return_physics = ReturnPhysics(physics, self.extinction_per_m, self.max_range_m)
+        vertices, triangles, triangle_material = static_mesh(
+            static_boxes,
+            static_ground,
+            self.position_m,
+            self.max_range_m,
+            physics.base_ground_material,
         )
-        self._material_exponent = np.array(
-            [MATERIAL_RESPONSE[m].angular_exponent for m in Material], dtype=np.float32
-        )
-        self._material_dropout = np.array(
-            [MATERIAL_RESPONSE[m].extra_dropout_probability for m in Material], dtype=np.float32
-        )
-        self._grazing_onset_cos = math.cos(math.radians(physics.grazing_onset_deg))
-        vertices, triangles, triangle_material = self._static_mesh(static_boxes, static_ground)
         scene = o3d.t.geometry.RaycastingScene()
         scene.add_triangles(
             o3d.core.Tensor.from_numpy(vertices), o3d.core.Tensor.from_numpy(triangles)
@@ -653,8 +285,8 @@ class LidarModel:
         self.static_range_m: Float32Array = np.where(
             hit, t_hit + np.float32(physics.min_range_m), np.float32(np.inf)
         ).astype(np.float32)
-        cos_incidence = _cos_incidence(self._rays[:, 3:], hits["primitive_normals"].numpy())
-        response = self._response(
+        cos_incidence = incidence_cosine(self._rays[:, 3:], hits["primitive_normals"].numpy())
+        response = self._return_physics.response(
             np.where(hit, self.static_range_m, np.float32(0.0)),
             cos_incidence,
             triangle_material[primitive],
@@ -687,101 +319,6 @@ class LidarModel:
             site_id=site_id,
             physics=physics,
         )
-
-    # --- physics ------------------------------------------------------------------------
-
-    def _response(
-        self, range_m: Float32Array, cos_incidence: Float32Array, material: IntArray
-    ) -> _Returns:
-        """Intensity, detection and dropout probability of hits (see the module docstring).
-
-        ``range_m``, ``cos_incidence`` and ``material`` are parallel, shape (n,); the returned
-        ``ray_index`` and ``labels`` are left empty.
-        """
-        physics = self.physics
-        intensity = np.take(self._material_reflectivity, material) * np.power(
-            cos_incidence, np.take(self._material_exponent, material)
-        )
-        if self.extinction_per_m > 0:
-            intensity *= np.exp(np.float32(-2.0 * self.extinction_per_m) * range_m)
-        detected = (range_m >= physics.min_range_m) & (range_m <= self.max_range_m)
-        if physics.range_spec_reflectivity > 0:
-            # intensity (R_max / r)^2 >= rho_spec, without dividing by r.
-            detected &= intensity * np.float32(self.max_range_m**2) >= np.float32(
-                physics.range_spec_reflectivity
-            ) * np.square(range_m)
-        grazing = np.clip(1.0 - cos_incidence / np.float32(self._grazing_onset_cos), 0.0, 1.0)
-        dropout = np.minimum(
-            np.float32(physics.dropout_probability)
-            + np.float32(physics.grazing_dropout_probability) * grazing
-            + np.take(self._material_dropout, material),
-            np.float32(1.0),
-        )
-        empty = np.empty(0, dtype=np.intp)
-        return _Returns(empty, range_m, intensity, detected, dropout, np.empty(0, dtype=np.int32))
-
-    def _static_mesh(
-        self, boxes: Sequence[Box], ground: Sequence[GroundPolygon]
-    ) -> tuple[Float32Array, npt.NDArray[np.uint32], IntArray]:
-        """Vertices (sensor-centred), triangles and per-triangle material of the static scene."""
-        vertex_blocks: list[FloatArray] = []
-        triangle_blocks: list[npt.NDArray[np.uint32]] = []
-        material_blocks: list[IntArray] = []
-        offset = 0
-
-        def add(
-            vertices: FloatArray, triangles: npt.NDArray[np.uint32], material: IntArray
-        ) -> None:
-            nonlocal offset
-            vertex_blocks.append(vertices - self.position_m)
-            triangle_blocks.append(triangles + np.uint32(offset))
-            material_blocks.append(material)
-            offset += len(vertices)
-
-        if boxes:
-            centers = np.array([box.center_xyz_m for box in boxes], dtype=np.float64)
-            sizes = np.array([box.size_lwh_m for box in boxes], dtype=np.float64)
-            yaws = np.array([box.yaw_rad for box in boxes], dtype=np.float64)
-            corners = box_corners(centers, sizes, yaws).reshape(-1, 3)
-            count = len(boxes)
-            triangles = (
-                BOX_TRIANGLES[None, :, :]
-                + np.uint32(8) * np.arange(count, dtype=np.uint32)[:, None, None]
-            ).reshape(-1, 3)
-            materials = np.repeat(
-                np.array([int(box.material) for box in boxes], dtype=np.intp), _TRIANGLES_PER_BOX
-            )
-            add(corners, triangles, materials)
-        lowest = 0.0
-        for polygon in ground:
-            xy = np.asarray(polygon.vertices_xy_m, dtype=np.float64)
-            triangles = triangulate_polygon(xy)
-            vertices = np.column_stack([xy, np.full(len(xy), polygon.z_m)])
-            add(vertices, triangles, np.full(len(triangles), int(polygon.material), np.intp))
-            lowest = min(lowest, polygon.z_m - 0.01)
-        # Base plane under everything, wide enough for every downward beam within range.
-        half = self.max_range_m + 100.0
-        px, py = self.position_m[0], self.position_m[1]
-        plane = np.array(
-            [
-                [px - half, py - half, lowest],
-                [px + half, py - half, lowest],
-                [px + half, py + half, lowest],
-                [px - half, py + half, lowest],
-            ]
-        )
-        add(
-            plane,
-            np.array([[0, 1, 2], [0, 2, 3]], dtype=np.uint32),
-            np.full(2, int(self.physics.base_ground_material), np.intp),
-        )
-        return (
-            np.ascontiguousarray(np.concatenate(vertex_blocks), dtype=np.float32),
-            np.ascontiguousarray(np.concatenate(triangle_blocks), dtype=np.uint32),
-            np.concatenate(material_blocks),
-        )
-
-    # --- one sweep ----------------------------------------------------------------------
 
     def scan(
         self,
@@ -834,7 +371,7 @@ class LidarModel:
             np.put(labels, index, np.where(np.take(dropped, index), STATIC_LABEL, returns.labels))
         noise_std = self.intrinsics.range_noise_std_m
         if noise_std > 0:
-            range_m += np.float32(noise_std) * _standard_normal(rng, self.num_rays)
+            range_m += np.float32(noise_std) * standard_normal(rng, self.num_rays)
         self._rain_clutter(rng, range_m, intensity, labels)
 
         # Range and intensity are NaN together (no return): so are the point's coordinates.
@@ -965,7 +502,7 @@ class LidarModel:
             velocity_mps=velocity_all[vehicle_index],
         )
 
-    def _vehicle_returns(self, bodies: _VehicleBodies) -> _Returns:
+    def _vehicle_returns(self, bodies: _VehicleBodies) -> Returns:
         """Cast the rays that may meet a vehicle; keep hits nearer than the static scene.
 
         Each vehicle stands once, at its sweep-start position, in its own universe. A ray that
@@ -986,7 +523,7 @@ class LidarModel:
         center = whole.mean(axis=1)
         radius = np.linalg.norm(whole - center[:, None, :], axis=-1).max(axis=-1)
         in_range = np.linalg.norm(center, axis=-1) - radius <= self.max_range_m
-        top, bottom = _elevation_extent(whole, _SWEPT_BOX_EDGES)
+        top, bottom = elevation_extent(whole, SWEPT_BOX_EDGES)
         t_first = self.column_time_offsets_s[self._sector_first_column]
         t_last = self.column_time_offsets_s[self._sector_last_column]
         xy_rotation = self.rotation[:, :2]
@@ -998,7 +535,7 @@ class LidarModel:
             ],
             axis=2,
         )  # (S, m, 16, 2)
-        az_start, az_span, around = _azimuth_extent(swept_xy[..., 0], swept_xy[..., 1])
+        az_start, az_span, around = azimuth_extent(swept_xy[..., 0], swept_xy[..., 1])
         # Around the vertical axis: the nadir (zenith) is met too.
         encircles = around.any(axis=0)
         top = np.where(encircles & (whole[..., 2].max(axis=-1) > 0), 0.5 * np.pi, top)
@@ -1043,7 +580,7 @@ class LidarModel:
             np.concatenate(part) for part in zip(*windows, strict=True)
         )
         if len(row0) == 0:
-            return _empty_returns()
+            return empty_returns()
         # Every (ray, vehicle) candidate of the windows, without a Python loop.
         widths = col1 - col0 + 1
         sizes = (row1 - row0 + 1) * widths
@@ -1062,7 +599,7 @@ class LidarModel:
             self.max_range_m + float(radius.max()) + speed_max * self.sweep_duration_s
         ) + (physics.min_range_m + 10.0)
         slot = np.cumsum(seen) - 1  # universes only for the vehicles seen: a compact grid
-        universe = _centred_grid(int(seen.sum()))[np.maximum(slot, 0)] * spacing  # (m, 3)
+        universe = centred_grid(int(seen.sum()))[np.maximum(slot, 0)] * spacing  # (m, 3)
         box_vehicle = np.repeat(np.arange(len(velocity)), bodies.count)
         scene_box = np.flatnonzero(seen[box_vehicle])
         corners = bodies.corners_m[scene_box]  # (nb, 8, 3), sensor at the origin
@@ -1070,7 +607,7 @@ class LidarModel:
         # away from the sensor at the sweep's start and end is turned away in between (the
         # sensor moves along a segment relative to the vehicle), so it is left out: half the
         # triangles, a faster scene build.
-        quads = corners[:, _BOX_FACE_CORNERS, :]  # (nb, 6, 4, 3)
+        quads = corners[:, BOX_FACE_CORNERS, :]  # (nb, 6, 4, 3)
         outward = np.cross(quads[:, :, 1] - quads[:, :, 0], quads[:, :, 3] - quads[:, :, 0])
         face_center = quads.mean(axis=2)
         sweep_motion = velocity[box_vehicle[scene_box]] * self.sweep_duration_s
@@ -1111,14 +648,14 @@ class LidarModel:
         winner = np.take(candidate, np.flatnonzero(key == np.take(best, candidate_ray)))
         triangle = np.take(hits["primitive_ids"].numpy(), winner).astype(np.intp)
         box = np.take(scene_box, np.take(triangle_box, triangle))
-        cos_incidence = _cos_incidence(
+        cos_incidence = incidence_cosine(
             np.take(rays, winner, axis=0)[:, 3:],
             np.take(hits["primitive_normals"].numpy(), winner, axis=0),
         )
-        response = self._response(
+        response = self._return_physics.response(
             np.take(t_hit, winner), cos_incidence, np.take(bodies.materials, box)
         )
-        return _Returns(
+        return Returns(
             ray_index=np.take(ray, winner),
             range_m=response.range_m,
             intensity=response.intensity,
@@ -1177,109 +714,6 @@ class LidarModel:
         return tuple(boxes)
 
 
-def _elevation_extent(corners: FloatArray, edges: IntArray) -> tuple[FloatArray, FloatArray]:
-    """Highest and lowest elevation [rad] of any point of convex bodies, seen from the origin.
-
-    Exact: the extremes of a body's projection on the unit sphere lie on the projections of its
-    edges, great-circle arcs whose highest (lowest) point is an end or the apex (antipode) of
-    their circle, when the apex lies on the arc. (A body around the vertical axis also
-    covers the nadir or zenith: see :func:`_azimuth_extent`.)
-
-    Parameters
-    ----------
-    corners : ndarray, shape (..., n, 3)
-        Corners of the bodies [m], none containing the origin.
-    edges : ndarray of int, shape (e, 2)
-        Pairs of corner indices, including every edge of the bodies' convex hulls.
-
-    Returns
-    -------
-    top, bottom : ndarray, shape (...)
-    """
-    x, y, z = corners[..., 0], corners[..., 1], corners[..., 2]
-    elevation = np.arctan2(z, np.hypot(x, y))
-    top, bottom = elevation.max(axis=-1), elevation.min(axis=-1)
-    ax, ay, az = (corners[..., edges[:, 0], i] for i in range(3))
-    bx, by, bz = (corners[..., edges[:, 1], i] for i in range(3))
-    # n = a x b, normal of the arc's great circle; its apex p = (-nx nz, -ny nz, nx^2 + ny^2)
-    # (z projected on the circle's plane) lies on the arc a -> b iff p.(n x a) >= 0 and
-    # p.(b x n) >= 0; the antipode -p iff both are <= 0.
-    nx, ny, nz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
-    horizontal2 = nx * nx + ny * ny
-    px, py = -nx * nz, -ny * nz
-    from_a = px * (ny * az - nz * ay) + py * (nz * ax - nx * az) + horizontal2 * (nx * ay - ny * ax)
-    to_b = px * (by * nz - bz * ny) + py * (bz * nx - bx * nz) + horizontal2 * (bx * ny - by * nx)
-    tilted = horizontal2 > 1e-12 * (horizontal2 + nz * nz)  # else the circle is the horizon
-    apex_elevation = np.arctan2(np.sqrt(horizontal2), np.abs(nz))
-    high = tilted & (from_a >= 0) & (to_b >= 0)
-    low = tilted & (from_a <= 0) & (to_b <= 0)
-    top = np.maximum(top, np.where(high, apex_elevation, -np.inf).max(axis=-1))
-    bottom = np.minimum(bottom, np.where(low, -apex_elevation, np.inf).min(axis=-1))
-    return top, bottom
-
-
-def _azimuth_extent(x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray, BoolArray]:
-    """Azimuths [rad] met by convex bodies, from their corners' x and y, shape (..., n).
-
-    Returns
-    -------
-    start, span : ndarray, shape (...)
-        The azimuths met are ``[start, start + span]`` (exact: the corners' azimuths less the
-        widest gap between them).
-    around : ndarray of bool, shape (...)
-        The body surrounds the vertical axis (no gap wider than pi): every azimuth is met.
-    """
-    azimuth = np.sort(np.arctan2(y, x), axis=-1)
-    gaps = np.diff(azimuth, axis=-1, append=azimuth[..., :1] + 2.0 * np.pi)
-    widest = gaps.argmax(axis=-1)[..., None]
-    widest_gap = np.take_along_axis(gaps, widest, axis=-1)[..., 0]
-    start = np.take_along_axis(azimuth, (widest + 1) % x.shape[-1], axis=-1)[..., 0]
-    return start, 2.0 * np.pi - widest_gap, widest_gap <= np.pi
-
-
 def _triple(values: FloatArray) -> tuple[float, float, float]:
     return (float(values[0]), float(values[1]), float(values[2]))
 
-
-def _cos_incidence(directions: Float32Array, normals: Float32Array) -> Float32Array:
-    """|cos| of the angle between unit ray directions and unit normals, both (n, 3); (n,)."""
-    cosine: Float32Array = np.minimum(
-        np.abs(np.einsum("ij,ij->i", directions, normals)), np.float32(1.0)
-    )
-    return cosine
-
-
-def _standard_normal(rng: np.random.Generator, count: int) -> Float32Array:
-    """``count`` standard normal float32 draws by Box-Muller on float32 uniforms.
-
-    Exact in distribution up to 5.8 sigma (the largest ``sqrt(-2 ln u)`` of a float32 u);
-    about twice as fast as numpy's float32 ziggurat on this kind of machine.
-    """
-    half = (count + 1) // 2
-    uniform = rng.random(2 * half, dtype=np.float32)
-    radius = np.sqrt(np.float32(-2.0) * np.log1p(-uniform[:half]))  # 1 - u lies in (0, 1]
-    angle = np.float32(2.0 * np.pi) * uniform[half:]
-    normal = np.empty(2 * half, dtype=np.float32)
-    np.multiply(radius, np.cos(angle), out=normal[:half])
-    np.multiply(radius, np.sin(angle), out=normal[half:])
-    return normal[:count]
-
-
-def _centred_grid(count: int) -> FloatArray:
-    """``count`` points of a unit-spaced 3D grid, as compact as possible, centred on 0, (n, 3)."""
-    side = max(1, math.ceil(count ** (1.0 / 3.0) - 1e-9))
-    index = np.arange(count)
-    grid = np.column_stack([index % side, (index // side) % side, index // (side * side)])
-    centred: FloatArray = grid - 0.5 * (grid.max(axis=0) + grid.min(axis=0))
-    return centred.astype(np.float64)
-
-
-def _empty_returns() -> _Returns:
-    return _Returns(
-        ray_index=np.empty(0, dtype=np.intp),
-        range_m=np.empty(0, dtype=np.float32),
-        intensity=np.empty(0, dtype=np.float32),
-        detected=np.empty(0, dtype=bool),
-        dropout_probability=np.empty(0, dtype=np.float32),
-        labels=np.empty(0, dtype=np.int32),
-    )

@@ -85,6 +85,7 @@ import numpy as np
 import numpy.typing as npt
 
 from wz_shared.messages import RadarScan, RadarTarget, VehicleClass, VehicleTruth
+from wz_shared.sensor_mounts import intrinsics_of
 from wz_shared.site import RadarIntrinsics, SensorMount
 from wz_simulator.sensors.scene import Weather
 
@@ -240,11 +241,7 @@ class RadarModel:
         clutter_rcs_dbsm: float = -10.0,
         clutter_speed_std_mps: float = 0.3,
     ) -> None:
-        if not isinstance(mount.intrinsics, RadarIntrinsics):
-            raise ValueError(
-                f"sensor {mount.sensor_id!r} is a {mount.kind}, not a radar: "
-                "RadarModel needs radar intrinsics"
-            )
+        intrinsics = intrinsics_of(mount, RadarIntrinsics, "RadarModel needs radar intrinsics")
         if false_alarm_rate_per_scan < 0 or rain_false_alarms_per_mm_h < 0:
             raise ValueError("false-alarm rates must be non-negative")
         if not 0.0 < reference_detection_probability < 1.0:
@@ -258,7 +255,7 @@ class RadarModel:
         if not 0.0 < occlusion_fraction <= 1.0:
             raise ValueError("occlusion_fraction must lie in (0, 1]")
         self.mount = mount
-        self.intrinsics: RadarIntrinsics = mount.intrinsics
+        self.intrinsics = intrinsics
         self.weather = weather
         self.seed = seed
         self.site_id = site_id
@@ -322,12 +319,7 @@ class RadarModel:
     def detection_probability(self, rcs_dbsm: npt.ArrayLike, range_m: npt.ArrayLike) -> FloatArray:
         """Probability of detecting a lone, visible Swerling I target.
 
-        Parameters
-        ----------
-        rcs_dbsm : array_like, shape (...)
-            Mean radar cross-section [dBsm].
-        range_m : array_like, shape (...)
-            Range [m].
+        ``rcs_dbsm`` [dBsm] and ``range_m`` [m] are as in :meth:`mean_snr`.
 
         Returns
         -------

@@ -40,7 +40,6 @@ import logging
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import TracebackType
 
 import libsumo
 import numpy as np
@@ -470,10 +469,5 @@ class TrafficWorld:
     def __enter__(self) -> TrafficWorld:
         return self
 
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        traceback: TracebackType | None,
-    ) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()

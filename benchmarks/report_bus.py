@@ -1,0 +1,281 @@
+"""Report sections of the bus and service benchmarks: latency, throughput, alerts, webhooks,
+the gateway's live API, recovery after a kill."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from benchmarks.report_format import (
+    FRAME_PATHS,
+    SMALL_PATHS,
+    THROUGHPUT_PATHS,
+    base_path,
+    fmt_latency,
+    fmt_ms,
+    fmt_rate,
+    fmt_round_range,
+    fmt_us,
+    md_table,
+)
+
+
+def bus_latency(result: dict[str, Any]) -> list[str]:
+    lines = [
+        "Ping-pong between this process and an echo process over Zenoh on `tcp/127.0.0.1` "
+        "(two peers, explicit endpoints, multicast off). The echo republishes each sample on "
+        "another key through the same API; one-way latency = round trip / 2. One sample in "
+        "flight at a time, after a warm-up. Each hop wakes a waiting thread; on this virtual "
+        "machine a thread woken on an idle core also pays that core's wake-up, so medians "
+        "are lower when other work keeps the cores busy (and tails higher).",
+        "",
+        "### Small messages (~200 bytes: a `RadarScan` with one target, or 200 raw bytes)",
+        "",
+    ]
+    rows = []
+    for name, entry in result["small"].items():
+        stats = entry["one_way_us"]
+        rows.append(
+            [
+                f"`{name}`",
+                SMALL_PATHS.get(name, ""),
+                str(entry["payload_bytes"]),
+                f"{stats['n']} ({entry['rounds']})",
+                f"**{fmt_us(stats['p50'])}**",
+                fmt_round_range(entry["round_p50_us"]),
+                fmt_us(stats["p90"]),
+                fmt_us(stats["p99"]),
+                fmt_us(stats["max"]),
+            ]
+        )
+    header = [
+        "Path",
+        "What a sample goes through",
+        "Bytes",
+        "Samples (rounds)",
+        "p50",
+        "p50 of each round",
+        "p90",
+        "p99",
+        "max",
+    ]
+    lines += [*md_table(header, rows), ""]
+    lines += ["### LiDAR frames (131072 points x 4 float32, 2 MB)", ""]
+    rows = []
+    for name, entry in result["frames"].items():
+        stats = entry["one_way_us"]
+        rows.append(
+            [
+                f"`{base_path(name)}`",
+                "on" if entry["shm"] else "off",
+                FRAME_PATHS.get(base_path(name), ""),
+                f"{entry['payload_bytes']:,}",
+                f"{stats['n']} ({entry['rounds']})",
+                f"**{fmt_latency(stats['p50'])}**",
+                fmt_round_range(entry["round_p50_us"]),
+                fmt_latency(stats["p90"]),
+                fmt_latency(stats["p99"]),
+                fmt_latency(stats["max"]),
+            ]
+        )
+    header = [
+        "Path",
+        "Shared memory",
+        "What",
+        "Bytes",
+        "Samples (rounds)",
+        "p50",
+        "p50 of each round",
+        "p90",
+        "p99",
+        "max",
+    ]
+    lines += [*md_table(header, rows), ""]
+    lines += ["### Ratios", ""]
+    lines += md_table(
+        ["Ratio", "Value"], [[name, f"{value:.2f}"] for name, value in result["ratios"].items()]
+    )
+    return [*lines, ""]
+
+
+def bus_throughput(result: dict[str, Any]) -> list[str]:
+    lines = [
+        "The peer publishes numbered samples as fast as it can (blocking congestion control, "
+        "reliable); this process takes every one, checks the order, and times first to last "
+        "arrival. Counts are checked after the peer has stopped: exact, none lost, none extra. "
+        "Each path runs in several rounds (fresh processes, round-robin over the paths); the "
+        "rates are the median round's, with every round's beside them.",
+        "",
+    ]
+    rows = []
+    for table in ("small", "frames"):
+        for name, entry in result[table].items():
+            rows.append(
+                [
+                    f"`{base_path(name)}`",
+                    "on" if entry["shm"] else "off",
+                    THROUGHPUT_PATHS.get(base_path(name), ""),
+                    f"{entry['payload_bytes']:,}",
+                    f"{entry['rounds']} x {entry['sent_per_round']:,}",
+                    f"{entry['lost']} / {entry['extra']} / {entry['out_of_order']}",
+                    f"**{fmt_rate(entry['messages_per_s'])}**",
+                    ", ".join(fmt_rate(rate) for rate in entry["messages_per_s_rounds"]),
+                    f"{entry['megabytes_per_s']:,.1f}",
+                    fmt_rate(entry["publisher_messages_per_s"]),
+                ]
+            )
+    header = [
+        "Path",
+        "Shared memory",
+        "What",
+        "Bytes",
+        "Sent",
+        "Lost / extra / out of order",
+        "Received msg/s",
+        "Each round",
+        "MB/s",
+        "Publisher puts/s",
+    ]
+    lines += [*md_table(header, rows), ""]
+    lines.append(
+        "All delivered exactly, in order."
+        if result["all_delivered"]
+        else "**Some samples were lost, duplicated or out of order (see the table).**"
+    )
+    lines += ["", "### Ratios", ""]
+    lines += md_table(
+        ["Ratio", "Value"], [[name, f"{value:.2f}"] for name, value in result["ratios"].items()]
+    )
+    return [*lines, ""]
+
+
+def alert_latency(result: dict[str, Any]) -> list[str]:
+    lines = [
+        "The alert service node as its own process (default site and thresholds), a Zenoh peer "
+        "of this one on `tcp/127.0.0.1`. Each sample is a new speeding car: ten 10 Hz track "
+        "batches hold the condition, then, once the node has taken them, the batch that "
+        "completes the 1 s hold is published; the time runs from that `put_bytes` (payload "
+        "encoded beforehand) to the speeding alert's arrival here (receive, decode, every rule "
+        f"on every track, encode, publish). {result['samples']} samples per batch size.",
+        "",
+    ]
+    rows = [[f"{v['tracks_per_batch']} track(s), {v['batch_bytes']:,} B",
+             fmt_ms(v["latency_ms"]["p50"]), fmt_ms(v["latency_ms"]["p90"]),
+             fmt_ms(v["latency_ms"]["p99"]), fmt_ms(v["latency_ms"]["max"])]
+            for v in result["variants"].values()]  # fmt: skip
+    lines += md_table(["Batch", "p50", "p90", "p99", "max"], rows)
+    return [*lines, ""]
+
+
+def webhook_latency(result: dict[str, Any]) -> list[str]:
+    lines = [
+        "The gateway node as its own process (SQLite, default site), a Zenoh peer of this one "
+        "on `tcp/127.0.0.1`; the receiver an `http.server` (HTTP/1.1, keep-alive) in this "
+        "process on loopback, subscribed through the API. Each sample is one new alert "
+        "(encoded beforehand): from its `put_bytes` to the receiver having read the POST "
+        "with that alert's `webhook-id` (bus, writer queue, the transaction storing the alert "
+        "and its outbox rows, the delivery's claim, signing, HTTP); with four subscriptions, "
+        f"to the last of the four. One alert at a time, after {result['warmup']} unmeasured; "
+        f"every signature checked. {result['samples']} samples per variant, "
+        f"{result['delivered']} events delivered in all.",
+        "",
+    ]
+    rows = [[f"{v['subscriptions']} subscription(s)", fmt_ms(v["latency_ms"]["p50"]),
+             fmt_ms(v["latency_ms"]["p90"]), fmt_ms(v["latency_ms"]["p99"]),
+             fmt_ms(v["latency_ms"]["max"])]
+            for v in result["variants"].values()]  # fmt: skip
+    lines += md_table(["Subscribers", "p50", "p90", "p99", "max"], rows)
+    return [*lines, ""]
+
+
+def gateway_live(result: dict[str, Any]) -> list[str]:
+    first = next(iter(result["variants"].values()))
+    lines = [
+        "The gateway node as its own process (SQLite in WAL mode, default site, rate limits "
+        "off), a Zenoh peer of this one on `tcp/127.0.0.1`. This process publishes a "
+        f"`TrackBatch` of {first['tracks_per_batch']} tracks ({first['batch_bytes']:,} B) at "
+        f"{first['rate_hz']:.0f} Hz; each track lives {first['track_life_s']:.0f} s, so "
+        f"{first['tracks_per_batch'] / first['track_life_s']:.0f} tracks end a second and "
+        "(with smoothing) are RTS-smoothed and stored by the writer thread between groups. "
+        "After a warm-up, ingestion alone, then with "
+        f"{first['live_clients']} threads asking `GET /v1/tracks/live` back to back and one "
+        f"paging `GET /v1/trajectories` ({first['page_points']:,} points a page), each with "
+        "its keep-alive `httpx` connection. Ingest lag: from just before a batch's "
+        "`put_bytes` to its commit, seen by a watcher process polling the database file "
+        "every 0.5 ms. Latency: request sent to body read, in this process (its client "
+        "threads share one interpreter, and both processes the machine's cores). Without "
+        "smoothing: the same with the track end timeout at an hour (nothing ends).",
+        "",
+    ]
+    rows = []
+    for name, run in result["variants"].items():
+        alone, loaded = run["ingest_only"]["ingest_lag_ms"], run["loaded"]["ingest_lag_ms"]
+        live, pages = run["loaded"]["live"], run["loaded"]["trajectories"]
+        rows.append([
+            name.replace("_", " "), f"{fmt_ms(alone['p50'])} / {fmt_ms(alone['p99'])}",
+            f"{fmt_ms(loaded['p50'])} / {fmt_ms(loaded['p99'])}",
+            f"**{live['requests_per_s']:,.0f}**",
+            f"{fmt_ms(live['latency_ms']['p50'])} / {fmt_ms(live['latency_ms']['p99'])}",
+            f"{fmt_ms(pages['latency_ms']['p50'])} / {fmt_ms(pages['latency_ms']['p99'])}",
+            f"{run['smoothing']['tracks']:.0f} ({fmt_ms(run['smoothing']['mean_ms'])})",
+            fmt_ms(run["write_group_mean_ms"]),
+        ])  # fmt: skip
+    lines += md_table(["Variant", "ingest lag alone p50 / p99", "ingest lag loaded p50 / p99",
+                     "live requests/s", "live p50 / p99", "trajectories page p50 / p99",
+                     "tracks smoothed (mean time each)", "write per group (mean)"], rows)  # fmt: skip
+    return [*lines, ""]
+
+
+def recovery(result: dict[str, Any]) -> list[str]:
+    lines = [
+        "The real stack as `wz up` runs it (router, simulator with SUMO and its sensors, both "
+        "detectors, fusion tracker, alert service, gateway on SQLite; seed "
+        f"{result['seed']}, status messages every {result['status_period_s']} s). While the "
+        "pipeline is steady (every service running, the gateway's newest track batch fresh "
+        "and fed by both sensors, the service's warm standby ready), each service in turn gets "
+        "SIGKILL. Times from the kill, on one wall clock: **restart**, the supervisor's "
+        "`started <name>` line; **status**, the new process's first status message that is "
+        "`running` with data going through it; **pipeline**, the gateway's API (polled every "
+        f"{result['poll_period_s']} s) serving a batch received after the restart with a track "
+        "fresh from a sensor (from the killed detector's sensor after a detector's kill; after "
+        "the alert service's, also its first devices message); **recovered**, the latest of "
+        f"these. Median of {result['rounds']} rounds (each round's in brackets), then one "
+        "round with each standby killed first, so that the service restarts as a new "
+        f"interpreter. The stack was steady {result['ready_s']} s after `wz up`. Method: "
+        "`benchmarks/recovery.py`.",
+        "",
+    ]
+    plain = {r["service"]: r for r in result["without_standby"]}
+
+    def cell(times: dict[str, Any]) -> str:
+        median = times["median"]
+        if median is None:
+            return "—"
+        each = ", ".join("—" if v is None else f"{v:.2f}" for v in times["values"])
+        return f"{median:.2f} s ({each})"
+
+    rows = []
+    for service, times in result["services"].items():
+        bare = plain.get(service, {})
+        rows.append([
+            f"`{service}`", cell(times["restart_s"]), cell(times["status_s"]),
+            cell(times["pipeline_s"]), f"**{cell(times['recovered_s'])}**",
+            "—" if bare.get("recovered_s") is None else f"{bare['recovered_s']:.2f} s",
+        ])  # fmt: skip
+    lines += md_table(["Killed", "restart", "status", "pipeline", "recovered",
+                     "recovered, no standby"], rows)  # fmt: skip
+    lines.append("")
+    devices = result["services"].get("alert-service", {}).get("devices_s")
+    if devices and devices["median"] is not None:
+        lines.append(f"- Alert service: its first devices message after the restart "
+                     f"{cell(devices)} after the kill.")  # fmt: skip
+    for index, check in enumerate(result["gateway_stored"]):
+        before, after = check["before"], check["after"]
+        label = f"round {index + 1}" if index < result["rounds"] else "round without standbys"
+        lines.append(
+            f"- Gateway, {label}: before its kill {before['track_points']:,} track points, "
+            f"{before['track_ids']} track ids, {before['alert_ids']} alert events; after its "
+            f"restart {after['track_points']:,}, {after['track_ids']}, {after['alert_ids']}: "
+            + ("nothing lost." if not check["lost"] else f"**lost {check['lost']}**.")
+        )
+    lines.append("")
+    return lines
