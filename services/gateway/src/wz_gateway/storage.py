@@ -75,12 +75,13 @@ from wz_shared.messages import (
     Track,
     TrackBatch,
 )
+from wz_shared.timebase import NEW_RUN_STEP_BACK_S, stamp_went_back
 
 log = logging.getLogger(__name__)
 
 _DIALECTS = ("sqlite", "postgresql")
 #: A track batch this much older than the newest one starts a new run [s] (see ``run_start``).
-RESTART_TOLERANCE_S = 1.0
+RESTART_TOLERANCE_S = NEW_RUN_STEP_BACK_S
 _DAY_S = 86400.0
 
 
@@ -423,7 +424,7 @@ class Storage:
         previous = connection.scalar(
             select(latest.c.stamp).where(latest.c.site == batch.site, latest.c.name == "tracks")
         )
-        if previous is not None and batch.stamp < previous - RESTART_TOLERANCE_S:
+        if stamp_went_back(previous, batch.stamp, RESTART_TOLERANCE_S):
             # Stamps went back: a new run (a restarted simulation counts from 0 again).
             log.warning("track stamps went back from %.3f s to %.3f s: a new run starts",
                         previous, batch.stamp)  # fmt: skip

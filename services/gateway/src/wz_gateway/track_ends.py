@@ -35,6 +35,7 @@ from wz_gateway.storage import RESTART_TOLERANCE_S, Storage
 from wz_gateway.track_lives import TrackLife, TrackLifeStore
 from wz_shared.messages import Message, TrackBatch
 from wz_shared.site import Site
+from wz_shared.timebase import stamp_went_back
 
 log = logging.getLogger(__name__)
 
@@ -90,7 +91,7 @@ class TrackEnds:
         if last_stamp is not None:
             for track_id, life in list(self.open.items()):
                 gone = last_stamp - life.last_stamp > self.end_after_s
-                earlier_run = life.last_stamp > last_stamp + self.restart_tolerance_s
+                earlier_run = stamp_went_back(life.last_stamp, last_stamp, self.restart_tolerance_s)
                 if gone or earlier_run:
                     ended.append(self.open.pop(track_id))
         return ended
@@ -99,7 +100,7 @@ class TrackEnds:
         """One stored batch: the lives it starts and those that have ended by its stamp."""
         stamp = batch.stamp
         out = EndsOfBatch(started=[], ended=[])
-        if self.last_stamp is not None and stamp < self.last_stamp - self.restart_tolerance_s:
+        if stamp_went_back(self.last_stamp, stamp, self.restart_tolerance_s):
             out.ended += self.open.values()  # a new run: the old one's tracks are all over
             self.open.clear()
         self.last_stamp, self.last_received_at = stamp, received_at
