@@ -2,11 +2,13 @@
 
 The pure core, no I/O:
 
-* :mod:`wz_fusion_tracker.kalman`: the constant-velocity model (paper Eq. 7-10, road-aligned
-  process noise) and the Kalman filter as functions, one filter, and a vectorised bank;
+* :mod:`wz_fusion_tracker.kalman`: the Kalman filter of the constant-velocity model of
+  :mod:`wz_shared.motion` (paper Eq. 7-10, road-aligned process noise) as functions, one
+  filter, and a vectorised bank;
 * :mod:`wz_fusion_tracker.paper`: the paper's method (per-sensor smoothing, nearest matching,
   sequential camera-then-LiDAR updates, the simple-average baseline) for reruns;
 * :mod:`wz_fusion_tracker.tracker`: the product's multi-target tracker (reorder window,
   Mahalanobis gating, global nearest neighbour, life cycle);
-* :mod:`wz_fusion_tracker.smoothing`: RTS smoothing of a stored track history.
+* :mod:`wz_fusion_tracker.smoothing`: RTS smoothing (:func:`wz_shared.motion.rts_smooth`) of
+  a stored track history.
 """

@@ -78,6 +78,7 @@ from wz_shared.messages import (
     Track,
     TrackBatch,
 )
+from wz_shared.motion import ProcessNoise
 
 log = logging.getLogger(__name__)
 
@@ -188,7 +189,9 @@ class LatestRow:
 @dataclass
 class TrackLife:
     """One life of a track id (see :mod:`wz_gateway.track_ends`); ``last_*`` are those of its
-    newest stored batch, ``life_id`` its row in ``tracks`` (None until recorded)."""
+    newest stored batch, ``life_id`` its row in ``tracks`` (None until recorded),
+    ``process_noise`` that of its first batch, which it is smoothed with (None: not known, an
+    older row; the model's defaults)."""
 
     track_id: int
     first_stamp: float
@@ -196,6 +199,7 @@ class TrackLife:
     last_stamp: float
     last_received_at: float
     life_id: int | None = None
+    process_noise: ProcessNoise | None = None
 
 
 @dataclass
@@ -721,7 +725,8 @@ class Storage:
                 life.life_id = connection.execute(
                     insert(tracks).values(site=site, track_id=life.track_id,
                                           first_stamp=life.first_stamp,
-                                          first_received_at=life.first_received_at)
+                                          first_received_at=life.first_received_at,
+                                          **_noise_columns(life.process_noise))
                     .returning(tracks.c.id)
                 ).scalar_one()  # fmt: skip
 
@@ -754,7 +759,8 @@ class Storage:
                     else (newest.stamp, newest.received_at)
                 )  # fmt: skip
                 lives.append(TrackLife(row.track_id, row.first_stamp, row.first_received_at,
-                                       last_stamp, last_received_at, life_id=row.id))  # fmt: skip
+                                       last_stamp, last_received_at, life_id=row.id,
+                                       process_noise=_noise_of(row)))  # fmt: skip
         return lives
 
     def track_life_points(self, site: str, life: TrackLife) -> StoredTrajectory:
@@ -803,7 +809,8 @@ class Storage:
                 life.life_id = connection.execute(
                     insert(tracks).values(site=site, track_id=life.track_id,
                                           first_stamp=life.first_stamp,
-                                          first_received_at=life.first_received_at, **done)
+                                          first_received_at=life.first_received_at, **done,
+                                          **_noise_columns(life.process_noise))
                     .returning(t.id)
                 ).scalar_one()  # fmt: skip
             else:
@@ -885,6 +892,19 @@ def _point_row(batch: TrackBatch, track: Track, latitude_deg: float, longitude_d
         "received_at": received_at,
         "covariance": struct.pack(COVARIANCE_FORMAT, *track.covariance),
     }
+
+
+def _noise_columns(noise: ProcessNoise | None) -> dict[str, float | None]:
+    """A track life's process noise as its columns in ``tracks`` (None: not known)."""
+    return {"sigma_along_mps2": None if noise is None else noise.sigma_along_mps2,
+            "sigma_across_mps2": None if noise is None else noise.sigma_across_mps2,
+            "heading_min_speed_mps": None if noise is None else noise.heading_min_speed_mps}  # fmt: skip
+
+
+def _noise_of(row: Any) -> ProcessNoise | None:
+    """The process noise stored with a ``tracks`` row; None where it has none (older rows)."""
+    values = (row.sigma_along_mps2, row.sigma_across_mps2, row.heading_min_speed_mps)
+    return None if any(v is None for v in values) else ProcessNoise(*values)
 
 
 def _smoothed_rows(site: str, smoothed: StoredTrajectory) -> list[dict[str, Any]]:
