@@ -13,13 +13,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from wz_fusion_tracker.imm import IMMStateBank, mixture_moments, two_mode_transition
-from wz_fusion_tracker.kalman import (
-    TrackStateBank,
-    cv_transition,
-    is_symmetric_positive_definite,
-    position_h,
-    road_aligned_q,
-)
+from wz_fusion_tracker.kalman import TrackStateBank, is_symmetric_positive_definite, position_h
+from wz_shared.motion import cv_transition, road_aligned_q
 
 STEADY = (0.5, 0.3)  # acceleration std along, across [m/s^2]
 MANOEUVRE = (3.5, 3.0)

@@ -1,5 +1,5 @@
-"""Constant-velocity Kalman filter: the model matrices and one predict/update against hand
-computation, the steady state against the Riccati equation, filterpy as a reference, the three
+"""Constant-velocity Kalman filter (the model matrices: tests/shared/test_motion.py): one
+predict/update against hand computation, the steady state against the Riccati equation, filterpy as a reference, the three
 forms (functions, one filter, the vectorised bank) side by side for 2000 steps, and the
 covariance staying symmetric positive definite under random sequences."""
 
@@ -18,17 +18,14 @@ from tests.purity import top_level_imports
 from wz_fusion_tracker import kalman
 from wz_fusion_tracker.kalman import (
     KalmanFilter,
-    ProcessNoise,
     TrackStateBank,
-    cv_transition,
     innovation,
     is_symmetric_positive_definite,
     position_h,
     predict,
-    road_aligned_q,
     update,
-    white_noise_q,
 )
+from wz_shared.motion import ProcessNoise, cv_transition, road_aligned_q, white_noise_q
 
 H = position_h()
 
@@ -42,45 +39,6 @@ def random_covariance(rng: np.random.Generator, dim: int, scale: float = 1.0) ->
 
 def test_core_imports_no_io_library() -> None:
     assert top_level_imports(kalman).isdisjoint({"zenoh", "fastapi", "uvicorn", "requests", "io"})
-
-
-# ----------------------------------------------------------------------------- model matrices
-
-
-def test_transition_and_paper_q_match_equations_8_and_9() -> None:
-    dt = 0.1
-    np.testing.assert_array_equal(
-        cv_transition(dt),
-        [[1, 0, 0.1, 0], [0, 1, 0, 0.1], [0, 0, 1, 0], [0, 0, 0, 1]],
-    )
-    # sigma_a = 2: sigma^2 dt^4/4 = 1e-4, sigma^2 dt^3/2 = 2e-3, sigma^2 dt^2 = 4e-2.
-    np.testing.assert_allclose(
-        white_noise_q(dt, 2.0),
-        [[1e-4, 0, 2e-3, 0], [0, 1e-4, 0, 2e-3], [2e-3, 0, 4e-2, 0], [0, 2e-3, 0, 4e-2]],
-        rtol=1e-12,
-    )
-    assert cv_transition(np.array([0.1, 0.2])).shape == (2, 4, 4)
-    assert white_noise_q(np.array([0.1, 0.2]), 1.0).shape == (2, 4, 4)
-
-
-def test_road_aligned_q_is_white_noise_q_when_isotropic_and_rotates_with_heading() -> None:
-    np.testing.assert_allclose(road_aligned_q(0.05, 1.5, 1.5, 0.7), white_noise_q(0.05, 1.5))
-    # Heading east: the along-road std acts on x, the across-road std on y.
-    east = road_aligned_q(0.1, 2.0, 0.5, 0.0)
-    np.testing.assert_allclose(east[[0, 2]][:, [0, 2]], white_noise_q(0.1, 2.0)[[0, 2]][:, [0, 2]])
-    np.testing.assert_allclose(east[[1, 3]][:, [1, 3]], white_noise_q(0.1, 0.5)[[1, 3]][:, [1, 3]])
-    # Q(h) = Rot4 Q(0) Rot4' with Rot4 = blockdiag(Rot(h), Rot(h)).
-    heading = 0.6
-    c, s = math.cos(heading), math.sin(heading)
-    rot = np.array([[c, -s], [s, c]])
-    rot4 = scipy.linalg.block_diag(rot, rot)
-    np.testing.assert_allclose(
-        road_aligned_q(0.1, 2.0, 0.5, heading), rot4 @ east @ rot4.T, atol=1e-15
-    )
-    assert ProcessNoise(2.0, 0.5, heading).q(0.1) == pytest.approx(
-        road_aligned_q(0.1, 2.0, 0.5, heading)
-    )
-    np.testing.assert_array_equal(ProcessNoise.isotropic(2.0).q(0.1), white_noise_q(0.1, 2.0))
 
 
 # ----------------------------------------------------------------------------- hand computation
@@ -185,11 +143,11 @@ def test_functions_filter_class_and_bank_agree_over_2000_steps() -> None:
         bank.predict(slots, dt, sigma_along, sigma_across, headings)
         bank.update(slots, z, R)
         for i in range(targets):
-            noise = ProcessNoise(sigma_along, sigma_across, float(headings[i]))
-            filters[i].predict(float(dt[i]), noise)
+            noise = ProcessNoise(sigma_along, sigma_across)
+            filters[i].predict(float(dt[i]), noise, float(headings[i]))
             filters[i].update(z[i], R[i])
             x, P = function_states[i]
-            x, P = predict(x, P, cv_transition(dt[i]), noise.q(float(dt[i])))
+            x, P = predict(x, P, cv_transition(dt[i]), noise.q(float(dt[i]), float(headings[i])))
             function_states[i] = update(x, P, z[i], H, R[i])
         if step % 10 == 0:  # now and then a 1-D velocity measurement, general H
             speeds = rng.normal(size=(targets, 1)) * 20.0

@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wz_fusion_tracker.node import FusionCore
-from wz_fusion_tracker.settings import FusionTrackerSettings
+from wz_fusion_tracker.node import FusionCore, process_noise
+from wz_fusion_tracker.settings import FusionTrackerSettings, TrackerSettings
 from wz_shared.bus import Bus
 from wz_shared.messages import (
     Detection,
@@ -26,6 +26,7 @@ from wz_shared.messages import (
     TrackBatch,
     TrackStatus,
 )
+from wz_shared.motion import ProcessNoise
 from wz_shared.settings import BusSettings
 from wz_shared.site import DEFAULT_SITE_PATH, load_site
 
@@ -70,6 +71,21 @@ def test_core_publishes_a_batch_per_output_period_with_road_coordinates() -> Non
         assert track.offset_m == pytest.approx(float(offset), abs=0.5)
         assert track.lane_index == (0 if offset < 0 else 1)
         assert track.status == TrackStatus.CONFIRMED and track.sources == ["lidar-mast"]
+
+
+def test_track_batches_carry_the_process_noise_of_the_trackers_settings() -> None:
+    """The gateway smooths with what the batches carry: the tracker's settings, which are the
+    motion model's defaults unless changed."""
+    assert process_noise(TrackerSettings()) == ProcessNoise()
+    tracker = TrackerSettings(sigma_along_mps2=2.5, sigma_across_mps2=1.5, heading_min_speed_mps=1.0)
+    core = FusionCore(SITE, FusionTrackerSettings(tracker=tracker), report=lambda r, d: None)
+    rng = np.random.default_rng(3)
+    outputs: list[TrackBatch] = []
+    for k in range(20):
+        outputs += core.add(batch("lidar-mast", k, 0.05 * k, rng, 0.2))
+    assert outputs and all(b.process_noise == ProcessNoise(2.5, 1.5, 1.0) for b in outputs)
+    decoded = TrackBatch.model_validate_json(outputs[-1].model_dump_json())
+    assert decoded.process_noise == ProcessNoise(2.5, 1.5, 1.0)
 
 
 def test_the_imm_motion_model_is_chosen_from_the_environment_and_tracks(

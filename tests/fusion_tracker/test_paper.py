@@ -9,7 +9,7 @@ import pytest
 
 from tests.purity import top_level_imports
 from wz_fusion_tracker import paper
-from wz_fusion_tracker.kalman import cv_transition, position_h, predict, update, white_noise_q
+from wz_fusion_tracker.kalman import position_h, predict, update
 from wz_fusion_tracker.paper import (
     Observation,
     PaperFusion,
@@ -20,6 +20,7 @@ from wz_fusion_tracker.paper import (
     smooth_object_tracks,
     smooth_sensor_tracks,
 )
+from wz_shared.motion import cv_transition, white_noise_q
 
 SETTINGS = PaperFusionSettings()
 CAMERA, LIDAR = SETTINGS.camera_sensor_id, SETTINGS.lidar_sensor_id

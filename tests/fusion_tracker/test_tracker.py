@@ -25,11 +25,11 @@ from wz_fusion_tracker.association import (
     gnn_assign,
     mahalanobis_squared,
 )
-from wz_fusion_tracker.kalman import ProcessNoise
 from wz_fusion_tracker.settings import TrackerSettings
-from wz_fusion_tracker.smoothing import history_segments, rts_smooth, smooth_history
+from wz_fusion_tracker.smoothing import history_segments, smooth_history
 from wz_fusion_tracker.tracker import MultiTargetTracker
 from wz_fusion_tracker.types import Measurement, TrackerCounters, TrackState
+from wz_shared.motion import ProcessNoise, rts_smooth
 
 LIDAR, CAMERA = "lidar-mast", "camera-mast"
 LIDAR_STD_M = 0.2
@@ -998,7 +998,7 @@ def test_a_resumed_track_is_smoothed_run_by_run_and_a_lost_one_is_still_unfinish
     x_smooth, P_smooth = smooth_history(history)
     for run in (first, second):
         x_run, P_run = rts_smooth(history.stamps_s[run], history.x_filt[run], history.P_filt[run],
-                                  None, x_pred=history.x_pred[run], P_pred=history.P_pred[run])  # fmt: skip
+                                  x_pred=history.x_pred[run], P_pred=history.P_pred[run])  # fmt: skip
         np.testing.assert_array_equal(x_smooth[run], x_run)
         np.testing.assert_array_equal(P_smooth[run], P_run)
     # nothing of the young track (3 m ahead of the old one's prediction) leaks back

@@ -31,12 +31,12 @@ from wz_gateway import auth, webhooks
 from wz_gateway.delivery import WebhookDeliverer
 from wz_gateway.key_store import KeyStore
 from wz_gateway.metrics import GatewayMetrics
-from wz_gateway.smoothing import rts_smooth
 from wz_gateway.storage import AlertQuery, PointQuery, Storage
 from wz_gateway.tables import SCHEMA_VERSION
 from wz_gateway.track_ends import TrackFinisher
 from wz_gateway.track_lives import TrackLifeStore
 from wz_gateway.webhook_store import WebhookStore
+from wz_shared.motion import ProcessNoise, rts_smooth
 
 NOW = 1_750_000_000.0
 
@@ -175,7 +175,8 @@ def test_track_smoothing_on_postgresql(postgres_url: str, tmp_path: Path) -> Non
                                     clock=lambda: received_at)  # fmt: skip
         assert finisher.resume() == 0
         car = filtered_car(seed=61, count=60)
-        messages = [*merged_batches((car.stamps_s, car_tracks(71, car))),
+        noise = ProcessNoise(1.5, 0.8, 1.0)  # carried by the batches, recorded with the life
+        messages = [*merged_batches((car.stamps_s, car_tracks(71, car)), process_noise=noise),
                     batch(10.0, [make_track(72, 900.0, 20.0)], 500)]  # fmt: skip
         for message in messages:
             message = message.model_copy(update={"site": site.site_id})
@@ -186,11 +187,10 @@ def test_track_smoothing_on_postgresql(postgres_url: str, tmp_path: Path) -> Non
         assert finisher.finish(life) == 0  # already ended: nothing more
         stored = storage.points(PointQuery(site=site.site_id, track_id=71, smoothed=True,
                                            limit=100)).items  # fmt: skip
-        x_s, _ = rts_smooth(car.stamps_s, car.x_filt, car.P_filt,
-                            sigma_along_mps2=settings.smoothing_sigma_along_mps2,
-                            sigma_across_mps2=settings.smoothing_sigma_across_mps2)  # fmt: skip
+        x_s, _ = rts_smooth(car.stamps_s, car.x_filt, car.P_filt, noise)
         np.testing.assert_allclose([[p.x_m, p.y_m, p.vx_mps, p.vy_mps] for p in stored], x_s,
                                    rtol=0.0, atol=1e-9)  # fmt: skip
-        assert [lv.track_id for lv in TrackLifeStore(storage.engine).unfinished(site.site_id)] == [72]
+        (unfinished,) = TrackLifeStore(storage.engine).unfinished(site.site_id)
+        assert unfinished.track_id == 72 and unfinished.process_noise == ProcessNoise()
     finally:
         storage.close()

@@ -176,7 +176,7 @@ def test_migration_4_keeps_the_alerts_and_makes_ids_unique_per_site(tmp_path: Pa
     engine.dispose()
     storage = Storage.open(f"sqlite:///{path}")
     try:
-        assert storage.current_schema_version() == SCHEMA_VERSION == 4
+        assert storage.current_schema_version() == SCHEMA_VERSION == 5
         assert [a.alert_id for a in storage.alerts(AlertQuery(site=SITE.site_id)).items] == [
             "ep-2", "ep-1", "ep-0"]  # fmt: skip
         result = storage.ingest([of_site(sample_alert("ep-1", 5.0), OTHER.site_id),

@@ -27,11 +27,11 @@ from tests.gateway.tracking import car_tracks, filtered_car, merged_batches
 from wz_gateway.metrics import GatewayMetrics
 from wz_gateway.node import Writer
 from wz_gateway.settings import GatewaySettings
-from wz_gateway.smoothing import rts_smooth
 from wz_gateway.storage import PointQuery, Storage
 from wz_gateway.tables import MIGRATIONS, schema_version, track_points
 from wz_gateway.track_ends import TrackEnds, TrackFinisher
 from wz_shared.messages import Message, TrackBatch
+from wz_shared.motion import ProcessNoise, rts_smooth
 
 T0 = 1_750_000_000.0
 READ = {"X-API-Key": READ_KEY}
@@ -163,21 +163,26 @@ def test_a_track_is_smoothed_only_once_it_is_missing_longer_than_the_timeout(
     assert tracks_rows(gateway.storage)[0][0] == 7 and tracks_rows(gateway.storage)[0][2] == n7
 
 
+#: A tracker's process noise other than the model's defaults, carried by its track batches.
+NOISE = ProcessNoise(1.5, 0.8, 1.0)
+
+
 def test_the_stored_smoothed_points_are_the_rts_smoothed_fused_ones(gateway: Gateway) -> None:
-    # the tracker's motion model, which the gateway's settings repeat
-    car = filtered_car(seed=21, count=160, sigma_a_mps2=gateway.settings.smoothing_sigma_along_mps2,
-                       sigma_across_mps2=gateway.settings.smoothing_sigma_across_mps2)
-    batches = merged_batches((car.stamps_s, car_tracks(3, car)))
+    # the tracker's motion model, which its batches carry
+    car = filtered_car(seed=21, count=160, sigma_a_mps2=NOISE.sigma_along_mps2,
+                       sigma_across_mps2=NOISE.sigma_across_mps2)  # fmt: skip
+    batches = merged_batches((car.stamps_s, car_tracks(3, car)), process_noise=NOISE)
     later = [batch(11.0 + 0.05 * k, [make_track(4, 900.0, 20.0)], 200 + k) for k in range(5)]
     gateway.feed([*batches, *later])
     stored = gateway.storage.points(PointQuery(site=SITE.site_id, track_id=3, smoothed=True,
                                                limit=1000)).items  # fmt: skip
-    x_s, _ = rts_smooth(car.stamps_s, car.x_filt, car.P_filt,
-                        sigma_along_mps2=gateway.settings.smoothing_sigma_along_mps2,
-                        sigma_across_mps2=gateway.settings.smoothing_sigma_across_mps2)  # fmt: skip
+    x_s, _ = rts_smooth(car.stamps_s, car.x_filt, car.P_filt, NOISE)
     got = np.array([[p.x_m, p.y_m, p.vx_mps, p.vy_mps] for p in stored])
     # the covariances went through JSON and back: equal to the last bits
     np.testing.assert_allclose(got, x_s, rtol=0.0, atol=1e-9)
+    # not what the model's defaults give
+    x_default, _ = rts_smooth(car.stamps_s, car.x_filt, car.P_filt, ProcessNoise())
+    assert np.max(np.abs(x_default - got)) > 1e-3
     assert all(p.smoothed and p.object_class.value == "unknown" for p in stored)
     assert {p.length_m for p in stored} == {4.5}  # the last estimate, for every point
     truth_error = {
@@ -244,6 +249,34 @@ def test_a_restart_takes_up_unfinished_tracks_and_smooths_nothing_twice(tmp_path
     assert len(second.points(7, smoothed=True)) == n7  # not twice
     ended = sorted((track_id, n) for track_id, at, n in tracks_rows(storage) if at is not None)
     assert ended == [(7, n7), (8, len(fused8)), (9, 21)]
+    storage.close()
+
+
+@pytest.mark.parametrize("recorded", [True, False])
+def test_a_life_taken_up_after_a_restart_is_smoothed_with_its_recorded_process_noise(
+    tmp_path: Path, recorded: bool,
+) -> None:
+    """Car 3's batches carry ``NOISE``; the process stops while it goes on, and the next one
+    ends it with batches of the model's defaults: smoothed with ``NOISE``, recorded with its
+    life, or with the defaults where the row has none (a life recorded before migration 5)."""
+    settings = gateway_settings(tmp_path)
+    storage = open_storage(settings)
+    car = filtered_car(seed=23, count=80, sigma_a_mps2=NOISE.sigma_along_mps2,
+                       sigma_across_mps2=NOISE.sigma_across_mps2)  # fmt: skip
+    first = start_gateway(settings, storage, [T0])
+    first.feed(merged_batches((car.stamps_s, car_tracks(3, car)), process_noise=NOISE))
+    if not recorded:
+        with storage.engine.begin() as connection:
+            connection.exec_driver_sql("UPDATE tracks SET sigma_along_mps2 = NULL, "
+                                       "sigma_across_mps2 = NULL, heading_min_speed_mps = NULL")  # fmt: skip
+    second = start_gateway(settings, storage, [first.now[0] + 1.0])
+    assert second.writer.finisher is not None and sorted(second.writer.finisher.ends.open) == [3]
+    second.feed(batch(7.5 + 0.05 * k, [make_track(4, 900.0, 20.0)], 100 + k) for k in range(5))
+    got = np.array([[p.x_m, p.y_m, p.vx_mps, p.vy_mps] for p in second.storage.points(
+        PointQuery(site=SITE.site_id, track_id=3, smoothed=True, limit=1000)).items])  # fmt: skip
+    x_s, _ = rts_smooth(car.stamps_s, car.x_filt, car.P_filt,
+                        NOISE if recorded else ProcessNoise())  # fmt: skip
+    np.testing.assert_allclose(got, x_s, rtol=0.0, atol=1e-9)
     storage.close()
 
 

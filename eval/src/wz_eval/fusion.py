@@ -87,6 +87,7 @@ from wz_fusion_tracker.calibration import (
 )
 from wz_fusion_tracker.kalman import F64
 from wz_fusion_tracker.node import (
+    process_noise,
     road_heading_hook,
     road_headings_hook,
     sensor_positions,
@@ -103,10 +104,10 @@ from wz_fusion_tracker.settings import TrackerSettings
 from wz_fusion_tracker.smoothing import smooth_history
 from wz_fusion_tracker.tracker import MultiTargetTracker
 from wz_fusion_tracker.types import TrackHistory, TrackState
-from wz_gateway.smoothing import rts_smooth as gateway_rts_smooth
 from wz_lidar_detector.settings import lidar_mount
 from wz_shared.logs import configure_logging
 from wz_shared.messages import DetectionBatch, TrackBatch, VehicleTruth
+from wz_shared.motion import rts_smooth
 from wz_shared.site import Site, load_site
 from wz_simulator.settings import SimulatorSettings
 
@@ -313,7 +314,8 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
         # what the node would publish, for the alert service
         alert_batches.append(TrackBatch(
             site=site.site_id, source_id="fusion-tracker", stamp=sample_s,
-            cycle_index=len(alert_batches), tracks=[to_track(site, s) for s in published]))  # fmt: skip
+            cycle_index=len(alert_batches), tracks=[to_track(site, s) for s in published],
+            process_noise=process_noise(options.tracker)))  # fmt: skip
         states = [s for s in published if math.hypot(s.x_m - centre[0], s.y_m - centre[1])
                   <= options.max_range_m + EDGE_MARGIN_M]  # fmt: skip
         found = truth.at(sample_s)
@@ -439,17 +441,17 @@ def smoothed_positions(histories: Sequence[TrackHistory]) -> dict[int, tuple[F64
 def gateway_smoothed(stored: dict[int, list[TrackState]],
                      settings: TrackerSettings) -> dict[int, tuple[F64, F64]]:  # fmt: skip
     """Per track id: the stamps and states of its published snapshots smoothed as the gateway
-    smooths a stored trajectory (:func:`wz_gateway.smoothing.rts_smooth`, the priors
-    recomputed with the tracker's process noise): what a researcher gets from
+    smooths a stored trajectory (:func:`wz_shared.motion.rts_smooth`, the priors recomputed
+    with the tracker's process noise): what a researcher gets from
     ``/v1/trajectories``. Unlike ``fused_smoothed`` (RTS over the tracker's own update
     history), the snapshots are 10 Hz predictions from the latest update, not every update."""
     out: dict[int, tuple[F64, F64]] = {}
+    noise = process_noise(settings)
     for track_id, states in stored.items():
         stamps = np.array([s.stamp_s for s in states])
         x = np.array([[s.x_m, s.y_m, s.vx_mps, s.vy_mps] for s in states])
         P = np.array([s.P for s in states])
-        x_smooth, _ = gateway_rts_smooth(stamps, x, P, sigma_along_mps2=settings.sigma_along_mps2,
-                                         sigma_across_mps2=settings.sigma_across_mps2)  # fmt: skip
+        x_smooth, _ = rts_smooth(stamps, x, P, noise)
         out[track_id] = (stamps, x_smooth)
     return out
 

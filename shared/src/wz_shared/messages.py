@@ -16,6 +16,8 @@ from typing import Annotated, Literal
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 
+from wz_shared.motion import ProcessNoise
+
 SCHEMA_VERSION: Literal[1] = 1
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
@@ -251,10 +253,24 @@ class Track(BaseModel):
     last_update_s: FiniteFloat | None = None  # stamp of the newest measurement used
 
 
+def _positive_process_noise(noise: ProcessNoise) -> ProcessNoise:
+    stds = (noise.sigma_along_mps2, noise.sigma_across_mps2)
+    if not all(math.isfinite(v) and v > 0.0 for v in stds) or not (
+            math.isfinite(noise.heading_min_speed_mps) and noise.heading_min_speed_mps >= 0.0):  # fmt: skip
+        raise ValueError("process noise: stds must be finite and > 0, the speed finite and >= 0")
+    return noise
+
+
 class TrackBatch(Message):
+    """The fused tracks of one tracker cycle, and the process noise the tracker predicted them
+    with (:class:`~wz_shared.motion.ProcessNoise`; absent in older recordings: the model's
+    defaults, the tracker's), which whoever smooths them uses."""
+
     kind: Literal["track_batch"] = "track_batch"
     cycle_index: Annotated[int, Field(ge=0)]
     tracks: list[Track]
+    process_noise: Annotated[ProcessNoise, AfterValidator(_positive_process_noise)] = (
+        ProcessNoise())  # fmt: skip
 
 
 # --- alerts ---------------------------------------------------------------------------------

@@ -11,7 +11,7 @@ models side by side and weighs them by how well each predicted the measurements:
   keeping, gentle speed changes);
 - mode 1, **manoeuvre**: the tracker's ordinary stds (braking at 6-9 m/s^2, a merge).
 
-Both modes are the constant-velocity model of :mod:`wz_fusion_tracker.kalman` on the same state
+Both modes are the constant-velocity model of :mod:`wz_shared.motion` on the same state
 ``[x, y, vx, vy]``, differing only in ``Q``; so the mixing needs no state conversion. One cycle,
 per target, with mode probabilities ``mu_i`` and the Markov chain's transition probabilities
 ``p_ij(dt)``:
@@ -61,10 +61,10 @@ from wz_fusion_tracker.kalman import (
     IntP,
     SlotBank,
     _inverse_2x2,
-    predict_cv_blocks,
     update,
     update_position_blocks,
 )
+from wz_shared.motion import predict_cv
 
 #: Mode probabilities are kept at least this, so that a mode long out of favour can come back
 #: within one update (a floor well below any probability that changes a decision).
@@ -245,7 +245,7 @@ class IMMStateBank(SlotBank):
         along = np.broadcast_to(np.asarray(sigma_along_mps2, dtype=np.float64), (k, m))
         across = np.broadcast_to(np.asarray(sigma_across_mps2, dtype=np.float64), (k, m))
         heading = np.broadcast_to(np.asarray(heading_rad, dtype=np.float64), index.shape)
-        x_p, P_p = predict_cv_blocks(
+        x_p, P_p = predict_cv(
             x0.reshape(k * m, STATE_DIM),
             P0.reshape(k * m, STATE_DIM, STATE_DIM),
             np.repeat(dt, m),

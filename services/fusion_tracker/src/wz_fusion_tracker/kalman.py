@@ -5,28 +5,12 @@ east, ``y`` north, seconds)::
 
     x = [x, y, vx, vy]                          [m, m, m/s, m/s]
 
-with the linear constant-velocity model of the paper (Saba et al. 2025, Eq. 7-10)::
+with the constant-velocity model and its road-aligned white-noise acceleration of
+:mod:`wz_shared.motion` (transition ``F``, process noise ``Q``, :class:`ProcessNoise`, the
+block-form prediction), shared with the gateway's smoother, and position measurements::
 
-    x_k = F x_{k-1} + w,   F = [[1, 0, dt, 0],      w ~ N(0, Q)
-                                [0, 1, 0, dt],
-                                [0, 0, 1,  0],
-                                [0, 0, 0,  1]]
-    z_k = H x_k + v,       H = [[1, 0, 0, 0],       v ~ N(0, R)
+    z_k = H x_k + v,       H = [[1, 0, 0, 0],       v ~ N(0, R)      (paper Eq. 10)
                                 [0, 1, 0, 0]]
-
-**Process noise.** ``Q`` is the discretised white-noise acceleration model: an acceleration
-``a`` (2-vector) held constant over ``dt`` moves the state by ``G a`` with
-``G = [[dt^2/2 I], [dt I]]`` (4x2), so ``Q = G Sigma_a G^T``. With an isotropic
-``Sigma_a = sigma_a^2 I`` this is the paper's Eq. 9 (:func:`white_noise_q`). On a highway a
-vehicle accelerates and brakes hard along the road but drifts little across it, so
-:func:`road_aligned_q` gives the acceleration different standard deviations along and across
-the road::
-
-    Sigma_a = Rot(h) diag(sigma_along^2, sigma_across^2) Rot(h)^T,   h: road heading
-
-which keeps the predicted covariance long and thin along the lane. Gates then stay tight
-across the road, where the neighbouring lane is only 3.6 m away, and wide along it, where a
-braking car really can be several metres from its constant-velocity prediction.
 
 **Update.** The covariance update uses the Joseph form
 ``P = (I - K H) P (I - K H)^T + K R K^T``, then symmetrises: the short form ``(I - K H) P`` is
@@ -37,9 +21,9 @@ precise sensor (a LiDAR at centimetres) updates an uncertain track.
 textbook equations and accept leading batch dimensions; :class:`KalmanFilter` wraps one target
 for readability (the paper's pipeline); :class:`TrackStateBank` keeps ``N`` targets in arrays
 ``x (N, 4)`` and ``P (N, 4, 4)`` and predicts and updates any subset in one vectorised call,
-with the block structure of ``F`` written out (no 4x4 products for the prediction) and 2x2
-innovation covariances inverted in closed form. The tests run the three side by side and
-against filterpy.
+predicting with :func:`~wz_shared.motion.predict_cv` (the block structure of ``F`` written
+out, no 4x4 products) and inverting 2x2 innovation covariances in closed form. The tests run
+the three side by side and against filterpy.
 
 Nothing here does I/O.
 """
@@ -47,16 +31,17 @@ Nothing here does I/O.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
-F64 = npt.NDArray[np.float64]
+# F64 and STATE_DIM re-exported: the tracker's modules import them from here.
+from wz_shared.motion import F64 as F64
+from wz_shared.motion import STATE_DIM as STATE_DIM
+from wz_shared.motion import ProcessNoise, cv_transition, predict_cv
+
 IntP = npt.NDArray[np.intp]
 
-#: Dimension of the state ``[x, y, vx, vy]``.
-STATE_DIM = 4
 #: Dimension of a position measurement ``[x, y]``.
 POSITION_DIM = 2
 
@@ -70,167 +55,6 @@ def position_h() -> F64:
         Shape (2, 4), a fresh array.
     """
     return np.eye(POSITION_DIM, STATE_DIM, dtype=np.float64)
-
-
-def cv_transition(dt_s: npt.ArrayLike) -> F64:
-    """Constant-velocity transition matrix (paper Eq. 8).
-
-    ``F = [[I, dt I], [0, I]]`` with ``I`` the 2x2 identity: ``x <- x + vx dt``,
-    ``y <- y + vy dt``, velocity unchanged.
-
-    Parameters
-    ----------
-    dt_s
-        Time step [s], a scalar or an array of shape (...,); may be 0.
-
-    Returns
-    -------
-    F
-        Shape (4, 4) for a scalar ``dt_s``, (..., 4, 4) for an array.
-    """
-    dt = np.asarray(dt_s, dtype=np.float64)
-    F = np.broadcast_to(np.eye(STATE_DIM), (*dt.shape, STATE_DIM, STATE_DIM)).copy()
-    F[..., 0, 2] = dt
-    F[..., 1, 3] = dt
-    return F
-
-
-def _acceleration_covariance(
-    sigma_along_mps2: npt.ArrayLike, sigma_across_mps2: npt.ArrayLike, heading_rad: npt.ArrayLike
-) -> F64:
-    """``Sigma_a = Rot(h) diag(sigma_along^2, sigma_across^2) Rot(h)^T`` [m^2/s^4], (..., 2, 2)."""
-    var_along = np.square(np.asarray(sigma_along_mps2, dtype=np.float64))
-    var_across = np.square(np.asarray(sigma_across_mps2, dtype=np.float64))
-    heading = np.asarray(heading_rad, dtype=np.float64)
-    cos_h, sin_h = np.cos(heading), np.sin(heading)
-    # Rot diag Rot^T written out: the along direction is (cos h, sin h), across (-sin h, cos h).
-    sxx = var_along * cos_h**2 + var_across * sin_h**2
-    syy = var_along * sin_h**2 + var_across * cos_h**2
-    sxy = (var_along - var_across) * cos_h * sin_h
-    sigma_a = np.empty((*np.broadcast_shapes(sxx.shape, syy.shape, sxy.shape), 2, 2))
-    sigma_a[..., 0, 0] = sxx
-    sigma_a[..., 1, 1] = syy
-    sigma_a[..., 0, 1] = sigma_a[..., 1, 0] = sxy
-    return sigma_a
-
-
-def _q_from_acceleration_covariance(dt_s: npt.ArrayLike, sigma_a: F64) -> F64:
-    """``Q = G Sigma_a G^T = T(dt) kron Sigma_a``, ``T = [[dt^4/4, dt^3/2], [dt^3/2, dt^2]]``."""
-    dt = np.asarray(dt_s, dtype=np.float64)
-    dt2 = dt * dt
-    T = np.stack(
-        [np.stack([dt2 * dt2 / 4.0, dt2 * dt / 2.0], axis=-1),
-         np.stack([dt2 * dt / 2.0, dt2], axis=-1)],
-        axis=-2,
-    )  # fmt: skip
-    # Q[2i + a, 2j + b] = T[i, j] Sigma_a[a, b]: position block i = 0, velocity block i = 1.
-    blocks = T[..., :, None, :, None] * sigma_a[..., None, :, None, :]
-    shape = np.broadcast_shapes(T.shape[:-2], sigma_a.shape[:-2])
-    return np.asarray(
-        np.broadcast_to(blocks, (*shape, 2, 2, 2, 2)).reshape(*shape, STATE_DIM, STATE_DIM),
-        dtype=np.float64,
-    )
-
-
-def white_noise_q(dt_s: npt.ArrayLike, sigma_a_mps2: npt.ArrayLike) -> F64:
-    """Discretised white-noise acceleration process noise (paper Eq. 9).
-
-    ::
-
-        Q = sigma_a^2 [[dt^4/4, 0,      dt^3/2, 0     ],
-                       [0,      dt^4/4, 0,      dt^3/2],
-                       [dt^3/2, 0,      dt^2,   0     ],
-                       [0,      dt^3/2, 0,      dt^2  ]]
-
-    Parameters
-    ----------
-    dt_s
-        Time step [s], scalar or (...,).
-    sigma_a_mps2
-        Standard deviation of the acceleration, the same in every direction [m/s^2].
-
-    Returns
-    -------
-    Q
-        Shape (4, 4) or (..., 4, 4) [m^2, m^2/s, m^2/s^2].
-    """
-    dt = np.asarray(dt_s, dtype=np.float64)
-    var_a = np.square(np.asarray(sigma_a_mps2, dtype=np.float64))
-    dt2 = dt * dt
-    Q = np.zeros((*np.broadcast_shapes(dt.shape, var_a.shape), STATE_DIM, STATE_DIM))
-    Q[..., 0, 0] = Q[..., 1, 1] = var_a * dt2 * dt2 / 4.0
-    Q[..., 0, 2] = Q[..., 2, 0] = Q[..., 1, 3] = Q[..., 3, 1] = var_a * dt2 * dt / 2.0
-    Q[..., 2, 2] = Q[..., 3, 3] = var_a * dt2
-    return Q
-
-
-def road_aligned_q(
-    dt_s: npt.ArrayLike,
-    sigma_along_mps2: npt.ArrayLike,
-    sigma_across_mps2: npt.ArrayLike,
-    heading_rad: npt.ArrayLike,
-) -> F64:
-    """White-noise acceleration process noise with different std along and across the road.
-
-    ::
-
-        Sigma_a = Rot(h) diag(sigma_along^2, sigma_across^2) Rot(h)^T
-        G = [[dt^2/2 I], [dt I]]
-        Q = G Sigma_a G^T = [[dt^4/4 Sigma_a, dt^3/2 Sigma_a],
-                             [dt^3/2 Sigma_a, dt^2   Sigma_a]]
-
-    With ``sigma_along == sigma_across`` it equals :func:`white_noise_q` (up to rounding).
-
-    Parameters
-    ----------
-    dt_s
-        Time step [s], scalar or (...,).
-    sigma_along_mps2
-        Std of the acceleration along the road heading [m/s^2], scalar or (...,).
-    sigma_across_mps2
-        Std of the acceleration across it [m/s^2], scalar or (...,).
-    heading_rad
-        Road heading, counter-clockwise from the site x axis (east) [rad], scalar or (...,).
-
-    Returns
-    -------
-    Q
-        Shape (4, 4) or (..., 4, 4), the arguments broadcast together.
-    """
-    sigma_a = _acceleration_covariance(sigma_along_mps2, sigma_across_mps2, heading_rad)
-    return _q_from_acceleration_covariance(dt_s, sigma_a)
-
-
-@dataclass(frozen=True, slots=True)
-class ProcessNoise:
-    """Parameters of the white-noise acceleration model (``q_params``).
-
-    Attributes
-    ----------
-    sigma_along_mps2
-        Std of the acceleration along ``heading_rad`` [m/s^2].
-    sigma_across_mps2
-        Std of the acceleration across it [m/s^2].
-    heading_rad
-        Direction of ``sigma_along``, counter-clockwise from east [rad]; irrelevant when the
-        two stds are equal.
-    """
-
-    sigma_along_mps2: float
-    sigma_across_mps2: float
-    heading_rad: float = 0.0
-
-    @classmethod
-    def isotropic(cls, sigma_a_mps2: float) -> ProcessNoise:
-        """The paper's model: the same acceleration std ``sigma_a`` [m/s^2] in every direction."""
-        return cls(sigma_a_mps2, sigma_a_mps2, 0.0)
-
-    def q(self, dt_s: float) -> F64:
-        """``Q`` over ``dt_s`` [s], shape (4, 4): :func:`white_noise_q` when isotropic, else
-        :func:`road_aligned_q`."""
-        if self.sigma_along_mps2 == self.sigma_across_mps2:
-            return white_noise_q(dt_s, self.sigma_along_mps2)
-        return road_aligned_q(dt_s, self.sigma_along_mps2, self.sigma_across_mps2, self.heading_rad)
 
 
 # ----------------------------------------------------------------------------- function form
@@ -382,9 +206,10 @@ class KalmanFilter:
         #: Current covariance, shape (4, 4).
         self.P = np.array(P, dtype=np.float64).reshape(STATE_DIM, STATE_DIM)
 
-    def predict(self, dt_s: float, noise: ProcessNoise) -> None:
-        """Predict ``dt_s`` [s] ahead: ``x = F x``, ``P = F P F^T + Q(dt, noise)``."""
-        self.x, self.P = predict(self.x, self.P, cv_transition(dt_s), noise.q(dt_s))
+    def predict(self, dt_s: float, noise: ProcessNoise, heading_rad: float = 0.0) -> None:
+        """Predict ``dt_s`` [s] ahead: ``x = F x``, ``P = F P F^T + Q``, ``Q`` of ``noise`` with
+        ``sigma_along`` along ``heading_rad`` [rad] (:meth:`ProcessNoise.q`)."""
+        self.x, self.P = predict(self.x, self.P, cv_transition(dt_s), noise.q(dt_s, heading_rad))
 
     def innovation(
         self, z: npt.ArrayLike, R: npt.ArrayLike, H: npt.ArrayLike | None = None
@@ -420,64 +245,6 @@ def _inverse_2x2(S: F64) -> F64:
     inverse[..., 1, 0] = -c / det
     inverse[..., 1, 1] = a / det
     return inverse
-
-
-def predict_cv_blocks(
-    x: F64,
-    P: F64,
-    dt_s: F64,
-    sigma_along_mps2: npt.ArrayLike,
-    sigma_across_mps2: npt.ArrayLike,
-    heading_rad: npt.ArrayLike,
-) -> tuple[F64, F64]:
-    """Constant-velocity prediction of a stack of states with the block form of ``F``.
-
-    With ``P = [[A, B], [B^T, C]]`` (2x2 blocks: position, position-velocity, velocity) and
-    ``Q = [[dt^4/4 S, dt^3/2 S], [dt^3/2 S, dt^2 S]]`` (``S = Sigma_a``, see
-    :func:`road_aligned_q`), ``F P F^T + Q`` is::
-
-        A' = A + dt (B + B^T) + dt^2 C + dt^4/4 S
-        B' = B + dt C + dt^3/2 S
-        C' = C + dt^2 S
-        p' = p + dt v,   v' = v
-
-    the same numbers as :func:`predict` with :func:`cv_transition` and :func:`road_aligned_q`,
-    without 4x4 products.
-
-    Parameters
-    ----------
-    x
-        States, shape (K, 4).
-    P
-        Covariances, shape (K, 4, 4).
-    dt_s
-        Time steps [s], shape (K,).
-    sigma_along_mps2, sigma_across_mps2, heading_rad
-        Acceleration stds [m/s^2] and heading [rad], scalars or shape (K,).
-
-    Returns
-    -------
-    x_p, P_p
-        Shapes (K, 4) and (K, 4, 4), new arrays.
-    """
-    dt = dt_s[:, None, None]
-    dt2 = dt * dt
-    S = _acceleration_covariance(sigma_along_mps2, sigma_across_mps2, heading_rad)
-    # F P F' in place of two 4x4 products: rows first (F P: position rows += dt velocity rows),
-    # then columns ((F P) F': position columns += dt velocity columns).
-    P_p = P.copy()
-    P_p[:, :2, :] += dt * P[:, 2:, :]
-    P_p[:, :, :2] += dt * P_p[:, :, 2:]
-    # + Q = T(dt) kron S
-    P_p[:, :2, :2] += (dt2 * dt2 / 4.0) * S
-    Q_cross = (dt2 * dt / 2.0) * S
-    P_p[:, :2, 2:] += Q_cross
-    P_p[:, 2:, :2] += Q_cross
-    P_p[:, 2:, 2:] += dt2 * S
-    # x = F x
-    x_p = x.copy()
-    x_p[:, :2] += dt_s[:, None] * x[:, 2:]
-    return x_p, P_p
 
 
 def update_position_blocks(x: F64, P: F64, z: F64, R: F64) -> tuple[F64, F64]:
@@ -640,7 +407,7 @@ class TrackStateBank(SlotBank):
     ) -> tuple[F64, F64]:
         """States of ``slots`` predicted to ``stamp_s`` [s], without storing them.
 
-        ``dt = stamp_s - stamp_s[slot]`` per slot, then :func:`predict_cv_blocks`.
+        ``dt = stamp_s - stamp_s[slot]`` per slot, then :func:`~wz_shared.motion.predict_cv`.
 
         Parameters
         ----------
@@ -649,7 +416,7 @@ class TrackStateBank(SlotBank):
         stamp_s
             Target time [s], scalar or (K,); not before any slot's own stamp.
         sigma_along_mps2, sigma_across_mps2, heading_rad
-            Process noise of :func:`road_aligned_q`, scalars or (K,).
+            Process noise of :func:`~wz_shared.motion.road_aligned_q`, scalars or (K,).
 
         Returns
         -------
@@ -661,7 +428,7 @@ class TrackStateBank(SlotBank):
             np.broadcast_to(np.asarray(stamp_s, dtype=np.float64), index.shape)
             - self._stamp_s[index]
         )
-        return predict_cv_blocks(
+        return predict_cv(
             self._x[index], self._P[index], dt, sigma_along_mps2, sigma_across_mps2, heading_rad
         )
 

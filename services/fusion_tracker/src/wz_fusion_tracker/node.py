@@ -10,7 +10,8 @@ Run it as ``python -m wz_fusion_tracker.node`` (settings: ``WZ_FUSION_*``, bus `
   :class:`TrackBatch` on ``wz/<site>/tracks``: the confirmed and coasting tracks predicted to the
   stamp of the newest measurement processed (the first one at or after the cycle's time on the
   period's grid; the tracker never predicts backwards), with the road frame's station, offset and lane, speed and heading, class and
-  size, contributing sensors, age and status; and answers ``wz/<site>/tracks/latest`` queries
+  size, contributing sensors, age and status, and the process noise the tracker predicted with
+  (:func:`process_noise`, for the gateway's smoother); and answers ``wz/<site>/tracks/latest`` queries
   with the newest batch;
 - when no detections arrive at all (every sensor silent), moves the tracker's clock on by the
   wall time elapsed since the last batch, so coasting tracks end rather than hang (data time
@@ -42,7 +43,7 @@ import numpy as np
 
 from wz_fusion_tracker.calibration import BiasMapError, LateralBiasCorrector, load_bias_map
 from wz_fusion_tracker.kalman import F64
-from wz_fusion_tracker.settings import FusionTrackerSettings
+from wz_fusion_tracker.settings import FusionTrackerSettings, TrackerSettings
 from wz_fusion_tracker.tracker import MultiTargetTracker
 from wz_fusion_tracker.types import Measurement, TrackState
 from wz_shared.codec import encode_json
@@ -53,6 +54,7 @@ from wz_shared.messages import (
     TrackStatus,
     VehicleClass,
 )
+from wz_shared.motion import ProcessNoise
 from wz_shared.service import NodeApp, ServiceRuntime
 from wz_shared.site import Site
 from wz_shared.timebase import RunWatch, SimClock
@@ -117,6 +119,13 @@ def bias_corrector(site: Site, settings: FusionTrackerSettings) -> LateralBiasCo
     return bias
 
 
+def process_noise(settings: TrackerSettings) -> ProcessNoise:
+    """The process noise the tracker predicts with (its manoeuvre mode's, with the IMM), as its
+    track batches carry it to whoever smooths them."""
+    return ProcessNoise(settings.sigma_along_mps2, settings.sigma_across_mps2,
+                        settings.heading_min_speed_mps)  # fmt: skip
+
+
 def to_track(site: Site, state: TrackState) -> Track:
     """A tracker snapshot as a bus message, with its road-frame position and lane."""
     station, offset = site.road_frame.to_road(state.x_m, state.y_m)
@@ -151,6 +160,7 @@ class FusionCore:
         #: read at start), else read from ``settings.bias_map``; None: none removed.
         self.bias = bias if bias is not None else bias_corrector(site, settings)
         self.tracker = self._new_tracker(first_track_id=1)
+        self._process_noise = process_noise(settings.tracker)
         self._next_output_s: float | None = None
         self._cycle = 0
         #: Runs seen: 1, then one more each time a sensor's stamps go back (see the module).
@@ -217,6 +227,7 @@ class FusionCore:
         batch = TrackBatch(
             site=self.site.site_id, source_id=SERVICE, stamp=stamp_s, cycle_index=self._cycle,
             tracks=[to_track(self.site, s) for s in states],
+            process_noise=self._process_noise,
         )  # fmt: skip
         self._cycle += 1
         return batch

@@ -98,14 +98,11 @@ class GatewaySettings(ServiceSettings):
     publisher: Annotated[str, Field(min_length=1, max_length=200)] = "Work-zone edge gateway"
     contact_email: Annotated[str, Field(max_length=200)] | None = None
     #: A track missing from the track batches for longer than this has ended, and its stored
-    #: trajectory is smoothed [s of stamps]; no batch at all for ``track_end_silence_s`` [s of
-    #: wall clock] ends every track (the tracker stopped).
+    #: trajectory is smoothed, with the process noise the tracker's batches carried [s of
+    #: stamps]; no batch at all for ``track_end_silence_s`` [s of wall clock] ends every track
+    #: (the tracker stopped).
     track_end_after_s: Annotated[float, Field(gt=0.0, le=3600.0)] = 3.0
     track_end_silence_s: Annotated[float, Field(gt=0.0, le=86400.0)] = 30.0
-    #: The smoother's process noise, acceleration std along and across the direction of
-    #: travel [m/s^2]: the fusion tracker's ``sigma_along_mps2``/``sigma_across_mps2``.
-    smoothing_sigma_along_mps2: Annotated[float, Field(gt=0.0, le=50.0)] = 3.5
-    smoothing_sigma_across_mps2: Annotated[float, Field(gt=0.0, le=50.0)] = 3.0
     #: The live stream (/v1/stream): most track batches a second to one client [Hz], events
     #: held for a slow client (beyond, its oldest are dropped), the heartbeat comment's
     #: period [s], and the most clients at once.

@@ -110,6 +110,11 @@ tracks = Table(
     #: Wall clock when it was smoothed [Unix s]; None while it lives (or waits to be smoothed).
     Column("ended_at", Double, nullable=True),
     Column("smoothed_points", Integer, nullable=True),
+    # Migration 5: the process noise its track batches carried, which it is smoothed with
+    # (wz_shared.motion.ProcessNoise); None in older rows: the model's defaults.
+    Column("sigma_along_mps2", Double, nullable=True),
+    Column("sigma_across_mps2", Double, nullable=True),
+    Column("heading_min_speed_mps", Double, nullable=True),
     Index("ix_tracks_site_ended", "site", "ended_at"),
     Index("ix_tracks_site_track", "site", "track_id"),
 )
@@ -375,9 +380,27 @@ def _v2_webhooks(connection: Connection) -> None:
          if i.name == "ux_webhook_outbox_subscription_event").create(connection)  # fmt: skip
 
 
+# tracks as migration 3 made it (migration 5 adds the process noise).
+_v3_tracks = Table(
+    "tracks",
+    _v1_metadata,
+    Column("id", RowId, primary_key=True, autoincrement=True),
+    Column("site", String(64), nullable=False),
+    Column("track_id", BigInteger, nullable=False),
+    Column("first_stamp", Double, nullable=False),
+    Column("first_received_at", Double, nullable=False),
+    Column("last_stamp", Double, nullable=True),
+    Column("last_received_at", Double, nullable=True),
+    Column("ended_at", Double, nullable=True),
+    Column("smoothed_points", Integer, nullable=True),
+    Index("ix_tracks_site_ended", "site", "ended_at"),
+    Index("ix_tracks_site_track", "site", "track_id"),
+)
+
+
 def _v3_smoothing(connection: Connection) -> None:
     _add_columns(connection, track_points, ["covariance"])
-    metadata.create_all(connection, tables=[tracks])
+    _v1_metadata.create_all(connection, tables=[_v3_tracks])
 
 
 def _v4_alerts_per_site(connection: Connection) -> None:
@@ -396,6 +419,11 @@ def _v4_alerts_per_site(connection: Connection) -> None:
     next(i for i in alerts.indexes if i.name == "ux_alerts_site_alert").create(connection)
 
 
+def _v5_track_process_noise(connection: Connection) -> None:
+    _add_columns(connection, tracks, ["sigma_along_mps2", "sigma_across_mps2",
+                                      "heading_min_speed_mps"])  # fmt: skip
+
+
 #: Every migration, in order; the last one's version is the schema this code reads and writes.
 MIGRATIONS: tuple[Migration, ...] = (
     Migration(1, "trajectories, alerts, device states, latest, API keys, webhooks", _v1_initial),
@@ -404,5 +432,7 @@ MIGRATIONS: tuple[Migration, ...] = (
               _v3_smoothing),
     Migration(4, "alerts: one per site and alert_id (a central gateway stores many sites)",
               _v4_alerts_per_site),
+    Migration(5, "track lives: the process noise of their track batches, smoothed with it",
+              _v5_track_process_noise),
 )
 SCHEMA_VERSION = MIGRATIONS[-1].version

@@ -12,7 +12,8 @@ it to the last. It ends when
 :class:`TrackEnds` decides that from the batches alone (pure). :class:`TrackFinisher` is what
 the node's writer thread runs around it: a life is recorded in the ``tracks`` table before its
 first points are written, and when it ends its fused points are RTS-smoothed
-(:func:`wz_gateway.smoothing.smooth_trajectory`) and written as ``smoothed`` points in the
+(:func:`wz_gateway.smoothing.smooth_trajectory`, with the process noise its first batch
+carried, recorded with the life) and written as ``smoothed`` points in the
 transaction that marks it ended, so a life is smoothed once, whatever stops when. Ended lives
 wait in a queue and are smoothed between groups of messages, a time budget at a time, so a run
 that ends fifty tracks at once does not hold the ingestion up. At start, lives left unfinished
@@ -34,6 +35,7 @@ from wz_gateway.smoothing import smooth_trajectory
 from wz_gateway.storage import RESTART_TOLERANCE_S, Storage
 from wz_gateway.track_lives import TrackLife, TrackLifeStore
 from wz_shared.messages import Message, TrackBatch
+from wz_shared.motion import ProcessNoise
 from wz_shared.site import Site
 from wz_shared.timebase import stamp_went_back
 
@@ -110,7 +112,8 @@ class TrackEnds:
                 out.ended.append(life)  # gone too long: back under the same id, a new life
                 life = None
             if life is None:
-                life = TrackLife(track.track_id, stamp, received_at, stamp, received_at)
+                life = TrackLife(track.track_id, stamp, received_at, stamp, received_at,
+                                 process_noise=batch.process_noise)  # fmt: skip
                 self.open[track.track_id] = life
                 out.started.append(life)
             else:
@@ -138,8 +141,6 @@ class TrackFinisher:
     storage : Storage
     site : Site
     ends : TrackEnds
-    sigma_along_mps2, sigma_across_mps2 : float
-        The smoother's process noise (the tracker's).
     metrics : GatewayMetrics
     clock : callable
         Wall clock [Unix s]: ``ended_at``, and the silence.
@@ -148,8 +149,6 @@ class TrackFinisher:
     storage: Storage
     site: Site
     ends: TrackEnds
-    sigma_along_mps2: float
-    sigma_across_mps2: float
     metrics: GatewayMetrics
     clock: Callable[[], float] = time.time
 
@@ -164,8 +163,7 @@ class TrackFinisher:
         """The finisher the settings describe."""
         ends = TrackEnds(settings.track_end_after_s, settings.track_end_silence_s,
                          RESTART_TOLERANCE_S)  # fmt: skip
-        return cls(storage, site, ends, settings.smoothing_sigma_along_mps2,
-                   settings.smoothing_sigma_across_mps2, metrics, clock)  # fmt: skip
+        return cls(storage, site, ends, metrics, clock)
 
     def resume(self) -> int:
         """Take up what the previous process left: its unfinished lives, as of its newest
@@ -227,13 +225,13 @@ class TrackFinisher:
         return finished
 
     def finish(self, life: TrackLife) -> int:
-        """Smooth one ended life and store it, marked ended, in one transaction; its points."""
+        """Smooth one ended life with its process noise (the model's defaults where none was
+        recorded) and store it, marked ended, in one transaction; its points."""
         started = time.perf_counter()
         points = self.lives.points(self.site.site_id, life)
         smoothed = None
         if len(points):
-            smoothed = smooth_trajectory(points, self.site, sigma_along_mps2=self.sigma_along_mps2,
-                                         sigma_across_mps2=self.sigma_across_mps2)  # fmt: skip
+            smoothed = smooth_trajectory(points, self.site, life.process_noise or ProcessNoise())
         written = self.lives.finish(self.site.site_id, life, smoothed, ended_at=self.clock())
         if written:
             self.metrics.smoothed_tracks.inc()

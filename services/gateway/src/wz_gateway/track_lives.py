@@ -21,12 +21,15 @@ from sqlalchemy import Engine, func, insert, select, update
 
 from wz_gateway.smoothing import StoredTrajectory
 from wz_gateway.tables import track_points, tracks
+from wz_shared.motion import ProcessNoise
 
 
 @dataclass
 class TrackLife:
     """One life of a track id (see :mod:`wz_gateway.track_ends`); ``last_*`` are those of its
-    newest stored batch, ``life_id`` its row in ``tracks`` (None until recorded)."""
+    newest stored batch, ``life_id`` its row in ``tracks`` (None until recorded),
+    ``process_noise`` that of its first batch, which it is smoothed with (None: not known, an
+    older row; the model's defaults)."""
 
     track_id: int
     first_stamp: float
@@ -34,6 +37,7 @@ class TrackLife:
     last_stamp: float
     last_received_at: float
     life_id: int | None = None
+    process_noise: ProcessNoise | None = None
 
 
 class TrackLifeStore:
@@ -49,7 +53,8 @@ class TrackLifeStore:
                 life.life_id = connection.execute(
                     insert(tracks).values(site=site, track_id=life.track_id,
                                           first_stamp=life.first_stamp,
-                                          first_received_at=life.first_received_at)
+                                          first_received_at=life.first_received_at,
+                                          **_noise_columns(life.process_noise))
                     .returning(tracks.c.id)
                 ).scalar_one()  # fmt: skip
 
@@ -82,7 +87,8 @@ class TrackLifeStore:
                     else (newest.stamp, newest.received_at)
                 )  # fmt: skip
                 lives.append(TrackLife(row.track_id, row.first_stamp, row.first_received_at,
-                                       last_stamp, last_received_at, life_id=row.id))  # fmt: skip
+                                       last_stamp, last_received_at, life_id=row.id,
+                                       process_noise=_noise_of(row)))  # fmt: skip
         return lives
 
     def points(self, site: str, life: TrackLife) -> StoredTrajectory:
@@ -131,7 +137,8 @@ class TrackLifeStore:
                 life.life_id = connection.execute(
                     insert(tracks).values(site=site, track_id=life.track_id,
                                           first_stamp=life.first_stamp,
-                                          first_received_at=life.first_received_at, **done)
+                                          first_received_at=life.first_received_at, **done,
+                                          **_noise_columns(life.process_noise))
                     .returning(t.id)
                 ).scalar_one()  # fmt: skip
             else:
@@ -143,6 +150,19 @@ class TrackLifeStore:
             if smoothed is not None and len(smoothed):
                 connection.execute(insert(track_points), _smoothed_rows(site, smoothed))
         return True
+
+
+def _noise_columns(noise: ProcessNoise | None) -> dict[str, float | None]:
+    """A track life's process noise as its columns in ``tracks`` (None: not known)."""
+    return {"sigma_along_mps2": None if noise is None else noise.sigma_along_mps2,
+            "sigma_across_mps2": None if noise is None else noise.sigma_across_mps2,
+            "heading_min_speed_mps": None if noise is None else noise.heading_min_speed_mps}  # fmt: skip
+
+
+def _noise_of(row: Any) -> ProcessNoise | None:
+    """The process noise stored with a ``tracks`` row; None where it has none (older rows)."""
+    values = (row.sigma_along_mps2, row.sigma_across_mps2, row.heading_min_speed_mps)
+    return None if any(v is None for v in values) else ProcessNoise(*values)
 
 
 def _smoothed_rows(site: str, smoothed: StoredTrajectory) -> list[dict[str, Any]]:
