@@ -6,7 +6,7 @@ import copy
 from collections.abc import Callable
 from typing import Any
 
-from wz_eval.fusion import _table_summary, must_show
+from wz_eval.fusion_report import must_show, table_summary
 
 
 def _row(vehicle: str, fused_lat: float, average_lat: float, samples: int = 20) -> dict[str, Any]:
@@ -29,7 +29,7 @@ def _report(table: list[dict[str, Any]]) -> dict[str, Any]:
                       "fused_rmse_lateral_m": 0.23, "fused_max_abs_error_m": 2.86,
                       "id_switches_from_start_to_2s_after": 0}],
     }  # fmt: skip
-    report["paper_table_summary"] = _table_summary(table)
+    report["paper_table_summary"] = table_summary(table)
     return report
 
 
@@ -74,7 +74,7 @@ def test_the_paper_table_needs_nine_in_ten_of_at_least_ten_vehicles() -> None:
     # a loss of 0.3 m over 20 samples is 1.5 cm a sample: not a tie; 0.1 m is
     assert report["paper_table_summary"]["fused_lateral_losses_to_average_within_1cm"] == 0
     table[0]["fused"]["lateral_m"] = 1.1
-    assert _table_summary(table)["fused_lateral_losses_to_average_within_1cm"] == 1
+    assert table_summary(table)["fused_lateral_losses_to_average_within_1cm"] == 1
     # nine table rows are too few, whatever the share
     assert _holds(_report(table[:9]))[
         "paper table, stored track below camera, LiDAR and average on both axes"] is False

@@ -14,7 +14,11 @@ from typing import Annotated, Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 from pydantic_settings import SettingsConfigDict
 
+from wz_shared.motion import ProcessNoise
 from wz_shared.settings import ServiceSettings
+
+#: The motion model's process noise is defined once, in :class:`wz_shared.motion.ProcessNoise`.
+_NOISE = ProcessNoise()
 
 
 class TrackerSettings(BaseModel):
@@ -24,9 +28,9 @@ class TrackerSettings(BaseModel):
 
     # --- motion model: docs/fusion-tracker.md#settings-motion-model ---
     #: Acceleration std along travel [m/s^2]: follows drivers braking hard at the closure.
-    sigma_along_mps2: float = Field(default=3.5, gt=0.0)
+    sigma_along_mps2: float = Field(default=_NOISE.sigma_along_mps2, gt=0.0)
     #: Acceleration std across travel [m/s^2]: lets a track follow a late, sharp merge.
-    sigma_across_mps2: float = Field(default=3.0, gt=0.0)
+    sigma_across_mps2: float = Field(default=_NOISE.sigma_across_mps2, gt=0.0)
     #: "cv" (one model) or "imm" (steady + manoeuvre, :mod:`wz_fusion_tracker.imm`); the IMM
     #: cut the speed error but cost identity switches, so "cv".
     motion_model: Literal["cv", "imm"] = "cv"
@@ -40,7 +44,7 @@ class TrackerSettings(BaseModel):
     imm_manoeuvre_sojourn_s: float = Field(default=2.0, gt=0.0)
     #: Without a road heading, below this speed a track's own heading is not trusted and its
     #: process noise is isotropic (``sigma_along`` both ways) [m/s].
-    heading_min_speed_mps: float = Field(default=2.0, ge=0.0)
+    heading_min_speed_mps: float = Field(default=_NOISE.heading_min_speed_mps, ge=0.0)
 
     # --- association: docs/fusion-tracker.md#settings-association ---
     #: Pairs with a larger squared Mahalanobis distance are never associated: chi-square
