@@ -47,7 +47,7 @@ processed by sensor id, so that too does not depend on arrival order.
    duplicate merging (:mod:`~wz_fusion_tracker.identity`).
 
 **Process noise.** White-noise acceleration, road-aligned
-(:func:`~wz_fusion_tracker.kalman.road_aligned_q`): ``sigma_along`` along the direction of
+(:func:`~wz_shared.motion.road_aligned_q`): ``sigma_along`` along the direction of
 travel, ``sigma_across`` across it. The direction is the road's heading at the track's position
 when the tracker is given a ``heading_at(x, y)`` hook, otherwise the track's own velocity
 heading once it moves faster than ``heading_min_speed_mps``, otherwise isotropic with
@@ -61,7 +61,7 @@ track's velocity. Without a hook it is ignored (its direction would be unknown).
 **Per track** the tracker also keeps a class vote (weighted by score; "unknown" never outvotes a
 known class), running medians of the measured length and width, the last update stamp per
 sensor, and the history needed for RTS smoothing (the prior and posterior of every update, see
-:func:`wz_fusion_tracker.smoothing.rts_smooth`), in
+:func:`wz_shared.motion.rts_smooth`), in
 :class:`~wz_fusion_tracker.track_table.TrackTable`.
 
 Nothing here does I/O: the node converts bus messages to :class:`Measurement`, calls

@@ -133,7 +133,7 @@ class TrackState:
 
 @dataclass(frozen=True, slots=True, eq=False)
 class TrackHistory:
-    """The updates of one track, for :func:`~wz_fusion_tracker.smoothing.rts_smooth`.
+    """The updates of one track, for :func:`~wz_shared.motion.rts_smooth`.
 
     Entry ``k`` is the update at ``stamps_s[k]``: ``x_pred``/``P_pred`` the prior it started
     from (predicted from update ``k - 1``; for the first entry, the initial state itself) and
