@@ -4,15 +4,13 @@ smoothing tests: what the fusion tracker would publish, with real covariances.""
 from __future__ import annotations
 
 import numpy as np
-import numpy.typing as npt
 
 from tests.gateway.helpers import SITE
 from tests.shared.filtered import FilteredCar as FilteredCar
 from tests.shared.filtered import filtered_car as filtered_car
+from wz_shared.arrays import F64
 from wz_shared.messages import Track, TrackBatch
 from wz_shared.motion import ProcessNoise
-
-F64 = npt.NDArray[np.float64]
 
 
 def car_tracks(track_id: int, car: FilteredCar) -> list[Track]:

@@ -29,9 +29,8 @@ from wz_lidar_detector.reference import (
     ReferenceSettings,
     class_from_size,
 )
+from wz_shared.arrays import F64
 from wz_shared.messages import VehicleClass
-
-FloatArray = npt.NDArray[np.float64]
 
 GROUND_Z_M = -5.0  # the road, 5 m below the sensor
 SPACING_M = 0.12  # between sampled points on a vehicle face
@@ -56,21 +55,21 @@ CAR = Vehicle((14.0, -4.0), (4.5, 1.8, 1.5), heading_rad=0.3)
 TRUCK = Vehicle((32.0, 5.0), (16.5, 2.6, 4.0))
 
 
-def face_grid(extent_a: float, extent_b: float) -> FloatArray:
+def face_grid(extent_a: float, extent_b: float) -> F64:
     """``(n, 2)`` grid of points on a ``extent_a`` x ``extent_b`` face, centred on 0."""
     a = np.arange(-0.5 * extent_a + 0.5 * SPACING_M, 0.5 * extent_a, SPACING_M)
     b = np.arange(-0.5 * extent_b + 0.5 * SPACING_M, 0.5 * extent_b, SPACING_M)
-    grid: FloatArray = np.stack(np.meshgrid(a, b, indexing="ij"), axis=-1).reshape(-1, 2)
+    grid: F64 = np.stack(np.meshgrid(a, b, indexing="ij"), axis=-1).reshape(-1, 2)
     return grid
 
 
-def visible_points(vehicle: Vehicle, rng: np.random.Generator) -> FloatArray:
+def visible_points(vehicle: Vehicle, rng: np.random.Generator) -> F64:
     """Points ``(n, 3)`` on the faces of ``vehicle`` that turn towards the sensor at the origin."""
     length, width, height = vehicle.size_lwh_m
     side_height = height - vehicle.sill_m
     mid_z = vehicle.sill_m + 0.5 * side_height
     # (outward normal, points) in the vehicle's frame: x along the heading, z up from the road
-    faces: list[tuple[tuple[float, float, float], FloatArray]] = []
+    faces: list[tuple[tuple[float, float, float], F64]] = []
     top = face_grid(length, width)
     faces.append(((0.0, 0.0, 1.0), np.column_stack([top, np.full(len(top), height)])))
     for sign in (1.0, -1.0):
@@ -93,15 +92,15 @@ def visible_points(vehicle: Vehicle, rng: np.random.Generator) -> FloatArray:
         if float(np.asarray(normal) @ rotation.T @ (-world.mean(axis=0))) > 0.0:
             seen.append(world)
     points = np.concatenate(seen)
-    noisy: FloatArray = points + rng.normal(0.0, 0.01, points.shape)
+    noisy: F64 = points + rng.normal(0.0, 0.01, points.shape)
     return noisy
 
 
-def ground_points(rng: np.random.Generator, spacing_m: float = 0.4) -> FloatArray:
+def ground_points(rng: np.random.Generator, spacing_m: float = 0.4) -> F64:
     """The road: x -5..60 m, y -15..15 m, z = -5 m with 2 cm noise, ``(n, 3)``."""
     x, y = np.meshgrid(np.arange(-5.0, 60.0, spacing_m), np.arange(-15.0, 15.0, spacing_m))
     z = GROUND_Z_M + rng.normal(0.0, 0.02, x.size)
-    ground: FloatArray = np.column_stack([x.ravel(), y.ravel(), z])
+    ground: F64 = np.column_stack([x.ravel(), y.ravel(), z])
     return ground
 
 
@@ -294,7 +293,7 @@ def test_roi_crops_by_box_and_by_range() -> None:
 # --- merge --------------------------------------------------------------------------------------
 
 
-def split_car() -> FloatArray:
+def split_car() -> F64:
     """A 4.6 m car abeam the sensor (its top and near side seen) in two parts: a 1.1 m shadow
     (a pole in front of it) across its middle, wider than DBSCAN's reach, so DBSCAN makes two
     clusters whose centroids are 2.85 m apart."""
@@ -302,7 +301,7 @@ def split_car() -> FloatArray:
     points, owner = scene((car,))
     along = points[:, 0] - car.center_xy_m[0]
     shadow = (owner == 1) & (np.abs(along) < 0.55)
-    kept: FloatArray = points[~shadow]
+    kept: F64 = points[~shadow]
     return kept
 
 
@@ -363,7 +362,7 @@ def test_cluster_size_limits() -> None:
     ],
     ids=["empty", "all-nan", "three-points", "three-points-no-intensity", "non-finite"],
 )
-def test_degenerate_frames_give_empty_results(points: FloatArray) -> None:
+def test_degenerate_frames_give_empty_results(points: F64) -> None:
     result = detect(points)
     assert result.detections == []
     assert result.foreground.shape == (len(points),)

@@ -6,12 +6,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 from filterpy.kalman import KalmanFilter
 
+from wz_shared.arrays import F64
 from wz_shared.motion import cv_transition, road_aligned_q
-
-F64 = npt.NDArray[np.float64]
 
 
 @dataclass(frozen=True)

@@ -5,16 +5,15 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import numpy.typing as npt
 import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from pyproj import Geod
 
+from wz_shared.arrays import F64
 from wz_shared.geometry import GRID_REACH_M, GeoFrame, RoadFrame
 from wz_shared.site import DEFAULT_SITE_PATH, load_site
 
-FloatArray = npt.NDArray[np.float64]
 ROUNDTRIP_TOLERANCE_M = 1e-3
 PROPERTY = settings(
     derandomize=True, max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow]
@@ -26,7 +25,7 @@ DEFAULT_FRAME = load_site(DEFAULT_SITE_PATH).road_frame
 # --- helpers ---------------------------------------------------------------------------------
 
 
-def arc_polyline(radius_m: float, spacing_m: float, angle_rad: float, turn: int) -> FloatArray:
+def arc_polyline(radius_m: float, spacing_m: float, angle_rad: float, turn: int) -> F64:
     """Vertices on a circle of ``radius_m``, starting at (0, 0) heading north (+y).
 
     ``turn`` +1 turns left (centre at (-R, 0)), -1 turns right (centre at (+R, 0)); the vertex
@@ -38,14 +37,14 @@ def arc_polyline(radius_m: float, spacing_m: float, angle_rad: float, turn: int)
 
 
 def polar_about_arc_centre(
-    radius_m: float, turn: int, r_m: FloatArray, phi: FloatArray
-) -> tuple[FloatArray, FloatArray]:
+    radius_m: float, turn: int, r_m: F64, phi: F64
+) -> tuple[F64, F64]:
     """Site position of the point at distance r and angle phi (from the start) about the centre."""
     return turn * (r_m * np.cos(phi) - radius_m), r_m * np.sin(phi)
 
 
 @st.composite
-def smooth_centerlines(draw: st.DrawFn) -> FloatArray:
+def smooth_centerlines(draw: st.DrawFn) -> F64:
     """Random smooth roads: |curvature| <= 1 / (100 m), vertex spacing 5..25 m, length 150..700 m.
 
     The curvature is a sum of three sinusoids; the heading may wander by at most 2.5 rad so that
@@ -74,7 +73,7 @@ def smooth_centerlines(draw: st.DrawFn) -> FloatArray:
         ]
     )
     stride = max(1, round(spacing / step))
-    vertices: FloatArray = xy[::stride]
+    vertices: F64 = xy[::stride]
     return vertices
 
 
@@ -195,7 +194,7 @@ def test_default_site_site_road_site_roundtrip(x: float, y: float) -> None:
 
 @PROPERTY
 @given(vertices=smooth_centerlines(), seed=st.integers(0, 2**32 - 1))
-def test_smooth_curve_roundtrips(vertices: FloatArray, seed: int) -> None:
+def test_smooth_curve_roundtrips(vertices: F64, seed: int) -> None:
     frame = RoadFrame(vertices)
     rng = np.random.default_rng(seed)
     station = rng.uniform(-20.0, frame.length_m + 20.0, 500)

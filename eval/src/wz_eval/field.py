@@ -41,10 +41,9 @@ from typing import Any, Protocol
 import numpy as np
 import numpy.typing as npt
 
+from wz_shared.arrays import F64, I64
 from wz_shared.geometry import RoadFrame
 
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
 Intervals = list[tuple[float, float]]
 
 

@@ -91,7 +91,6 @@ from wz_fusion_tracker.calibration import (
     load_bias_map,
     write_bias_map,
 )
-from wz_fusion_tracker.kalman import F64
 from wz_fusion_tracker.node import (
     process_noise,
     road_heading_hook,
@@ -111,6 +110,7 @@ from wz_fusion_tracker.smoothing import smooth_history
 from wz_fusion_tracker.tracker import MultiTargetTracker
 from wz_fusion_tracker.types import TrackHistory, TrackState
 from wz_lidar_detector.settings import lidar_mount
+from wz_shared.arrays import F64
 from wz_shared.logs import configure_logging
 from wz_shared.messages import DetectionBatch, TrackBatch, VehicleTruth
 from wz_shared.motion import rts_smooth

@@ -18,14 +18,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-import numpy.typing as npt
 from scipy.optimize import linear_sum_assignment
 
+from wz_shared.arrays import F64
 from wz_shared.messages import VehicleTruth
 from wz_shared.site import Site
 from wz_simulator.sensors.rig import moved
-
-F64 = npt.NDArray[np.float64]
 
 
 class TruthIndex:

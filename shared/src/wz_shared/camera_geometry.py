@@ -34,10 +34,9 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from wz_shared.arrays import F64
 from wz_shared.sensor_mounts import intrinsics_of
 from wz_shared.site import CameraIntrinsics, SensorMount
-
-F64 = npt.NDArray[np.float64]
 
 # Optical axes (columns) in the sensor frame: x_opt = -y_s, y_opt = -z_s, z_opt = x_s.
 _SENSOR_FROM_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])

@@ -36,7 +36,7 @@ import numpy as np
 import numpy.typing as npt
 from pyproj import Transformer
 
-FloatArray = npt.NDArray[np.float64]
+from wz_shared.arrays import F64
 
 # Tolerance on the segment parameter u when accepting a root at a segment's end: a point on the
 # normal line through a vertex is found by both segments, and rounding must not lose it.
@@ -58,13 +58,13 @@ _GRID_CHUNK_POINTS = 2048
 
 
 def polar_covariance(bearing_rad: float, range_variance_m2: float, lateral_variance_m2: float,
-                     min_variance_m2: float = 1e-6) -> FloatArray:  # fmt: skip
+                     min_variance_m2: float = 1e-6) -> F64:  # fmt: skip
     """A position seen along a line of sight at ``bearing_rad`` (CCW from the site x axis):
     ``sigma_rho^2 u u^T + sigma_lat^2 n n^T`` [m^2], shape (2, 2), with ``u`` the line of sight,
     ``n`` its left normal, and each variance at least ``min_variance_m2``."""
     cos_b, sin_b = math.cos(bearing_rad), math.sin(bearing_rad)
     u, n = np.array([cos_b, sin_b]), np.array([-sin_b, cos_b])
-    covariance: FloatArray = max(range_variance_m2, min_variance_m2) * np.outer(u, u) + max(
+    covariance: F64 = max(range_variance_m2, min_variance_m2) * np.outer(u, u) + max(
         lateral_variance_m2, min_variance_m2
     ) * np.outer(n, n)
     return covariance
@@ -157,12 +157,12 @@ class RoadFrame:
     # --- properties ------------------------------------------------------------------------
 
     @property
-    def vertices_xy_m(self) -> FloatArray:
+    def vertices_xy_m(self) -> F64:
         """Centerline vertices in the site frame [m], shape (N, 2), read-only."""
         return self._vertices
 
     @property
-    def vertex_stations_m(self) -> FloatArray:
+    def vertex_stations_m(self) -> F64:
         """Station of each vertex [m], shape (N,), read-only; the first is 0."""
         return self._stations
 
@@ -178,21 +178,21 @@ class RoadFrame:
 
     # --- road -> site ----------------------------------------------------------------------
 
-    def _locate(self, station_m: FloatArray) -> tuple[npt.NDArray[np.intp], FloatArray]:
+    def _locate(self, station_m: F64) -> tuple[npt.NDArray[np.intp], F64]:
         """Segment index and parameter u of each station; u < 0 or u > 1 beyond the ends."""
         segment = np.searchsorted(self._stations, station_m, side="right") - 1
         segment = np.clip(segment, 0, self.segment_count - 1)
         u = (station_m - self._stations[segment]) / self._lengths[segment]
         return segment, u
 
-    def _unit_normal(self, segment: npt.NDArray[np.intp], u: FloatArray) -> FloatArray:
+    def _unit_normal(self, segment: npt.NDArray[np.intp], u: F64) -> F64:
         """Interpolated unit normal, shape (..., 2); held fixed beyond the ends."""
         u_clamped = np.clip(u, 0.0, 1.0)[..., None]
         normal = self._vertex_normals[segment] + u_clamped * self._normal_deltas[segment]
-        normal_length: FloatArray = np.hypot(normal[..., 0], normal[..., 1])[..., None]
+        normal_length: F64 = np.hypot(normal[..., 0], normal[..., 1])[..., None]
         return normal / normal_length
 
-    def normal_at(self, station_m: npt.ArrayLike) -> FloatArray:
+    def normal_at(self, station_m: npt.ArrayLike) -> F64:
         """Unit left normal of the road frame at each station.
 
         Parameters
@@ -210,7 +210,7 @@ class RoadFrame:
         segment, u = self._locate(station)
         return self._unit_normal(segment, u)
 
-    def tangent_at(self, station_m: npt.ArrayLike) -> FloatArray:
+    def tangent_at(self, station_m: npt.ArrayLike) -> F64:
         """Unit tangent of the road frame (direction of travel) at each station, shape (..., 2).
 
         The tangent is the normal of :meth:`normal_at` turned 90 deg clockwise, so it is
@@ -225,7 +225,7 @@ class RoadFrame:
         station, _ = self.to_road(x_m, y_m)
         return float(np.asarray(self.heading_at(station)).reshape(-1)[0])
 
-    def heading_at(self, station_m: npt.ArrayLike) -> FloatArray:
+    def heading_at(self, station_m: npt.ArrayLike) -> F64:
         """Heading of the direction of travel at each station.
 
         Parameters
@@ -246,12 +246,12 @@ class RoadFrame:
         vertices on a 1500 m curve), where the frame's heading is the smoother estimate.
         """
         tangent = self.tangent_at(station_m)
-        heading: FloatArray = np.arctan2(tangent[..., 1], tangent[..., 0])
+        heading: F64 = np.arctan2(tangent[..., 1], tangent[..., 0])
         return heading
 
     def to_site(
         self, station_m: npt.ArrayLike, offset_m: npt.ArrayLike
-    ) -> tuple[FloatArray, FloatArray]:
+    ) -> tuple[F64, F64]:
         """Road frame to site frame.
 
         Parameters
@@ -275,7 +275,7 @@ class RoadFrame:
 
     # --- site -> road ----------------------------------------------------------------------
 
-    def to_road(self, x_m: npt.ArrayLike, y_m: npt.ArrayLike) -> tuple[FloatArray, FloatArray]:
+    def to_road(self, x_m: npt.ArrayLike, y_m: npt.ArrayLike) -> tuple[F64, F64]:
         """Site frame to road frame.
 
         Parameters
@@ -360,18 +360,18 @@ class RoadFrame:
         self._grid_start = np.concatenate([[0], np.cumsum(counts)]).astype(np.intp)
         self._grid_segments = segment_ids[order]
 
-    def _segment_distance(self, x_m: FloatArray, y_m: FloatArray, segment: int) -> FloatArray:
+    def _segment_distance(self, x_m: F64, y_m: F64, segment: int) -> F64:
         """Euclidean distance [m] from points to one segment (clamped projection)."""
         wx = x_m - self._vertices[segment, 0]
         wy = y_m - self._vertices[segment, 1]
         dx, dy = self._deltas[segment]
         t = np.clip((wx * dx + wy * dy) / self._lengths[segment] ** 2, 0.0, 1.0)
-        distance: FloatArray = np.hypot(wx - t * dx, wy - t * dy)
+        distance: F64 = np.hypot(wx - t * dx, wy - t * dy)
         return distance
 
     def _to_road_grid(
-        self, qx: FloatArray, qy: FloatArray
-    ) -> tuple[FloatArray, FloatArray, npt.NDArray[np.bool_]]:
+        self, qx: F64, qy: F64
+    ) -> tuple[F64, F64, npt.NDArray[np.bool_]]:
         """Fast search among each point's cell's segments; ``resolved`` is False where unsure."""
         station = np.full(qx.size, np.nan)
         offset = np.full(qx.size, np.nan)
@@ -407,9 +407,9 @@ class RoadFrame:
         count: int,
         pair_point: npt.NDArray[np.intp],
         pair_segment: npt.NDArray[np.intp],
-        u: FloatArray,
-        d: FloatArray,
-    ) -> tuple[npt.NDArray[np.intp], FloatArray, FloatArray]:
+        u: F64,
+        d: F64,
+    ) -> tuple[npt.NDArray[np.intp], F64, F64]:
         """Smallest-|d| pair of each point; pairs grouped by point in increasing order.
 
         Points without a pair get segment 0, u = 0 and d = inf.
@@ -432,7 +432,7 @@ class RoadFrame:
         best_d[group_point] = d[first_hit]
         return segment, best_u, best_d
 
-    def _to_road_exhaustive(self, qx: FloatArray, qy: FloatArray) -> tuple[FloatArray, FloatArray]:
+    def _to_road_exhaustive(self, qx: F64, qy: F64) -> tuple[F64, F64]:
         """Search over all segments, pruned by distance; shape (count,) in and out."""
         count = qx.size
         last = self.segment_count - 1
@@ -487,12 +487,12 @@ class RoadFrame:
 
     def _beyond_ends(
         self,
-        qx: FloatArray,
-        qy: FloatArray,
+        qx: F64,
+        qy: F64,
         segment: npt.NDArray[np.intp],
-        u: FloatArray,
-        d: FloatArray,
-    ) -> tuple[npt.NDArray[np.intp], FloatArray, FloatArray]:
+        u: F64,
+        d: F64,
+    ) -> tuple[npt.NDArray[np.intp], F64, F64]:
         """Replace (segment, u, d) by the extrapolation beyond an end where that has smaller |d|.
 
         Beyond the ends the frame is the end segment's line with its normal held fixed, so the
@@ -518,8 +518,8 @@ class RoadFrame:
         return segment, u, d
 
     def _solve(
-        self, qx: FloatArray, qy: FloatArray, segment: npt.NDArray[np.intp]
-    ) -> tuple[FloatArray, FloatArray]:
+        self, qx: F64, qy: F64, segment: npt.NDArray[np.intp]
+    ) -> tuple[F64, F64]:
         """Best root u in [0, 1] on ``segment`` and its offset d; d = inf where there is none.
 
         ``qx``, ``qy`` and ``segment`` broadcast together; the outputs have their shape.
@@ -584,7 +584,7 @@ class GeoFrame:
         latitude_deg: npt.ArrayLike,
         longitude_deg: npt.ArrayLike,
         altitude_m: npt.ArrayLike | None = None,
-    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    ) -> tuple[F64, F64, F64]:
         """WGS84 to site frame.
 
         Parameters
@@ -615,7 +615,7 @@ class GeoFrame:
 
     def to_wgs84(
         self, x_m: npt.ArrayLike, y_m: npt.ArrayLike, z_m: npt.ArrayLike = 0.0
-    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    ) -> tuple[F64, F64, F64]:
         """Site frame to WGS84.
 
         Parameters

@@ -64,7 +64,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-F64 = npt.NDArray[np.float64]
+from wz_shared.arrays import F64
 
 #: Dimension of the state ``[x, y, vx, vy]``.
 STATE_DIM = 4

@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-Float32Array = npt.NDArray[np.float32]
+from wz_shared.arrays import F32
 
 
 @dataclass(frozen=True)
@@ -57,7 +57,7 @@ class PointFrame:
         Capture time [s] (sweep start).
     """
 
-    points: Float32Array
+    points: F32
     rows: int
     columns: int
     stamp_s: float = 0.0

@@ -96,16 +96,14 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field
 from scipy.optimize import linear_sum_assignment
 
+from wz_shared.arrays import F64
 from wz_shared.geometry import polar_covariance
 from wz_shared.messages import Detection, RadarScan, RadarTarget, VehicleClass
 from wz_shared.sensor_mounts import intrinsics_of
 from wz_shared.site import RadarIntrinsics, SensorMount
-
-F64 = npt.NDArray[np.float64]
 
 FusedSource = Literal["camera+radar", "camera", "radar"]
 

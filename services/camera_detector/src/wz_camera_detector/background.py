@@ -42,13 +42,10 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from wz_camera_detector.yolo import ImageDetection
-
-U8 = npt.NDArray[np.uint8]
-I32 = npt.NDArray[np.int32]
+from wz_shared.arrays import U8
 
 #: Name of this backend, carried in the node's output next to its detections.
 BACKEND = "background-subtraction"

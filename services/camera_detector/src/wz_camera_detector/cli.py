@@ -47,7 +47,6 @@ from typing import Any
 
 import cv2
 import numpy as np
-import numpy.typing as npt
 from pydantic import ValidationError
 
 from wz_camera_detector.node import (
@@ -62,13 +61,13 @@ from wz_camera_detector.settings import CameraDetectorSettings, camera_mount
 from wz_camera_detector.tracker import ImageTracker
 from wz_camera_detector.world import box_to_ground, fit_box_to_ground, paper_box_to_ground
 from wz_camera_detector.yolo import ImageDetection, ModelLoadError
+from wz_shared.arrays import U8
 from wz_shared.camera_geometry import PinholeCamera, camera_intrinsics
 from wz_shared.logs import configure_logging
 from wz_shared.site import SensorMount, Site, SiteFileError, load_site
 
 log = logging.getLogger("wz_camera_detector.cli")
 
-U8 = npt.NDArray[np.uint8]
 IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".bmp"}
 
 

@@ -63,7 +63,6 @@ from typing import Protocol
 
 import cv2
 import numpy as np
-import numpy.typing as npt
 from pydantic import ValidationError
 
 from wz_camera_detector.association import (
@@ -78,6 +77,7 @@ from wz_camera_detector.settings import CameraDetectorSettings, camera_mount, ra
 from wz_camera_detector.tracker import ImageTrack, ImageTracker
 from wz_camera_detector.world import VehicleShape, box_to_ground, fit_box_to_ground
 from wz_camera_detector.yolo import ImageDetection, ModelLoadError, YoloOnnxDetector
+from wz_shared.arrays import F64, U8
 from wz_shared.camera_geometry import PinholeCamera, camera_intrinsics
 from wz_shared.codec import Frame
 from wz_shared.messages import (
@@ -95,8 +95,6 @@ from wz_shared.timebase import RunWatch, SimClock
 SERVICE = "camera-detector"
 log = logging.getLogger("wz_camera_detector.node")
 
-U8 = npt.NDArray[np.uint8]
-F64 = npt.NDArray[np.float64]
 #: How a problem is reported: (reason, detail).
 Report = Callable[[str, str], None]
 

@@ -42,9 +42,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from scipy.optimize import linear_sum_assignment
 
 from wz_camera_detector.yolo import ImageDetection, box_iou
-
-F64 = npt.NDArray[np.float64]
-IntP = npt.NDArray[np.intp]
+from wz_shared.arrays import F64
 
 _STATE_DIM = 8  # cx, cy, w, h and their rates
 _MEAS_DIM = 4  # cx, cy, w, h

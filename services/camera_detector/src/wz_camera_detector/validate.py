@@ -38,11 +38,9 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import numpy.typing as npt
 
 from wz_camera_detector.yolo import YoloOnnxDetector, box_iou
-
-F64 = npt.NDArray[np.float64]
+from wz_shared.arrays import F64
 
 #: Distance bins of the report [m].
 RANGE_BINS_M: tuple[tuple[float, float], ...] = ((0, 25), (25, 50), (50, 75), (75, 100))

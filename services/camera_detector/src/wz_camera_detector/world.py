@@ -62,14 +62,13 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from wz_shared.arrays import F64
 from wz_shared.camera_geometry import (
     PinholeCamera,
     backproject_to_ground,
     paper_flat_road_ground_point,
 )
 from wz_shared.site import SensorMount
-
-F64 = npt.NDArray[np.float64]
 
 
 def box_bottom_centre_px(box_xyxy_px: npt.ArrayLike) -> F64:

@@ -37,10 +37,7 @@ import numpy as np
 import numpy.typing as npt
 import onnxruntime as ort
 
-F32 = npt.NDArray[np.float32]
-F64 = npt.NDArray[np.float64]
-U8 = npt.NDArray[np.uint8]
-IntP = npt.NDArray[np.intp]
+from wz_shared.arrays import F32, F64, U8, IntP
 
 #: A far-field tile's box closer than this to the tile's edge is a cut vehicle [px].
 TILE_EDGE_MARGIN_PX = 2.0

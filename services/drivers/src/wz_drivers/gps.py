@@ -34,14 +34,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import numpy.typing as npt
 
 from wz_drivers.records import FieldDataError, GpsFix, Problems
+from wz_shared.arrays import F64
 from wz_shared.site import Site
 
 log = logging.getLogger(__name__)
 
-FloatArray = npt.NDArray[np.float64]
 
 #: One knot [m/s] (1852 m per hour).
 KNOT_MPS = 1852.0 / 3600.0
@@ -576,19 +575,19 @@ class GpsTrack:
     counter-clockwise from the site x axis (east), in (-pi, pi].
     """
 
-    t: FloatArray
-    x_m: FloatArray
-    y_m: FloatArray
-    station_m: FloatArray
-    offset_m: FloatArray
-    speed_mps: FloatArray
-    heading_rad: FloatArray
+    t: F64
+    x_m: F64
+    y_m: F64
+    station_m: F64
+    offset_m: F64
+    speed_mps: F64
+    heading_rad: F64
 
     def __len__(self) -> int:
         return int(self.t.size)
 
 
-def _track_headings(x_m: FloatArray, y_m: FloatArray, baseline_m: float) -> FloatArray:
+def _track_headings(x_m: F64, y_m: F64, baseline_m: float) -> F64:
     """Heading of the direction the track moves at each point [rad], NaN where it never moves
     ``baseline_m``.
 
@@ -606,7 +605,7 @@ def _track_headings(x_m: FloatArray, y_m: FloatArray, baseline_m: float) -> Floa
     keys = np.asarray(keyframes)
     chord_heading = np.arctan2(np.diff(y_m[keys]), np.diff(x_m[keys]))
     segment = np.searchsorted(keys, np.arange(x_m.size), side="right") - 1
-    result: FloatArray = chord_heading[np.minimum(segment, chord_heading.size - 1)]
+    result: F64 = chord_heading[np.minimum(segment, chord_heading.size - 1)]
     return result
 
 

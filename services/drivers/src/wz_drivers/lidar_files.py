@@ -41,15 +41,14 @@ from decimal import Decimal
 from pathlib import Path
 
 import numpy as np
-import numpy.typing as npt
 
 from wz_drivers.frame_times import read_frame_times
 from wz_drivers.records import FieldDataError, LidarSweep, Problems
+from wz_shared.arrays import F32
 from wz_shared.pointcloud_files import PointCloudFileError, PointFrame, read_point_cloud
 
 log = logging.getLogger(__name__)
 
-Float32Array = npt.NDArray[np.float32]
 
 #: Suffixes of the files :func:`read_frame_folder` takes as frames (compared lower-case).
 FRAME_SUFFIXES = (".pcd", ".ply", ".npz")
@@ -218,7 +217,7 @@ def _sweep(frame: PointFrame, stamp: float, where: str) -> LidarSweep:
         points[no_return, :3] = np.nan
         return LidarSweep(stamp=stamp, points=points, rows=frame.rows, columns=frame.columns,
                           organized=True, where=where)  # fmt: skip
-    kept: Float32Array = np.ascontiguousarray(points[~no_return])
+    kept: F32 = np.ascontiguousarray(points[~no_return])
     return LidarSweep(stamp=stamp, points=kept, rows=1, columns=0, organized=False, where=where)
 
 

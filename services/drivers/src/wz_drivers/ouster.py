@@ -110,12 +110,10 @@ from ouster.sdk.open_source import SourceURLException, open_source
 from ouster.sdk.pcap.pcap import record
 
 from wz_drivers.records import FieldDataError, LidarSweep, Problems
+from wz_shared.arrays import F64
 
 log = logging.getLogger(__name__)
 
-Float32Array = npt.NDArray[np.float32]
-Float64Array = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.intp]
 
 #: Column timestamps below this (2000-01-01, in ns) count from power-on, not from 1970.
 _UNIX_2000_NS = 946_684_800 * 10**9
@@ -840,9 +838,9 @@ def _sweep_to_frame(
 def bin_range_image(
     points: npt.ArrayLike,
     *,
-    altitudes_deg: Float64Array,
+    altitudes_deg: F64,
     columns: int,
-    lidar_to_sensor: Float64Array,
+    lidar_to_sensor: F64,
     max_range_mm: int,
 ) -> tuple[npt.NDArray[np.uint32], npt.NDArray[np.uint8], int]:
     """Bin returns into an Ouster range image (beam azimuth offsets and beam origin offset 0).

@@ -31,9 +31,9 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import linear_sum_assignment
 
-from wz_fusion_tracker.kalman import F64
 from wz_fusion_tracker.settings import TrackerSettings
-from wz_fusion_tracker.types import NO_INDEX, IntP, Measurement
+from wz_fusion_tracker.types import NO_INDEX, Measurement
+from wz_shared.arrays import F64, IntP
 
 #: Cost of a forbidden pair in the assignment: above any sum of allowed costs.
 _FORBIDDEN_COST = 1e9

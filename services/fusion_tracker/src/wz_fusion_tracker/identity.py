@@ -22,10 +22,9 @@ import numpy as np
 import numpy.typing as npt
 
 from wz_fusion_tracker.association import gnn_assign
-from wz_fusion_tracker.kalman import F64
 from wz_fusion_tracker.settings import TrackerSettings
 from wz_fusion_tracker.track_table import Track, TrackStore
-from wz_fusion_tracker.types import IntP
+from wz_shared.arrays import F64, IntP
 
 #: The hand-over and duplicate merging run at most this often (data time) [s].
 IDENTITY_PERIOD_S = 0.1

@@ -35,12 +35,11 @@ from abc import ABC, abstractmethod
 import numpy as np
 import numpy.typing as npt
 
-# F64 and STATE_DIM re-exported: the tracker's modules import them from here.
-from wz_shared.motion import F64 as F64
+from wz_shared.arrays import F64, IntP
+
+# STATE_DIM re-exported: the tracker's modules import it from here.
 from wz_shared.motion import STATE_DIM as STATE_DIM
 from wz_shared.motion import ProcessNoise, cv_transition, predict_cv
-
-IntP = npt.NDArray[np.intp]
 
 #: Dimension of a position measurement ``[x, y]``.
 POSITION_DIM = 2

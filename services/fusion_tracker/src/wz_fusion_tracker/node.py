@@ -42,10 +42,10 @@ from collections.abc import Callable
 import numpy as np
 
 from wz_fusion_tracker.calibration import BiasMapError, LateralBiasCorrector, load_bias_map
-from wz_fusion_tracker.kalman import F64
 from wz_fusion_tracker.settings import FusionTrackerSettings, TrackerSettings
 from wz_fusion_tracker.tracker import MultiTargetTracker
 from wz_fusion_tracker.types import Measurement, TrackState
+from wz_shared.arrays import F64
 from wz_shared.codec import encode_json
 from wz_shared.messages import (
     DetectionBatch,

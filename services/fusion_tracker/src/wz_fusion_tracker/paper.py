@@ -47,7 +47,8 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from wz_fusion_tracker.kalman import F64, KalmanFilter
+from wz_fusion_tracker.kalman import KalmanFilter
+from wz_shared.arrays import F64
 from wz_shared.motion import ProcessNoise
 
 SensorRole = Literal["camera", "lidar"]

@@ -19,7 +19,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from wz_shared.motion import F64, rts_smooth
+from wz_shared.arrays import F64
+from wz_shared.motion import rts_smooth
 
 if TYPE_CHECKING:
     from wz_fusion_tracker.tracker import TrackHistory

@@ -94,20 +94,20 @@ from wz_fusion_tracker.identity import (
     reacquisitions,
 )
 from wz_fusion_tracker.imm import IMMStateBank
-from wz_fusion_tracker.kalman import F64, STATE_DIM, TrackStateBank
+from wz_fusion_tracker.kalman import STATE_DIM, TrackStateBank
 from wz_fusion_tracker.settings import TrackerSettings
 from wz_fusion_tracker.track_table import Track, TrackStore, UpdateRecord
 from wz_fusion_tracker.types import (
     NO_INDEX,
     HeadingAt,
     HeadingsAt,
-    IntP,
     Measurement,
     TrackerCounters,
     TrackHistory,
     TrackState,
     TrackStatus,
 )
+from wz_shared.arrays import F64, IntP
 
 __all__ = [
     "Measurement",

@@ -14,9 +14,8 @@ from typing import Literal
 import numpy as np
 import numpy.typing as npt
 
-from wz_fusion_tracker.kalman import F64
+from wz_shared.arrays import F64, IntP
 
-IntP = npt.NDArray[np.intp]
 TrackStatus = Literal["tentative", "confirmed", "coasting"]
 #: Road heading [rad, counter-clockwise from east] at a site position ``(x_m, y_m)``.
 HeadingAt = Callable[[float, float], float]

@@ -15,7 +15,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 import numpy.typing as npt
 
-from wz_shared.motion import F64, ProcessNoise, rts_smooth
+from wz_shared.arrays import F64
+from wz_shared.motion import ProcessNoise, rts_smooth
 from wz_shared.site import Site
 
 # --- a stored trajectory -------------------------------------------------------------------

@@ -59,10 +59,9 @@ import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from scipy.spatial import cKDTree
 
-from wz_lidar_detector.detection import BoolArray, Float32Array, FloatArray, PointFrame
+from wz_lidar_detector.detection import PointFrame
+from wz_shared.arrays import F32, F64, I64, U64, Bool
 
-Int64Array = npt.NDArray[np.int64]
-UInt64Array = npt.NDArray[np.uint64]
 PathLike = str | os.PathLike[str]
 
 #: Version of the ``.npz`` layout written by :meth:`RangeImageBackground.save` and
@@ -96,11 +95,11 @@ class ShapeMismatchError(ValueError):
 class BackgroundModel(Protocol):
     """What the fast pipeline needs from a background model."""
 
-    def foreground_mask(self, frame: PointFrame) -> BoolArray:
+    def foreground_mask(self, frame: PointFrame) -> Bool:
         """``(N,)`` bool over ``frame.points``: valid points that are not background."""
         ...
 
-    def ground_z_m(self, xy_m: FloatArray) -> FloatArray:
+    def ground_z_m(self, xy_m: F64) -> F64:
         """``(K,)`` ground height [m] under each ``(K, 2)`` x, y [m]; NaN where unknown."""
         ...
 
@@ -114,7 +113,7 @@ class BackgroundModel(Protocol):
 # --------------------------------------------------------------------------------------------
 
 
-def voxel_indices(xyz_m: npt.ArrayLike, voxel_m: float) -> Int64Array:
+def voxel_indices(xyz_m: npt.ArrayLike, voxel_m: float) -> I64:
     """Integer voxel index of each point.
 
     Parameters
@@ -126,44 +125,44 @@ def voxel_indices(xyz_m: npt.ArrayLike, voxel_m: float) -> Int64Array:
 
     Returns
     -------
-    Int64Array
+    I64
         ``(N, 3)`` voxel indices.
     """
     xyz = np.asarray(xyz_m, dtype=np.float64).reshape(-1, 3)
     return np.floor(xyz / voxel_m).astype(np.int64)
 
 
-def pack_keys(indices: Int64Array) -> Int64Array:
+def pack_keys(indices: I64) -> I64:
     """``(N, 3)`` voxel indices to ``(N,)`` int64 keys (21 bits per axis); order is x, y, z."""
     shifted = indices + _KEY_OFFSET
     if shifted.size and (shifted.min() < 0 or shifted.max() > _KEY_MASK):
         raise ValueError(f"voxel index beyond +-{_KEY_OFFSET} voxels: make the voxels larger")
-    packed: Int64Array = (shifted[:, 0] << (2 * _KEY_BITS)) | (shifted[:, 1] << _KEY_BITS)
+    packed: I64 = (shifted[:, 0] << (2 * _KEY_BITS)) | (shifted[:, 1] << _KEY_BITS)
     packed |= shifted[:, 2]
     return packed
 
 
-def unpack_keys(keys: Int64Array) -> Int64Array:
+def unpack_keys(keys: I64) -> I64:
     """Inverse of :func:`pack_keys`: ``(N,)`` keys to ``(N, 3)`` voxel indices."""
     fields = [(keys >> (shift * _KEY_BITS)) & _KEY_MASK for shift in (2, 1, 0)]
-    indices: Int64Array = np.stack(fields, axis=1) - _KEY_OFFSET
+    indices: I64 = np.stack(fields, axis=1) - _KEY_OFFSET
     return indices
 
 
-def dilate_keys(keys: Int64Array) -> Int64Array:
+def dilate_keys(keys: I64) -> I64:
     """Sorted unique keys of the voxels and their 26 neighbours."""
     indices = unpack_keys(keys)
     grown = (indices[:, None, :] + _NEIGHBOURHOOD_27[None, :, :]).reshape(-1, 3)
     return np.unique(pack_keys(grown))
 
 
-def _sorted_member(sorted_keys: Int64Array, keys: Int64Array) -> BoolArray:
+def _sorted_member(sorted_keys: I64, keys: I64) -> Bool:
     """Whether each of ``keys`` is in ``sorted_keys`` (sorted, unique)."""
     if len(sorted_keys) == 0:
         return np.zeros(len(keys), dtype=bool)
     position = np.searchsorted(sorted_keys, keys)
     position[position == len(sorted_keys)] = 0
-    found: BoolArray = sorted_keys[position] == keys
+    found: Bool = sorted_keys[position] == keys
     return found
 
 
@@ -193,8 +192,8 @@ class GroundGrid:
     def __init__(
         self,
         cell_m: float,
-        cell_keys: Int64Array,
-        ground_z_m: FloatArray,
+        cell_keys: I64,
+        ground_z_m: F64,
         *,
         search_radius_m: float = 30.0,
         neighbours: int = 4,
@@ -209,9 +208,9 @@ class GroundGrid:
         self._tree: cKDTree | None = None
 
     @staticmethod
-    def _keys(xy_m: FloatArray, cell_m: float) -> Int64Array:
+    def _keys(xy_m: F64, cell_m: float) -> I64:
         ij = np.floor(xy_m / cell_m).astype(np.int64) + _CELL_OFFSET
-        keys: Int64Array = (ij[:, 0] << 32) | ij[:, 1]
+        keys: I64 = (ij[:, 0] << 32) | ij[:, 1]
         return keys
 
     @classmethod
@@ -234,13 +233,13 @@ class GroundGrid:
         first[1:] = keys[1:] != keys[:-1]
         return cls(cell_m, keys[first], z[first])
 
-    def _cell_centres(self) -> FloatArray:
+    def _cell_centres(self) -> F64:
         i = (self.cell_keys >> 32) - _CELL_OFFSET
         j = (self.cell_keys & 0xFFFFFFFF) - _CELL_OFFSET
-        centres: FloatArray = (np.column_stack([i, j]) + 0.5) * self.cell_m
+        centres: F64 = (np.column_stack([i, j]) + 0.5) * self.cell_m
         return centres
 
-    def lookup(self, xy_m: npt.ArrayLike) -> FloatArray:
+    def lookup(self, xy_m: npt.ArrayLike) -> F64:
         """Ground z [m] under each ``(K, 2)`` x, y [m]; NaN where nothing is known nearby."""
         xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
         if len(self.cell_keys) == 0:
@@ -249,7 +248,7 @@ class GroundGrid:
         position = np.searchsorted(self.cell_keys, keys)
         position[position == len(self.cell_keys)] = 0
         found = self.cell_keys[position] == keys
-        result: FloatArray = np.where(found, self.ground_z[position], np.nan)
+        result: F64 = np.where(found, self.ground_z[position], np.nan)
         if found.all() or self.search_radius_m <= 0:
             return result
         if self._tree is None:
@@ -273,21 +272,21 @@ class GroundGrid:
         return result
 
 
-def _frame_xyz(frame: PointFrame) -> Float32Array:
-    xyz: Float32Array = np.asarray(frame.points[:, :3], dtype=np.float32)
+def _frame_xyz(frame: PointFrame) -> F32:
+    xyz: F32 = np.asarray(frame.points[:, :3], dtype=np.float32)
     return xyz
 
 
-def _valid(xyz: Float32Array) -> BoolArray:
+def _valid(xyz: F32) -> Bool:
     # A no-return slot has NaN x; some drivers write NaN in y or z only, or inf: check all.
-    valid: BoolArray = np.isfinite(xyz[:, 0]) & np.isfinite(xyz[:, 1]) & np.isfinite(xyz[:, 2])
+    valid: Bool = np.isfinite(xyz[:, 0]) & np.isfinite(xyz[:, 1]) & np.isfinite(xyz[:, 2])
     return valid
 
 
-def _ranges(xyz: Float32Array) -> Float32Array:
+def _ranges(xyz: F32) -> F32:
     # Column by column: numpy's reductions over a short last axis are several times slower.
     x, y, z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
-    ranges: Float32Array = np.sqrt(x * x + y * y + z * z)
+    ranges: F32 = np.sqrt(x * x + y * y + z * z)
     return ranges
 
 
@@ -360,7 +359,7 @@ def _ground_arrays(ground: GroundGrid | None) -> dict[str, npt.NDArray[np.generi
     }
 
 
-def _ground_height(ground: GroundGrid | None, xy_m: FloatArray) -> FloatArray:
+def _ground_height(ground: GroundGrid | None, xy_m: F64) -> F64:
     """Ground height [m] under ``(K, 2)`` x, y [m]; NaN where unknown (everywhere: no ground)."""
     if ground is None:
         return np.full(len(np.asarray(xy_m).reshape(-1, 2)), np.nan)
@@ -438,7 +437,7 @@ class RangeImageBackground:
         if np.isnan(image).any():
             raise ValueError("background_range_m holds NaN: use +inf for open sky")
         self.settings = settings or RangeBackgroundSettings()
-        self._range_m: Float32Array = image.reshape(-1)
+        self._range_m: F32 = image.reshape(-1)
         self._shape = (int(image.shape[0]), int(image.shape[1]))
         self._farther_frames = np.zeros(image.size, dtype=np.int32)
         self.ground = ground
@@ -452,7 +451,7 @@ class RangeImageBackground:
         return self._shape[1]
 
     @property
-    def background_range_m(self) -> Float32Array:
+    def background_range_m(self) -> F32:
         """``(rows, columns)`` copy of the background range [m]; +inf for open sky."""
         return self._range_m.reshape(self._shape).copy()
 
@@ -524,17 +523,17 @@ class RangeImageBackground:
                 "rebuild the background model"
             )
 
-    def _margin_m(self) -> Float32Array:
+    def _margin_m(self) -> F32:
         # Open-sky slots (+inf) get the minimum margin, not inf (inf - inf would be NaN).
         settings = self.settings
         finite_range = np.where(np.isinf(self._range_m), np.float32(0.0), self._range_m)
-        margin: Float32Array = np.maximum(
+        margin: F32 = np.maximum(
             np.float32(settings.margin_min_m),
             np.float32(settings.margin_range_fraction) * finite_range,
         )
         return margin
 
-    def foreground_mask(self, frame: PointFrame) -> BoolArray:
+    def foreground_mask(self, frame: PointFrame) -> Bool:
         """Valid points nearer than their slot's background by more than the margin.
 
         Parameters
@@ -544,7 +543,7 @@ class RangeImageBackground:
 
         Returns
         -------
-        BoolArray
+        Bool
             ``(rows * columns,)``; False for no-return slots and returns beyond ``max_range_m``.
             In open-sky slots every valid return within ``max_range_m`` is foreground.
 
@@ -559,7 +558,7 @@ class RangeImageBackground:
             ranges = _ranges(xyz)
             # NaN ranges compare False, so no-return slots are never foreground.
             nearer = ranges < self._range_m - self._margin_m()
-            mask: BoolArray = nearer & (ranges <= np.float32(self.settings.max_range_m))
+            mask: Bool = nearer & (ranges <= np.float32(self.settings.max_range_m))
         return mask
 
     def update(self, frame: PointFrame) -> None:
@@ -591,7 +590,7 @@ class RangeImageBackground:
         self._range_m[revealed] = ranges[revealed]
         self._farther_frames[revealed] = 0
 
-    def ground_z_m(self, xy_m: FloatArray) -> FloatArray:
+    def ground_z_m(self, xy_m: F64) -> F64:
         """Ground height [m] under ``(K, 2)`` x, y [m]; NaN where unknown."""
         return _ground_height(self.ground, xy_m)
 
@@ -677,7 +676,7 @@ class VoxelBackground:
 
     def __init__(
         self,
-        keys: Int64Array,
+        keys: I64,
         voxel_m: float,
         ground: GroundGrid | None = None,
         *,
@@ -686,10 +685,10 @@ class VoxelBackground:
         max_table_bytes = min(max_table_bytes, 8 * (2**31 - 1))
         if not voxel_m > 0:
             raise ValueError(f"voxel_m must be positive, got {voxel_m}")
-        self.keys: Int64Array = np.unique(np.asarray(keys, dtype=np.int64))
+        self.keys: I64 = np.unique(np.asarray(keys, dtype=np.int64))
         self.voxel_m = float(voxel_m)
         self.ground = ground
-        self._table: UInt64Array | None = None
+        self._table: U64 | None = None
         self._origin = np.zeros(3, dtype=np.int64)
         self._extent = np.zeros(3, dtype=np.int64)
         if len(self.keys):
@@ -782,13 +781,13 @@ class VoxelBackground:
 
     @classmethod
     def _from_keys(
-        cls, keys: Int64Array, voxel_m: float, dilate: bool, ground_cell_m: float
+        cls, keys: I64, voxel_m: float, dilate: bool, ground_cell_m: float
     ) -> VoxelBackground:
         centres = (unpack_keys(keys) + 0.5) * voxel_m
         ground = GroundGrid.from_points(centres, ground_cell_m) if len(keys) else None
         return cls(dilate_keys(keys) if dilate and len(keys) else keys, voxel_m, ground)
 
-    def is_background(self, xyz_m: npt.ArrayLike) -> BoolArray:
+    def is_background(self, xyz_m: npt.ArrayLike) -> Bool:
         """Whether each ``(N, 3)`` point [m] falls in a background voxel (NaN rows: False)."""
         xyz = np.asarray(xyz_m, dtype=np.float32).reshape(-1, 3)
         if self._table is None:
@@ -819,25 +818,25 @@ class VoxelBackground:
         flat += cy
         word = np.take(self._table, flat, mode="clip")
         bit = np.right_shift(word, (cz & 63).astype(np.uint64)) & np.uint64(1)
-        found: BoolArray = inside & bit.astype(bool)
+        found: Bool = inside & bit.astype(bool)
         return found
 
-    def foreground_mask(self, frame: PointFrame) -> BoolArray:
+    def foreground_mask(self, frame: PointFrame) -> Bool:
         """Valid points whose voxel is not background.
 
         Returns
         -------
-        BoolArray
+        Bool
             ``(N,)`` over ``frame.points``; points outside the model's extent are foreground.
         """
         xyz = _frame_xyz(frame)
-        mask: BoolArray = _valid(xyz) & ~self.is_background(xyz)
+        mask: Bool = _valid(xyz) & ~self.is_background(xyz)
         return mask
 
     def update(self, frame: PointFrame) -> None:
         """No-op: the voxel model is static (learn a new one to refresh it)."""
 
-    def ground_z_m(self, xy_m: FloatArray) -> FloatArray:
+    def ground_z_m(self, xy_m: F64) -> F64:
         """Ground height [m] under ``(K, 2)`` x, y [m]; NaN where unknown."""
         return _ground_height(self.ground, xy_m)
 

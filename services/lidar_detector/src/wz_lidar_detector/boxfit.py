@@ -70,7 +70,6 @@ import numpy as np
 import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field
 
-from wz_lidar_detector.detection import FloatArray
 from wz_lidar_detector.reference import (
     HEAVY_MIN_HEIGHT_M,
     HEAVY_MIN_LENGTH_M,
@@ -78,6 +77,7 @@ from wz_lidar_detector.reference import (
     MOTORCYCLE_MAX_WIDTH_M,
     class_from_size,
 )
+from wz_shared.arrays import F64
 from wz_shared.messages import VehicleClass
 
 
@@ -172,13 +172,13 @@ class BoxFit:
     size_lwh_m: tuple[float, float, float]
     heading_rad: float
     object_class: VehicleClass
-    covariance_xy_m2: FloatArray
+    covariance_xy_m2: F64
     visible_lw_m: tuple[float, float]
     faces_seen: int
     completed_lw: tuple[bool, bool]
 
 
-def closeness_scores(xy_m: FloatArray, headings_rad: FloatArray, floor_m: float) -> FloatArray:
+def closeness_scores(xy_m: F64, headings_rad: F64, floor_m: float) -> F64:
     """Zhang's closeness criterion of each candidate rectangle orientation.
 
     Parameters
@@ -192,7 +192,7 @@ def closeness_scores(xy_m: FloatArray, headings_rad: FloatArray, floor_m: float)
 
     Returns
     -------
-    FloatArray
+    F64
         ``(H,)`` scores; the best orientation has the highest.
     """
     # (H, N) projections on e1 = (cos, sin) and e2 = (-sin, cos): one row per candidate, so
@@ -209,11 +209,11 @@ def closeness_scores(xy_m: FloatArray, headings_rad: FloatArray, floor_m: float)
     )
     np.minimum(distance, d_across, out=distance)
     np.maximum(distance, floor_m, out=distance)
-    scores: FloatArray = np.reciprocal(distance, out=distance).sum(axis=1)
+    scores: F64 = np.reciprocal(distance, out=distance).sum(axis=1)
     return scores
 
 
-def visible_outline(xy_m: FloatArray, bin_rad: float) -> FloatArray:
+def visible_outline(xy_m: F64, bin_rad: float) -> F64:
     """The outline a sensor at the origin sees: the nearest point in each bearing bin.
 
     Parameters
@@ -225,7 +225,7 @@ def visible_outline(xy_m: FloatArray, bin_rad: float) -> FloatArray:
 
     Returns
     -------
-    FloatArray
+    F64
         ``(K, 2)`` points, K <= N, in bearing order.
     """
     bins = np.floor(np.arctan2(xy_m[:, 1], xy_m[:, 0]) / bin_rad).astype(np.int64)
@@ -233,12 +233,12 @@ def visible_outline(xy_m: FloatArray, bin_rad: float) -> FloatArray:
     sorted_bins = bins[order]
     first = np.ones(len(order), dtype=bool)
     first[1:] = sorted_bins[1:] != sorted_bins[:-1]
-    outline: FloatArray = xy_m[order[first]]
+    outline: F64 = xy_m[order[first]]
     return outline
 
 
 def search_orientation(
-    xy_m: FloatArray,
+    xy_m: F64,
     settings: BoxFitSettings,
     prior_rad: float | None = None,
     tolerance_rad: float = math.radians(20.0),
@@ -268,7 +268,7 @@ def search_orientation(
     else:
         half = min(tolerance_rad, math.pi / 4)
         low, high = prior_rad - half, prior_rad + half
-    candidates: FloatArray = np.linspace(low, high, max(2, math.ceil((high - low) / coarse) + 1))
+    candidates: F64 = np.linspace(low, high, max(2, math.ceil((high - low) / coarse) + 1))
     best = float(candidates[np.argmax(closeness_scores(points, candidates, floor_m))])
     fine = math.radians(settings.refine_step_deg)
     count = max(1, math.ceil(coarse / fine))
@@ -298,7 +298,7 @@ def _completion_class(
     return VehicleClass.CAR
 
 
-def _column_step_rad(xy: FloatArray, resolution_deg: float) -> float:
+def _column_step_rad(xy: F64, resolution_deg: float) -> float:
     """The azimuth step between the cluster's columns [rad]: the median gap between distinct
     azimuths, at most the sensor's resolution (dense or synthetic points: smaller)."""
     azimuths = np.unique(np.round(np.arctan2(xy[:, 1], xy[:, 0]), 7))
@@ -322,12 +322,12 @@ def _complete(low: float, high: float, dimension: float) -> tuple[float, float, 
     return middle - 0.5 * dimension, middle + 0.5 * dimension, "both_ends"
 
 
-def _rotated_covariance(variance_a: float, variance_b: float, angle_rad: float) -> FloatArray:
+def _rotated_covariance(variance_a: float, variance_b: float, angle_rad: float) -> F64:
     """``R diag(a, b) R^T``, R the rotation by ``angle_rad``: a 2x2 covariance [m^2] with
     variance ``a`` along ``angle_rad`` and ``b`` across it."""
     c, s = math.cos(angle_rad), math.sin(angle_rad)
     cross = c * s * (variance_a - variance_b)
-    covariance: FloatArray = np.array(
+    covariance: F64 = np.array(
         [
             [c * c * variance_a + s * s * variance_b, cross],
             [cross, s * s * variance_a + c * c * variance_b],

@@ -9,17 +9,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numpy as np
-import numpy.typing as npt
-
+from wz_shared.arrays import Bool
 from wz_shared.messages import VehicleClass
 
 # One LiDAR frame: defined with the file readers, in the shared library.
 from wz_shared.pointcloud_files import PointFrame as PointFrame
-
-Float32Array = npt.NDArray[np.float32]
-FloatArray = npt.NDArray[np.float64]
-BoolArray = npt.NDArray[np.bool_]
 
 
 @dataclass(frozen=True)
@@ -60,6 +54,6 @@ class DetectionResult:
 
     detections: list[BoxDetection]
     #: Foreground (object) points that went into clustering, as a mask over the input points.
-    foreground: BoolArray
+    foreground: Bool
     #: Wall time of each named step [s], in order.
     timings_s: dict[str, float] = field(default_factory=dict)

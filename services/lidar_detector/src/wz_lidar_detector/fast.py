@@ -53,7 +53,6 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
@@ -61,15 +60,8 @@ from scipy.spatial import cKDTree
 
 from wz_lidar_detector.background import BackgroundModel, pack_keys, voxel_indices
 from wz_lidar_detector.boxfit import BoxFit, BoxFitSettings, fit_box
-from wz_lidar_detector.detection import (
-    BoolArray,
-    BoxDetection,
-    DetectionResult,
-    FloatArray,
-    PointFrame,
-)
-
-IntArray = npt.NDArray[np.int64]
+from wz_lidar_detector.detection import BoxDetection, DetectionResult, PointFrame
+from wz_shared.arrays import F64, I64, Bool
 
 #: Names of the timed steps, in the order they run.
 STEP_NAMES = ("foreground", "cluster", "boxes", "update")
@@ -128,12 +120,12 @@ class FastSettings(BaseModel):
 
 
 def euclidean_clusters(
-    xyz_m: FloatArray,
+    xyz_m: F64,
     cell_m: float,
     eps_m: float,
     z_scale: float = 1.0,
     eps_range_fraction: float = 0.0,
-) -> IntArray:
+) -> I64:
     """Label points by Euclidean connectivity over cube means (see the module docstring).
 
     Parameters
@@ -152,7 +144,7 @@ def euclidean_clusters(
 
     Returns
     -------
-    IntArray
+    I64
         ``(M,)`` cluster label of each point, 0 .. (clusters - 1).
     """
     if len(xyz_m) == 0:
@@ -190,7 +182,7 @@ def euclidean_clusters(
         (np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])), shape=(cubes, cubes)
     )
     _, cube_labels = connected_components(graph, directed=False)
-    labels: IntArray = np.asarray(cube_labels, dtype=np.int64)[cube_of_point]
+    labels: I64 = np.asarray(cube_labels, dtype=np.int64)[cube_of_point]
     return labels
 
 
@@ -201,7 +193,7 @@ class _Fitted:
     fit: BoxFit
     num_points: int
 
-    def contains_xy(self, xy_m: FloatArray, margin_m: float) -> BoolArray:
+    def contains_xy(self, xy_m: F64, margin_m: float) -> Bool:
         """Which ``(K, 2)`` points [m] fall in the box's footprint grown by ``margin_m``."""
         centre = np.asarray(self.fit.center_xyz_m[:2])
         heading = self.fit.heading_rad
@@ -210,7 +202,7 @@ class _Fitted:
         )
         local = (xy_m - centre) @ axes
         half = 0.5 * np.asarray(self.fit.size_lwh_m[:2]) + margin_m
-        inside: BoolArray = (np.abs(local[:, 0]) <= half[0]) & (np.abs(local[:, 1]) <= half[1])
+        inside: Bool = (np.abs(local[:, 0]) <= half[0]) & (np.abs(local[:, 1]) <= half[1])
         return inside
 
 
@@ -283,7 +275,7 @@ class FastPipeline:
 
         return DetectionResult(detections=detections, foreground=foreground, timings_s=timings)
 
-    def _boxes(self, xyz: FloatArray, labels: IntArray) -> list[BoxDetection]:
+    def _boxes(self, xyz: F64, labels: I64) -> list[BoxDetection]:
         settings = self.settings
         if len(labels) == 0:
             return []
@@ -319,7 +311,7 @@ class FastPipeline:
             fitted.append(_Fitted(fit, len(cluster)))
         return [self._detection(box) for box in fitted]
 
-    def _ground_heights(self, clusters: list[FloatArray]) -> list[float | None]:
+    def _ground_heights(self, clusters: list[F64]) -> list[float | None]:
         """Median ground height [m] under each cluster (None where unknown), in one lookup."""
         samples = [c[:: max(1, math.ceil(len(c) / _GROUND_SAMPLES)), :2] for c in clusters]
         if not samples:
@@ -334,7 +326,7 @@ class FastPipeline:
             start += len(sample)
         return grounds
 
-    def _owner(self, fitted: list[_Fitted], xy_m: FloatArray) -> _Fitted | None:
+    def _owner(self, fitted: list[_Fitted], xy_m: F64) -> _Fitted | None:
         """The first fitted box holding at least half of ``(K, 2)`` points, if any."""
         margin_m = self.settings.absorb_margin_m
         centre = xy_m.mean(axis=0)

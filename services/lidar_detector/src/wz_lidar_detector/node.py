@@ -53,11 +53,12 @@ from wz_lidar_detector.background import (
     learn_background_from_frames,
     load_background,
 )
-from wz_lidar_detector.detection import BoxDetection, DetectionResult, Float32Array, PointFrame
+from wz_lidar_detector.detection import BoxDetection, DetectionResult, PointFrame
 from wz_lidar_detector.fast import FastPipeline
 from wz_lidar_detector.reference import ReferencePipeline
 from wz_lidar_detector.settings import LidarDetectorSettings, lidar_mount
 from wz_lidar_detector.transform import box_to_site, to_detection
+from wz_shared.arrays import F32, F64
 from wz_shared.codec import Frame
 from wz_shared.messages import Detection, DetectionBatch, LidarFrameMeta, ServiceState
 from wz_shared.service import NodeApp, ServiceRuntime
@@ -196,7 +197,6 @@ class BackgroundLearner:
             log.info("saved the background to %s", path)
 
 
-FloatArray = npt.NDArray[np.float64]
 
 
 class ColumnClock:
@@ -224,7 +224,7 @@ class ColumnClock:
         self.sweep_duration_s = sweep_duration_s
         self._known = np.flatnonzero(np.isfinite(self.azimuth_rad))
 
-    def offsets_s(self, x_m: npt.ArrayLike, y_m: npt.ArrayLike) -> FloatArray:
+    def offsets_s(self, x_m: npt.ArrayLike, y_m: npt.ArrayLike) -> F64:
         """Capture time after the stamp [s] of points at sensor-frame ``(x, y)``."""
         azimuth = np.arctan2(np.asarray(y_m, np.float64), np.asarray(x_m, np.float64))
         if len(self._known) == 0:
@@ -232,7 +232,7 @@ class ColumnClock:
         known = self.azimuth_rad[self._known]
         gap = np.abs(np.angle(np.exp(1j * (azimuth[..., None] - known[None, :]))))
         column = self._known[np.argmin(gap, axis=-1)]
-        offsets: FloatArray = column * (self.sweep_duration_s / self.columns)
+        offsets: F64 = column * (self.sweep_duration_s / self.columns)
         return offsets
 
 
@@ -283,7 +283,7 @@ class LidarDetector:
         return ServiceState.DEGRADED if has_background else ServiceState.STARTING
 
     def handle(
-        self, meta: LidarFrameMeta, points: Float32Array, taken_s: float
+        self, meta: LidarFrameMeta, points: F32, taken_s: float
     ) -> DetectionBatch | None:
         """Process one decoded frame.
 
@@ -350,7 +350,7 @@ class LidarDetector:
             latency_s=max(0.0, time.monotonic() - taken_s),
         )
 
-    def _point_frame(self, meta: LidarFrameMeta, points: Float32Array) -> PointFrame | None:
+    def _point_frame(self, meta: LidarFrameMeta, points: F32) -> PointFrame | None:
         """A clean copy of the frame: corrupt points set to no return; None if none is left."""
         cloud = np.array(points, dtype=np.float32, copy=True).reshape(-1, 4)
         # The codec has checked an organized frame's rows x columns; an unorganized one may

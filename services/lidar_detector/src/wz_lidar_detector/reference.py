@@ -81,24 +81,17 @@ import time
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
-import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 from scipy.cluster.hierarchy import fcluster, linkage
 from scipy.spatial import ConvexHull, QhullError
 
-from wz_lidar_detector.detection import (
-    BoolArray,
-    BoxDetection,
-    DetectionResult,
-    FloatArray,
-    PointFrame,
-)
+from wz_lidar_detector.detection import BoxDetection, DetectionResult, PointFrame
+from wz_shared.arrays import F64, I64, Bool
 from wz_shared.messages import VehicleClass
 
 if TYPE_CHECKING:
     import open3d as o3d
 
-IntArray = npt.NDArray[np.int64]
 
 #: Names of the timed steps, in the order they run.
 STEP_NAMES = (
@@ -336,7 +329,7 @@ class ReferencePipeline:
         # cloud_id[j]: the voxel of the j-th point still in the cloud.
         cloud_id = np.arange(len(cloud), dtype=np.int64)
 
-        plane: FloatArray | None = None
+        plane: F64 | None = None
         if s.enable_ground:
             start = time.perf_counter()
             plane = _fit_ground_plane(cloud, s)
@@ -396,7 +389,7 @@ class ReferencePipeline:
 
         return DetectionResult(detections=detections, foreground=foreground, timings_s=timings)
 
-    def _box(self, members: FloatArray, num_returns: int) -> BoxDetection:
+    def _box(self, members: F64, num_returns: int) -> BoxDetection:
         """Box, class and covariance of one cluster ``(n, 3)`` [m]; its position is the centroid."""
         s = self.settings
         centroid = members.mean(axis=0)
@@ -418,11 +411,11 @@ class ReferencePipeline:
 # --- steps --------------------------------------------------------------------------------------
 
 
-def _inside_roi(xyz: FloatArray, s: ReferenceSettings) -> BoolArray:
+def _inside_roi(xyz: F64, s: ReferenceSettings) -> Bool:
     """Mask of points ``(n, 3)`` [m] inside the ROI box and range interval."""
     x, y, z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
     range_sq = x * x + y * y + z * z
-    inside: BoolArray = (
+    inside: Bool = (
         (x >= s.roi_x_min_m) & (x <= s.roi_x_max_m)
         & (y >= s.roi_y_min_m) & (y <= s.roi_y_max_m)
         & (z >= s.roi_z_min_m) & (z <= s.roi_z_max_m)
@@ -431,7 +424,7 @@ def _inside_roi(xyz: FloatArray, s: ReferenceSettings) -> BoolArray:
     return inside
 
 
-def _voxel_downsample(xyz: FloatArray, voxel_size_m: float) -> tuple[FloatArray, IntArray]:
+def _voxel_downsample(xyz: F64, voxel_size_m: float) -> tuple[F64, I64]:
     """Mean point of each occupied voxel, and each point's voxel.
 
     Parameters
@@ -458,7 +451,7 @@ def _voxel_downsample(xyz: FloatArray, voxel_size_m: float) -> tuple[FloatArray,
     voxel_of = voxel_of.reshape(-1).astype(np.int64)
     count = np.bincount(voxel_of).astype(np.float64)
     sums = np.column_stack([np.bincount(voxel_of, weights=xyz[:, k]) for k in range(3)])
-    cloud: FloatArray = sums.astype(np.float64) / count[:, None]
+    cloud: F64 = sums.astype(np.float64) / count[:, None]
     return cloud, voxel_of
 
 
@@ -471,7 +464,7 @@ def _open3d() -> Any:
     return open3d
 
 
-def _to_open3d(xyz: FloatArray) -> o3d.geometry.PointCloud:
+def _to_open3d(xyz: F64) -> o3d.geometry.PointCloud:
     lib = _open3d()
     cloud: o3d.geometry.PointCloud = lib.geometry.PointCloud(
         lib.utility.Vector3dVector(np.ascontiguousarray(xyz))
@@ -479,13 +472,13 @@ def _to_open3d(xyz: FloatArray) -> o3d.geometry.PointCloud:
     return cloud
 
 
-def _height_above(xyz: FloatArray, plane: FloatArray) -> FloatArray:
+def _height_above(xyz: F64, plane: F64) -> F64:
     """Signed distance [m] of points ``(n, 3)`` above ``plane`` (a, b, c, d), unit upward normal."""
-    height: FloatArray = xyz @ plane[:3] + plane[3]
+    height: F64 = xyz @ plane[:3] + plane[3]
     return height
 
 
-def _fit_ground_plane(cloud: FloatArray, s: ReferenceSettings) -> FloatArray | None:
+def _fit_ground_plane(cloud: F64, s: ReferenceSettings) -> F64 | None:
     """The road plane ``(a, b, c, d)`` (unit normal, c > 0) by RANSAC, or None.
 
     A plane is accepted when its normal is within ``ground_max_tilt_deg`` of z and it holds at
@@ -513,7 +506,7 @@ def _fit_ground_plane(cloud: FloatArray, s: ReferenceSettings) -> FloatArray | N
     return None
 
 
-def _statistical_inliers(cloud: FloatArray, neighbors: int, std_ratio: float) -> IntArray:
+def _statistical_inliers(cloud: F64, neighbors: int, std_ratio: float) -> I64:
     """Rows of ``cloud`` kept by statistical outlier removal.
 
     With ``neighbors`` or fewer points there are no statistics to judge by, and all are kept.
@@ -524,7 +517,7 @@ def _statistical_inliers(cloud: FloatArray, neighbors: int, std_ratio: float) ->
     return np.asarray(kept, dtype=np.int64)
 
 
-def _dbscan(cloud: FloatArray, eps_m: float, min_points: int) -> IntArray:
+def _dbscan(cloud: F64, eps_m: float, min_points: int) -> I64:
     """DBSCAN label of each point (-1: noise)."""
     if len(cloud) == 0:
         return np.zeros(0, dtype=np.int64)
@@ -533,8 +526,8 @@ def _dbscan(cloud: FloatArray, eps_m: float, min_points: int) -> IntArray:
 
 
 def _merge_clusters(
-    cloud: FloatArray, labels: IntArray, merge_distance_m: float, method: str
-) -> IntArray:
+    cloud: F64, labels: I64, merge_distance_m: float, method: str
+) -> I64:
     """Agglomerative merge of clusters by their centroids; new labels ``0..k-1`` per point.
 
     Each cluster enters as one observation, its centroid [m]; scipy's hierarchical clustering
@@ -554,11 +547,11 @@ def _merge_clusters(
     group = np.asarray(fcluster(tree, t=merge_distance_m, criterion="distance"), np.int64) - 1
     group_of_label = np.full(len(count), -1, dtype=np.int64)
     group_of_label[present] = group
-    merged: IntArray = group_of_label[labels]
+    merged: I64 = group_of_label[labels]
     return merged
 
 
-def _min_area_rectangle(xy: FloatArray) -> tuple[float, float, float]:
+def _min_area_rectangle(xy: F64) -> tuple[float, float, float]:
     """Minimum-area rectangle around points ``(n, 2)`` [m].
 
     Returns

@@ -47,6 +47,8 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from wz_shared.arrays import F32, F64, I32, U8, Bool, IntP
+
 # Re-exported (``X as X``): the geometry moved to the shared library, the frame and its truth
 # to camera_frame; their names stay here.
 from wz_shared.camera_geometry import LensDistortion as LensDistortion
@@ -80,13 +82,6 @@ from wz_simulator.sensors.camera_paint import (
 )
 from wz_simulator.sensors.camera_projection import ONE, SHIFT, Projector
 from wz_simulator.sensors.scene import Box, GroundPolygon, Material, Weather
-
-F64 = npt.NDArray[np.float64]
-F32 = npt.NDArray[np.float32]
-U8 = npt.NDArray[np.uint8]
-I32 = npt.NDArray[np.int32]
-IntP = npt.NDArray[np.intp]
-BoolA = npt.NDArray[np.bool_]
 
 
 class StaticSceneLike(Protocol):
@@ -552,7 +547,7 @@ class CameraModel:
         self,
         image: U8,
         face_buffer: npt.NDArray[np.int16] | npt.NDArray[np.int32],
-        own: BoolA,
+        own: Bool,
         x0: int,
         y0: int,
         planes: tuple[F64, F64],

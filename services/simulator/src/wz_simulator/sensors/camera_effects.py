@@ -10,12 +10,10 @@ import math
 
 import cv2
 import numpy as np
-import numpy.typing as npt
 
+from wz_shared.arrays import U8
 from wz_simulator.sensors.camera_light import Lighting
 from wz_simulator.sensors.camera_paint import LAMP_GLOW_RGB
-
-U8 = npt.NDArray[np.uint8]
 
 
 class SensorEffects:

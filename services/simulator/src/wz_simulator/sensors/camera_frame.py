@@ -12,10 +12,9 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from wz_shared.arrays import I16, U8
 from wz_shared.messages import VehicleClass
 
-U8 = npt.NDArray[np.uint8]
-I16 = npt.NDArray[np.int16]
 
 @dataclass(frozen=True, slots=True)
 class CameraTruthLabel:

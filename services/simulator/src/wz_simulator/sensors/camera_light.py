@@ -11,11 +11,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
+from wz_shared.arrays import F64
 from wz_simulator.sensors.scene import Light, Weather
-
-F64 = npt.NDArray[np.float64]
 
 #: Koschmieder's constant: contrast falls to 2 % at the meteorological visibility.
 KOSCHMIEDER = 3.912

@@ -14,13 +14,9 @@ from dataclasses import dataclass
 from enum import IntEnum
 
 import numpy as np
-import numpy.typing as npt
 
+from wz_shared.arrays import F64, Bool, IntP
 from wz_simulator.sensors.scene import BOX_CORNER_SIGNS, BOX_FACES, Box, Material
-
-F64 = npt.NDArray[np.float64]
-IntP = npt.NDArray[np.intp]
-BoolA = npt.NDArray[np.bool_]
 
 _FACE_CORNERS = np.array(BOX_FACES, dtype=np.intp)  # (6, 4)
 FACE_BOTTOM, FACE_TOP, FACE_RIGHT, FACE_FRONT, FACE_LEFT, FACE_BACK = range(6)
@@ -226,7 +222,7 @@ def _decal_quads(parent: F64, spec: F64) -> F64:
 
 
 def build_quads(
-    arrays: BoxArrays, face_rgb: F64, roles: IntP, decal_filter: BoolA | None = None
+    arrays: BoxArrays, face_rgb: F64, roles: IntP, decal_filter: Bool | None = None
 ) -> Quads:
     """Box faces (B * 6, box-major) followed by the decals of each box's roles.
 
@@ -280,7 +276,7 @@ def build_quads(
 
 def vehicle_structure(
     arrays: BoxArrays, starts: IntP, ends: IntP
-) -> tuple[IntP, IntP, IntP, BoolA, F64]:
+) -> tuple[IntP, IntP, IntP, Bool, F64]:
     """How each vehicle's boxes fit together, for all vehicles at once.
 
     Boxes are sorted by label; vehicle ``k`` owns boxes ``starts[k]:ends[k]``.

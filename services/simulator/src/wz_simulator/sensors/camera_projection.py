@@ -12,15 +12,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
+from wz_shared.arrays import F64, I32, Bool, IntP
 from wz_shared.camera_geometry import PinholeCamera
 from wz_simulator.sensors.camera_paint import Quads
-
-F64 = npt.NDArray[np.float64]
-I32 = npt.NDArray[np.int32]
-IntP = npt.NDArray[np.intp]
-BoolA = npt.NDArray[np.bool_]
 
 SHIFT = 4  # fractional bits of the fixed-point vertices handed to OpenCV
 ONE = float(1 << SHIFT)
@@ -95,7 +90,7 @@ class Projector:
         self.ray_x = ((np.arange(width) + 0.5 - cx) / f).astype(np.float32)
         self.ray_y = ((np.arange(height) + 0.5 - cy) / f).astype(np.float32)
 
-    def project_quads(self, quads_site: F64, drawable: BoolA) -> Projected:
+    def project_quads(self, quads_site: F64, drawable: Bool) -> Projected:
         """Clip (in 3D, where needed) and project quads (Q, 4, 3) to fixed-point polygons."""
         cam = self.camera
         width, height = cam.width_px, cam.height_px
@@ -151,9 +146,9 @@ class Projector:
         np.clip(bounds[:, 1::2], 0, height - 1, out=bounds[:, 1::2])
         return Projected(polygons, bounds)
 
-    def front_facing(self, quads: Quads) -> BoolA:
+    def front_facing(self, quads: Quads) -> Bool:
         centroid = quads.site.mean(axis=1)
-        facing: BoolA = np.einsum("qi,qi->q", centroid - self.camera.position_m, quads.normal) < 0.0
+        facing: Bool = np.einsum("qi,qi->q", centroid - self.camera.position_m, quads.normal) < 0.0
         return facing
 
     def range_to(self, points_site: F64) -> F64:

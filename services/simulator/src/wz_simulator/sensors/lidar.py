@@ -74,9 +74,9 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
-import numpy.typing as npt
 import open3d as o3d
 
+from wz_shared.arrays import F32, F64, I32, IntP
 from wz_shared.messages import LidarFrameMeta, VehicleTruth
 from wz_shared.sensor_mounts import intrinsics_of
 from wz_shared.site import LidarIntrinsics, SensorMount
@@ -110,12 +110,6 @@ from wz_simulator.sensors.lidar_physics import fog_extinction_per_m as fog_extin
 from wz_simulator.sensors.lidar_physics import rain_extinction_per_m as rain_extinction_per_m
 from wz_simulator.sensors.scene import STATIC_LABEL, Box, GroundPolygon, Weather
 
-FloatArray = npt.NDArray[np.float64]
-Float32Array = npt.NDArray[np.float32]
-IntArray = npt.NDArray[np.intp]
-Int32Array = npt.NDArray[np.int32]
-BoolArray = npt.NDArray[np.bool_]
-
 #: ``boxes_for(vehicles, dt_s)``: the vehicles' bodies as boxes moved ``dt_s`` seconds from the
 #: truth's stamp, each labelled with the 1-based index of its vehicle (``scene.vehicle_boxes``).
 BoxesFor = Callable[[Sequence[VehicleTruth], float], list[Box]]
@@ -143,16 +137,16 @@ class _VehicleBodies:
     count[j]``.
     """
 
-    corners_m: FloatArray  # (nb, 8, 3)
-    labels: IntArray  # (nb,)
-    materials: IntArray  # (nb,)
-    vehicle_index: IntArray  # (m,) 0-based index into the frame's truth
-    start: IntArray  # (m,)
-    count: IntArray  # (m,)
-    hull_center_m: FloatArray  # (m, 3) heading-aligned bounding box of the body
-    hull_size_m: FloatArray  # (m, 3)
-    heading_rad: FloatArray  # (m,)
-    velocity_mps: FloatArray  # (m, 3)
+    corners_m: F64  # (nb, 8, 3)
+    labels: IntP  # (nb,)
+    materials: IntP  # (nb,)
+    vehicle_index: IntP  # (m,) 0-based index into the frame's truth
+    start: IntP  # (m,)
+    count: IntP  # (m,)
+    hull_center_m: F64  # (m, 3) heading-aligned bounding box of the body
+    hull_size_m: F64  # (m, 3)
+    heading_rad: F64  # (m,)
+    velocity_mps: F64  # (m, 3)
 
 
 
@@ -211,8 +205,8 @@ class LidarModel:
         self.sweep_duration_s = 1.0 / mount.rate_hz
         self.max_range_m = intrinsics.max_range_m
         pose = mount.pose
-        self.position_m: FloatArray = np.array([pose.x_m, pose.y_m, pose.z_m])
-        self.rotation: FloatArray = pose.rotation()
+        self.position_m: F64 = np.array([pose.x_m, pose.y_m, pose.z_m])
+        self.rotation: F64 = pose.rotation()
         self.extinction_per_m = fog_extinction_per_m(
             weather.fog_visibility_m, physics.wavelength_nm
         ) + rain_extinction_per_m(
@@ -223,12 +217,12 @@ class LidarModel:
 
         # --- rays ---------------------------------------------------------------------------
         #: Beam elevations [rad], row 0 the highest, shape (rows,).
-        self.elevations_rad: FloatArray = np.radians(
+        self.elevations_rad: F64 = np.radians(
             np.linspace(intrinsics.vertical_max_deg, intrinsics.vertical_min_deg, self.rows)
         )
         self._elevations_ascending = self.elevations_rad[::-1].copy()
         #: Column azimuths [rad] in the sensor frame, shape (columns,).
-        self.azimuths_rad: FloatArray = np.pi - 2.0 * np.pi * np.arange(self.columns) / self.columns
+        self.azimuths_rad: F64 = np.pi - 2.0 * np.pi * np.arange(self.columns) / self.columns
         cos_el = np.cos(self.elevations_rad)[:, None]
         directions = np.stack(
             np.broadcast_arrays(
@@ -239,9 +233,9 @@ class LidarModel:
             axis=-1,
         ).reshape(-1, 3)
         #: Unit ray directions in the sensor frame, (rows * columns, 3), point order.
-        self.ray_directions_sensor: FloatArray = directions
+        self.ray_directions_sensor: F64 = directions
         #: Unit ray directions in the site frame, (rows * columns, 3).
-        self.ray_directions_site: FloatArray = directions @ self.rotation.T
+        self.ray_directions_site: F64 = directions @ self.rotation.T
         # Rays for open3d in the sensor-centred site frame (small coordinates keep float32
         # precise): origin at the blind-zone distance along the direction, then the direction.
         self._rays = np.empty((self.num_rays, 6), dtype=np.float32)
@@ -253,14 +247,14 @@ class LidarModel:
         # --- timing and sectors -------------------------------------------------------------
         column = np.arange(self.columns)
         #: Firing time of each column after the sweep start [s], shape (columns,).
-        self.column_time_offsets_s: FloatArray = column * self.sweep_duration_s / self.columns
+        self.column_time_offsets_s: F64 = column * self.sweep_duration_s / self.columns
         self._column_time_s = self.column_time_offsets_s.astype(np.float32)
         #: Sector of each column (the unit of ray culling), shape (columns,).
-        self.sector_of_column: IntArray = (column * physics.sectors) // self.columns
+        self.sector_of_column: IntP = (column * physics.sectors) // self.columns
         first = np.searchsorted(self.sector_of_column, np.arange(physics.sectors), side="left")
         last = np.searchsorted(self.sector_of_column, np.arange(physics.sectors), side="right") - 1
-        self._sector_first_column: IntArray = first
-        self._sector_last_column: IntArray = last
+        self._sector_first_column: IntP = first
+        self._sector_last_column: IntP = last
 
         # --- static scene, cast once ----------------------------------------------------------
         self._return_physics = ReturnPhysics(physics, self.extinction_per_m, self.max_range_m)
@@ -282,7 +276,7 @@ class LidarModel:
         hit = np.isfinite(t_hit)
         primitive = np.where(hit, hits["primitive_ids"].numpy(), 0).astype(np.intp)
         #: First static hit along each ray [m] (inf: none), whether detectable or not.
-        self.static_range_m: Float32Array = np.where(
+        self.static_range_m: F32 = np.where(
             hit, t_hit + np.float32(physics.min_range_m), np.float32(np.inf)
         ).astype(np.float32)
         cos_incidence = incidence_cosine(self._rays[:, 3:], hits["primitive_normals"].numpy())
@@ -403,9 +397,9 @@ class LidarModel:
     def _rain_clutter(
         self,
         rng: np.random.Generator,
-        range_m: Float32Array,
-        intensity: Float32Array,
-        labels: Int32Array,
+        range_m: F32,
+        intensity: F32,
+        labels: I32,
     ) -> None:
         """Spurious raindrop returns (in place): nearer than a beam's return, they replace it."""
         physics = self.physics
@@ -562,7 +556,7 @@ class LidarModel:
         first = self._sector_first_column[:, None]
         last = self._sector_last_column[:, None]
         useful = in_range[None, :] & (row_first <= row_last)
-        windows: list[tuple[IntArray, ...]] = []
+        windows: list[tuple[IntP, ...]] = []
         for wrap in (0, columns):  # the interval, then its part past the seam
             low = np.maximum(col_low - wrap, first)
             high = np.minimum(col_high - wrap, last)
@@ -670,7 +664,7 @@ class LidarModel:
         self,
         vehicles: Sequence[VehicleTruth],
         bodies: _VehicleBodies,
-        labels: Int32Array,
+        labels: I32,
         sweep_start_s: float,
     ) -> tuple[LidarTruthBox, ...]:
         """Each body's box when the sweep's beam points at its centre."""
@@ -714,6 +708,6 @@ class LidarModel:
         return tuple(boxes)
 
 
-def _triple(values: FloatArray) -> tuple[float, float, float]:
+def _triple(values: F64) -> tuple[float, float, float]:
     return (float(values[0]), float(values[1]), float(values[2]))
 

@@ -6,13 +6,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-import numpy.typing as npt
-
+from wz_shared.arrays import F32, I32
 from wz_shared.messages import LidarFrameMeta
-
-Float32Array = npt.NDArray[np.float32]
-Int32Array = npt.NDArray[np.int32]
 
 
 @dataclass(frozen=True)
@@ -73,14 +68,14 @@ class LidarScan:
         The frame's metadata message (stamp: the sweep start).
     """
 
-    points: Float32Array
-    labels: Int32Array
+    points: F32
+    labels: I32
     vehicle_ids: tuple[str, ...]
     boxes: tuple[LidarTruthBox, ...]
     meta: LidarFrameMeta
 
     @property
-    def range_image(self) -> Float32Array:
+    def range_image(self) -> F32:
         """The points as a ``(rows, columns, 4)`` view."""
-        image: Float32Array = self.points.reshape(self.meta.rows, self.meta.columns, 4)
+        image: F32 = self.points.reshape(self.meta.rows, self.meta.columns, 4)
         return image

@@ -10,12 +10,8 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 
+from wz_shared.arrays import F32, F64, Bool, IntP
 from wz_simulator.sensors.scene import BOX_CORNER_SIGNS, BOX_FACES, Box, GroundPolygon, Material
-
-FloatArray = npt.NDArray[np.float64]
-Float32Array = npt.NDArray[np.float32]
-IntArray = npt.NDArray[np.intp]
-BoolArray = npt.NDArray[np.bool_]
 
 #: Corner indices of the 6 faces of a box (``BOX_FACES``), shape (6, 4).
 BOX_FACE_CORNERS = np.array(BOX_FACES, dtype=np.intp)
@@ -36,7 +32,7 @@ SWEPT_BOX_EDGES = np.concatenate(
 #: Slack on interval ends (columns, radians) against float round-off in the ray culling.
 
 
-def box_corners(centers_m: FloatArray, sizes_lwh_m: FloatArray, yaws_rad: FloatArray) -> FloatArray:
+def box_corners(centers_m: F64, sizes_lwh_m: F64, yaws_rad: F64) -> F64:
     """Corners of many boxes at once, in :meth:`Box.corners` order.
 
     Parameters
@@ -129,20 +125,20 @@ def triangulate_polygon(vertices_xy: npt.ArrayLike) -> npt.NDArray[np.uint32]:
 def static_mesh(
     boxes: Sequence[Box],
     ground: Sequence[GroundPolygon],
-    position_m: FloatArray,
+    position_m: F64,
     max_range_m: float,
     base_ground_material: Material,
-) -> tuple[Float32Array, npt.NDArray[np.uint32], IntArray]:
+) -> tuple[F32, npt.NDArray[np.uint32], IntP]:
     """Vertices (centred on ``position_m``), triangles and per-triangle material of a static
     scene, with a base ground plane under everything wide enough for every downward beam
     within ``max_range_m`` (at z = 0, or 1 cm below the lowest polygon)."""
-    vertex_blocks: list[FloatArray] = []
+    vertex_blocks: list[F64] = []
     triangle_blocks: list[npt.NDArray[np.uint32]] = []
-    material_blocks: list[IntArray] = []
+    material_blocks: list[IntP] = []
     offset = 0
 
     def add(
-        vertices: FloatArray, triangles: npt.NDArray[np.uint32], material: IntArray
+        vertices: F64, triangles: npt.NDArray[np.uint32], material: IntP
     ) -> None:
         nonlocal offset
         vertex_blocks.append(vertices - position_m)
@@ -196,7 +192,7 @@ def static_mesh(
 # --- one sweep ----------------------------------------------------------------------
 
 
-def elevation_extent(corners: FloatArray, edges: IntArray) -> tuple[FloatArray, FloatArray]:
+def elevation_extent(corners: F64, edges: IntP) -> tuple[F64, F64]:
     """Highest and lowest elevation [rad] of any point of convex bodies, seen from the origin.
 
     Exact: the extremes of a body's projection on the unit sphere lie on the projections of its
@@ -237,7 +233,7 @@ def elevation_extent(corners: FloatArray, edges: IntArray) -> tuple[FloatArray, 
     return top, bottom
 
 
-def azimuth_extent(x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray, BoolArray]:
+def azimuth_extent(x: F64, y: F64) -> tuple[F64, F64, Bool]:
     """Azimuths [rad] met by convex bodies, from their corners' x and y, shape (..., n).
 
     Returns
@@ -257,10 +253,10 @@ def azimuth_extent(x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray
 
 
 
-def centred_grid(count: int) -> FloatArray:
+def centred_grid(count: int) -> F64:
     """``count`` points of a unit-spaced 3D grid, as compact as possible, centred on 0, (n, 3)."""
     side = max(1, math.ceil(count ** (1.0 / 3.0) - 1e-9))
     index = np.arange(count)
     grid = np.column_stack([index % side, (index // side) % side, index // (side * side)])
-    centred: FloatArray = grid - 0.5 * (grid.max(axis=0) + grid.min(axis=0))
+    centred: F64 = grid - 0.5 * (grid.max(axis=0) + grid.min(axis=0))
     return centred.astype(np.float64)

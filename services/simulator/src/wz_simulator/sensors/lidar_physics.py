@@ -55,15 +55,10 @@ from dataclasses import dataclass
 from types import MappingProxyType
 
 import numpy as np
-import numpy.typing as npt
 
+from wz_shared.arrays import F32, I32, Bool, IntP
 from wz_shared.site import LidarIntrinsics
 from wz_simulator.sensors.scene import Material
-
-Float32Array = npt.NDArray[np.float32]
-IntArray = npt.NDArray[np.intp]
-Int32Array = npt.NDArray[np.int32]
-BoolArray = npt.NDArray[np.bool_]
 
 
 @dataclass(frozen=True)
@@ -233,12 +228,12 @@ def rain_extinction_per_m(
 class Returns:
     """Returns of a subset of rays: indices into the frame and their physics."""
 
-    ray_index: IntArray
-    range_m: Float32Array
-    intensity: Float32Array
-    detected: BoolArray
-    dropout_probability: Float32Array
-    labels: Int32Array
+    ray_index: IntP
+    range_m: F32
+    intensity: F32
+    detected: Bool
+    dropout_probability: F32
+    labels: I32
 
 
 def empty_returns() -> Returns:
@@ -282,7 +277,7 @@ class ReturnPhysics:
         self.grazing_onset_cos = math.cos(math.radians(physics.grazing_onset_deg))
 
     def response(
-        self, range_m: Float32Array, cos_incidence: Float32Array, material: IntArray
+        self, range_m: F32, cos_incidence: F32, material: IntP
     ) -> Returns:
         """Intensity, detection and dropout probability of hits (see the module docstring).
 
@@ -312,15 +307,15 @@ class ReturnPhysics:
         return Returns(empty, range_m, intensity, detected, dropout, np.empty(0, dtype=np.int32))
 
 
-def incidence_cosine(directions: Float32Array, normals: Float32Array) -> Float32Array:
+def incidence_cosine(directions: F32, normals: F32) -> F32:
     """|cos| of the angle between unit ray directions and unit normals, both (n, 3); (n,)."""
-    cosine: Float32Array = np.minimum(
+    cosine: F32 = np.minimum(
         np.abs(np.einsum("ij,ij->i", directions, normals)), np.float32(1.0)
     )
     return cosine
 
 
-def standard_normal(rng: np.random.Generator, count: int) -> Float32Array:
+def standard_normal(rng: np.random.Generator, count: int) -> F32:
     """``count`` standard normal float32 draws by Box-Muller on float32 uniforms.
 
     Exact in distribution up to 5.8 sigma (the largest ``sqrt(-2 ln u)`` of a float32 u);

@@ -84,13 +84,11 @@ from types import MappingProxyType
 import numpy as np
 import numpy.typing as npt
 
+from wz_shared.arrays import F64, Bool
 from wz_shared.messages import RadarScan, RadarTarget, VehicleClass, VehicleTruth
 from wz_shared.sensor_mounts import intrinsics_of
 from wz_shared.site import RadarIntrinsics, SensorMount
 from wz_simulator.sensors.scene import Weather
-
-FloatArray = npt.NDArray[np.float64]
-BoolArray = npt.NDArray[np.bool_]
 
 #: Mean RCS by vehicle class, seen head-on or tail-on [dBsm].
 CLASS_RCS_DBSM: Mapping[VehicleClass, float] = MappingProxyType(
@@ -111,17 +109,17 @@ CLUTTER_RCS_SPREAD_DB = 5.0
 _MIN_SNR_RANGE_M = 1.0
 
 
-def _wrap_rad(angle_rad: FloatArray) -> FloatArray:
+def _wrap_rad(angle_rad: F64) -> F64:
     """Wrap angles to [-pi, pi)."""
-    wrapped: FloatArray = (angle_rad + np.pi) % (2.0 * np.pi) - np.pi
+    wrapped: F64 = (angle_rad + np.pi) % (2.0 * np.pi) - np.pi
     return wrapped
 
 
 def _interval_overlap(
-    low_a: FloatArray, high_a: FloatArray, low_b: FloatArray, high_b: FloatArray
-) -> FloatArray:
+    low_a: F64, high_a: F64, low_b: F64, high_b: F64
+) -> F64:
     """Length of the intersection of intervals ``[low_a, high_a]`` and ``[low_b, high_b]``."""
-    overlap: FloatArray = np.clip(np.minimum(high_a, high_b) - np.maximum(low_a, low_b), 0.0, None)
+    overlap: F64 = np.clip(np.minimum(high_a, high_b) - np.maximum(low_a, low_b), 0.0, None)
     return overlap
 
 
@@ -152,21 +150,21 @@ class RadarEchoes:
     """
 
     vehicle_ids: tuple[str, ...]
-    reflection_xyz_m: FloatArray
-    range_m: FloatArray
-    azimuth_rad: FloatArray
-    elevation_rad: FloatArray
-    radial_speed_mps: FloatArray
-    mean_rcs_dbsm: FloatArray
-    mean_snr: FloatArray
-    in_fov: BoolArray
-    in_range: BoolArray
-    occluded: BoolArray
+    reflection_xyz_m: F64
+    range_m: F64
+    azimuth_rad: F64
+    elevation_rad: F64
+    radial_speed_mps: F64
+    mean_rcs_dbsm: F64
+    mean_snr: F64
+    in_fov: Bool
+    in_range: Bool
+    occluded: Bool
 
     @property
-    def visible(self) -> BoolArray:
+    def visible(self) -> Bool:
         """Echoes the radar can see: in the field of view, in range and not occluded, (N,)."""
-        visible: BoolArray = self.in_fov & self.in_range & ~self.occluded
+        visible: Bool = self.in_fov & self.in_range & ~self.occluded
         return visible
 
 
@@ -269,8 +267,8 @@ class RadarModel:
         self.clutter_speed_std_mps = clutter_speed_std_mps
 
         pose = mount.pose
-        self.position_m: FloatArray = np.array([pose.x_m, pose.y_m, pose.z_m])
-        self.rotation: FloatArray = pose.rotation()
+        self.position_m: F64 = np.array([pose.x_m, pose.y_m, pose.z_m])
+        self.rotation: F64 = pose.rotation()
         # Threshold T in noise-power units: P_fa = exp(-T).
         self.threshold = -math.log(cell_false_alarm_probability)
         # Swerling I: P_d = exp(-T / (1 + SNR))  =>  SNR_ref = T / -ln(P_d,ref) - 1.
@@ -289,13 +287,13 @@ class RadarModel:
         one_way_db_per_km = RAIN_ATTENUATION_K_DB_PER_KM * math.pow(rain, RAIN_ATTENUATION_ALPHA)
         return 2.0 * one_way_db_per_km / 1000.0
 
-    def _snr_per_m2(self, range_m: FloatArray) -> FloatArray:
+    def _snr_per_m2(self, range_m: F64) -> F64:
         """Mean SNR per square metre of RCS, without rain loss: ``SNR_ref/σ_car (R_ref/R)^4``."""
         ratio = self.reference_range_m / np.maximum(range_m, _MIN_SNR_RANGE_M)
-        snr: FloatArray = (self.reference_snr / self.reference_rcs_m2) * ratio**4
+        snr: F64 = (self.reference_snr / self.reference_rcs_m2) * ratio**4
         return snr
 
-    def mean_snr(self, rcs_dbsm: npt.ArrayLike, range_m: npt.ArrayLike) -> FloatArray:
+    def mean_snr(self, rcs_dbsm: npt.ArrayLike, range_m: npt.ArrayLike) -> F64:
         """Mean SNR (linear) of a target by the radar equation, rain loss included.
 
         Parameters
@@ -313,10 +311,10 @@ class RadarModel:
         rcs_m2 = 10.0 ** (np.asarray(rcs_dbsm, dtype=np.float64) / 10.0)
         range_arr = np.asarray(range_m, dtype=np.float64)
         rain_gain = 10.0 ** (-self.rain_attenuation_db_per_m * range_arr / 10.0)
-        snr: FloatArray = rcs_m2 * self._snr_per_m2(range_arr) * rain_gain
+        snr: F64 = rcs_m2 * self._snr_per_m2(range_arr) * rain_gain
         return snr
 
-    def detection_probability(self, rcs_dbsm: npt.ArrayLike, range_m: npt.ArrayLike) -> FloatArray:
+    def detection_probability(self, rcs_dbsm: npt.ArrayLike, range_m: npt.ArrayLike) -> F64:
         """Probability of detecting a lone, visible Swerling I target.
 
         ``rcs_dbsm`` [dBsm] and ``range_m`` [m] are as in :meth:`mean_snr`.
@@ -326,7 +324,7 @@ class RadarModel:
         ndarray, shape (...)
             ``P_d = exp(-T / (1 + SNR))`` with ``T = -ln(P_fa)``.
         """
-        pd: FloatArray = np.exp(-self.threshold / (1.0 + self.mean_snr(rcs_dbsm, range_m)))
+        pd: F64 = np.exp(-self.threshold / (1.0 + self.mean_snr(rcs_dbsm, range_m)))
         return pd
 
     # --- geometry ----------------------------------------------------------------------
@@ -418,15 +416,15 @@ class RadarModel:
 
     def _occluded(
         self,
-        center_xy: FloatArray,
-        center_z: FloatArray,
-        cos_h: FloatArray,
-        sin_h: FloatArray,
-        half_length: FloatArray,
-        half_width: FloatArray,
-        half_height: FloatArray,
-        echo_range_m: FloatArray,
-    ) -> BoolArray:
+        center_xy: F64,
+        center_z: F64,
+        cos_h: F64,
+        sin_h: F64,
+        half_length: F64,
+        half_width: F64,
+        half_height: F64,
+        echo_range_m: F64,
+    ) -> Bool:
         """Vehicles mostly in the shadow of one nearer vehicle, shape (N,).
 
         Each box's angular extent is its azimuth and elevation interval over its 8 corners;
@@ -474,7 +472,7 @@ class RadarModel:
         shadow = (az_overlap / az_extent[None, :]) * (el_overlap / el_extent[None, :])
         nearer = echo_range_m[:, None] < echo_range_m[None, :]
         shadow = np.where(nearer, shadow, 0.0)
-        occluded: BoolArray = shadow.max(axis=0) >= self.occlusion_fraction
+        occluded: Bool = shadow.max(axis=0) >= self.occlusion_fraction
         return occluded
 
     def _resolution_cells(self, echoes: RadarEchoes) -> list[npt.NDArray[np.intp]]:
