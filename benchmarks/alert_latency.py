@@ -42,11 +42,25 @@ SAMPLE_SPAN_S = 2.0  # data time between the first batches of two samples
 
 def _track(track_id: int, station_m: float, speed_mps: float) -> Track:
     """A confirmed track in lane 0 on the straight road (x = -d, y = s)."""
-    return Track(track_id=track_id, x_m=1.83, y_m=station_m, vx_mps=0.0, vy_mps=speed_mps,
-                 covariance=[0.0] * 16, station_m=station_m, offset_m=-1.83,
-                 speed_mps=speed_mps, heading_rad=math.pi / 2, lane_index=0, age_s=1.0,
-                 hits=10, confirmed=True, sources=["lidar-mast"], length_m=4.6,
-                 width_m=1.8)  # fmt: skip
+    return Track(
+        track_id=track_id,
+        x_m=1.83,
+        y_m=station_m,
+        vx_mps=0.0,
+        vy_mps=speed_mps,
+        covariance=[0.0] * 16,
+        station_m=station_m,
+        offset_m=-1.83,
+        speed_mps=speed_mps,
+        heading_rad=math.pi / 2,
+        lane_index=0,
+        age_s=1.0,
+        hits=10,
+        confirmed=True,
+        sources=["lidar-mast"],
+        length_m=4.6,
+        width_m=1.8,
+    )
 
 
 def _batches(site_id: str, sample: int, background: int) -> list[TrackBatch]:
@@ -56,12 +70,20 @@ def _batches(site_id: str, sample: int, background: int) -> list[TrackBatch]:
     for k in range(HOLD_BATCHES + 1):
         dt = k * PERIOD_S
         # Legal traffic 170 m and more ahead of the speeder, all at one speed: no rule fires.
-        tracks = [_track(i, 600.0 + 20.0 * i + BACKGROUND_MPS * dt, BACKGROUND_MPS)
-                  for i in range(background)]  # fmt: skip
+        tracks = [
+            _track(i, 600.0 + 20.0 * i + BACKGROUND_MPS * dt, BACKGROUND_MPS)
+            for i in range(background)
+        ]
         tracks.append(_track(1000 + sample, 400.0 + SPEEDER_MPS * dt, SPEEDER_MPS))
-        batches.append(TrackBatch(site=site_id, source_id="fusion-tracker", stamp=start_s + dt,
-                                  cycle_index=sample * (HOLD_BATCHES + 1) + k,
-                                  tracks=tracks))  # fmt: skip
+        batches.append(
+            TrackBatch(
+                site=site_id,
+                source_id="fusion-tracker",
+                stamp=start_s + dt,
+                cycle_index=sample * (HOLD_BATCHES + 1) + k,
+                tracks=tracks,
+            )
+        )
     return batches
 
 
@@ -80,16 +102,19 @@ def measure(samples: int, background: int) -> dict[str, Any]:
     site = load_site(DEFAULT_SITE_PATH)
     port = free_port()
     env = {k: v for k, v in os.environ.items() if not k.startswith("WZ_")}
-    env.update(WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{port}", WZ_BUS_LISTEN_ENDPOINTS="",
-               WZ_LOG_LEVEL="WARNING", WZ_LOG_FORMAT="json",
-               WZ_ALERT_EPISODE_ID_PREFIX="bench")  # fmt: skip
+    env.update(
+        WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{port}",
+        WZ_BUS_LISTEN_ENDPOINTS="",
+        WZ_LOG_LEVEL="WARNING",
+        WZ_LOG_FORMAT="json",
+        WZ_ALERT_EPISODE_ID_PREFIX="bench",
+    )
     latencies_ms: list[float] = []
     batch_bytes = 0
     with Bus.open(listener_settings(port, shm=True), site=site.site_id, service="bench") as bus:
         tracks = bus.publisher(bus.keys.tracks, TrackBatch)
         alerts = bus.subscribe(bus.keys.alerts_all, Alert)
-        node = subprocess.Popen([sys.executable, "-m", "wz_alert_service.node"], cwd=ROOT,
-                                env=env)  # fmt: skip
+        node = subprocess.Popen([sys.executable, "-m", "wz_alert_service.node"], cwd=ROOT, env=env)
         try:
             if not tracks.wait_for_subscribers(TIMEOUT_S):
                 raise TimeoutError("the alert node never subscribed to the tracks")

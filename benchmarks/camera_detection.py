@@ -59,13 +59,19 @@ def record(duration_s: float, warmup_s: float = 40.0, seed: int = 5) -> Recorded
     site = load_site(DEFAULT_SITE_PATH)
     camera, radar = camera_mount(site, None), radar_mount(site, None)
     assert radar is not None
-    settings = SimulatorSettings.model_validate({
-        "seed": seed, "realtime_factor": 0.0, "sensors_enabled": False,
-        "vehicles_per_hour": 1800.0, "truck_share": 0.2,
-        "duration_s": warmup_s + duration_s + 0.5,
-    })  # fmt: skip
-    rig = SensorRig(site, WEATHER_PRESETS["day"], seed,
-                    sensor_ids=[camera.sensor_id, radar.sensor_id])  # fmt: skip
+    settings = SimulatorSettings.model_validate(
+        {
+            "seed": seed,
+            "realtime_factor": 0.0,
+            "sensors_enabled": False,
+            "vehicles_per_hour": 1800.0,
+            "truck_share": 0.2,
+            "duration_s": warmup_s + duration_s + 0.5,
+        }
+    )
+    rig = SensorRig(
+        site, WEATHER_PRESETS["day"], seed, sensor_ids=[camera.sensor_id, radar.sensor_id]
+    )
     events: list[tuple[float, str, Any]] = []
     with TrafficWorld(site, settings) as world:
         while not world.finished:
@@ -92,12 +98,18 @@ def _inference(recorded: Recorded) -> dict[str, Any]:
     settings = CameraDetectorSettings.model_validate({})
     assert settings.model_path is not None
     detector = YoloOnnxDetector(settings.model_path, conf_threshold=settings.conf_threshold)
-    images = [cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR)
-              for _, jpeg in recorded.frames()]  # fmt: skip
+    images = [
+        cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR)
+        for _, jpeg in recorded.frames()
+    ]
     for image in images[:5]:
         detector.detect(image)  # warm-up
-    steps: dict[str, list[float]] = {"preprocess": [], "inference": [], "postprocess": [],
-                                     "total": []}  # fmt: skip
+    steps: dict[str, list[float]] = {
+        "preprocess": [],
+        "inference": [],
+        "postprocess": [],
+        "total": [],
+    }
     for image in images:
         _, timings = detector.detect_with_timings(image)
         steps["preprocess"].append(timings.preprocess_s)
@@ -129,8 +141,11 @@ def _per_frame(recorded: Recorded) -> dict[str, Any]:
         batch = detector.handle(meta, jpeg, started)
         times.append(time.perf_counter() - started)
         detections += len(batch.detections) if batch is not None else 0
-    return {"frames": len(times), "detections_per_frame": detections / max(1, len(times)),
-            **_stats_ms(times)}  # fmt: skip
+    return {
+        "frames": len(times),
+        "detections_per_frame": detections / max(1, len(times)),
+        **_stats_ms(times),
+    }
 
 
 def _service(recorded: Recorded) -> dict[str, Any]:
@@ -139,15 +154,20 @@ def _service(recorded: Recorded) -> dict[str, Any]:
     settings = BusSettings(listen_endpoints=[f"tcp/127.0.0.1:{port}"], connect_endpoints=[])
     site = load_site(DEFAULT_SITE_PATH)
     env = {k: v for k, v in os.environ.items() if not k.startswith("WZ_")}
-    env.update(WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{port}", WZ_BUS_LISTEN_ENDPOINTS="",
-               WZ_LOG_FORMAT="json", WZ_LOG_LEVEL="WARNING")  # fmt: skip
+    env.update(
+        WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{port}",
+        WZ_BUS_LISTEN_ENDPOINTS="",
+        WZ_LOG_FORMAT="json",
+        WZ_LOG_LEVEL="WARNING",
+    )
     camera_id = recorded.frames()[0][0].source_id
     with Bus.open(settings, site=site.site_id, service="bench-camera") as bus:
         frames_pub = bus.publisher(bus.keys.raw_camera(camera_id), CameraFrameMeta, block=True)
         radar_pub = bus.publisher(bus.keys.raw_radar("radar-mast"), RadarScan, block=True)
         batches = bus.subscribe(bus.keys.detections(camera_id), DetectionBatch, capacity=10_000)
-        node = subprocess.Popen([sys.executable, "-m", "wz_camera_detector.node"], cwd=ROOT,
-                                env=env)  # fmt: skip
+        node = subprocess.Popen(
+            [sys.executable, "-m", "wz_camera_detector.node"], cwd=ROOT, env=env
+        )
         sent_at: dict[int, float] = {}
         received: dict[int, tuple[float, DetectionBatch]] = {}
         try:
@@ -181,16 +201,19 @@ def _service(recorded: Recorded) -> dict[str, Any]:
     end_to_end = [at - sent_at[i] for i, (at, _) in received.items() if i in sent_at]
     node_latency = [batch.latency_s for _, batch in received.values()]
     return {
-        "span_s": span_s, "frames_sent": len(sent_at), "radar_scans_sent": radar_scans,
+        "span_s": span_s,
+        "frames_sent": len(sent_at),
+        "radar_scans_sent": radar_scans,
         "batches_received": len(received),
         "frames_missing": len(sent_at) - len(received),
         "output_rate_hz": len(received) / span_s if span_s > 0 else 0.0,
         "node_latency": _stats_ms(node_latency),
         "end_to_end_latency": _stats_ms(end_to_end),
-        "fused_share": (sum(1 for _, b in received.values() for d in b.detections
-                            if d.speed_mps is not None)
-                        / max(1, sum(len(b.detections) for _, b in received.values()))),
-    }  # fmt: skip
+        "fused_share": (
+            sum(1 for _, b in received.values() for d in b.detections if d.speed_mps is not None)
+            / max(1, sum(len(b.detections) for _, b in received.values()))
+        ),
+    }
 
 
 def run(quick: bool) -> dict[str, Any]:

@@ -61,8 +61,24 @@ LIVE_CLIENTS = 4
 PAGE_POINTS = 1000
 READ_KEY = "bench-read-4f9Qz7Lm2Xv8Tb3Nc6Wd1Ys5"
 #: A plausible fused covariance (x, y, vx, vy) [m^2, m^2/s, m^2/s^2], symmetric positive.
-COVARIANCE = [0.05, 0.01, 0.02, 0.0, 0.01, 0.05, 0.0, 0.02,
-              0.02, 0.0, 0.30, 0.05, 0.0, 0.02, 0.05, 0.30]  # fmt: skip
+COVARIANCE = [
+    0.05,
+    0.01,
+    0.02,
+    0.0,
+    0.01,
+    0.05,
+    0.0,
+    0.02,
+    0.02,
+    0.0,
+    0.30,
+    0.05,
+    0.0,
+    0.02,
+    0.05,
+    0.30,
+]
 
 
 # --- the traffic ------------------------------------------------------------------------------
@@ -84,17 +100,31 @@ def batches(site: Site, count: int) -> list[tuple[float, bytes]]:
         x, y = road.to_site(station, offsets)
         tangent = road.tangent_at(station)
         tracks = [
-            Track(track_id=int(life[i]) * TRACKS + i + 1, x_m=float(x[i]), y_m=float(y[i]),
-                  vx_mps=float(SPEED_MPS * tangent[i, 0]), vy_mps=float(SPEED_MPS * tangent[i, 1]),
-                  covariance=COVARIANCE, station_m=float(station[i]), offset_m=float(offsets[i]),
-                  speed_mps=SPEED_MPS, heading_rad=float(math.atan2(tangent[i, 1], tangent[i, 0])),
-                  lane_index=0 if offsets[i] < 0 else 1, age_s=float(age[i]),
-                  hits=int(age[i] * RATE_HZ) + 1, confirmed=True, sources=["lidar-mast"],
-                  length_m=4.6, width_m=1.8, last_update_s=stamp)
+            Track(
+                track_id=int(life[i]) * TRACKS + i + 1,
+                x_m=float(x[i]),
+                y_m=float(y[i]),
+                vx_mps=float(SPEED_MPS * tangent[i, 0]),
+                vy_mps=float(SPEED_MPS * tangent[i, 1]),
+                covariance=COVARIANCE,
+                station_m=float(station[i]),
+                offset_m=float(offsets[i]),
+                speed_mps=SPEED_MPS,
+                heading_rad=float(math.atan2(tangent[i, 1], tangent[i, 0])),
+                lane_index=0 if offsets[i] < 0 else 1,
+                age_s=float(age[i]),
+                hits=int(age[i] * RATE_HZ) + 1,
+                confirmed=True,
+                sources=["lidar-mast"],
+                length_m=4.6,
+                width_m=1.8,
+                last_update_s=stamp,
+            )
             for i in range(TRACKS)
-        ]  # fmt: skip
-        batch = TrackBatch(site=site.site_id, source_id="fusion-tracker", stamp=stamp,
-                           cycle_index=k, tracks=tracks)  # fmt: skip
+        ]
+        batch = TrackBatch(
+            site=site.site_id, source_id="fusion-tracker", stamp=stamp, cycle_index=k, tracks=tracks
+        )
         out.append((stamp, encode_json(batch)))
     return out
 
@@ -134,8 +164,11 @@ class Watcher:
         self.seen: list[tuple[float, float]] = []
         self._process = subprocess.Popen(
             [sys.executable, "-m", "benchmarks.gateway_live", "--watch", str(database), site_id],
-            cwd=ROOT, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
-        )  # fmt: skip
+            cwd=ROOT,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()
 
@@ -153,8 +186,9 @@ class Watcher:
         self._reader.join(TIMEOUT_S)
 
 
-def ingest_lags_ms(published: dict[float, float], seen: list[tuple[float, float]],
-                   start_s: float, end_s: float) -> list[float]:  # fmt: skip
+def ingest_lags_ms(
+    published: dict[float, float], seen: list[tuple[float, float]], start_s: float, end_s: float
+) -> list[float]:
     """Per batch published in [start_s, end_s) (monotonic): the time until the newest stored
     batch was it or a later one [ms]."""
     lags = []
@@ -182,8 +216,9 @@ class Clients:
         self.pages: list[tuple[float, float]] = []
         self.errors: list[str] = []
         self._lock = threading.Lock()
-        self._threads = [threading.Thread(target=self._live, daemon=True)
-                         for _ in range(LIVE_CLIENTS)]  # fmt: skip
+        self._threads = [
+            threading.Thread(target=self._live, daemon=True) for _ in range(LIVE_CLIENTS)
+        ]
         self._threads.append(threading.Thread(target=self._trajectories, daemon=True))
 
     def __enter__(self) -> Clients:
@@ -197,11 +232,17 @@ class Clients:
             thread.join(TIMEOUT_S)
 
     def _client(self) -> httpx.Client:
-        return httpx.Client(base_url=self.base_url, headers={"X-API-Key": READ_KEY},
-                            timeout=TIMEOUT_S)  # fmt: skip
+        return httpx.Client(
+            base_url=self.base_url, headers={"X-API-Key": READ_KEY}, timeout=TIMEOUT_S
+        )
 
-    def _timed(self, client: httpx.Client, path: str, params: dict[str, Any],
-               into: list[tuple[float, float]]) -> httpx.Response | None:  # fmt: skip
+    def _timed(
+        self,
+        client: httpx.Client,
+        path: str,
+        params: dict[str, Any],
+        into: list[tuple[float, float]],
+    ) -> httpx.Response | None:
         sent = time.monotonic()
         try:
             response = client.get(path, params=params)
@@ -263,8 +304,9 @@ def _wait(condition: Callable[[], bool], what: str) -> None:
     raise TimeoutError(f"timed out waiting for {what}")
 
 
-def measure(warmup_s: float, ingest_only_s: float, loaded_s: float, *,
-            smoothing: bool) -> dict[str, Any]:  # fmt: skip
+def measure(
+    warmup_s: float, ingest_only_s: float, loaded_s: float, *, smoothing: bool
+) -> dict[str, Any]:
     """One run of the node; without ``smoothing`` tracks end only after an hour (none in the
     run), which shows what smoothing costs the ingestion."""
     site = load_site(DEFAULT_SITE_PATH)
@@ -275,15 +317,22 @@ def measure(warmup_s: float, ingest_only_s: float, loaded_s: float, *,
     base_url = f"http://127.0.0.1:{http_port}"
     with tempfile.TemporaryDirectory(prefix="wz-bench-gateway-") as data_dir:
         env = {k: v for k, v in os.environ.items() if not k.startswith("WZ_")}
-        env.update(WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{bus_port}",
-                   WZ_BUS_LISTEN_ENDPOINTS="", WZ_LOG_LEVEL="WARNING", WZ_LOG_FORMAT="json",
-                   WZ_GATEWAY_PORT=str(http_port), WZ_GATEWAY_DATA_DIR=data_dir,
-                   WZ_GATEWAY_API_KEYS=f"read:{READ_KEY}", WZ_GATEWAY_RATE_LIMIT_PER_S="1000000",
-                   WZ_GATEWAY_RATE_LIMIT_BURST="1000000",
-                   WZ_GATEWAY_TRACK_END_AFTER_S="3.0" if smoothing else "3600")  # fmt: skip
+        env.update(
+            WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{bus_port}",
+            WZ_BUS_LISTEN_ENDPOINTS="",
+            WZ_LOG_LEVEL="WARNING",
+            WZ_LOG_FORMAT="json",
+            WZ_GATEWAY_PORT=str(http_port),
+            WZ_GATEWAY_DATA_DIR=data_dir,
+            WZ_GATEWAY_API_KEYS=f"read:{READ_KEY}",
+            WZ_GATEWAY_RATE_LIMIT_PER_S="1000000",
+            WZ_GATEWAY_RATE_LIMIT_BURST="1000000",
+            WZ_GATEWAY_TRACK_END_AFTER_S="3.0" if smoothing else "3600",
+        )
         published: dict[float, float] = {}
-        with Bus.open(listener_settings(bus_port, shm=True), site=site.site_id,
-                      service="bench") as bus:  # fmt: skip
+        with Bus.open(
+            listener_settings(bus_port, shm=True), site=site.site_id, service="bench"
+        ) as bus:
             tracks = bus.publisher(bus.keys.tracks, TrackBatch)
             node = subprocess.Popen([sys.executable, "-m", "wz_gateway.node"], cwd=ROOT, env=env)
             watcher: Watcher | None = None
@@ -325,8 +374,11 @@ def measure(warmup_s: float, ingest_only_s: float, loaded_s: float, *,
                     raise errors.get()
                 time.sleep(1.0)  # the last batches stored
                 metrics = _metrics(httpx.get(f"{base_url}/metrics").text)
-                rows = httpx.get(f"{base_url}/v1/trajectories", params={"limit": 1},
-                                 headers={"X-API-Key": READ_KEY}).status_code  # fmt: skip
+                rows = httpx.get(
+                    f"{base_url}/v1/trajectories",
+                    params={"limit": 1},
+                    headers={"X-API-Key": READ_KEY},
+                ).status_code
                 if rows != 200:
                     raise RuntimeError(f"/v1/trajectories answered {rows} at the end")
             finally:
@@ -358,8 +410,11 @@ def measure(warmup_s: float, ingest_only_s: float, loaded_s: float, *,
         "loaded": {
             "duration_s": loaded_s,
             "ingest_lag_ms": summarize(ingest_lags_ms(published, watcher.seen, *loaded)),
-            "live": {"requests": len(live), "requests_per_s": len(live) / loaded_s,
-                     "latency_ms": summarize(live)},
+            "live": {
+                "requests": len(live),
+                "requests_per_s": len(live) / loaded_s,
+                "latency_ms": summarize(live),
+            },
             "trajectories": {"requests": len(pages), "latency_ms": summarize(pages)},
         },
         "batches_published": len(published),
@@ -367,10 +422,12 @@ def measure(warmup_s: float, ingest_only_s: float, loaded_s: float, *,
         "smoothing": {
             "tracks": smoothed,
             "points": metrics.get("wz_gateway_smoothed_track_points_total", 0.0),
-            "mean_ms": 1e3 * metrics.get("wz_gateway_smoothing_seconds_sum", 0.0)
+            "mean_ms": 1e3
+            * metrics.get("wz_gateway_smoothing_seconds_sum", 0.0)
             / max(smoothed, 1.0),
         },
-        "write_group_mean_ms": 1e3 * metrics.get("wz_gateway_write_seconds_sum", 0.0)
+        "write_group_mean_ms": 1e3
+        * metrics.get("wz_gateway_write_seconds_sum", 0.0)
         / max(metrics.get("wz_gateway_write_seconds_count", 0.0), 1.0),
     }
 

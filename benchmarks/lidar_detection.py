@@ -43,10 +43,19 @@ def _load(path: Path) -> tuple[list[Any], list[Any], list[list[Any]]]:
         frames = [PointFrame(p, rows, columns) for p in data["eval_points"]]
         truth_json = json.loads(str(data["truth_json"]))
     truths = [
-        [TruthVehicle(t["vehicle_id"], tuple(t["center_xyz_m"]), tuple(t["size_lwh_m"]),
-                      t["heading_rad"], t["visibility"], t["num_points"]) for t in frame]
+        [
+            TruthVehicle(
+                t["vehicle_id"],
+                tuple(t["center_xyz_m"]),
+                tuple(t["size_lwh_m"]),
+                t["heading_rad"],
+                t["visibility"],
+                t["num_points"],
+            )
+            for t in frame
+        ]
         for frame in truth_json
-    ]  # fmt: skip
+    ]
     return learn, frames, truths
 
 
@@ -70,11 +79,15 @@ def _score_and_time(path: Path, repeats: int) -> dict[str, Any]:
     learn_s = time.perf_counter() - start
     # Scoring runs on a frozen background so both paths see exactly the same task; the heading
     # prior is the site's road direction in the sensor frame, as the node sets it.
-    fast = FastPipeline(FastSettings(update_background=False, heading_prior_rad=_prior()),
-                        background)  # fmt: skip
+    fast = FastPipeline(
+        FastSettings(update_background=False, heading_prior_rad=_prior()), background
+    )
     reference = ReferencePipeline(ReferenceSettings())
-    results: dict[str, Any] = {"frames": len(frames), "learn_frames": len(learn),
-                               "background_learn_s": learn_s}  # fmt: skip
+    results: dict[str, Any] = {
+        "frames": len(frames),
+        "learn_frames": len(learn),
+        "background_learn_s": learn_s,
+    }
     for name, pipeline in (("reference", reference), ("fast", fast)):
         scorer = Scorer()
         times: list[float] = []
@@ -93,28 +106,50 @@ def _score_and_time(path: Path, repeats: int) -> dict[str, Any]:
             "p90_ms": 1e3 * float(np.percentile(times, 90)),
             "steps_median_ms": {k: 1e3 * statistics.median(v) for k, v in steps.items()},
             "bins": [
-                {"range_m": f"{b.low_m:.0f}-{b.high_m:.0f}", "scored": b.scored, "hits": b.hits,
-                 "recall": b.recall, "detections": b.detections, "false_alarms": b.false_alarms,
-                 "precision": b.precision,
-                 "centre_error_median_m": percentile(b.centre_errors_m, 50),
-                 "centre_error_p95_m": percentile(b.centre_errors_m, 95)}
+                {
+                    "range_m": f"{b.low_m:.0f}-{b.high_m:.0f}",
+                    "scored": b.scored,
+                    "hits": b.hits,
+                    "recall": b.recall,
+                    "detections": b.detections,
+                    "false_alarms": b.false_alarms,
+                    "precision": b.precision,
+                    "centre_error_median_m": percentile(b.centre_errors_m, 50),
+                    "centre_error_p95_m": percentile(b.centre_errors_m, 95),
+                }
                 for b in [*scorer.bins, total]
             ],
-        }  # fmt: skip
+        }
     results["speedup"] = results["reference"]["median_ms"] / results["fast"]["median_ms"]
     return results
 
 
 def _one_core_rate(path: Path) -> dict[str, Any]:
     """Frames per second of each path with one thread, in a child process."""
-    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
-           "MKL_NUM_THREADS": "1"}  # fmt: skip
+    env = {
+        **os.environ,
+        "OMP_NUM_THREADS": "1",
+        "OPENBLAS_NUM_THREADS": "1",
+        "MKL_NUM_THREADS": "1",
+    }
     out = path.with_suffix(".onecore.json")
     subprocess.run(
-        ["taskset", "-c", "0", sys.executable, "-m", "benchmarks.lidar_detection", "one-core",
-         str(path), str(out)],
-        cwd=ROOT, env=env, check=True, timeout=1800,
-    )  # fmt: skip
+        [
+            "taskset",
+            "-c",
+            "0",
+            sys.executable,
+            "-m",
+            "benchmarks.lidar_detection",
+            "one-core",
+            str(path),
+            str(out),
+        ],
+        cwd=ROOT,
+        env=env,
+        check=True,
+        timeout=1800,
+    )
     result: dict[str, Any] = json.loads(out.read_text())
     return result
 

@@ -32,9 +32,18 @@ log = logging.getLogger(__name__)
 TRUTH_RANGE_M = 130.0
 
 
-def generate(out: Path, *, seed: int, vehicles_per_hour: float, warmup_s: float,
-             learn_frames: int, learn_every_s: float, eval_frames: int, eval_every_s: float,
-             work_dir: Path) -> dict[str, Any]:  # fmt: skip
+def generate(
+    out: Path,
+    *,
+    seed: int,
+    vehicles_per_hour: float,
+    warmup_s: float,
+    learn_frames: int,
+    learn_every_s: float,
+    eval_frames: int,
+    eval_every_s: float,
+    work_dir: Path,
+) -> dict[str, Any]:
     from wz_shared.site import DEFAULT_SITE_PATH, load_site
     from wz_simulator.sensors.lidar import LidarModel
     from wz_simulator.sensors.scene import WEATHER_PRESETS, static_scene, vehicle_boxes
@@ -43,13 +52,23 @@ def generate(out: Path, *, seed: int, vehicles_per_hour: float, warmup_s: float,
 
     site = load_site(DEFAULT_SITE_PATH)
     mount = next(m for m in site.sensors if m.kind == "lidar")
-    model = LidarModel.from_scene(mount, static_scene(site), WEATHER_PRESETS["day"], seed,
-                                  boxes_for=vehicle_boxes, site_id=site.site_id)  # fmt: skip
+    model = LidarModel.from_scene(
+        mount,
+        static_scene(site),
+        WEATHER_PRESETS["day"],
+        seed,
+        boxes_for=vehicle_boxes,
+        site_id=site.site_id,
+    )
     settings = SimulatorSettings(
-        seed=seed, realtime_factor=0.0, sensors_enabled=False, truck_share=0.2,
-        vehicles_per_hour=vehicles_per_hour, work_dir=work_dir,
+        seed=seed,
+        realtime_factor=0.0,
+        sensors_enabled=False,
+        truck_share=0.2,
+        vehicles_per_hour=vehicles_per_hour,
+        work_dir=work_dir,
         duration_s=warmup_s + learn_frames * learn_every_s + eval_frames * eval_every_s + 1.0,
-    )  # fmt: skip
+    )
     times = [warmup_s + k * learn_every_s for k in range(learn_frames)]
     start_eval = warmup_s + learn_frames * learn_every_s
     times += [start_eval + k * eval_every_s for k in range(eval_frames)]
@@ -72,15 +91,18 @@ def generate(out: Path, *, seed: int, vehicles_per_hour: float, warmup_s: float,
                 if box.num_points == 0 and horizontal > TRUTH_RANGE_M:
                     continue
                 alone_vehicle = [v for v in vehicles if v.vehicle_id == box.vehicle_id]
-                alone = model.scan(alone_vehicle, now, frame_index + 10_000_000,
-                                   truth_stamp_s=now)  # fmt: skip
+                alone = model.scan(alone_vehicle, now, frame_index + 10_000_000, truth_stamp_s=now)
                 alone_points = int((alone.labels == 1).sum())
-                frame_truth.append({
-                    "vehicle_id": box.vehicle_id, "center_xyz_m": box.center_sensor_m,
-                    "size_lwh_m": box.size_lwh_m, "heading_rad": box.yaw_sensor_rad,
-                    "num_points": box.num_points,
-                    "visibility": box.num_points / alone_points if alone_points else 0.0,
-                })  # fmt: skip
+                frame_truth.append(
+                    {
+                        "vehicle_id": box.vehicle_id,
+                        "center_xyz_m": box.center_sensor_m,
+                        "size_lwh_m": box.size_lwh_m,
+                        "heading_rad": box.yaw_sensor_rad,
+                        "num_points": box.num_points,
+                        "visibility": box.num_points / alone_points if alone_points else 0.0,
+                    }
+                )
             truths.append(frame_truth)
     np.savez_compressed(
         out,
@@ -90,8 +112,11 @@ def generate(out: Path, *, seed: int, vehicles_per_hour: float, warmup_s: float,
         rows=np.array(model.rows),
         columns=np.array(model.columns),
     )
-    return {"learn_frames": len(learn), "eval_frames": len(evaluate),
-            "vehicles_scored_candidates": sum(len(t) for t in truths)}  # fmt: skip
+    return {
+        "learn_frames": len(learn),
+        "eval_frames": len(evaluate),
+        "vehicles_scored_candidates": sum(len(t) for t in truths),
+    }
 
 
 def make_frames(quick: bool, seed: int = 11) -> Path:
@@ -99,10 +124,19 @@ def make_frames(quick: bool, seed: int = 11) -> Path:
     folder = Path(tempfile.mkdtemp(prefix="wz-lidar-frames-"))
     out = folder / "frames.npz"
     args = [
-        sys.executable, "-m", "benchmarks.lidar_frames", str(out), "--seed", str(seed),
-        "--learn-frames", "20" if quick else "40", "--eval-frames", "10" if quick else "40",
-        "--work-dir", str(folder / "work"),
-    ]  # fmt: skip
+        sys.executable,
+        "-m",
+        "benchmarks.lidar_frames",
+        str(out),
+        "--seed",
+        str(seed),
+        "--learn-frames",
+        "20" if quick else "40",
+        "--eval-frames",
+        "10" if quick else "40",
+        "--work-dir",
+        str(folder / "work"),
+    ]
     subprocess.run(args, cwd=ROOT, check=True, timeout=1800)
     return out
 
@@ -121,11 +155,16 @@ def main() -> None:
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO)
     summary = generate(
-        args.out, seed=args.seed, vehicles_per_hour=args.vehicles_per_hour,
-        warmup_s=args.warmup_s, learn_frames=args.learn_frames,
-        learn_every_s=args.learn_every_s, eval_frames=args.eval_frames,
-        eval_every_s=args.eval_every_s, work_dir=args.work_dir,
-    )  # fmt: skip
+        args.out,
+        seed=args.seed,
+        vehicles_per_hour=args.vehicles_per_hour,
+        warmup_s=args.warmup_s,
+        learn_frames=args.learn_frames,
+        learn_every_s=args.learn_every_s,
+        eval_frames=args.eval_frames,
+        eval_every_s=args.eval_every_s,
+        work_dir=args.work_dir,
+    )
     log.info("lidar frames: %s", summary)
 
 

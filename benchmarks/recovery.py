@@ -103,8 +103,10 @@ _STARTED = re.compile(
 _STANDBY_STARTED = re.compile(r"^standby of (?P<name>\S+) \(pid (?P<pid>\d+)\) importing")
 _STANDBY_READY = re.compile(r"^standby of (?P<name>\S+) \(pid (?P<pid>\d+)\) ready")
 _STANDBY_GONE = re.compile(r"^the standby of (?P<name>\S+) \(pid (?P<pid>\d+)\) ")
-_EXITED = re.compile(r"^(?P<name>\S+) \(pid (?P<pid>\d+)\) (?P<how>.+?) after [\d.]+ s; "
-                     r"restarting in (?P<delay>[\d.]+) s")  # fmt: skip
+_EXITED = re.compile(
+    r"^(?P<name>\S+) \(pid (?P<pid>\d+)\) (?P<how>.+?) after [\d.]+ s; "
+    r"restarting in (?P<delay>[\d.]+) s"
+)
 
 
 @dataclass(frozen=True)
@@ -215,15 +217,30 @@ class Stack:
             WZ_GATEWAY_DATA_DIR=str(self.gateway_dir),
         )
         self._process = subprocess.Popen(
-            [sys.executable, "-m", "wz_cli.main", "up", "--listen", self.endpoint,
-             "--seed", str(self.seed)],
-            cwd=ROOT, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+            [
+                sys.executable,
+                "-m",
+                "wz_cli.main",
+                "up",
+                "--listen",
+                self.endpoint,
+                "--seed",
+                str(self.seed),
+            ],
+            cwd=ROOT,
+            env=env,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,
-        )  # fmt: skip
+        )
         self._reader = threading.Thread(target=self._read_log, name="up-log", daemon=True)
         self._reader.start()
-        settings = BusSettings(mode="client", connect_endpoints=[self.endpoint],
-                               listen_endpoints=[], multicast_scouting=False)  # fmt: skip
+        settings = BusSettings(
+            mode="client",
+            connect_endpoints=[self.endpoint],
+            listen_endpoints=[],
+            multicast_scouting=False,
+        )
         deadline = time.monotonic() + 30.0
         while True:  # the router listens once `wz up` has started it
             try:
@@ -278,8 +295,13 @@ class Stack:
             self._supervisor_lines.append(message)
         event = None
         if match := _STARTED.match(message):
-            event = SupervisorEvent(ts, "started", match["name"], int(match["pid"]),
-                                    standby=match["standby"] is not None)  # fmt: skip
+            event = SupervisorEvent(
+                ts,
+                "started",
+                match["name"],
+                int(match["pid"]),
+                standby=match["standby"] is not None,
+            )
         elif match := _STANDBY_STARTED.match(message):
             event = SupervisorEvent(ts, "standby_started", match["name"], int(match["pid"]))
         elif match := _STANDBY_READY.match(message):
@@ -287,8 +309,9 @@ class Stack:
         elif match := _STANDBY_GONE.match(message):
             event = SupervisorEvent(ts, "standby_gone", match["name"], int(match["pid"]))
         elif match := _EXITED.match(message):
-            event = SupervisorEvent(ts, "exited", match["name"], int(match["pid"]),
-                                    match["how"], float(match["delay"]))  # fmt: skip
+            event = SupervisorEvent(
+                ts, "exited", match["name"], int(match["pid"]), match["how"], float(match["delay"])
+            )
         if event is not None:
             with self._lock:
                 self._events.append(event)
@@ -344,8 +367,12 @@ class Stack:
         """When the first flowing, running status of ``pid`` came after ``since``; or None."""
         with self._lock:
             for received, status in self._statuses:
-                if (received >= since and status.service == service and status.pid == pid
-                        and self._flowing(status)):  # fmt: skip
+                if (
+                    received >= since
+                    and status.service == service
+                    and status.pid == pid
+                    and self._flowing(status)
+                ):
                     return received
         return None
 
@@ -361,11 +388,17 @@ class Stack:
             return None
         kind = "standby_ready" if ready else "standby_started"
         with self._lock:
-            found = [e.pid for e in self._events
-                     if e.kind == kind and e.name == service and e.ts >= current[0]]  # fmt: skip
+            found = [
+                e.pid
+                for e in self._events
+                if e.kind == kind and e.name == service and e.ts >= current[0]
+            ]
             # Gone, or woken (the service's process now): not a standby any more.
-            gone = {e.pid for e in self._events
-                    if e.kind in ("standby_gone", "started") and e.name == service}  # fmt: skip
+            gone = {
+                e.pid
+                for e in self._events
+                if e.kind in ("standby_gone", "started") and e.name == service
+            }
         found = [pid for pid in found if pid not in gone]
         return found[-1] if found else None
 
@@ -404,18 +437,28 @@ class Stack:
                 raise TimeoutError(f"no {what} within {timeout_s:.0f} s; log: {self.log_tail()}")
             time.sleep(POLL_PERIOD_S)
 
-    def wait_steady(self, timeout_s: float = STEADY_TIMEOUT_S, *,
-                    standby_of: str | None = None) -> None:  # fmt: skip
-        self.wait(lambda: self.steady(standby_of), timeout_s,
-                  "steady pipeline (all running, fresh tracks from both sensors at the gateway"
-                  + (f", {standby_of}'s standby ready" if standby_of else "") + ")")  # fmt: skip
+    def wait_steady(
+        self, timeout_s: float = STEADY_TIMEOUT_S, *, standby_of: str | None = None
+    ) -> None:
+        self.wait(
+            lambda: self.steady(standby_of),
+            timeout_s,
+            "steady pipeline (all running, fresh tracks from both sensors at the gateway"
+            + (f", {standby_of}'s standby ready" if standby_of else "")
+            + ")",
+        )
 
     def drop_standby(self, service: str, timeout_s: float = STEADY_TIMEOUT_S) -> None:
         """Make the supervisor restart ``service`` the plain way (a new interpreter) from now
         on: SIGKILL its standby once it has started one (ready or not), and wait until it has
         noticed; nothing to do once it has given up on them."""
-        self.wait(lambda: self.standby(service, ready=False) is not None
-                  or self.gave_up_standbys(service), timeout_s, f"{service}'s standby")  # fmt: skip
+        self.wait(
+            lambda: (
+                self.standby(service, ready=False) is not None or self.gave_up_standbys(service)
+            ),
+            timeout_s,
+            f"{service}'s standby",
+        )
         pid = self.standby(service, ready=False)
         if pid is None:
             return
@@ -445,8 +488,9 @@ class Stack:
         connection = sqlite3.connect(f"file:{path}?mode=ro", uri=True, timeout=10.0)
         try:
             (points,) = connection.execute("SELECT count(*) FROM track_points").fetchone()
-            track_ids = {row[0] for row in connection.execute(
-                "SELECT DISTINCT track_id FROM track_points")}  # fmt: skip
+            track_ids = {
+                row[0] for row in connection.execute("SELECT DISTINCT track_id FROM track_points")
+            }
             alert_ids = {row[0] for row in connection.execute("SELECT alert_id FROM alerts")}
         finally:
             connection.close()
@@ -463,8 +507,17 @@ class Stack:
 
         def restarted() -> SupervisorEvent | None:
             with self._lock:
-                return next((e for e in self._events if e.kind == "started" and e.name == service
-                             and e.pid != old_pid and e.ts >= killed_at - 0.01), None)  # fmt: skip
+                return next(
+                    (
+                        e
+                        for e in self._events
+                        if e.kind == "started"
+                        and e.name == service
+                        and e.pid != old_pid
+                        and e.ts >= killed_at - 0.01
+                    ),
+                    None,
+                )
 
         while (start := restarted()) is None:
             self.check_alive()
@@ -472,8 +525,9 @@ class Stack:
                 raise TimeoutError(f"{service} was not restarted within {timeout_s:.0f} s")
             time.sleep(0.02)
         with self._lock:
-            exit_event = next((e for e in self._events if e.kind == "exited"
-                               and e.pid == old_pid), None)  # fmt: skip
+            exit_event = next(
+                (e for e in self._events if e.kind == "exited" and e.pid == old_pid), None
+            )
         restart_at = start.ts
         sensor = SENSOR_OF.get(service)
         pipeline_at: float | None = None
@@ -485,8 +539,11 @@ class Stack:
             devices_at = self.devices_since(restart_at) if service == "alert-service" else 0.0
             if pipeline_at is None and (live := self.live()) is not None:
                 received_at, batch = live
-                fresh = [t for t in batch["tracks"] if t["sources"]
-                         and (sensor is None or sensor in t["sources"])]  # fmt: skip
+                fresh = [
+                    t
+                    for t in batch["tracks"]
+                    if t["sources"] and (sensor is None or sensor in t["sources"])
+                ]
                 if received_at >= restart_at and fresh:
                     pipeline_at = time.time()
                     batch_stamp, batch_tracks = float(batch["stamp"]), len(batch["tracks"])
@@ -499,16 +556,21 @@ class Stack:
             return None if t is None else round(t - killed_at, 3)
 
         recovery = Recovery(
-            service=service, killed_pid=old_pid, new_pid=start.pid,
+            service=service,
+            killed_pid=old_pid,
+            new_pid=start.pid,
             exit_seen=exit_event.how if exit_event else "",
             backoff_s=exit_event.delay_s if exit_event else float("nan"),
             from_standby=start.standby,
-            restart_s=round(restart_at - killed_at, 3), status_s=since_kill(status_at),
+            restart_s=round(restart_at - killed_at, 3),
+            status_s=since_kill(status_at),
             pipeline_s=since_kill(pipeline_at),
-            devices_s=(since_kill(self.devices_since(restart_at))
-                       if service == "alert-service" else None),
-            batch_stamp=batch_stamp, batch_tracks=batch_tracks,
-        )  # fmt: skip
+            devices_s=(
+                since_kill(self.devices_since(restart_at)) if service == "alert-service" else None
+            ),
+            batch_stamp=batch_stamp,
+            batch_tracks=batch_tracks,
+        )
         log.info("recovery: %s", recovery.as_dict())
         return recovery
 
@@ -527,8 +589,11 @@ def one_round(stack: Stack, *, plain: bool = False) -> tuple[list[Recovery], dic
             stack.drop_standby(service)
         if service == "gateway":
             # Something of each kind for the check to hold on: alerts come with traffic.
-            stack.wait(lambda: bool(stack.stored().alert_ids), ALERT_TIMEOUT_S,
-                       "an alert stored by the gateway")  # fmt: skip
+            stack.wait(
+                lambda: bool(stack.stored().alert_ids),
+                ALERT_TIMEOUT_S,
+                "an alert stored by the gateway",
+            )
             stack.wait_steady(standby_of=None if plain else service)
             before = stack.stored()
         recoveries.append(stack.kill(service))
@@ -536,13 +601,18 @@ def one_round(stack: Stack, *, plain: bool = False) -> tuple[list[Recovery], dic
             stack.wait_steady()  # the new gateway stores what the bus brings again
             after = stack.stored()
             check = {
-                "before": {"track_points": before.track_points,
-                           "track_ids": len(before.track_ids),
-                           "alert_ids": len(before.alert_ids)},
-                "after": {"track_points": after.track_points, "track_ids": len(after.track_ids),
-                          "alert_ids": len(after.alert_ids)},
+                "before": {
+                    "track_points": before.track_points,
+                    "track_ids": len(before.track_ids),
+                    "alert_ids": len(before.alert_ids),
+                },
+                "after": {
+                    "track_points": after.track_points,
+                    "track_ids": len(after.track_ids),
+                    "alert_ids": len(after.alert_ids),
+                },
                 "lost": before.missing_from(after),
-            }  # fmt: skip
+            }
     return recoveries, check
 
 
@@ -578,10 +648,12 @@ def run(quick: bool) -> dict[str, Any]:
     for position, service in enumerate(SERVICES):
         samples = [round_[position] for round_ in all_rounds]
         services[service] = {
-            name: {"median": _median([s[name] for s in samples]),
-                   "values": [s[name] for s in samples]}
+            name: {
+                "median": _median([s[name] for s in samples]),
+                "values": [s[name] for s in samples],
+            }
             for name in ("restart_s", "status_s", "pipeline_s", "devices_s", "recovered_s")
-        }  # fmt: skip
+        }
         services[service]["backoff_s"] = [s["backoff_s"] for s in samples]
         services[service]["exit_seen"] = sorted({s["exit_seen"] for s in samples})
         services[service]["from_standby"] = [s["from_standby"] for s in samples]
@@ -615,17 +687,23 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--quick", action="store_true", help="one round instead of three")
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s",
-                        stream=sys.stderr)  # fmt: skip
+    logging.basicConfig(
+        level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s", stream=sys.stderr
+    )
     result = run(args.quick)
     header = f"{'service':<16} {'restart':>8} {'status':>8} {'pipeline':>9} {'recovered':>10}"
     lines = [f"median of {result['rounds']} round(s), seconds after the SIGKILL", header]
     for service, times in result["services"].items():
-        cells = [times[name]["median"] for name in ("restart_s", "status_s", "pipeline_s",
-                                                    "recovered_s")]  # fmt: skip
-        lines.append(f"{service:<16} " + " ".join(
-            f"{'-' if v is None else f'{v:.2f}':>{w}}" for v, w in zip(cells, (8, 8, 9, 10),
-                                                                        strict=True)))  # fmt: skip
+        cells = [
+            times[name]["median"] for name in ("restart_s", "status_s", "pipeline_s", "recovered_s")
+        ]
+        lines.append(
+            f"{service:<16} "
+            + " ".join(
+                f"{'-' if v is None else f'{v:.2f}':>{w}}"
+                for v, w in zip(cells, (8, 8, 9, 10), strict=True)
+            )
+        )
     lines.append(f"gateway lost: {result['gateway_lost']}")
     sys.stdout.write("\n".join(lines) + "\n")
     return 0 if result["all_within_target"] and not any(result["gateway_lost"]) else 1

@@ -213,8 +213,11 @@ def _summary(benchmarks: dict[str, Any]) -> list[str]:
     if crashes:
         services = crashes["services"]
         worst = max(services, key=lambda name: services[name]["recovered_s"]["median"] or 0.0)
-        plain = {r["service"]: r["recovered_s"] for r in crashes["without_standby"]
-                 if r["recovered_s"] is not None}  # fmt: skip
+        plain = {
+            r["service"]: r["recovered_s"]
+            for r in crashes["without_standby"]
+            if r["recovered_s"] is not None
+        }
         slowest = max(plain, key=lambda name: plain[name]) if plain else None
         lines.append(
             f"- `kill -9` of each service of `wz up` in turn: restarted after "
@@ -223,9 +226,12 @@ def _summary(benchmarks: dict[str, Any]) -> list[str]:
             f"({worst}, median of {crashes['rounds']} rounds; target {crashes['target_s']:.0f} "
             f"s); restarted as new interpreters, without the warm standbys, up to "
             f"{fmt_s(plain.get(slowest) if slowest else None)} ({slowest}). "
-            + ("The gateway lost nothing it had stored."
-               if not any(crashes["gateway_lost"]) else "**The gateway lost stored data.**")
-        )  # fmt: skip
+            + (
+                "The gateway lost nothing it had stored."
+                if not any(crashes["gateway_lost"])
+                else "**The gateway lost stored data.**"
+            )
+        )
     return ["## Summary", "", *lines, ""] if lines else []
 
 
@@ -235,17 +241,24 @@ SECTIONS: dict[str, tuple[str, Callable[[dict[str, Any]], list[str]]]] = {
     "sumo_step": ("the simulator's SUMO step", sumo_step),
     "sensors": ("the simulator's sensor models and the whole simulator", sensors),
     "lidar_detection": ("the LiDAR detector's two paths: accuracy and speed", lidar_detection),
-    "camera_detection": ("the camera-radar detector: YOLO, per frame, the node at 10 fps",
-                         camera_detection),
-    "tracker_cycle": ("the fusion tracker's cycle with 200 tracks and three sensors",
-                      tracker_cycle),
+    "camera_detection": (
+        "the camera-radar detector: YOLO, per frame, the node at 10 fps",
+        camera_detection,
+    ),
+    "tracker_cycle": (
+        "the fusion tracker's cycle with 200 tracks and three sensors",
+        tracker_cycle,
+    ),
     "alert_latency": ("the alert service: track batch to alert on the bus", alert_latency),
-    "webhook_latency": ("gateway webhooks: alert on the bus to the signed POST at the receiver",
-                        webhook_latency),
-    "gateway_live": ("the gateway storing 20 Hz track batches while clients read the live API",
-                     gateway_live),
-    "recovery": ("`kill -9` of each service of `wz up`: restart and pipeline recovery",
-                 recovery),
+    "webhook_latency": (
+        "gateway webhooks: alert on the bus to the signed POST at the receiver",
+        webhook_latency,
+    ),
+    "gateway_live": (
+        "the gateway storing 20 Hz track batches while clients read the live API",
+        gateway_live,
+    ),
+    "recovery": ("`kill -9` of each service of `wz up`: restart and pipeline recovery", recovery),
 }
 
 

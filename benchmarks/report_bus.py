@@ -158,10 +158,16 @@ def alert_latency(result: dict[str, Any]) -> list[str]:
         f"on every track, encode, publish). {result['samples']} samples per batch size.",
         "",
     ]
-    rows = [[f"{v['tracks_per_batch']} track(s), {v['batch_bytes']:,} B",
-             fmt_ms(v["latency_ms"]["p50"]), fmt_ms(v["latency_ms"]["p90"]),
-             fmt_ms(v["latency_ms"]["p99"]), fmt_ms(v["latency_ms"]["max"])]
-            for v in result["variants"].values()]  # fmt: skip
+    rows = [
+        [
+            f"{v['tracks_per_batch']} track(s), {v['batch_bytes']:,} B",
+            fmt_ms(v["latency_ms"]["p50"]),
+            fmt_ms(v["latency_ms"]["p90"]),
+            fmt_ms(v["latency_ms"]["p99"]),
+            fmt_ms(v["latency_ms"]["max"]),
+        ]
+        for v in result["variants"].values()
+    ]
     lines += md_table(["Batch", "p50", "p90", "p99", "max"], rows)
     return [*lines, ""]
 
@@ -179,10 +185,16 @@ def webhook_latency(result: dict[str, Any]) -> list[str]:
         f"{result['delivered']} events delivered in all.",
         "",
     ]
-    rows = [[f"{v['subscriptions']} subscription(s)", fmt_ms(v["latency_ms"]["p50"]),
-             fmt_ms(v["latency_ms"]["p90"]), fmt_ms(v["latency_ms"]["p99"]),
-             fmt_ms(v["latency_ms"]["max"])]
-            for v in result["variants"].values()]  # fmt: skip
+    rows = [
+        [
+            f"{v['subscriptions']} subscription(s)",
+            fmt_ms(v["latency_ms"]["p50"]),
+            fmt_ms(v["latency_ms"]["p90"]),
+            fmt_ms(v["latency_ms"]["p99"]),
+            fmt_ms(v["latency_ms"]["max"]),
+        ]
+        for v in result["variants"].values()
+    ]
     lines += md_table(["Subscribers", "p50", "p90", "p99", "max"], rows)
     return [*lines, ""]
 
@@ -210,18 +222,31 @@ def gateway_live(result: dict[str, Any]) -> list[str]:
     for name, run in result["variants"].items():
         alone, loaded = run["ingest_only"]["ingest_lag_ms"], run["loaded"]["ingest_lag_ms"]
         live, pages = run["loaded"]["live"], run["loaded"]["trajectories"]
-        rows.append([
-            name.replace("_", " "), f"{fmt_ms(alone['p50'])} / {fmt_ms(alone['p99'])}",
-            f"{fmt_ms(loaded['p50'])} / {fmt_ms(loaded['p99'])}",
-            f"**{live['requests_per_s']:,.0f}**",
-            f"{fmt_ms(live['latency_ms']['p50'])} / {fmt_ms(live['latency_ms']['p99'])}",
-            f"{fmt_ms(pages['latency_ms']['p50'])} / {fmt_ms(pages['latency_ms']['p99'])}",
-            f"{run['smoothing']['tracks']:.0f} ({fmt_ms(run['smoothing']['mean_ms'])})",
-            fmt_ms(run["write_group_mean_ms"]),
-        ])  # fmt: skip
-    lines += md_table(["Variant", "ingest lag alone p50 / p99", "ingest lag loaded p50 / p99",
-                     "live requests/s", "live p50 / p99", "trajectories page p50 / p99",
-                     "tracks smoothed (mean time each)", "write per group (mean)"], rows)  # fmt: skip
+        rows.append(
+            [
+                name.replace("_", " "),
+                f"{fmt_ms(alone['p50'])} / {fmt_ms(alone['p99'])}",
+                f"{fmt_ms(loaded['p50'])} / {fmt_ms(loaded['p99'])}",
+                f"**{live['requests_per_s']:,.0f}**",
+                f"{fmt_ms(live['latency_ms']['p50'])} / {fmt_ms(live['latency_ms']['p99'])}",
+                f"{fmt_ms(pages['latency_ms']['p50'])} / {fmt_ms(pages['latency_ms']['p99'])}",
+                f"{run['smoothing']['tracks']:.0f} ({fmt_ms(run['smoothing']['mean_ms'])})",
+                fmt_ms(run["write_group_mean_ms"]),
+            ]
+        )
+    lines += md_table(
+        [
+            "Variant",
+            "ingest lag alone p50 / p99",
+            "ingest lag loaded p50 / p99",
+            "live requests/s",
+            "live p50 / p99",
+            "trajectories page p50 / p99",
+            "tracks smoothed (mean time each)",
+            "write per group (mean)",
+        ],
+        rows,
+    )
     return [*lines, ""]
 
 
@@ -256,18 +281,26 @@ def recovery(result: dict[str, Any]) -> list[str]:
     rows = []
     for service, times in result["services"].items():
         bare = plain.get(service, {})
-        rows.append([
-            f"`{service}`", cell(times["restart_s"]), cell(times["status_s"]),
-            cell(times["pipeline_s"]), f"**{cell(times['recovered_s'])}**",
-            "—" if bare.get("recovered_s") is None else f"{bare['recovered_s']:.2f} s",
-        ])  # fmt: skip
-    lines += md_table(["Killed", "restart", "status", "pipeline", "recovered",
-                     "recovered, no standby"], rows)  # fmt: skip
+        rows.append(
+            [
+                f"`{service}`",
+                cell(times["restart_s"]),
+                cell(times["status_s"]),
+                cell(times["pipeline_s"]),
+                f"**{cell(times['recovered_s'])}**",
+                "—" if bare.get("recovered_s") is None else f"{bare['recovered_s']:.2f} s",
+            ]
+        )
+    lines += md_table(
+        ["Killed", "restart", "status", "pipeline", "recovered", "recovered, no standby"], rows
+    )
     lines.append("")
     devices = result["services"].get("alert-service", {}).get("devices_s")
     if devices and devices["median"] is not None:
-        lines.append(f"- Alert service: its first devices message after the restart "
-                     f"{cell(devices)} after the kill.")  # fmt: skip
+        lines.append(
+            f"- Alert service: its first devices message after the restart "
+            f"{cell(devices)} after the kill."
+        )
     for index, check in enumerate(result["gateway_stored"]):
         before, after = check["before"], check["after"]
         label = f"round {index + 1}" if index < result["rounds"] else "round without standbys"

@@ -59,7 +59,6 @@ def base_path(name: str) -> str:
     return name.removesuffix("-noshm")
 
 
-
 def fmt_s(value: float | None) -> str:
     return "—" if value is None else f"{value:.1f} s"
 
@@ -69,17 +68,20 @@ def median_of(services: dict[str, Any], name: str) -> float | None:
     return values[len(values) // 2] if values else None
 
 
-
 def fmt_spread(counts: dict[str, Any]) -> str:
     """min / median / max of a count."""
     return f"{counts['min']} / {counts['median']:.0f} / {counts['max']}"
 
 
 def frame_stats(stats: dict[str, float]) -> list[str]:
-    return [f"**{fmt_ms(stats['p50'])}**", fmt_ms(stats["p90"]), fmt_ms(stats["p99"]), fmt_ms(stats["max"])]
+    return [
+        f"**{fmt_ms(stats['p50'])}**",
+        fmt_ms(stats["p90"]),
+        fmt_ms(stats["p99"]),
+        fmt_ms(stats["max"]),
+    ]
 
 
 def gc_columns(split: dict[str, Any]) -> list[str]:
     """Calls a full garbage collection fell in; the slowest call without one."""
     return [str(split["calls_with_full_gc"]), fmt_ms(split["max_ms_without_full_gc"])]
-

@@ -31,16 +31,27 @@ def sumo_step(result: dict[str, Any]) -> list[str]:
     step = stepping["step_ms"]
     parts = [
         ("`TrafficWorld.step()` (SUMO step + `VehicleTruth` messages)", stepping["step_ms"]),
-        ("of which, re-measured: `site.road_frame.to_road` of the vehicles", stepping["to_road_ms"]),
-        ("of which, re-measured: validating the `VehicleTruth`s", stepping["vehicle_truth_validate_ms"]),
-        ("for comparison: `VehicleTruth.model_construct` (no validation)", stepping["vehicle_truth_construct_ms"]),
+        (
+            "of which, re-measured: `site.road_frame.to_road` of the vehicles",
+            stepping["to_road_ms"],
+        ),
+        (
+            "of which, re-measured: validating the `VehicleTruth`s",
+            stepping["vehicle_truth_validate_ms"],
+        ),
+        (
+            "for comparison: `VehicleTruth.model_construct` (no validation)",
+            stepping["vehicle_truth_construct_ms"],
+        ),
         (
             f"node's extra: `GroundTruth` build + encode "
             f"({stepping['ground_truth_bytes_median'] / 1000:.1f} kB)",
             stepping["ground_truth_build_encode_ms"],
         ),
-    ]  # fmt: skip
-    rows = [[what, f"**{fmt_ms(s['p50'])}**", fmt_ms(s["p99"]), fmt_ms(s["max"])] for what, s in parts]
+    ]
+    rows = [
+        [what, f"**{fmt_ms(s['p50'])}**", fmt_ms(s["p99"]), fmt_ms(s["max"])] for what, s in parts
+    ]
     lines += [*md_table(["Per step", "p50", "p99", "max"], rows), ""]
     lines += md_table(
         ["Derived", "Value"],
@@ -59,9 +70,12 @@ def sumo_step(result: dict[str, Any]) -> list[str]:
             ],
             ["step time per vehicle (mean)", fmt_us(stepping["per_vehicle_step_us"])],
             ["libsumo start-up, network built in a fresh folder", f"{stepping['startup_s']:.2f} s"],
-            ["collisions / teleports during the timed steps", f"{stepping['collisions']} / {stepping['teleports']}"],
+            [
+                "collisions / teleports during the timed steps",
+                f"{stepping['collisions']} / {stepping['teleports']}",
+            ],
         ],
-    )  # fmt: skip
+    )
     lines += ["", "### Whole runs, end to end", ""]
     rows = [
         [
@@ -377,21 +391,31 @@ def lidar_detection(result: dict[str, Any]) -> list[str]:
     ]
     rows = []
     for fast, ref in zip(result["fast"]["bins"], result["reference"]["bins"], strict=True):
-        rows.append([
-            f"{fast['range_m']} m" if fast is not result["fast"]["bins"][-1] else
-            f"**all ({fast['range_m']} m)**",
-            str(fast["scored"]), f"{fast['recall']:.2f}", f"{ref['recall']:.2f}",
-            f"{fast['precision']:.2f}", f"{ref['precision']:.2f}",
-            f"{fast['centre_error_median_m']:.2f} / {fast['centre_error_p95_m']:.2f} m",
-            f"{ref['centre_error_median_m']:.2f} / {ref['centre_error_p95_m']:.2f} m",
-        ])  # fmt: skip
+        rows.append(
+            [
+                f"{fast['range_m']} m"
+                if fast is not result["fast"]["bins"][-1]
+                else f"**all ({fast['range_m']} m)**",
+                str(fast["scored"]),
+                f"{fast['recall']:.2f}",
+                f"{ref['recall']:.2f}",
+                f"{fast['precision']:.2f}",
+                f"{ref['precision']:.2f}",
+                f"{fast['centre_error_median_m']:.2f} / {fast['centre_error_p95_m']:.2f} m",
+                f"{ref['centre_error_median_m']:.2f} / {ref['centre_error_p95_m']:.2f} m",
+            ]
+        )
     lines += md_table(header, rows)
     lines += ["", "Time per frame (both cores available):", ""]
     timing_rows = [
-        [name, fmt_ms(result[name]["median_ms"]), fmt_ms(result[name]["p90_ms"]),
-         ", ".join(f"{k} {fmt_ms(v)}" for k, v in result[name]["steps_median_ms"].items())]
+        [
+            name,
+            fmt_ms(result[name]["median_ms"]),
+            fmt_ms(result[name]["p90_ms"]),
+            ", ".join(f"{k} {fmt_ms(v)}" for k, v in result[name]["steps_median_ms"].items()),
+        ]
         for name in ("reference", "fast")
-    ]  # fmt: skip
+    ]
     lines += md_table(["Path", "p50", "p90", "Median per step"], timing_rows)
     one = result["one_core"]
     lines += [
@@ -414,8 +438,10 @@ def camera_detection(result: dict[str, Any]) -> list[str]:
         f"on {inference['frames']} simulated day frames (default site, 1800 veh/h, 20 % trucks).",
         "",
     ]
-    rows = [[name, fmt_ms(v["p50_ms"]), fmt_ms(v["p90_ms"]), fmt_ms(v["max_ms"])]
-            for name, v in inference["steps"].items()]  # fmt: skip
+    rows = [
+        [name, fmt_ms(v["p50_ms"]), fmt_ms(v["p90_ms"]), fmt_ms(v["max_ms"])]
+        for name, v in inference["steps"].items()
+    ]
     lines += md_table(["YOLO step", "p50", "p90", "max"], rows)
     lines += [
         "",
@@ -432,11 +458,18 @@ def camera_detection(result: dict[str, Any]) -> list[str]:
         f"{100 * service['fused_share']:.0f} % of detections carry a radar speed.",
         "",
     ]
-    rows = [[name, fmt_ms(service[key]["p50_ms"]), fmt_ms(service[key]["p99_ms"]),
-             fmt_ms(service[key]["max_ms"])]
-            for name, key in (("node (frame taken -> batch published)", "node_latency"),
-                              ("end to end (frame published -> batch received)",
-                               "end_to_end_latency"))]  # fmt: skip
+    rows = [
+        [
+            name,
+            fmt_ms(service[key]["p50_ms"]),
+            fmt_ms(service[key]["p99_ms"]),
+            fmt_ms(service[key]["max_ms"]),
+        ]
+        for name, key in (
+            ("node (frame taken -> batch published)", "node_latency"),
+            ("end to end (frame published -> batch received)", "end_to_end_latency"),
+        )
+    ]
     lines += md_table(["Latency", "p50", "p99", "max"], rows)
     return [*lines, ""]
 
@@ -449,7 +482,7 @@ def tracker_cycle(result: dict[str, Any]) -> list[str]:
         f"{result['confirmed_tracks_median']:.0f} confirmed tracks. One cycle is one sensor "
         "batch through `MultiTargetTracker.add` (predict, gate, assign, update, start, merge), "
         "the batches in stamp order and no reorder window, so each `add` processes its own "
-        "batch; the snapshot is the 10 Hz `tracks(t)` the node publishes. \"Windowed\": the "
+        'batch; the snapshot is the 10 Hz `tracks(t)` the node publishes. "Windowed": the '
         "node's 150 ms reorder window, where an `add` processes the batches it releases "
         "(none, one or two), so per call the times mix batches (the mean is the same work).",
         "",
@@ -457,8 +490,14 @@ def tracker_cycle(result: dict[str, Any]) -> list[str]:
 
     def row(label: str, v: dict[str, Any]) -> list[str]:
         mean = fmt_ms(v["mean_ms"]) if "mean_ms" in v else "-"
-        return [label, fmt_ms(v["median_ms"]), mean, fmt_ms(v["p99_ms"]), fmt_ms(v["max_ms"]),
-                str(v["samples"])]  # fmt: skip
+        return [
+            label,
+            fmt_ms(v["median_ms"]),
+            mean,
+            fmt_ms(v["p99_ms"]),
+            fmt_ms(v["max_ms"]),
+            str(v["samples"]),
+        ]
 
     rows = [row("all batches", result["cycle"])]
     rows += [row(f"{name} batches", v) for name, v in result["per_sensor"].items()]
@@ -468,12 +507,19 @@ def tracker_cycle(result: dict[str, Any]) -> list[str]:
         rows.append(row("all `add` calls, windowed (as the node runs)", windowed["cycle"]))
     imm = result.get("imm")
     if imm:  # the IMM motion model (an option), same batches
-        for label, key in (("all batches, IMM option", "cycle"), ("snapshot, IMM option", "snapshot")):
+        for label, key in (
+            ("all batches, IMM option", "cycle"),
+            ("snapshot, IMM option", "snapshot"),
+        ):
             rows.append(row(label, imm[key]))
     correction = result.get("bias_map_correction")
     if correction:  # in the node, before the tracker, with a lateral bias map
         for size in (10, 200):
-            rows.append(row(f"lateral bias map on a batch of {size} (node, before `add`)",
-                            correction[f"batch_of_{size}"]))  # fmt: skip
+            rows.append(
+                row(
+                    f"lateral bias map on a batch of {size} (node, before `add`)",
+                    correction[f"batch_of_{size}"],
+                )
+            )
     lines += md_table(["Step", "median", "mean", "p99", "max", "samples"], rows)
     return [*lines, ""]

@@ -173,9 +173,12 @@ def _traffic(
     from wz_simulator.traffic.world import TrafficWorld
 
     settings = SimulatorSettings(
-        vehicles_per_hour=FRAMES_VEHICLES_PER_HOUR, seed=SEED, realtime_factor=0.0,
-        step_s=STEP_S, work_dir=work_dir,
-    )  # fmt: skip
+        vehicles_per_hour=FRAMES_VEHICLES_PER_HOUR,
+        seed=SEED,
+        realtime_factor=0.0,
+        step_s=STEP_S,
+        work_dir=work_dir,
+    )
     start = time.perf_counter()
     with TrafficWorld(site, settings) as world:
         in_range = 0
@@ -215,9 +218,13 @@ def _time_lidar(
     for weather in LIDAR_WEATHERS:
         start = time.perf_counter()
         model = LidarModel.from_scene(
-            mount, scene, WEATHER_PRESETS[weather], SEED, boxes_for=vehicle_boxes,
+            mount,
+            scene,
+            WEATHER_PRESETS[weather],
+            SEED,
+            boxes_for=vehicle_boxes,
             site_id=site.site_id,
-        )  # fmt: skip
+        )
         build_s = time.perf_counter() - start
         wall_s: list[float] = []
         cpu_s: list[float] = []
@@ -430,9 +437,12 @@ def measure_loop(quick: bool, work_dir: Path) -> dict[str, Any]:
     duration_s: float = plan["duration_s"]
     site = load_site(DEFAULT_SITE_PATH)
     settings = SimulatorSettings(
-        vehicles_per_hour=LOOP_VEHICLES_PER_HOUR, seed=SEED, realtime_factor=0.0,
-        step_s=STEP_S, work_dir=work_dir,
-    )  # fmt: skip
+        vehicles_per_hour=LOOP_VEHICLES_PER_HOUR,
+        seed=SEED,
+        realtime_factor=0.0,
+        step_s=STEP_S,
+        work_dir=work_dir,
+    )
     spent: dict[str, float] = defaultdict(float)
     kind_of_sensor = {mount.sensor_id: mount.kind for mount in site.sensors}
     rates = {mount.sensor_id: mount.rate_hz for mount in site.sensors}
@@ -441,9 +451,13 @@ def measure_loop(quick: bool, work_dir: Path) -> dict[str, Any]:
         """The site's rig; each capture's wall time is added to its sensor kind."""
 
         def capture(
-            self, sensor_id: str, index: int, fire_s: float, vehicles: Sequence[VehicleTruth],
+            self,
+            sensor_id: str,
+            index: int,
+            fire_s: float,
+            vehicles: Sequence[VehicleTruth],
             truth_stamp_s: float,
-        ) -> SensorOutput:  # fmt: skip
+        ) -> SensorOutput:
             start = time.perf_counter()
             output = super().capture(sensor_id, index, fire_s, vehicles, truth_stamp_s)
             spent[kind_of_sensor[sensor_id]] += time.perf_counter() - start
@@ -523,9 +537,14 @@ def measure_loop(quick: bool, work_dir: Path) -> dict[str, Any]:
         with mock.patch.object(rig_module, "encode_jpeg", timed_jpeg):
             cpu_0, wall_0 = time.process_time(), time.perf_counter()
             steps = run_loop(
-                window, publish_truth, SimClock(), Pacer(0.0), threading.Event(),  # type: ignore[arg-type]
-                rig, publish_sensor,
-            )  # fmt: skip
+                window,
+                publish_truth,
+                SimClock(),
+                Pacer(0.0),
+                threading.Event(),  # type: ignore[arg-type]
+                rig,
+                publish_sensor,
+            )
             wall_s, cpu_s = time.perf_counter() - wall_0, time.process_time() - cpu_0
         simulated_s = window.sim_time_s
     # Captures include their JPEG encode; split it out.
@@ -691,10 +710,21 @@ def measure_node(quick: bool) -> dict[str, Any]:
         node_log = Path(folder) / "node.log"
         port = free_port()
         counter = subprocess.Popen(
-            [sys.executable, "-m", "benchmarks.sensors", "count", "--port", str(port),
-             "--out", str(out)],
-            cwd=ROOT, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
-        )  # fmt: skip
+            [
+                sys.executable,
+                "-m",
+                "benchmarks.sensors",
+                "count",
+                "--port",
+                str(port),
+                "--out",
+                str(out),
+            ],
+            cwd=ROOT,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
         try:
             assert counter.stdout is not None and counter.stdin is not None
             if counter.stdout.readline().strip() != "ready":
@@ -715,9 +745,14 @@ def measure_node(quick: bool) -> dict[str, Any]:
             started_monotonic = time.monotonic()
             with node_log.open("w") as log_file:
                 node = subprocess.run(
-                    [sys.executable, "-m", "wz_simulator.node"], cwd=ROOT, env=env,
-                    stdout=log_file, stderr=subprocess.STDOUT, timeout=600, check=False,
-                )  # fmt: skip
+                    [sys.executable, "-m", "wz_simulator.node"],
+                    cwd=ROOT,
+                    env=env,
+                    stdout=log_file,
+                    stderr=subprocess.STDOUT,
+                    timeout=600,
+                    check=False,
+                )
             process_s = time.monotonic() - started_monotonic
             if node.returncode != 0:
                 tail = "\n".join(node_log.read_text().splitlines()[-20:])

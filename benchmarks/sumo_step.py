@@ -202,10 +202,13 @@ def run(quick: bool) -> dict[str, Any]:
     log.info("sumo_step: %d steps at %.0f veh/h", steps, STEP_VEHICLES_PER_HOUR)
     stepping = _child(
         "steps",
-        "--vehicles-per-hour", str(STEP_VEHICLES_PER_HOUR),
-        "--steps", str(steps),
-        "--target", str(TARGET_VEHICLES),
-    )  # fmt: skip
+        "--vehicles-per-hour",
+        str(STEP_VEHICLES_PER_HOUR),
+        "--steps",
+        str(steps),
+        "--target",
+        str(TARGET_VEHICLES),
+    )
     runs = []
     for vehicles_per_hour in (1400.0, STEP_VEHICLES_PER_HOUR):
         log.info("sumo_step: %.0f simulated s at %.0f veh/h", duration_s, vehicles_per_hour)

@@ -59,21 +59,30 @@ def _batches(duration_s: float, seed: int = 1) -> list[tuple[float, str, list[Me
             x = start_x + speed * t + rng.normal(0, sx, VEHICLES)
             y = lane_y + rng.normal(0, sy, VEHICLES)
             measurements = [
-                Measurement(x_m=float(x[i]), y_m=float(y[i]), covariance_m2=cov,
-                            object_class="car", length_m=4.6, width_m=1.8,
-                            speed_mps=float(speed[i] + rng.normal(0, 0.3)) if has_speed else None)
+                Measurement(
+                    x_m=float(x[i]),
+                    y_m=float(y[i]),
+                    covariance_m2=cov,
+                    object_class="car",
+                    length_m=4.6,
+                    width_m=1.8,
+                    speed_mps=float(speed[i] + rng.normal(0, 0.3)) if has_speed else None,
+                )
                 for i in np.flatnonzero(seen)
-            ]  # fmt: skip
+            ]
             events.append((t, sensor, measurements))
     return sorted(events, key=lambda e: e[0])
 
 
 def _stats(values_s: list[float]) -> dict[str, float]:
     ordered = sorted(values_s)
-    return {"median_ms": 1e3 * statistics.median(ordered),
-            "mean_ms": 1e3 * statistics.fmean(ordered),
-            "p99_ms": 1e3 * ordered[int(0.99 * (len(ordered) - 1))],
-            "max_ms": 1e3 * ordered[-1], "samples": len(ordered)}  # fmt: skip
+    return {
+        "median_ms": 1e3 * statistics.median(ordered),
+        "mean_ms": 1e3 * statistics.fmean(ordered),
+        "p99_ms": 1e3 * ordered[int(0.99 * (len(ordered) - 1))],
+        "max_ms": 1e3 * ordered[-1],
+        "samples": len(ordered),
+    }
 
 
 def run(quick: bool) -> dict[str, Any]:
@@ -84,24 +93,38 @@ def run(quick: bool) -> dict[str, Any]:
     windowed = _run_tracker(events, duration_s, TrackerSettings())
     result["windowed"] = {"cycle": windowed["cycle"], "snapshot": windowed["snapshot"]}
     # the IMM option (not the default) on the same batches: what its second model costs
-    imm = _run_tracker(events, duration_s, TrackerSettings(motion_model="imm", reorder_window_s=0.0))
-    result["imm"] = {"cycle": imm["cycle"], "snapshot": imm["snapshot"],
-                     "confirmed_tracks_median": imm["confirmed_tracks_median"]}  # fmt: skip
+    imm = _run_tracker(
+        events, duration_s, TrackerSettings(motion_model="imm", reorder_window_s=0.0)
+    )
+    result["imm"] = {
+        "cycle": imm["cycle"],
+        "snapshot": imm["snapshot"],
+        "confirmed_tracks_median": imm["confirmed_tracks_median"],
+    }
     result["bias_map_correction"] = _bias_map_correction(repeats=200 if quick else 1000)
     return result
 
 
 def _bias_map_correction(repeats: int) -> dict[str, Any]:
     site = load_site(DEFAULT_SITE_PATH)
-    corrector = LateralBiasCorrector(site, load_bias_map(DEFAULT_SITE_PATH.with_suffix(".bias-map.json")))
+    corrector = LateralBiasCorrector(
+        site, load_bias_map(DEFAULT_SITE_PATH.with_suffix(".bias-map.json"))
+    )
     rng = np.random.default_rng(2)
     out: dict[str, Any] = {}
     for size in (10, 200):
         stations = rng.uniform(60.0, 1100.0, size)
         offsets = rng.choice([-1.83, 1.83], size) + rng.normal(0.0, 0.2, size)
         x, y = site.road_frame.to_site(stations, offsets)
-        batch = [Measurement(x_m=float(x[i]), y_m=float(y[i]), covariance_m2=np.eye(2) * 0.04,
-                             sensor_id="lidar-mast") for i in range(size)]  # fmt: skip
+        batch = [
+            Measurement(
+                x_m=float(x[i]),
+                y_m=float(y[i]),
+                covariance_m2=np.eye(2) * 0.04,
+                sensor_id="lidar-mast",
+            )
+            for i in range(size)
+        ]
         times = []
         for _ in range(repeats):
             started = time.perf_counter()
@@ -111,12 +134,14 @@ def _bias_map_correction(repeats: int) -> dict[str, Any]:
     return out
 
 
-def _run_tracker(events: list[tuple[float, str, list[Measurement]]], duration_s: float,
-                 settings: TrackerSettings) -> dict[str, Any]:  # fmt: skip
+def _run_tracker(
+    events: list[tuple[float, str, list[Measurement]]], duration_s: float, settings: TrackerSettings
+) -> dict[str, Any]:
     warmup_s = 5.0
     # the road's heading at a point and, as the node gives it too, for many points at once
-    tracker = MultiTargetTracker(settings, heading_at=lambda x, y: 0.0,
-                                 headings_at=lambda x, y: np.zeros(np.shape(x)))  # fmt: skip
+    tracker = MultiTargetTracker(
+        settings, heading_at=lambda x, y: 0.0, headings_at=lambda x, y: np.zeros(np.shape(x))
+    )
     per_sensor: dict[str, list[float]] = {sensor: [] for sensor in SENSORS}
     snapshots: list[float] = []
     next_snapshot = 0.0

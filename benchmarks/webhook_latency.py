@@ -86,24 +86,46 @@ class _Receiver:
 
 
 def _alert(site_id: str, number: int) -> Alert:
-    return Alert(site=site_id, source_id="bench", stamp=0.1 * number, alert_id=f"bench-{number}",
-                 alert_type=AlertType.SPEEDING, severity=AlertSeverity.WARNING, track_id=number,
-                 station_m=700.0, offset_m=-1.83, speed_mps=29.0, measured_value=29.0,
-                 threshold_value=26.8, description="speeding: 65 mph in the 55 mph zone",
-                 episode_id=f"bench-ep-{number}", onset_stamp=0.1 * number, value_unit="m/s",
-                 evidence={"speed_limit_mps": 24.587})  # fmt: skip
+    return Alert(
+        site=site_id,
+        source_id="bench",
+        stamp=0.1 * number,
+        alert_id=f"bench-{number}",
+        alert_type=AlertType.SPEEDING,
+        severity=AlertSeverity.WARNING,
+        track_id=number,
+        station_m=700.0,
+        offset_m=-1.83,
+        speed_mps=29.0,
+        measured_value=29.0,
+        threshold_value=26.8,
+        description="speeding: 65 mph in the 55 mph zone",
+        episode_id=f"bench-ep-{number}",
+        onset_stamp=0.1 * number,
+        value_unit="m/s",
+        evidence={"speed_limit_mps": 24.587},
+    )
 
 
 @contextmanager
 def _gateway(bus_port: int, http_port: int, data_dir: Path) -> Iterator[httpx.Client]:
     env = {k: v for k, v in os.environ.items() if not k.startswith("WZ_")}
-    env.update(WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{bus_port}", WZ_BUS_LISTEN_ENDPOINTS="",
-               WZ_LOG_LEVEL="WARNING", WZ_LOG_FORMAT="json", WZ_GATEWAY_PORT=str(http_port),
-               WZ_GATEWAY_DATA_DIR=str(data_dir), WZ_GATEWAY_API_KEYS=f"admin:{ADMIN_KEY}",
-               WZ_GATEWAY_WEBHOOK_ALLOWED_NETWORKS="127.0.0.1/32")  # fmt: skip
+    env.update(
+        WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{bus_port}",
+        WZ_BUS_LISTEN_ENDPOINTS="",
+        WZ_LOG_LEVEL="WARNING",
+        WZ_LOG_FORMAT="json",
+        WZ_GATEWAY_PORT=str(http_port),
+        WZ_GATEWAY_DATA_DIR=str(data_dir),
+        WZ_GATEWAY_API_KEYS=f"admin:{ADMIN_KEY}",
+        WZ_GATEWAY_WEBHOOK_ALLOWED_NETWORKS="127.0.0.1/32",
+    )
     node = subprocess.Popen([sys.executable, "-m", "wz_gateway.node"], cwd=ROOT, env=env)
-    http = httpx.Client(base_url=f"http://127.0.0.1:{http_port}", timeout=TIMEOUT_S,
-                        headers={"X-API-Key": ADMIN_KEY})  # fmt: skip
+    http = httpx.Client(
+        base_url=f"http://127.0.0.1:{http_port}",
+        timeout=TIMEOUT_S,
+        headers={"X-API-Key": ADMIN_KEY},
+    )
     try:
         deadline = time.monotonic() + TIMEOUT_S
         while True:
@@ -122,8 +144,9 @@ def _gateway(bus_port: int, http_port: int, data_dir: Path) -> Iterator[httpx.Cl
         node.wait(TIMEOUT_S)
 
 
-def _measure(bus: Bus, receiver: _Receiver, site_id: str, secrets: dict[str, str],
-             first: int, samples: int) -> list[float]:  # fmt: skip
+def _measure(
+    bus: Bus, receiver: _Receiver, site_id: str, secrets: dict[str, str], first: int, samples: int
+) -> list[float]:
     """Latencies [ms] to the last of the subscriptions' receivers, alerts first, first+1..."""
     publisher = bus.publisher(bus.keys.alerts(AlertType.SPEEDING.value), Alert)
     if not publisher.wait_for_subscribers(TIMEOUT_S):
@@ -141,8 +164,9 @@ def _measure(bus: Bus, receiver: _Receiver, site_id: str, secrets: dict[str, str
             arrived, path, got_id, headers, body = receiver.arrivals.get(timeout=TIMEOUT_S)
             if got_id != webhook_id:
                 raise RuntimeError(f"unexpected webhook {got_id} while waiting for {webhook_id}")
-            expected = webhooks.sign(secrets[path], got_id, int(headers["webhook-timestamp"]),
-                                     body.decode())  # fmt: skip
+            expected = webhooks.sign(
+                secrets[path], got_id, int(headers["webhook-timestamp"]), body.decode()
+            )
             if expected not in headers["webhook-signature"].split(" "):
                 raise RuntimeError(f"bad signature on {got_id} to {path}")
             waiting.discard(path)
@@ -158,10 +182,12 @@ def run(quick: bool) -> dict[str, Any]:
     site_id = load_site(DEFAULT_SITE_PATH).site_id
     port, http_port = free_port(), free_port()
     results: dict[str, Any] = {}
-    with (tempfile.TemporaryDirectory(prefix="wz-bench-webhooks-") as data_dir,
-          _Receiver() as receiver,
-          Bus.open(listener_settings(port, shm=True), site=site_id, service="bench") as bus,
-          _gateway(port, http_port, Path(data_dir)) as http):  # fmt: skip
+    with (
+        tempfile.TemporaryDirectory(prefix="wz-bench-webhooks-") as data_dir,
+        _Receiver() as receiver,
+        Bus.open(listener_settings(port, shm=True), site=site_id, service="bench") as bus,
+        _gateway(port, http_port, Path(data_dir)) as http,
+    ):
         secrets: dict[str, str] = {}
         next_alert = 0
         for name, subscriptions in (("one_subscription", 1), ("four_subscriptions", 4)):
@@ -175,7 +201,9 @@ def run(quick: bool) -> dict[str, Any]:
             next_alert += WARMUP + samples
             results[name] = {"subscriptions": subscriptions, "latency_ms": summarize(latencies)}
         metrics = http.get("/metrics").text
-    delivered = next(float(line.split()[-1]) for line in metrics.splitlines()
-                     if line.startswith('wz_gateway_webhook_events_total{state="delivered"}'))  # fmt: skip
-    return {"samples": samples, "warmup": WARMUP, "delivered": int(delivered),
-            "variants": results}
+    delivered = next(
+        float(line.split()[-1])
+        for line in metrics.splitlines()
+        if line.startswith('wz_gateway_webhook_events_total{state="delivered"}')
+    )
+    return {"samples": samples, "warmup": WARMUP, "delivered": int(delivered), "variants": results}

@@ -49,7 +49,9 @@ def only(alert_type: AlertType) -> AlertEngine:
     return AlertEngine(SITE, SITE.alerts.model_copy(update=update))
 
 
-def speeder(speed_of: Callable[[float], float], station_m: float = 500.0) -> Callable[[float], list[Track]]:  # fmt: skip
+def speeder(
+    speed_of: Callable[[float], float], station_m: float = 500.0
+) -> Callable[[float], list[Track]]:
     return lambda t: [make_track(1, station_m, speed_of(t))]
 
 
@@ -109,8 +111,11 @@ def test_an_alert_starts_only_on_a_measured_track_not_a_coasting_one() -> None:
 
     def coasting_between(start_s: float, end_s: float) -> Callable[[float], list[Track]]:
         def tracks(t: float) -> list[Track]:
-            status = (TrackStatus.COASTING if start_s - 1e-9 <= t < end_s - 1e-9
-                      else TrackStatus.CONFIRMED)  # fmt: skip
+            status = (
+                TrackStatus.COASTING
+                if start_s - 1e-9 <= t < end_s - 1e-9
+                else TrackStatus.CONFIRMED
+            )
             return [make_track(1, 500.0, FAST, status=status)]
 
         return tracks
@@ -120,10 +125,22 @@ def test_an_alert_starts_only_on_a_measured_track_not_a_coasting_one() -> None:
     assert events[0].onset_stamp == 0.0
     # A track that meets the hold while coasting and is then deleted never alerts: the
     # short-lived track a wrong camera-radar pairing starts, coasting to its end.
-    events = run(only(AlertType.SPEEDING), stamps(3.0), lambda t: (
-        [] if t >= 1.5 - 1e-9
-        else [make_track(1, 500.0, FAST, status=TrackStatus.COASTING if t >= 0.6 - 1e-9
-                         else TrackStatus.CONFIRMED)]))  # fmt: skip
+    events = run(
+        only(AlertType.SPEEDING),
+        stamps(3.0),
+        lambda t: (
+            []
+            if t >= 1.5 - 1e-9
+            else [
+                make_track(
+                    1,
+                    500.0,
+                    FAST,
+                    status=TrackStatus.COASTING if t >= 0.6 - 1e-9 else TrackStatus.CONFIRMED,
+                )
+            ]
+        ),
+    )
     assert events == []
     # Once open, coasting neither clears nor holds back the episode.
     events = run(only(AlertType.SPEEDING), stamps(3.0), coasting_between(1.5, 2.5))
@@ -167,7 +184,9 @@ def test_severity_rise_gives_one_update_and_the_clear_carries_the_peak() -> None
 # --- hysteresis: no alert storms ---------------------------------------------------------------
 
 
-def oscillating(centre_mph: float, amplitude_mph: float, period_s: float) -> Callable[[float], float]:  # fmt: skip
+def oscillating(
+    centre_mph: float, amplitude_mph: float, period_s: float
+) -> Callable[[float], float]:
     """``v(t) = limit + (centre + amplitude sin(2 pi t / period)) mph``."""
     return lambda t: (
         LIMIT_55_MPS
@@ -249,7 +268,9 @@ def test_hard_braking_detected_on_a_noisy_profile(seed: int) -> None:
     engine = only(AlertType.HARD_BRAKING)
     times = stamps(10.0)
     noise = np.random.default_rng(seed).normal(0.0, 0.3, len(times))  # speed noise 0.3 m/s
-    speeds = {round(t, 6): max(0.0, braking_speed(t) + n) for t, n in zip(times, noise, strict=True)}  # fmt: skip
+    speeds = {
+        round(t, 6): max(0.0, braking_speed(t) + n) for t, n in zip(times, noise, strict=True)
+    }
     measured: list[float] = []
     events: list[AlertEvent] = []
     for k, t in enumerate(times):
@@ -283,7 +304,10 @@ def test_moderate_braking_is_not_hard_braking(seed: int) -> None:
     engine = only(AlertType.HARD_BRAKING)
     times = stamps(10.0)
     noise = np.random.default_rng(seed).normal(0.0, 0.3, len(times))
-    speeds = {round(t, 6): 30.0 - 3.0 * min(max(t - 2.0, 0.0), 4.0) + n for t, n in zip(times, noise, strict=True)}  # fmt: skip
+    speeds = {
+        round(t, 6): 30.0 - 3.0 * min(max(t - 2.0, 0.0), 4.0) + n
+        for t, n in zip(times, noise, strict=True)
+    }
     assert run(engine, times, lambda t: [make_track(1, 600.0, speeds[round(t, 6)])]) == []
 
 
@@ -320,7 +344,9 @@ def test_queue_episode_reports_the_tail_and_follows_it_upstream() -> None:
     def tracks(t: float) -> list[Track]:
         stopped = [make_track(i, 950.0 - 10.0 * i, 0.0) for i in range(1, 4)]  # 940, 930, 920
         # a car approaching at 20 m/s joins the queue at 910 m at t = 5 s
-        joiner = make_track(9, 810.0 + 20.0 * t, 20.0) if t < 5.0 - 1e-9 else make_track(9, 910.0, 0.0)  # fmt: skip
+        joiner = (
+            make_track(9, 810.0 + 20.0 * t, 20.0) if t < 5.0 - 1e-9 else make_track(9, 910.0, 0.0)
+        )
         return [*stopped, joiner]
 
     events = run(engine, stamps(8.0), tracks)
@@ -350,7 +376,12 @@ def test_events_become_valid_alert_messages() -> None:
         assert message.alert_id.startswith("alerts.1700000000-")
         assert message.episode_id == event.episode_id and message.phase == event.phase
         assert message.track is not None and message.track.track_id == 1
-        assert message.evidence["speed_limit_mps" if event.alert_type is AlertType.SPEEDING else "zone_limit_mps"] == LIMIT_55_MPS  # fmt: skip
+        assert (
+            message.evidence[
+                "speed_limit_mps" if event.alert_type is AlertType.SPEEDING else "zone_limit_mps"
+            ]
+            == LIMIT_55_MPS
+        )
         assert message.value_unit in {"m/s", "m/s^2"}
     with pytest.raises(ValueError, match="id_prefix"):
         AlertEngine(SITE, id_prefix="bad prefix/")

@@ -28,8 +28,12 @@ def test_a_speeder_gives_one_start_then_a_clear_and_the_devices_follow() -> None
         tracks = [make_track(1, 500.0 + 27.0 * t, FAST_MPS)] if t < 2.0 else []
         outputs = core.add(batch(t, tracks, k))
         assert outputs.accepted
-        starts += [a for a in outputs.alerts if a.alert_type is AlertType.SPEEDING and a.phase == "start"]  # fmt: skip
-        clears += [a for a in outputs.alerts if a.alert_type is AlertType.SPEEDING and a.phase == "clear"]  # fmt: skip
+        starts += [
+            a for a in outputs.alerts if a.alert_type is AlertType.SPEEDING and a.phase == "start"
+        ]
+        clears += [
+            a for a in outputs.alerts if a.alert_type is AlertType.SPEEDING and a.phase == "clear"
+        ]
         if outputs.devices is not None:
             device_states.append(outputs.devices)
         if t == pytest.approx(1.5):
@@ -89,8 +93,11 @@ def test_a_new_run_of_the_tracker_starts_the_engine_again_with_ids_going_on() ->
     def speeder(start_s: float, duration_s: float, first_cycle: int) -> list[Alert]:
         alerts: list[Alert] = []
         for k, t in enumerate(stamps(duration_s, rate_hz=10.0, start_s=start_s)):
-            tracks = [make_track(1, 500.0 + 27.0 * (t - start_s), FAST_MPS)] \
-                if t < start_s + duration_s - 0.5 else []  # fmt: skip
+            tracks = (
+                [make_track(1, 500.0 + 27.0 * (t - start_s), FAST_MPS)]
+                if t < start_s + duration_s - 0.5
+                else []
+            )
             alerts += core.add(batch(t, tracks, first_cycle + k)).alerts
         return alerts
 
@@ -99,7 +106,9 @@ def test_a_new_run_of_the_tracker_starts_the_engine_again_with_ids_going_on() ->
     assert [reason for reason, _ in reports] == ["out_of_order"]
     second = speeder(0.0, 3.0, 0)  # the new run, from 0 s
     assert core.runs == 2
-    starts = [a for a in first + second if a.phase == "start" and a.alert_type is AlertType.SPEEDING]
+    starts = [
+        a for a in first + second if a.phase == "start" and a.alert_type is AlertType.SPEEDING
+    ]
     # The new run is confirmed at its third batch (0.2 s): the hold runs from there.
     assert len(starts) == 2 and starts[1].stamp == pytest.approx(1.2)
     ids = [a.alert_id for a in first + second]

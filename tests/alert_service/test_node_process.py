@@ -34,8 +34,13 @@ PERIOD_S = 0.1
 T = TypeVar("T")
 
 
-def wait_for(subscription: Subscription[T], condition: Callable[[T], bool], what: str,
-             seen: list[T] | None = None, timeout_s: float = 20.0) -> T:  # fmt: skip
+def wait_for(
+    subscription: Subscription[T],
+    condition: Callable[[T], bool],
+    what: str,
+    seen: list[T] | None = None,
+    timeout_s: float = 20.0,
+) -> T:
     """The first message that meets ``condition``; every message received is kept in ``seen``."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
@@ -49,39 +54,49 @@ def wait_for(subscription: Subscription[T], condition: Callable[[T], bool], what
     pytest.fail(f"timed out after {timeout_s:.0f} s waiting for {what}")
 
 
-def speeder_batches(track_id: int, start_s: float, duration_s: float,
-                    first_cycle: int) -> list[TrackBatch]:  # fmt: skip
+def speeder_batches(
+    track_id: int, start_s: float, duration_s: float, first_cycle: int
+) -> list[TrackBatch]:
     """A car at 65 mph from station 450 m, one batch every 0.1 s."""
     count = round(duration_s / PERIOD_S)
     return [
-        batch(start_s + k * PERIOD_S,
-              [make_track(track_id, 450.0 + FAST_MPS * k * PERIOD_S, FAST_MPS)],
-              first_cycle + k)
+        batch(
+            start_s + k * PERIOD_S,
+            [make_track(track_id, 450.0 + FAST_MPS * k * PERIOD_S, FAST_MPS)],
+            first_cycle + k,
+        )
         for k in range(count)
-    ]  # fmt: skip
+    ]
 
 
 def test_node_process_alerts_once_drives_the_beacon_and_survives_bad_input(port: int) -> None:
     settings = BusSettings(listen_endpoints=[f"tcp/127.0.0.1:{port}"], connect_endpoints=[])
     env = {k: v for k, v in os.environ.items() if not k.startswith("WZ_")}
-    env.update(WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{port}", WZ_BUS_LISTEN_ENDPOINTS="",
-               WZ_STATUS_PERIOD_S="0.2", WZ_LOG_FORMAT="json",
-               WZ_ALERT_EPISODE_ID_PREFIX="proc")  # fmt: skip
+    env.update(
+        WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{port}",
+        WZ_BUS_LISTEN_ENDPOINTS="",
+        WZ_STATUS_PERIOD_S="0.2",
+        WZ_LOG_FORMAT="json",
+        WZ_ALERT_EPISODE_ID_PREFIX="proc",
+    )
     with Bus.open(settings, site=SITE.site_id, service="node-test") as bus:
         tracks = bus.publisher(bus.keys.tracks, TrackBatch)
         alerts = bus.subscribe(bus.keys.alerts_all, Alert)
         devices = bus.subscribe(bus.keys.devices_state, RoadsideDeviceState)
-        status = bus.subscribe(bus.keys.status("alert-service"), ServiceStatus, mode="ring",
-                               capacity=1)  # fmt: skip
-        node = subprocess.Popen([sys.executable, "-m", "wz_alert_service.node"], cwd=ROOT,
-                                env=env)  # fmt: skip
+        status = bus.subscribe(
+            bus.keys.status("alert-service"), ServiceStatus, mode="ring", capacity=1
+        )
+        node = subprocess.Popen([sys.executable, "-m", "wz_alert_service.node"], cwd=ROOT, env=env)
         try:
             assert tracks.wait_for_subscribers(30.0), "the node never subscribed to the tracks"
             received: list[Alert] = []
 
             def speeding(phase: str, track_id: int) -> Callable[[Alert], bool]:
-                return lambda a: (a.alert_type is AlertType.SPEEDING and a.phase == phase
-                                  and a.track_id == track_id)  # fmt: skip
+                return lambda a: (
+                    a.alert_type is AlertType.SPEEDING
+                    and a.phase == phase
+                    and a.track_id == track_id
+                )
 
             # 2 s of a speeder: the start comes after the 1 s hold, at the batch of 1.0 s.
             for message in speeder_batches(1, 0.0, 2.0, 0):
@@ -119,16 +134,21 @@ def test_node_process_alerts_once_drives_the_beacon_and_survives_bad_input(port:
 
             # Bad input: counted in the status, dropped, and the node carries on.
             tracks.put_bytes(b"\x00\x01 not a track batch")
-            tracks.put(TrackBatch(site="elsewhere", source_id="tracker", stamp=3.0,
-                                  cycle_index=30, tracks=[]))  # fmt: skip
+            tracks.put(
+                TrackBatch(
+                    site="elsewhere", source_id="tracker", stamp=3.0, cycle_index=30, tracks=[]
+                )
+            )
             tracks.put(batch(0.5, [make_track(9, 500.0, FAST_MPS)], 31))  # from the past
             name = f"{bus.keys.tracks}|"
             counted = wait_for(
                 status,
-                lambda s: all(s.invalid_counts.get(name + reason, 0) == 1
-                              for reason in ("bad_json", "wrong_site", "out_of_order")),
+                lambda s: all(
+                    s.invalid_counts.get(name + reason, 0) == 1
+                    for reason in ("bad_json", "wrong_site", "out_of_order")
+                ),
                 "bad_json, wrong_site and out_of_order each counted once",
-            )  # fmt: skip
+            )
             assert counted.state.value == "running"
 
             # Still alerting: a second speeder opens its own episode.
@@ -139,8 +159,9 @@ def test_node_process_alerts_once_drives_the_beacon_and_survives_bad_input(port:
             assert node.poll() is None
 
             # Exactly one start and one clear for the first car, nothing else on speeding.
-            speeding_events = [(a.phase, a.track_id) for a in received
-                               if a.alert_type is AlertType.SPEEDING]  # fmt: skip
+            speeding_events = [
+                (a.phase, a.track_id) for a in received if a.alert_type is AlertType.SPEEDING
+            ]
             assert speeding_events == [("start", 1), ("clear", 1), ("start", 2)]
             assert len({a.alert_id for a in received}) == len(received)
         finally:

@@ -56,9 +56,13 @@ SPEEDING_ENTER_MPS = LIMIT_55_MPS + 5.0 * MPH_TO_MPS
 
 @pytest.mark.parametrize(
     ("speed_mps", "fires"),
-    [(SPEEDING_ENTER_MPS - 0.01, False), (SPEEDING_ENTER_MPS, True), (SPEEDING_ENTER_MPS + 0.01, True)],
+    [
+        (SPEEDING_ENTER_MPS - 0.01, False),
+        (SPEEDING_ENTER_MPS, True),
+        (SPEEDING_ENTER_MPS + 0.01, True),
+    ],
     ids=["26.8124-below", "26.8224-at", "26.8324-above"],
-)  # fmt: skip
+)
 def test_speeding_enters_at_limit_plus_5_mph(speed_mps: float, fires: bool) -> None:
     finding = speeding(make_track(1, 800.0, speed_mps), ZONE, RULES.speeding)
     assert (finding is not None) is fires
@@ -78,9 +82,13 @@ SPEEDING_EXIT_MPS = LIMIT_55_MPS + 3.0 * MPH_TO_MPS
 
 @pytest.mark.parametrize(
     ("speed_mps", "holds"),
-    [(SPEEDING_EXIT_MPS - 0.01, False), (SPEEDING_EXIT_MPS, True), (SPEEDING_EXIT_MPS + 0.01, True)],
+    [
+        (SPEEDING_EXIT_MPS - 0.01, False),
+        (SPEEDING_EXIT_MPS, True),
+        (SPEEDING_EXIT_MPS + 0.01, True),
+    ],
     ids=["25.91832-below", "25.92832-at", "25.93832-above"],
-)  # fmt: skip
+)
 def test_open_speeding_stays_open_down_to_limit_plus_3_mph(speed_mps: float, holds: bool) -> None:
     finding = speeding(make_track(1, 800.0, speed_mps), ZONE, RULES.speeding, active=True)
     assert (finding is not None) is holds
@@ -243,7 +251,7 @@ def test_not_slowing_needs_the_speed_margin_and_the_advance_warning_point() -> N
     ("decel_mps2", "fires"),
     [(0.4 * G_MPS2 - 0.01, False), (0.4 * G_MPS2, True), (0.4 * G_MPS2 + 0.01, True)],
     ids=["3.91266-below", "3.92266-at", "3.93266-above"],
-)  # fmt: skip
+)
 def test_hard_braking_enters_at_0_4_g(decel_mps2: float, fires: bool) -> None:
     finding = hard_braking(make_track(1, 800.0, 20.0), -decel_mps2, ZONE, RULES.hard_braking)
     assert (finding is not None) is fires
@@ -389,10 +397,27 @@ def test_gap_and_ttc_closed_forms() -> None:
 
 @pytest.mark.parametrize(
     ("gap_m", "severity"),
-    [(15.01, None), (15.0, INFO), (14.99, INFO), (10.01, INFO), (10.0, W), (5.01, W), (5.0, C), (1.0, C)],
-    ids=["1.501s-none", "1.5s-info", "1.499s-info", "1.001s-info", "1.0s-warning",
-         "0.501s-warning", "0.5s-critical", "0.1s-critical"],
-)  # fmt: skip
+    [
+        (15.01, None),
+        (15.0, INFO),
+        (14.99, INFO),
+        (10.01, INFO),
+        (10.0, W),
+        (5.01, W),
+        (5.0, C),
+        (1.0, C),
+    ],
+    ids=[
+        "1.501s-none",
+        "1.5s-info",
+        "1.499s-info",
+        "1.001s-info",
+        "1.0s-warning",
+        "0.501s-warning",
+        "0.5s-critical",
+        "0.1s-critical",
+    ],
+)
 def test_short_ttc_bins_at_10_m_s_closing(gap_m: float, severity: AlertSeverity | None) -> None:
     # Follower 30 m/s, leader 20 m/s: closing 10 m/s, TTC = gap / 10.
     follower, leader = make_track(1, 900.0, 30.0), make_track(2, 900.0 + gap_m + 4.5, 20.0)
@@ -511,9 +536,15 @@ def test_queue_slow_threshold_hysteresis_and_severity() -> None:
 @pytest.mark.parametrize(
     ("station_m", "severity"),
     [(1200.99, None), (1201.0, W), (1299.99, W), (1300.0, C), (1699.99, C), (1700.0, None)],
-    ids=["taper-none", "buffer-start-warning", "buffer-end-warning", "activity-start-critical",
-         "activity-end-critical", "termination-none"],
-)  # fmt: skip
+    ids=[
+        "taper-none",
+        "buffer-start-warning",
+        "buffer-end-warning",
+        "activity-start-critical",
+        "activity-end-critical",
+        "termination-none",
+    ],
+)
 def test_intrusion_in_buffer_and_activity_area(
     station_m: float, severity: AlertSeverity | None
 ) -> None:

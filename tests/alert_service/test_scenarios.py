@@ -82,16 +82,25 @@ def braking_frames(decel_mps2: float, duration_s: float = 10.0) -> list[Frame]:
 def closing_frames(follower_mps: float = FOLLOWER_MPS, duration_s: float = 4.8) -> list[Frame]:
     """Follower (1) and leader (2): centres a gap plus a length apart at 0 s."""
     leader0 = 500.0 + GAP0_M + LENGTH_M
-    return [(t, [(1, 500.0 + follower_mps * t, follower_mps),
-                 (2, leader0 + LEADER_MPS * t, LEADER_MPS)]) for t in grid(duration_s)]  # fmt: skip
+    return [
+        (
+            t,
+            [
+                (1, 500.0 + follower_mps * t, follower_mps),
+                (2, leader0 + LEADER_MPS * t, LEADER_MPS),
+            ],
+        )
+        for t in grid(duration_s)
+    ]
 
 
 def exact_ttc_s(t: float) -> float:
     return (GAP0_M - CLOSING_MPS * t) / CLOSING_MPS
 
 
-def as_track(track_id: int, station_m: float, speed_mps: float,
-             rng: np.random.Generator | None) -> Track:  # fmt: skip
+def as_track(
+    track_id: int, station_m: float, speed_mps: float, rng: np.random.Generator | None
+) -> Track:
     """The truth as the tracker would publish it: exactly, or with its output noise."""
     offset_m = OPEN_LANE_D
     if rng is not None:
@@ -101,8 +110,9 @@ def as_track(track_id: int, station_m: float, speed_mps: float,
     return make_track(track_id, station_m, speed_mps, offset_m=offset_m, length_m=LENGTH_M)
 
 
-def run(frames: Iterable[Frame], alert_type: AlertType, seed: int | None = None,
-        track_id: int = 1) -> list[AlertEvent]:  # fmt: skip
+def run(
+    frames: Iterable[Frame], alert_type: AlertType, seed: int | None = None, track_id: int = 1
+) -> list[AlertEvent]:
     """The engine's events of one type for one track, exact truth (no seed) or noisy."""
     rng = None if seed is None else np.random.default_rng(seed)
     engine = AlertEngine(SITE)
@@ -239,15 +249,22 @@ def sumo_braking_truth(work_dir: Path) -> tuple[float, list[tuple[float, Vehicle
     from wz_simulator.traffic.demand import ROUTE_ID
     from wz_simulator.traffic.world import TrafficWorld
 
-    settings = SimulatorSettings(seed=3, work_dir=work_dir, vehicles_per_hour=1.0,
-                                 sensors_enabled=False)  # fmt: skip
+    settings = SimulatorSettings(
+        seed=3, work_dir=work_dir, vehicles_per_hour=1.0, sensors_enabled=False
+    )
     probe, cruise_mps = "probe", 28.0
     samples: list[tuple[float, VehicleTruth]] = []
     braking_since: float | None = None
     onset_s: float | None = None
     with TrafficWorld(SITE, settings) as world:
-        libsumo.vehicle.add(probe, ROUTE_ID, typeID="car_normal", depart="now",
-                            departLane="0", departSpeed=str(cruise_mps))  # fmt: skip
+        libsumo.vehicle.add(
+            probe,
+            ROUTE_ID,
+            typeID="car_normal",
+            depart="now",
+            departLane="0",
+            departSpeed=str(cruise_mps),
+        )
         libsumo.vehicle.setLaneChangeMode(probe, 0)
         libsumo.vehicle.setSpeedMode(probe, 0)
         libsumo.vehicle.setSpeed(probe, cruise_mps)
@@ -262,7 +279,9 @@ def sumo_braking_truth(work_dir: Path) -> tuple[float, list[tuple[float, Vehicle
             if braking_since is None and truth.station_m >= 500.0:
                 braking_since = now
             if braking_since is not None:
-                libsumo.vehicle.setSpeed(probe, max(0.0, cruise_mps - BRAKE_MPS2 * (now - braking_since)))  # fmt: skip
+                libsumo.vehicle.setSpeed(
+                    probe, max(0.0, cruise_mps - BRAKE_MPS2 * (now - braking_since))
+                )
             if onset_s is None and truth.accel_mps2 <= -BRAKE_MPS2 + 1e-6:
                 onset_s = previous_s
             if world.step_index % 2 == 0:

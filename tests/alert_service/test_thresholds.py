@@ -67,9 +67,17 @@ def test_partial_alerts_section_keeps_the_other_defaults() -> None:
         ({"speeding": {"margin_kph": 5.0}}, "margin_kph"),
         ({"late_merge": {"distance_m": -1.0}}, "distance_m"),
     ],
-    ids=["speed-bands", "braking-bands", "braking-hysteresis", "ttc-bins", "decel-bands",
-         "no-vehicles", "unknown-key", "negative-distance"],
-)  # fmt: skip
+    ids=[
+        "speed-bands",
+        "braking-bands",
+        "braking-hysteresis",
+        "ttc-bins",
+        "decel-bands",
+        "no-vehicles",
+        "unknown-key",
+        "negative-distance",
+    ],
+)
 def test_bad_thresholds_are_refused_naming_the_field(section: dict[str, Any], reason: str) -> None:
     raw = default_raw()
     raw["alerts"] = section

@@ -131,10 +131,22 @@ def test_core_imports_no_io_library() -> None:
 def test_conversion_inverts_the_simulated_echo() -> None:
     """The simulator's noise-free echo converts back onto its reflection point."""
     truth = VehicleTruth(
-        vehicle_id="car-1", vehicle_class=VehicleClass.CAR, x_m=6.0, y_m=910.0, z_m=0.75,
-        heading_rad=math.pi / 2.0, speed_mps=20.0, accel_mps2=0.0, length_m=4.5, width_m=1.8,
-        height_m=1.5, lane_index=1, station_m=0.0, offset_m=0.0, driver_profile="normal",
-    )  # fmt: skip
+        vehicle_id="car-1",
+        vehicle_class=VehicleClass.CAR,
+        x_m=6.0,
+        y_m=910.0,
+        z_m=0.75,
+        heading_rad=math.pi / 2.0,
+        speed_mps=20.0,
+        accel_mps2=0.0,
+        length_m=4.5,
+        width_m=1.8,
+        height_m=1.5,
+        lane_index=1,
+        station_m=0.0,
+        offset_m=0.0,
+        driver_profile="normal",
+    )
     echoes = RadarModel(RADAR, WEATHER_PRESETS["day"], seed=0, site_id="us75").echoes([truth])
     target = RadarTarget(
         range_m=float(echoes.range_m[0]),
@@ -150,9 +162,11 @@ def test_conversion_inverts_the_simulated_echo() -> None:
 def test_radar_covariance_matches_hand_computation() -> None:
     """Level radar looking east, target dead ahead: R = diag((sr r/rho)^2, (rho sa)^2)."""
     mount = SensorMount(
-        sensor_id="radar-east", pose=Pose(x_m=0.0, y_m=0.0, z_m=4.0),
-        intrinsics=RadarIntrinsics(range_noise_std_m=0.5, azimuth_noise_std_deg=1.0), rate_hz=10.0,
-    )  # fmt: skip
+        sensor_id="radar-east",
+        pose=Pose(x_m=0.0, y_m=0.0, z_m=4.0),
+        intrinsics=RadarIntrinsics(range_noise_std_m=0.5, azimuth_noise_std_deg=1.0),
+        rate_hz=10.0,
+    )
     settings = AssociationSettings(target_height_m=0.0)
     target = RadarTarget(range_m=5.0, azimuth_rad=0.0, radial_speed_mps=0.0, rcs_dbsm=0.0)
     (point,) = radar_targets_to_site([target], mount, settings)
@@ -188,8 +202,7 @@ def test_a_pair_with_an_unpaired_rival_within_the_margin_is_dropped(
     assert associate(distances, 13.82, ambiguity_margin_chi2=6.0) == ([(0, 0)] if paired else [])
     assert associate(distances, 13.82) == [(0, 0)]  # no check: the nearest, as before
     # The same from the echo's side: two boxes, one echo.
-    assert associate(distances.T, 13.82, ambiguity_margin_chi2=6.0) == (
-        [(0, 0)] if paired else [])
+    assert associate(distances.T, 13.82, ambiguity_margin_chi2=6.0) == ([(0, 0)] if paired else [])
     # A rival the assignment paired elsewhere is no rival (two cars one after the other).
     both = np.array([[1.0, 2.0], [2.0, 1.0]])
     assert associate(both, 13.82, ambiguity_margin_chi2=6.0) == [(0, 0), (1, 1)]
@@ -276,11 +289,14 @@ def test_moving_radar_target_far_from_cameras_becomes_radar_only() -> None:
     # The echo (8, 850) is a near face: the centre of a car-sized vehicle heading north is
     # about half a length further from the radar along its line of sight.
     bearing = bearing_from_radar(8.0, 850.0)
-    setback = max(2.3 * abs(math.cos(bearing - ROAD_HEADING_RAD)),
-                  0.9 * abs(math.sin(bearing - ROAD_HEADING_RAD)))  # fmt: skip
+    setback = max(
+        2.3 * abs(math.cos(bearing - ROAD_HEADING_RAD)),
+        0.9 * abs(math.sin(bearing - ROAD_HEADING_RAD)),
+    )
     assert setback == pytest.approx(2.3, abs=0.01)
     assert (radar_only.x_m, radar_only.y_m) == pytest.approx(
-        (8.0 + setback * math.cos(bearing), 850.0 + setback * math.sin(bearing)), abs=1e-6)
+        (8.0 + setback * math.cos(bearing), 850.0 + setback * math.sin(bearing)), abs=1e-6
+    )
     assert radar_only.speed_mps is not None and radar_only.speed_mps > 19.0
     assert_spd(radar_only.covariance_m2)
     along = np.array([math.cos(bearing), math.sin(bearing)])
@@ -346,11 +362,16 @@ def test_the_echo_is_on_the_near_face_and_the_fused_point_at_the_centre() -> Non
     face_x = x_m - 0.5 * length_m * math.cos(bearing)
     face_y = y_m - 0.5 * length_m * math.sin(bearing)
     truck = CameraObject(
-        local_id=1, x_m=x_m, y_m=y_m,
+        local_id=1,
+        x_m=x_m,
+        y_m=y_m,
         covariance_m2=polar_covariance(bearing, CAMERA_RANGE_STD_M, CAMERA_LATERAL_STD_M),
-        object_class=VehicleClass.TRUCK, score=0.9,
-        heading_rad=heading, length_m=length_m, width_m=width_m,
-    )  # fmt: skip
+        object_class=VehicleClass.TRUCK,
+        score=0.9,
+        heading_rad=heading,
+        length_m=length_m,
+        width_m=width_m,
+    )
     assert association.reflection_setback_m(truck, bearing) == pytest.approx(0.5 * length_m)
     scan = scan_of(radar_target(face_x, face_y))
 
@@ -359,13 +380,16 @@ def test_the_echo_is_on_the_near_face_and_the_fused_point_at_the_centre() -> Non
 
     no_size = CameraObject(1, x_m, y_m, truck.covariance_m2, VehicleClass.TRUCK, 0.9)
     (short,) = fuse_camera_radar([no_size], scan, RADAR, SETTINGS)
-    assert (short.x_m, short.y_m) == (pytest.approx(face_x, abs=1e-6),
-                                      pytest.approx(face_y, abs=1e-6))  # fmt: skip
+    assert (short.x_m, short.y_m) == (
+        pytest.approx(face_x, abs=1e-6),
+        pytest.approx(face_y, abs=1e-6),
+    )
 
 
 def test_setback_seen_side_on_is_half_the_width() -> None:
-    car = CameraObject(0, 0.0, 0.0, np.eye(2), VehicleClass.CAR, 0.9, heading_rad=0.0,
-                       length_m=4.6, width_m=1.8)  # fmt: skip
+    car = CameraObject(
+        0, 0.0, 0.0, np.eye(2), VehicleClass.CAR, 0.9, heading_rad=0.0, length_m=4.6, width_m=1.8
+    )
     assert association.reflection_setback_m(car, math.pi / 2) == pytest.approx(0.9)
     # At 45 degrees the end face's centre (2.3 cos 45) is nearer than the side's (0.9 sin 45).
     assert association.reflection_setback_m(car, math.pi / 4) == pytest.approx(2.3 / math.sqrt(2))

@@ -27,9 +27,11 @@ LEARNING_FRAMES = 15
 FRAME_PERIOD_S = 0.1
 # Pixel areas scaled from the 1200 x 1200 defaults by (400 / 1200)^2.
 SETTINGS = BackgroundSubtractionSettings(
-    min_blob_area_px=16, score_area_scale_px=170.0, close_kernel_px=5,
+    min_blob_area_px=16,
+    score_area_scale_px=170.0,
+    close_kernel_px=5,
     warm_up_frames=LEARNING_FRAMES,
-)  # fmt: skip
+)
 
 
 def vehicle(
@@ -38,11 +40,21 @@ def vehicle(
     """A vehicle heading north on the road upstream of the mast (which looks south)."""
     length, width, height = size_lwh_m
     return VehicleTruth(
-        vehicle_id=vehicle_id, vehicle_class="truck" if length > 7.5 else "car", x_m=x_m,
-        y_m=y_m, heading_rad=math.pi / 2, speed_mps=0.0, accel_mps2=0.0, length_m=length,
-        width_m=width, height_m=height, lane_index=0, station_m=0.0, offset_m=0.0,
+        vehicle_id=vehicle_id,
+        vehicle_class="truck" if length > 7.5 else "car",
+        x_m=x_m,
+        y_m=y_m,
+        heading_rad=math.pi / 2,
+        speed_mps=0.0,
+        accel_mps2=0.0,
+        length_m=length,
+        width_m=width,
+        height_m=height,
+        lane_index=0,
+        station_m=0.0,
+        offset_m=0.0,
         driver_profile="normal",
-    )  # fmt: skip
+    )
 
 
 # Mast at (7.5, 980) facing south; lanes at x = -1.83 and +1.83. In the image the two cars sit

@@ -65,8 +65,18 @@ def test_a_bad_file_is_a_line_with_the_error_and_exit_code_1(
     small = tmp_path / "small.png"
     cv2.imwrite(str(small), np.zeros((100, 100, 3), dtype=np.uint8))
     good = _image(tmp_path, "good.jpg")
-    code = main(["--model", str(model), "--backend", "yolo", str(broken), str(small),
-                 str(tmp_path / "missing.jpg"), str(good)])  # fmt: skip
+    code = main(
+        [
+            "--model",
+            str(model),
+            "--backend",
+            "yolo",
+            str(broken),
+            str(small),
+            str(tmp_path / "missing.jpg"),
+            str(good),
+        ]
+    )
     lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     assert code == 1
     assert "not a decodable image" in lines[0]["error"]
@@ -93,9 +103,21 @@ def test_a_video_file_gives_its_frames_with_their_times(
 
 def test_a_missing_model_is_a_start_up_error(tmp_path: Path) -> None:
     result = subprocess.run(
-        [sys.executable, "-m", "wz_cli.main", "detect-camera", "--backend", "yolo", "--model",
-         str(tmp_path / "none.onnx"), str(tmp_path / "x.jpg")],
-        capture_output=True, text=True, timeout=120, check=False,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "wz_cli.main",
+            "detect-camera",
+            "--backend",
+            "yolo",
+            "--model",
+            str(tmp_path / "none.onnx"),
+            str(tmp_path / "x.jpg"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
     assert result.returncode == 2
     assert "no such file" in result.stderr and "never downloads" in result.stderr

@@ -39,7 +39,7 @@ SETTINGS = CameraDetectorSettings(
     backend="background-subtraction",
     background=BackgroundSubtractionSettings(
         min_blob_area_px=16, score_area_scale_px=170.0, close_kernel_px=5, warm_up_frames=WARM_UP
-    )
+    ),
 )
 
 
@@ -48,11 +48,21 @@ def vehicle(
 ) -> VehicleTruth:
     length, width, height = lwh_m
     return VehicleTruth(
-        vehicle_id=vehicle_id, vehicle_class="truck" if length > 7.5 else "car", x_m=x_m,
-        y_m=y_m, heading_rad=math.pi / 2, speed_mps=SPEED_MPS, accel_mps2=0.0, length_m=length,
-        width_m=width, height_m=height, lane_index=0, station_m=0.0, offset_m=0.0,
+        vehicle_id=vehicle_id,
+        vehicle_class="truck" if length > 7.5 else "car",
+        x_m=x_m,
+        y_m=y_m,
+        heading_rad=math.pi / 2,
+        speed_mps=SPEED_MPS,
+        accel_mps2=0.0,
+        length_m=length,
+        width_m=width,
+        height_m=height,
+        lane_index=0,
+        station_m=0.0,
+        offset_m=0.0,
         driver_profile="normal",
-    )  # fmt: skip
+    )
 
 
 # Upstream of the mast (7.5, 980), which looks south; the boxes do not touch in the image.
@@ -85,9 +95,13 @@ def frame(model: CameraModel, index: int, traffic: bool) -> tuple[CameraFrameMet
         vehicle_boxes(vehicles) if vehicles else [], [v.vehicle_id for v in vehicles], stamp
     )
     meta = CameraFrameMeta(
-        site=SITE.site_id, source_id=model_id(), stamp=stamp, frame_index=index,
-        width_px=SIDE_PX, height_px=SIDE_PX,
-    )  # fmt: skip
+        site=SITE.site_id,
+        source_id=model_id(),
+        stamp=stamp,
+        frame_index=index,
+        width_px=SIDE_PX,
+        height_px=SIDE_PX,
+    )
     return meta, encode_jpeg(rendered.image)
 
 
@@ -258,12 +272,19 @@ def test_camera_only_objects_ranged_beyond_max_range_are_not_published() -> None
     def at(range_m: float, source: str) -> FusedObject:
         return FusedObject(
             source=source,  # type: ignore[arg-type]
-            x_m=mount.x_m + range_m * math.cos(heading), y_m=mount.y_m + range_m * math.sin(heading),
-            covariance_m2=np.eye(2), object_class=VehicleClass.CAR, score=0.9, speed_mps=None,
-            camera_local_id=1, radar_target_index=None,
-        )  # fmt: skip
+            x_m=mount.x_m + range_m * math.cos(heading),
+            y_m=mount.y_m + range_m * math.sin(heading),
+            covariance_m2=np.eye(2),
+            object_class=VehicleClass.CAR,
+            score=0.9,
+            speed_mps=None,
+            camera_local_id=1,
+            radar_target_index=None,
+        )
 
     fused = [at(limit - 1.0, "camera"), at(limit + 1.0, "camera"), at(limit + 1.0, "camera+radar")]
     kept = detector._within_range(fused)
     assert [(o.source, round(math.hypot(o.x_m - mount.x_m, o.y_m - mount.y_m))) for o in kept] == [
-        ("camera", round(limit - 1.0)), ("camera+radar", round(limit + 1.0))]  # fmt: skip
+        ("camera", round(limit - 1.0)),
+        ("camera+radar", round(limit + 1.0)),
+    ]

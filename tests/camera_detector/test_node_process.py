@@ -50,10 +50,11 @@ VEHICLES = (
 def traffic_at(stamp_s: float) -> list[VehicleTruth]:
     """The test's three vehicles driving north at their speed, at ``stamp_s``."""
     return [
-        vehicle(v.vehicle_id, v.x_m, v.y_m + v.speed_mps * stamp_s,
-                (v.length_m, v.width_m, v.height_m))
+        vehicle(
+            v.vehicle_id, v.x_m, v.y_m + v.speed_mps * stamp_s, (v.length_m, v.width_m, v.height_m)
+        )
         for v in VEHICLES
-    ]  # fmt: skip
+    ]
 
 
 def wait_status(
@@ -73,8 +74,12 @@ def test_node_process_detects_fuses_and_survives_bad_input(port: int) -> None:
     radar = RadarModel(RADAR, WEATHER_PRESETS["day"], seed=4, site_id=SITE.site_id)
     settings = BusSettings(listen_endpoints=[f"tcp/127.0.0.1:{port}"], connect_endpoints=[])
     env = {k: v for k, v in os.environ.items() if not k.startswith("WZ_")}
-    env.update(WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{port}", WZ_BUS_LISTEN_ENDPOINTS="",
-               WZ_STATUS_PERIOD_S="0.2", WZ_LOG_FORMAT="json")  # fmt: skip
+    env.update(
+        WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{port}",
+        WZ_BUS_LISTEN_ENDPOINTS="",
+        WZ_STATUS_PERIOD_S="0.2",
+        WZ_LOG_FORMAT="json",
+    )
     with Bus.open(settings, site=SITE.site_id, service="node-test") as bus:
         raw_key = bus.keys.raw_camera(CAMERA.sensor_id)
         radar_key = bus.keys.raw_radar(RADAR.sensor_id)
@@ -84,8 +89,9 @@ def test_node_process_detects_fuses_and_survives_bad_input(port: int) -> None:
         status = bus.subscribe(
             bus.keys.status("camera-detector"), ServiceStatus, mode="ring", capacity=1
         )
-        node = subprocess.Popen([sys.executable, "-m", "wz_camera_detector.node"], cwd=ROOT,
-                                env=env)  # fmt: skip
+        node = subprocess.Popen(
+            [sys.executable, "-m", "wz_camera_detector.node"], cwd=ROOT, env=env
+        )
         try:
             assert frames.wait_for_subscribers(60.0), "the node never subscribed"
             assert scans.wait_for_subscribers(10.0), "the node never subscribed to the radar"
@@ -96,12 +102,18 @@ def test_node_process_detects_fuses_and_survives_bad_input(port: int) -> None:
                 truth = traffic_at(stamp_s)
                 scans.put(radar.scan(truth, stamp_s, index).scan)
                 if jpeg is None:
-                    image = camera.render(vehicle_boxes(truth), [v.vehicle_id for v in truth],
-                                          stamp_s).image  # fmt: skip
+                    image = camera.render(
+                        vehicle_boxes(truth), [v.vehicle_id for v in truth], stamp_s
+                    ).image
                     jpeg = encode_jpeg(image)
-                meta = CameraFrameMeta(site=SITE.site_id, source_id=CAMERA.sensor_id,
-                                       stamp=stamp_s, frame_index=index, width_px=size,
-                                       height_px=size)  # fmt: skip
+                meta = CameraFrameMeta(
+                    site=SITE.site_id,
+                    source_id=CAMERA.sensor_id,
+                    stamp=stamp_s,
+                    frame_index=index,
+                    width_px=size,
+                    height_px=size,
+                )
                 frames.put_bytes(encode_camera_frame(meta, jpeg))
                 index += 1
 
@@ -115,8 +127,9 @@ def test_node_process_detects_fuses_and_survives_bad_input(port: int) -> None:
             truth = traffic_at(batch.stamp)
             assert len(batch.detections) == len(truth)
             for v in truth:
-                nearest = min(batch.detections,
-                              key=lambda d: np.hypot(d.x_m - v.x_m, d.y_m - v.y_m))  # fmt: skip
+                nearest = min(
+                    batch.detections, key=lambda d: np.hypot(d.x_m - v.x_m, d.y_m - v.y_m)
+                )
                 assert np.hypot(nearest.x_m - v.x_m, nearest.y_m - v.y_m) < 1.5, (v, nearest)
                 assert nearest.object_class == v.vehicle_class
                 assert nearest.speed_mps == pytest.approx(v.speed_mps, abs=2.0)  # radar paired
@@ -142,8 +155,9 @@ def test_node_process_detects_fuses_and_survives_bad_input(port: int) -> None:
             send(stamp, jpeg=small.tobytes(), size=640)  # honest size, but smaller than the ROI
             counted(raw_key, "wrong_size")
             nan_scan = json.loads(radar.scan(traffic_at(stamp), stamp, 99).scan.model_dump_json())
-            nan_scan["targets"] = [{"range_m": "NaN", "azimuth_rad": 0.1,
-                                    "radial_speed_mps": -20.0, "rcs_dbsm": 10.0}]  # fmt: skip
+            nan_scan["targets"] = [
+                {"range_m": "NaN", "azimuth_rad": 0.1, "radial_speed_mps": -20.0, "rcs_dbsm": 10.0}
+            ]
             scans.put_bytes(json.dumps(nan_scan).encode())
             counted(radar_key, "invalid")
 

@@ -65,8 +65,9 @@ def _fake_dataset(root: Path, prefix: str) -> None:
             _line(0, 100, 60, 140, 80, 160, 120) + "\n"
         )
         (root / "truth" / split / f"{prefix}-{split}.json").write_text(json.dumps({"vehicles": []}))
-    (root / "data.yaml").write_text("path: x\ntrain: images/train\nval: images/val\n"
-                                    "names:\n  0: car\n  1: truck\n")  # fmt: skip
+    (root / "data.yaml").write_text(
+        "path: x\ntrain: images/train\nval: images/val\nnames:\n  0: car\n  1: truck\n"
+    )
     (root / "manifest.json").write_text(json.dumps({"seed": prefix}))
 
 

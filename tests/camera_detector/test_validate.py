@@ -49,8 +49,11 @@ def test_match_each_vehicle_once_by_score_then_iou() -> None:
     outcome = match_frame(truths, preds, [True, True])
     # 0.9 takes vehicle 0, 0.8 vehicle 1, 0.7 is nowhere (false), 0.6 is a duplicate (false).
     assert list(zip(outcome.scores, outcome.true, strict=True)) == [
-        (0.9, True), (0.8, True), (0.7, False), (0.6, False)
-    ]  # fmt: skip
+        (0.9, True),
+        (0.8, True),
+        (0.7, False),
+        (0.6, False),
+    ]
     assert outcome.n_truth == 2
     assert outcome.hit_scores == [0.9, 0.8]
 
@@ -86,8 +89,13 @@ def test_threshold_counts_and_recall_by_range_group() -> None:
     preds = [_pred(0.0, 0.9), _pred(100.0, 0.1), _pred(300.0, 0.5)]
     outcome.extend(match_frame(truths, preds, [True, True], groups=groups))
     counts = at_threshold(outcome, 0.25)
-    assert counts == {"precision": 0.5, "recall": 0.5, "true_positives": 1,
-                      "false_positives": 1, "false_negatives": 1}  # fmt: skip
+    assert counts == {
+        "precision": 0.5,
+        "recall": 0.5,
+        "true_positives": 1,
+        "false_positives": 1,
+        "false_negatives": 1,
+    }
     assert recall_by_group(outcome, 0.25) == {
         "0-25 m": {"vehicles": 1, "recall": 1.0},
         "75-100 m": {"vehicles": 1, "recall": 0.0},

@@ -117,8 +117,9 @@ CAR_BOX = VehicleShape(LENGTH_M, WIDTH_M, HEIGHT_M)
 CAR_ON_WHEELS = VehicleShape(LENGTH_M, WIDTH_M, HEIGHT_M, clearance_m=0.28, wheel_inset_m=0.53)
 
 
-def labelled_box(camera: PinholeCamera, centre_xy_m: tuple[float, float], heading_rad: float,
-                 shape: VehicleShape) -> np.ndarray:  # fmt: skip
+def labelled_box(
+    camera: PinholeCamera, centre_xy_m: tuple[float, float], heading_rad: float, shape: VehicleShape
+) -> np.ndarray:
     """The box a label around the vehicle's pixels has: its exact box grown by half a pixel."""
     exact = vehicle_image_boxes(camera, [centre_xy_m], heading_rad, shape)[0]
     return exact + PIXEL_EDGE_INSET_PX * np.array([-1.0, -1.0, 1.0, 1.0])

@@ -339,8 +339,9 @@ def _with_metadata(path: Path, **props: str) -> Path:
 def test_class_names_and_roi_come_from_the_model_metadata(tmp_path: Path) -> None:
     model_path = _with_metadata(
         _fixed_output_model(tmp_path / "yolo.onnx", _hand_made_output()),
-        wz_class_names="car,truck", wz_roi_xyxy_px="100,200,740,840",
-    )  # fmt: skip
+        wz_class_names="car,truck",
+        wz_roi_xyxy_px="100,200,740,840",
+    )
     detector = YoloOnnxDetector(model_path)
     assert detector.class_names == ("car", "truck")
     assert detector.roi_xyxy_px == (100, 200, 740, 840)
@@ -357,8 +358,9 @@ def test_class_names_and_roi_come_from_the_model_metadata(tmp_path: Path) -> Non
 def test_explicit_roi_and_names_override_the_metadata(tmp_path: Path) -> None:
     model_path = _with_metadata(
         _fixed_output_model(tmp_path / "yolo.onnx", _hand_made_output()),
-        wz_class_names="car,truck", wz_roi_xyxy_px="100,200,740,840",
-    )  # fmt: skip
+        wz_class_names="car,truck",
+        wz_roi_xyxy_px="100,200,740,840",
+    )
     detector = YoloOnnxDetector(model_path, ("auto", "lorry"), roi_xyxy_px=(0, 0, 1280, 720))
     assert detector.class_names == ("auto", "lorry")
     frame = np.zeros((720, 1280, 3), dtype=np.uint8)
@@ -393,9 +395,10 @@ def test_a_frame_smaller_than_the_roi_or_not_bgr_is_refused(tmp_path: Path) -> N
 def test_far_field_tile_adds_magnified_detections_and_drops_cut_ones(tmp_path: Path) -> None:
     model_path = _with_metadata(
         _fixed_output_model(tmp_path / "yolo.onnx", _hand_made_output()),
-        wz_class_names="car,truck", wz_roi_xyxy_px="0,0,640,640",
+        wz_class_names="car,truck",
+        wz_roi_xyxy_px="0,0,640,640",
         wz_tiles_xyxy_px="600,600,760,760",
-    )  # fmt: skip
+    )
     detector = YoloOnnxDetector(model_path)
     assert detector.tiles_xyxy_px == ((600, 600, 760, 760),)
     boxes = {d.box_xyxy_px for d in detector.detect(np.zeros((1000, 1000, 3), dtype=np.uint8))}
@@ -403,8 +406,11 @@ def test_far_field_tile_adds_magnified_detections_and_drops_cut_ones(tmp_path: P
     # input, so A and C come again at a quarter size, shifted by (600, 600); the tile's E
     # touches the tile's right edge (a cut vehicle) and is dropped.
     assert boxes == {
-        (80.0, 190.0, 120.0, 210.0), (250.0, 290.0, 350.0, 350.0), (610.0, 140.0, 640.0, 160.0),
-        (620.0, 647.5, 630.0, 652.5), (662.5, 672.5, 687.5, 687.5),
-    }  # fmt: skip
+        (80.0, 190.0, 120.0, 210.0),
+        (250.0, 290.0, 350.0, 350.0),
+        (610.0, 140.0, 640.0, 160.0),
+        (620.0, 647.5, 630.0, 652.5),
+        (662.5, 672.5, 687.5, 687.5),
+    }
     with pytest.raises(ValueError, match="tile"):
         YoloOnnxDetector(model_path, tiles_xyxy_px=[(10, 10, 5, 20)])

@@ -60,8 +60,9 @@ def test_tcp_endpoints_are_parsed_for_the_readiness_check() -> None:
 
 
 def test_stack_selection_and_child_environment(tmp_path: Path) -> None:
-    assert [spec.name for spec in select(None)] == [spec.name for spec in STACK
-                                                     if spec.name != "drivers"]  # fmt: skip
+    assert [spec.name for spec in select(None)] == [
+        spec.name for spec in STACK if spec.name != "drivers"
+    ]
     assert [spec.name for spec in select(["drivers", "gateway"])] == ["drivers", "gateway"]
     assert [spec.name for spec in select(["simulator"])] == ["simulator"]
     with pytest.raises(ValueError, match="no service named nope"):
@@ -86,7 +87,8 @@ def test_stack_selection_and_child_environment(tmp_path: Path) -> None:
     assert "WZ_LIDAR_BACKGROUND_FILE" not in lidar.child_env({}, options)
     with_state = dataclasses.replace(options, state_dir=tmp_path / "state")
     assert lidar.child_env({}, with_state)["WZ_LIDAR_BACKGROUND_FILE"] == str(
-        (tmp_path / "state").resolve() / "lidar-detector" / "background.npz")  # fmt: skip
+        (tmp_path / "state").resolve() / "lidar-detector" / "background.npz"
+    )
     mine = {"WZ_LIDAR_BACKGROUND_FILE": "/var/lib/bg.npz"}
     assert lidar.child_env(mine, with_state)["WZ_LIDAR_BACKGROUND_FILE"] == "/var/lib/bg.npz"
     assert all(spec.standby for spec in STACK if not spec.optional)

@@ -106,13 +106,14 @@ def test_up_with_the_edge_box_topology(tmp_path: Path) -> None:
     log_path = tmp_path / "up.log"
     with log_path.open("wb") as log:
         up = subprocess.Popen(
-            wz_argv("up", "--topology", str(EDGE_BOX), "--only", "alert-service",
-                    "--listen", endpoint),
+            wz_argv(
+                "up", "--topology", str(EDGE_BOX), "--only", "alert-service", "--listen", endpoint
+            ),
             cwd=ROOT,
             env=wz_env(WZ_ALERT_STATUS_PERIOD_S="0.5"),
             stdout=log,
             stderr=subprocess.STDOUT,
-        )  # fmt: skip
+        )
         with running(up):
 
             def alert_service_alive() -> bool:

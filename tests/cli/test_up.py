@@ -253,8 +253,9 @@ def test_a_crashed_service_restarts_from_its_warm_standby(
     -9 of the child wakes the standby: a new process that runs the module as `python -m`
     would, arguments included. Stopping the stack ends the standby started after it."""
     monkeypatch.setattr(supervisor_module, "STANDBY_AFTER_S", 0.5)
-    spec = ServiceSpec("server", "tests.cli.stub_service", "serves", "X_",
-                       args=("serve", "--flag"), standby=True)  # fmt: skip
+    spec = ServiceSpec(
+        "server", "tests.cli.stub_service", "serves", "X_", args=("serve", "--flag"), standby=True
+    )
     options = StackOptions(f"tcp/127.0.0.1:{free_port()}", DEFAULT_SITE_PATH)
     stop = threading.Event()
     supervisor = Supervisor([spec], options, stop, base_env=wz_env(PYTHONPATH=str(ROOT)))
@@ -287,5 +288,7 @@ def test_a_crashed_service_restarts_from_its_warm_standby(
     assert "wz-standby-ready" not in out  # the supervisor takes that line
     messages = [record.getMessage() for record in caplog.records]
     assert f"started server (pid {standby}) from its warm standby, restart #1" in messages
-    assert any(m.startswith(f"standby of server (pid {standby}) ready: its imports took ")
-               for m in messages)  # fmt: skip
+    assert any(
+        m.startswith(f"standby of server (pid {standby}) ready: its imports took ")
+        for m in messages
+    )

@@ -42,12 +42,14 @@ class Host:
     def argv(self, argv: Sequence[str]) -> list[str]:
         return ["ip", "netns", "exec", self.name, *argv]
 
-    def popen(self, argv: Sequence[str], *, env: Mapping[str, str], cwd: Path,
-              log: Path) -> subprocess.Popen[bytes]:  # fmt: skip
+    def popen(
+        self, argv: Sequence[str], *, env: Mapping[str, str], cwd: Path, log: Path
+    ) -> subprocess.Popen[bytes]:
         """Start ``argv`` in this namespace, stdout and stderr to ``log`` (appended)."""
         with log.open("ab") as out:
-            return subprocess.Popen(self.argv(argv), env=dict(env), cwd=cwd, stdout=out,
-                                    stderr=subprocess.STDOUT)  # fmt: skip
+            return subprocess.Popen(
+                self.argv(argv), env=dict(env), cwd=cwd, stdout=out, stderr=subprocess.STDOUT
+            )
 
 
 @dataclass

@@ -69,7 +69,9 @@ def load_compose() -> dict[str, Any]:
     return loaded
 
 
-_VARIABLE = re.compile(r"\$\$|\$\{(?P<name>[A-Za-z_][A-Za-z0-9_]*)(?:(?P<op>:?[-?])(?P<arg>[^}]*))?\}")
+_VARIABLE = re.compile(
+    r"\$\$|\$\{(?P<name>[A-Za-z_][A-Za-z0-9_]*)(?:(?P<op>:?[-?])(?P<arg>[^}]*))?\}"
+)
 
 
 def interpolate(value: Any, env: Mapping[str, str]) -> Any:
@@ -371,8 +373,10 @@ def _distribution_of(module: str) -> tuple[str, list[str]]:
     for folder in Path(found.origin).parents:
         if (folder / "pyproject.toml").is_file():
             project = tomllib.loads((folder / "pyproject.toml").read_text("utf-8"))["project"]
-            dependencies = [re.split(r"[\s<>=!~\[;]", dep, maxsplit=1)[0] for dep in
-                            project.get("dependencies", [])]  # fmt: skip
+            dependencies = [
+                re.split(r"[\s<>=!~\[;]", dep, maxsplit=1)[0]
+                for dep in project.get("dependencies", [])
+            ]
             return str(project["name"]), dependencies
     raise AssertionError(f"no pyproject.toml above {found.origin}")
 
@@ -399,8 +403,11 @@ def test_dockerfile_without_build_args_is_refused() -> None:
 
 def test_the_per_service_dockerfiles_are_gone() -> None:
     """One Dockerfile: one a service folder kept for itself would drift from it."""
-    found = [path for top in ("shared", "services", "cli", "eval", "deploy", "tests")
-             for path in (ROOT / top).rglob("*Dockerfile*")]  # fmt: skip
+    found = [
+        path
+        for top in ("shared", "services", "cli", "eval", "deploy", "tests")
+        for path in (ROOT / top).rglob("*Dockerfile*")
+    ]
     assert found == [DOCKERFILE]
     assert not (ROOT / "Dockerfile").exists()
 
@@ -416,8 +423,9 @@ def test_dockerfiles_are_multi_stage_non_root_and_locked(services: dict[str, Ser
         assert any(c.startswith(f"--from={build_stage[2]} ") for c in copies), (
             f"{where}: the run stage copies the environment built in stage {build_stage[2]!r}"
         )
-        assert not any("uv sync" in rest or "pip install" in rest
-                       for rest in dockerfile.instructions("RUN")), f"{where}: no build tools"  # fmt: skip
+        assert not any(
+            "uv sync" in rest or "pip install" in rest for rest in dockerfile.instructions("RUN")
+        ), f"{where}: no build tools"
         users = dockerfile.instructions("USER")
         assert users and users[-1] not in ROOT_USERS, f"{where}: runs as root"
         assert "user" not in service.config or service.config["user"] not in ROOT_USERS, where
@@ -486,8 +494,7 @@ def test_router_probe_targets_the_port_it_listens_on(services: dict[str, Service
     router = services[ROUTER.name]
     command = router.config["command"]
     assert "--listen" not in command  # the config file says it
-    (listen,) = _zenoh_endpoints(_mounted(router, command[command.index("--config") + 1]),
-                                 "listen")  # fmt: skip
+    (listen,) = _zenoh_endpoints(_mounted(router, command[command.index("--config") + 1]), "listen")
     port = int(listen.rsplit(":", 1)[1])
     assert listen == f"tcp/0.0.0.0:{port}"
     assert f"('127.0.0.1', {port})" in _probe(router)[2]
@@ -580,7 +587,9 @@ def test_limits_fit_the_edge_box(compose: dict[str, Any], services: dict[str, Se
         assert 0 < float(limits["cpus"]) <= float(box["cpus"]), service.name
         assert memory_bytes(limits["memory"]) >= 128 * 2**20, f"{service.name}: too small to run"
         total += memory_bytes(limits["memory"])
-    assert total <= budget, f"limits add up to {total / 2**30:.2f} GiB, the box has {budget / 2**30:.2f}"
+    assert total <= budget, (
+        f"limits add up to {total / 2**30:.2f} GiB, the box has {budget / 2**30:.2f}"
+    )
 
 
 # --- profiles, volumes, ports -------------------------------------------------------------
@@ -827,9 +836,12 @@ def test_regional_file_is_valid_compose_and_serves_every_site() -> None:
     assert schema_errors(raw) == []
     assert schema_errors(interpolate(raw, STAND_IN_ENV)) == []
     router, gateway = raw["services"]["router"], raw["services"]["gateway"]
-    mounts = {target: REGIONAL_FILE.parent / source for service in (router, gateway)
-              for source, target, *_ in (str(v).split(":") for v in service["volumes"])
-              if source.startswith(".")}  # fmt: skip
+    mounts = {
+        target: REGIONAL_FILE.parent / source
+        for service in (router, gateway)
+        for source, target, *_ in (str(v).split(":") for v in service["volumes"])
+        if source.startswith(".")
+    }
     config = router["command"][router["command"].index("--config") + 1]
     assert config == "/etc/wz/zenoh/regional-router.json5"
     assert (mounts["/etc/wz/zenoh"] / "regional-router.json5").is_file()
@@ -842,8 +854,13 @@ def test_regional_file_is_valid_compose_and_serves_every_site() -> None:
         assert service["healthcheck"]["test"][0] == "CMD" and service["restart"] in RESTART_POLICIES
     from wz_gateway.settings import GatewaySettings
 
-    unknown = [name for name in env if name not in READ_BY_LOGGING
-               and not is_setting(name, GatewaySettings) and not is_setting(name, BusSettings)]
+    unknown = [
+        name
+        for name in env
+        if name not in READ_BY_LOGGING
+        and not is_setting(name, GatewaySettings)
+        and not is_setting(name, BusSettings)
+    ]
     assert unknown == []
 
 

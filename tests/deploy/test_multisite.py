@@ -72,8 +72,9 @@ def port_accepts(host: str, port: int) -> bool:
 
 def base_env(**extra: str) -> dict[str, str]:
     env = {k: v for k, v in os.environ.items() if not k.startswith("WZ_")}
-    env.update({"WZ_LOG_FORMAT": "json", "PYTHONUNBUFFERED": "1", "WZ_STATUS_PERIOD_S": "0.5",
-                **extra})  # fmt: skip
+    env.update(
+        {"WZ_LOG_FORMAT": "json", "PYTHONUNBUFFERED": "1", "WZ_STATUS_PERIOD_S": "0.5", **extra}
+    )
     return env
 
 
@@ -90,41 +91,59 @@ class Trailer:
     router: subprocess.Popen[bytes] | None = None
 
     def service_env(self, **extra: str) -> dict[str, str]:
-        return base_env(WZ_BUS_CONFIG_FILE=str(ZENOH / "edge-service.json5"),
-                        WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{ROUTER_PORT}",
-                        WZ_SITE_FILE=str(self.site_file), **extra)  # fmt: skip
+        return base_env(
+            WZ_BUS_CONFIG_FILE=str(ZENOH / "edge-service.json5"),
+            WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{ROUTER_PORT}",
+            WZ_SITE_FILE=str(self.site_file),
+            **extra,
+        )
 
     def start_router(self) -> subprocess.Popen[bytes]:
         self.router = self.host.popen(
-            [sys.executable, "-m", "wz_cli.main", "router", "--config",
-             str(ZENOH / "trailer-router.json5"), "--listen", f"tcp/127.0.0.1:{ROUTER_PORT}",
-             "--connect", self.uplink],
-            env=base_env(), cwd=ROOT, log=self.log_dir / f"{self.site}-router.log",
-        )  # fmt: skip
+            [
+                sys.executable,
+                "-m",
+                "wz_cli.main",
+                "router",
+                "--config",
+                str(ZENOH / "trailer-router.json5"),
+                "--listen",
+                f"tcp/127.0.0.1:{ROUTER_PORT}",
+                "--connect",
+                self.uplink,
+            ],
+            env=base_env(),
+            cwd=ROOT,
+            log=self.log_dir / f"{self.site}-router.log",
+        )
         return self.router
 
     def alert_ids(self) -> list[str]:
         """What the trailer's own gateway stored, read from its database file."""
         with sqlite3.connect(f"file:{self.data_dir / 'gateway.sqlite3'}?mode=ro", uri=True) as db:
-            rows = db.execute("SELECT alert_id FROM alerts WHERE site = ? ORDER BY id",
-                              (self.site,)).fetchall()  # fmt: skip
+            rows = db.execute(
+                "SELECT alert_id FROM alerts WHERE site = ? ORDER BY id", (self.site,)
+            ).fetchall()
         return [row[0] for row in rows]
 
     def newest_tracks_received_at(self) -> float | None:
         with sqlite3.connect(f"file:{self.data_dir / 'gateway.sqlite3'}?mode=ro", uri=True) as db:
-            row = db.execute("SELECT received_at FROM latest WHERE site = ? AND name = 'tracks'",
-                             (self.site,)).fetchone()  # fmt: skip
+            row = db.execute(
+                "SELECT received_at FROM latest WHERE site = ? AND name = 'tracks'", (self.site,)
+            ).fetchone()
         return None if row is None else float(row[0])
 
 
 class Centre:
     def __init__(self, address: str) -> None:
-        self.http = httpx.Client(base_url=f"http://{address}:{HTTP_PORT}", timeout=5.0,
-                                 headers={"X-API-Key": READ_KEY})  # fmt: skip
+        self.http = httpx.Client(
+            base_url=f"http://{address}:{HTTP_PORT}", timeout=5.0, headers={"X-API-Key": READ_KEY}
+        )
 
     def alert_ids(self, site: str) -> list[str]:
-        response = self.http.get("/v1/alerts", params={"site": site, "order": "oldest",
-                                                       "limit": 10_000})  # fmt: skip
+        response = self.http.get(
+            "/v1/alerts", params={"site": site, "order": "oldest", "limit": 10_000}
+        )
         response.raise_for_status()
         body = response.json()
         assert body["next_cursor"] is None, "more than one page: lengthen the limit"
@@ -159,57 +178,120 @@ def test_link_cuts_and_a_router_restart_lose_and_duplicate_no_alert(
     for site in SITES:
         host = network.host(site[-1])
         cable = network.cable(centre_host, host)
-        trailers.append(Trailer(
-            site=site, host=host, cable=cable, site_file=_site_file(tmp_path, site),
-            data_dir=tmp_path / site, stop_file=tmp_path / f"{site}.stop",
-            uplink=f"tcp/{centre_host.addresses[-1]}:{ROUTER_PORT}", log_dir=logs,
-        ))  # fmt: skip
+        trailers.append(
+            Trailer(
+                site=site,
+                host=host,
+                cable=cable,
+                site_file=_site_file(tmp_path, site),
+                data_dir=tmp_path / site,
+                stop_file=tmp_path / f"{site}.stop",
+                uplink=f"tcp/{centre_host.addresses[-1]}:{ROUTER_PORT}",
+                log_dir=logs,
+            )
+        )
     processes: list[subprocess.Popen[bytes]] = []
 
     def start(host: Host, name: str, argv: list[str], env: dict[str, str]) -> None:
         processes.append(host.popen(argv, env=env, cwd=ROOT, log=logs / f"{name}.log"))
 
     try:
-        start(centre_host, "centre-router",
-              [sys.executable, "-m", "wz_cli.main", "router", "--config",
-               str(ZENOH / "regional-router.json5")], base_env())  # fmt: skip
-        start(centre_host, "centre-gateway", [sys.executable, "-m", "wz_gateway.node"], base_env(
-            WZ_BUS_CONFIG_FILE=str(ZENOH / "edge-service.json5"),
-            WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{ROUTER_PORT}",
-            WZ_GATEWAY_SITE_FILES=",".join(str(t.site_file) for t in trailers),
-            WZ_GATEWAY_HOST="0.0.0.0", WZ_GATEWAY_PORT=str(HTTP_PORT),
-            WZ_GATEWAY_API_KEYS=f"read:{READ_KEY}", WZ_GATEWAY_DATA_DIR=str(tmp_path / "centre"),
-        ))  # fmt: skip
+        start(
+            centre_host,
+            "centre-router",
+            [
+                sys.executable,
+                "-m",
+                "wz_cli.main",
+                "router",
+                "--config",
+                str(ZENOH / "regional-router.json5"),
+            ],
+            base_env(),
+        )
+        start(
+            centre_host,
+            "centre-gateway",
+            [sys.executable, "-m", "wz_gateway.node"],
+            base_env(
+                WZ_BUS_CONFIG_FILE=str(ZENOH / "edge-service.json5"),
+                WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{ROUTER_PORT}",
+                WZ_GATEWAY_SITE_FILES=",".join(str(t.site_file) for t in trailers),
+                WZ_GATEWAY_HOST="0.0.0.0",
+                WZ_GATEWAY_PORT=str(HTTP_PORT),
+                WZ_GATEWAY_API_KEYS=f"read:{READ_KEY}",
+                WZ_GATEWAY_DATA_DIR=str(tmp_path / "centre"),
+            ),
+        )
         for trailer in trailers:
             processes.append(trailer.start_router())
-            start(trailer.host, f"{trailer.site}-alert-service",
-                  [sys.executable, "-m", "wz_alert_service.node"],
-                  trailer.service_env(WZ_ALERT_EPISODE_ID_PREFIX="run1"))  # fmt: skip
-            start(trailer.host, f"{trailer.site}-gateway", [sys.executable, "-m", "wz_gateway.node"],
-                  trailer.service_env(WZ_GATEWAY_DEV_MODE="true",
-                                      WZ_GATEWAY_DATA_DIR=str(trailer.data_dir)))  # fmt: skip
-            start(trailer.host, f"{trailer.site}-tracks",
-                  [sys.executable, "-m", "tests.deploy.track_source", str(trailer.site_file),
-                   str(trailer.stop_file)], trailer.service_env())  # fmt: skip
+            start(
+                trailer.host,
+                f"{trailer.site}-alert-service",
+                [sys.executable, "-m", "wz_alert_service.node"],
+                trailer.service_env(WZ_ALERT_EPISODE_ID_PREFIX="run1"),
+            )
+            start(
+                trailer.host,
+                f"{trailer.site}-gateway",
+                [sys.executable, "-m", "wz_gateway.node"],
+                trailer.service_env(
+                    WZ_GATEWAY_DEV_MODE="true", WZ_GATEWAY_DATA_DIR=str(trailer.data_dir)
+                ),
+            )
+            start(
+                trailer.host,
+                f"{trailer.site}-tracks",
+                [
+                    sys.executable,
+                    "-m",
+                    "tests.deploy.track_source",
+                    str(trailer.site_file),
+                    str(trailer.stop_file),
+                ],
+                trailer.service_env(),
+            )
         tap_log = logs / "centre-tap.out"
         # A plain subscription (no recovery), once the regional router listens (the tap, a
         # command-line tool, gives up at once without a router).
-        eventually(lambda: port_accepts(centre_address, ROUTER_PORT) or None,
-                   "the regional router", 30.0)  # fmt: skip
+        eventually(
+            lambda: port_accepts(centre_address, ROUTER_PORT) or None, "the regional router", 30.0
+        )
         with tap_log.open("w") as out, (logs / "centre-tap.log").open("w") as err:
-            processes.append(subprocess.Popen(
-                centre_host.argv([sys.executable, "-m", "wz_cli.main", "tap",
-                                  "wz/trailer-b/alerts/*", "--json", "--connect",
-                                  f"tcp/127.0.0.1:{ROUTER_PORT}"]),
-                env=base_env(), cwd=ROOT, stdout=out, stderr=err))  # fmt: skip
+            processes.append(
+                subprocess.Popen(
+                    centre_host.argv(
+                        [
+                            sys.executable,
+                            "-m",
+                            "wz_cli.main",
+                            "tap",
+                            "wz/trailer-b/alerts/*",
+                            "--json",
+                            "--connect",
+                            f"tcp/127.0.0.1:{ROUTER_PORT}",
+                        ]
+                    ),
+                    env=base_env(),
+                    cwd=ROOT,
+                    stdout=out,
+                    stderr=err,
+                )
+            )
         centre = Centre(centre_address)
         a, b = trailers
         for trailer in trailers:
-            eventually(lambda t=trailer: len(centre.alert_ids(t.site)) >= 3 or None,
-                       f"alerts of {trailer.site} at the centre", 90.0)  # fmt: skip
+            eventually(
+                lambda t=trailer: len(centre.alert_ids(t.site)) >= 3 or None,
+                f"alerts of {trailer.site} at the centre",
+                90.0,
+            )
         # Both alert services started their ids alike: the centre keeps them apart by site.
-        eventually(lambda: set(centre.alert_ids(a.site)) & set(centre.alert_ids(b.site)) or None,
-                   "the same alert id from both trailers, stored for each", 30.0)  # fmt: skip
+        eventually(
+            lambda: set(centre.alert_ids(a.site)) & set(centre.alert_ids(b.site)) or None,
+            "the same alert id from both trailers, stored for each",
+            30.0,
+        )
 
         # --- the uplinks cut: A for 10 s, B for 25 s ------------------------------------
         a.cable.cut()
@@ -225,14 +307,20 @@ def test_link_cuts_and_a_router_restart_lose_and_duplicate_no_alert(
             assert len(trailer.alert_ids()) >= trailer_at_cut[trailer.site] + 5, trailer.site
         time.sleep(max(0.0, 10.0 - (time.monotonic() - cut_at)))
         a.cable.heal()
-        eventually(lambda: set(centre.alert_ids(a.site)) >= set(a.alert_ids()[:-3]) or None,
-                   "trailer A's alerts of the cut at the centre", 20.0)  # fmt: skip
+        eventually(
+            lambda: set(centre.alert_ids(a.site)) >= set(a.alert_ids()[:-3]) or None,
+            "trailer A's alerts of the cut at the centre",
+            20.0,
+        )
         time.sleep(max(0.0, 25.0 - (time.monotonic() - cut_at)))
         assert len(centre.alert_ids(b.site)) == at_cut[b.site]  # still cut at 24 s
         b.cable.heal()
         b_during_cut = set(b.alert_ids()) - b_before_cut
-        eventually(lambda: set(centre.alert_ids(b.site)) >= set(b.alert_ids()[:-3]) or None,
-                   "trailer B's alerts of the cut at the centre", 60.0)  # fmt: skip
+        eventually(
+            lambda: set(centre.alert_ids(b.site)) >= set(b.alert_ids()[:-3]) or None,
+            "trailer B's alerts of the cut at the centre",
+            60.0,
+        )
 
         # --- trailer A's router killed and started again ----------------------------------
         assert a.router is not None
@@ -241,16 +329,24 @@ def test_link_cuts_and_a_router_restart_lose_and_duplicate_no_alert(
         time.sleep(1.0)  # the services notice and start retrying
         restarted_at = time.time()
         processes.append(a.start_router())
-        eventually(lambda: (a.newest_tracks_received_at() or 0.0) > restarted_at or None,
-                   "track batches stored on trailer A after its router restarted", 30.0)  # fmt: skip
+        eventually(
+            lambda: (a.newest_tracks_received_at() or 0.0) > restarted_at or None,
+            "track batches stored on trailer A after its router restarted",
+            30.0,
+        )
         trailer_flow_s = time.time() - restarted_at
         before = set(centre.alert_ids(a.site))
         eventually(lambda: set(a.alert_ids()) - before or None, "a new alert on trailer A", 30.0)
-        eventually(lambda: set(centre.alert_ids(a.site)) - before or None,
-                   "a new alert of trailer A at the centre", 30.0)  # fmt: skip
+        eventually(
+            lambda: set(centre.alert_ids(a.site)) - before or None,
+            "a new alert of trailer A at the centre",
+            30.0,
+        )
         centre_flow_s = time.time() - restarted_at
-        print(f"router restart: tracks stored again on the trailer after {trailer_flow_s:.2f} s,"
-              f" a new alert at the centre after {centre_flow_s:.2f} s")  # fmt: skip
+        print(
+            f"router restart: tracks stored again on the trailer after {trailer_flow_s:.2f} s,"
+            f" a new alert at the centre after {centre_flow_s:.2f} s"
+        )
         assert trailer_flow_s <= RECONNECT_S
 
         # --- the end: every alert once, the same at the centre as on each trailer ---------
@@ -259,35 +355,58 @@ def test_link_cuts_and_a_router_restart_lose_and_duplicate_no_alert(
         time.sleep(3.0)  # the last cars' clears
         for trailer in trailers:
             try:
-                eventually(lambda t=trailer: sorted(centre.alert_ids(t.site))
-                           == sorted(t.alert_ids()) or None,
-                           f"the centre to hold exactly {trailer.site}'s alerts", 30.0)  # fmt: skip
+                eventually(
+                    lambda t=trailer: (
+                        sorted(centre.alert_ids(t.site)) == sorted(t.alert_ids()) or None
+                    ),
+                    f"the centre to hold exactly {trailer.site}'s alerts",
+                    30.0,
+                )
             except BaseException:
                 at_centre, on_trailer = centre.alert_ids(trailer.site), trailer.alert_ids()
-                print(f"{trailer.site}: {len(on_trailer)} alerts on the trailer, "
-                      f"{len(at_centre)} at the centre; only on the trailer (in its order): "
-                      f"{[(on_trailer.index(i), i) for i in set(on_trailer) - set(at_centre)]}; "
-                      f"only at the centre: {sorted(set(at_centre) - set(on_trailer))}; "
-                      f"repeated at the centre: {len(at_centre) - len(set(at_centre))}")
-                print("centre bus counters:\n" + "\n".join(
-                    line for line in centre.http.get("/metrics").text.splitlines()
-                    if line.startswith(("wz_gateway_bus_invalid", "wz_gateway_bus_received",
-                                        "wz_gateway_bus_gaps"))))
+                print(
+                    f"{trailer.site}: {len(on_trailer)} alerts on the trailer, "
+                    f"{len(at_centre)} at the centre; only on the trailer (in its order): "
+                    f"{[(on_trailer.index(i), i) for i in set(on_trailer) - set(at_centre)]}; "
+                    f"only at the centre: {sorted(set(at_centre) - set(on_trailer))}; "
+                    f"repeated at the centre: {len(at_centre) - len(set(at_centre))}"
+                )
+                print(
+                    "centre bus counters:\n"
+                    + "\n".join(
+                        line
+                        for line in centre.http.get("/metrics").text.splitlines()
+                        if line.startswith(
+                            (
+                                "wz_gateway_bus_invalid",
+                                "wz_gateway_bus_received",
+                                "wz_gateway_bus_gaps",
+                            )
+                        )
+                    )
+                )
                 raise
             ids = centre.alert_ids(trailer.site)
             assert len(ids) == len(set(ids)) >= 40, (trailer.site, len(ids))
         # Every gap Zenoh's own recovery gave up on was re-fetched from the alert services'
         # caches (the equality above is the proof); how many there were, for the log.
         metrics = centre.http.get("/metrics").text
-        print("gaps re-fetched at the centre:", [line for line in metrics.splitlines()
-                                                 if line.startswith("wz_gateway_bus_gaps")])
-        assert not [line for line in metrics.splitlines()
-                    if line.startswith("wz_gateway_bus_invalid") and "alerts" in line]
+        print(
+            "gaps re-fetched at the centre:",
+            [line for line in metrics.splitlines() if line.startswith("wz_gateway_bus_gaps")],
+        )
+        assert not [
+            line
+            for line in metrics.splitlines()
+            if line.startswith("wz_gateway_bus_invalid") and "alerts" in line
+        ]
         tapped = set(re.findall(r'"alert_id":\s*"([^"]+)"', tap_log.read_text()))
         missed = b_during_cut - tapped
-        print(f"of trailer B's {len(b_during_cut)} alerts raised during its 25 s cut, a plain "
-              f"subscriber at the centre missed {len(missed)} (and saw {len(tapped - b_during_cut)}"
-              " of its alerts outside the cut); the central gateway has all")
+        print(
+            f"of trailer B's {len(b_during_cut)} alerts raised during its 25 s cut, a plain "
+            f"subscriber at the centre missed {len(missed)} (and saw {len(tapped - b_during_cut)}"
+            " of its alerts outside the cut); the central gateway has all"
+        )
         assert missed, "the 25 s cut lost nothing without recovery: it did not test recovery"
         # ... while it saw B's live alerts (how many depends on how long each phase took)
         assert len(tapped - b_during_cut) >= 3, "the plain subscriber saw the live alerts"

@@ -125,7 +125,9 @@ def test_router_unit_runs_the_trailer_router_config() -> None:
 
 def test_systemd_analyze_finds_nothing_but_the_missing_venv() -> None:
     analyze = shutil.which("systemd-analyze")
-    assert analyze is not None, "systemd-analyze is missing (deploy/host/bootstrap.sh installs systemd)"
+    assert analyze is not None, (
+        "systemd-analyze is missing (deploy/host/bootstrap.sh installs systemd)"
+    )
     result = subprocess.run(
         [analyze, "verify", *map(str, UNITS)],
         capture_output=True,

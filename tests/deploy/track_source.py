@@ -30,11 +30,22 @@ CAR_LIFE_S = 3.0
 def car(track_id: int, age_s: float) -> Track:
     station_m = 450.0 + SPEED_MPS * age_s
     return Track(
-        track_id=track_id, x_m=1.83, y_m=station_m, vx_mps=0.0, vy_mps=SPEED_MPS,
-        covariance=[0.0] * 16, station_m=station_m, offset_m=-1.83, speed_mps=SPEED_MPS,
-        heading_rad=1.5707963, lane_index=0, age_s=age_s + 1.0, hits=10, confirmed=True,
+        track_id=track_id,
+        x_m=1.83,
+        y_m=station_m,
+        vx_mps=0.0,
+        vy_mps=SPEED_MPS,
+        covariance=[0.0] * 16,
+        station_m=station_m,
+        offset_m=-1.83,
+        speed_mps=SPEED_MPS,
+        heading_rad=1.5707963,
+        lane_index=0,
+        age_s=age_s + 1.0,
+        hits=10,
+        confirmed=True,
         sources=["lidar-mast"],
-    )  # fmt: skip
+    )
 
 
 def main() -> None:
@@ -47,10 +58,20 @@ def main() -> None:
         while not stop_file.exists():
             stamp = cycle * PERIOD_S
             first = int(max(0.0, stamp - CAR_LIFE_S) // CAR_EVERY_S)
-            cars = [car(k, stamp - k * CAR_EVERY_S) for k in range(first, int(stamp // CAR_EVERY_S) + 1)
-                    if 0.0 <= stamp - k * CAR_EVERY_S < CAR_LIFE_S]  # fmt: skip
-            tracks.put(TrackBatch(site=site.site_id, source_id="fusion-tracker", stamp=stamp,
-                                  cycle_index=cycle, tracks=cars))  # fmt: skip
+            cars = [
+                car(k, stamp - k * CAR_EVERY_S)
+                for k in range(first, int(stamp // CAR_EVERY_S) + 1)
+                if 0.0 <= stamp - k * CAR_EVERY_S < CAR_LIFE_S
+            ]
+            tracks.put(
+                TrackBatch(
+                    site=site.site_id,
+                    source_id="fusion-tracker",
+                    stamp=stamp,
+                    cycle_index=cycle,
+                    tracks=cars,
+                )
+            )
             cycle += 1
             time.sleep(max(0.0, start + cycle * PERIOD_S - time.time()))
 

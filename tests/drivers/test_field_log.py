@@ -93,8 +93,9 @@ def test_field_validation_on_the_sample_log(tmp_path: Path) -> None:
     lidar, unit, fused = common[LIDAR], common[UNIT], common[FUSED]
     assert unit["availability"] < 0.9 and unit["longest_gap_s"] >= 1.0  # gappy
     assert fused["availability"] >= 0.99 and fused["longest_gap_s"] <= 0.2  # continuous
-    assert fused["rmse_longitudinal_m"] < min(lidar["rmse_longitudinal_m"],
-                                              unit["rmse_longitudinal_m"])  # fmt: skip
+    assert fused["rmse_longitudinal_m"] < min(
+        lidar["rmse_longitudinal_m"], unit["rmse_longitudinal_m"]
+    )
     assert fused["rmse_distance_m"] < min(lidar["rmse_distance_m"], unit["rmse_distance_m"])
     assert fused["rmse_lateral_m"] < unit["rmse_lateral_m"]
     assert fused["rmse_lateral_m"] < 0.2  # (the LiDAR's alone: 0.05 m; see docs/field-data.md)
@@ -107,9 +108,26 @@ def test_a_calibration_drive_gives_a_bias_map_the_tracker_takes(tmp_path: Path) 
     drive it was measured on: a check of the plumbing, not of how well a map carries over)."""
     out, path = tmp_path / "measured", tmp_path / "bias.json"
     result = subprocess.run(
-        [sys.executable, "-m", "wz_cli.main", "eval", "--log", str(SAMPLE), "--out", str(out),
-         "--write-bias-map", str(path), "--bias-min-samples", "2"],
-        cwd=ROOT, capture_output=True, text=True, timeout=600, check=False)  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "wz_cli.main",
+            "eval",
+            "--log",
+            str(SAMPLE),
+            "--out",
+            str(out),
+            "--write-bias-map",
+            str(path),
+            "--bias-min-samples",
+            "2",
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
     assert result.returncode == 0, result.stderr[-3000:]
     measured = load_bias_map(path)
     assert set(measured.sensors) == {LIDAR, UNIT}
@@ -125,9 +143,24 @@ def test_a_calibration_drive_gives_a_bias_map_the_tracker_takes(tmp_path: Path) 
     # another site's map is refused before anything is read
     path.write_text(path.read_text().replace('"us75-lincoln"', '"elsewhere"'))
     refused = subprocess.run(
-        [sys.executable, "-m", "wz_cli.main", "eval", "--log", str(SAMPLE), "--out", str(out),
-         "--bias-map", str(path)],
-        cwd=ROOT, capture_output=True, text=True, timeout=600, check=False)  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "wz_cli.main",
+            "eval",
+            "--log",
+            str(SAMPLE),
+            "--out",
+            str(out),
+            "--bias-map",
+            str(path),
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
     assert refused.returncode == 1 and "for site 'elsewhere'" in refused.stderr
 
 
@@ -168,7 +201,10 @@ def test_a_damaged_log_is_read_up_to_its_damage_with_file_and_line(tmp_path: Pat
     ("change", "message"),
     [
         (lambda m: m["sources"][0].update(sensor_id="lidar-pole"), "has no such sensor"),
-        (lambda m: m["sources"][1].update(kind="lidar", format="frames"), "site's sensor is a radar"),
+        (
+            lambda m: m["sources"][1].update(kind="lidar", format="frames"),
+            "site's sensor is a radar",
+        ),
         (lambda m: m["sources"][0].update(path="lidar/missing.pcap"), "missing.pcap is missing"),
         (lambda m: m["sources"][0].pop("metadata"), "needs its metadata JSON"),
         (lambda m: m.update(format="other/2"), "format"),
@@ -192,9 +228,17 @@ def test_the_real_freeway_frame_through_a_field_logs_pcd_path(tmp_path: Path) ->
     (log / "lidar").mkdir(parents=True)
     shutil.copy(REAL_FRAME, log / "lidar" / "1700000000.500.pcd")
     shutil.copy(SAMPLE / "site.yaml", log / "site.yaml")
-    (log / "log.yaml").write_text(yaml.safe_dump({
-        "format": "wz-field-log/1", "site": "site.yaml",
-        "sources": [{"sensor_id": LIDAR, "kind": "lidar", "format": "frames", "path": "lidar"}]}))
+    (log / "log.yaml").write_text(
+        yaml.safe_dump(
+            {
+                "format": "wz-field-log/1",
+                "site": "site.yaml",
+                "sources": [
+                    {"sensor_id": LIDAR, "kind": "lidar", "format": "frames", "path": "lidar"}
+                ],
+            }
+        )
+    )
     problems = Problems()
     (out,) = list(merged(load_log(log), problems))
     assert not problems and out.stamp == pytest.approx(1_700_000_000.5)
@@ -218,11 +262,18 @@ def test_replay_over_zenoh_through_the_detector_and_tracker_processes(tmp_path: 
     env = {k: v for k, v in os.environ.items() if not k.startswith("WZ_")}
     # A replay slower than real time (here half: a 2-core machine's LiDAR detector keeps up)
     # must not let the tracker's idle clock run ahead of the log's silences.
-    env.update(WZ_BUS_CONNECT_ENDPOINTS=endpoint, WZ_BUS_LISTEN_ENDPOINTS="",
-               WZ_SITE_FILE=site_file, WZ_LOG_FORMAT="json", PYTHONUNBUFFERED="1",
-               WZ_FUSION_IDLE_ADVANCE_AFTER_S="10")  # fmt: skip
-    services = [subprocess.Popen([sys.executable, "-m", module], cwd=ROOT, env=env)
-                for module in ("wz_lidar_detector.node", "wz_fusion_tracker.node")]  # fmt: skip
+    env.update(
+        WZ_BUS_CONNECT_ENDPOINTS=endpoint,
+        WZ_BUS_LISTEN_ENDPOINTS="",
+        WZ_SITE_FILE=site_file,
+        WZ_LOG_FORMAT="json",
+        PYTHONUNBUFFERED="1",
+        WZ_FUSION_IDLE_ADVANCE_AFTER_S="10",
+    )
+    services = [
+        subprocess.Popen([sys.executable, "-m", module], cwd=ROOT, env=env)
+        for module in ("wz_lidar_detector.node", "wz_fusion_tracker.node")
+    ]
     settings = BusSettings(mode="client", connect_endpoints=[endpoint], listen_endpoints=[])
     try:
         with Bus.open(settings, site="us75-lincoln", service="test") as bus:
@@ -232,9 +283,23 @@ def test_replay_over_zenoh_through_the_detector_and_tracker_processes(tmp_path: 
                 assert time.monotonic() < deadline, "the services did not come up"
                 time.sleep(0.2)
             replay = subprocess.run(
-                [sys.executable, "-m", "wz_cli.main", "replay", str(log_dir), "--connect",
-                 endpoint, "--rate", "0.5"], cwd=ROOT, env=env, capture_output=True, text=True,
-                timeout=120)  # fmt: skip
+                [
+                    sys.executable,
+                    "-m",
+                    "wz_cli.main",
+                    "replay",
+                    str(log_dir),
+                    "--connect",
+                    endpoint,
+                    "--rate",
+                    "0.5",
+                ],
+                cwd=ROOT,
+                env=env,
+                capture_output=True,
+                text=True,
+                timeout=120,
+            )
             assert replay.returncode == 0, replay.stdout + replay.stderr
             assert "lidar-mast" in replay.stdout and "radar-mast" in replay.stdout
             time.sleep(1.0)
@@ -248,8 +313,9 @@ def test_replay_over_zenoh_through_the_detector_and_tracker_processes(tmp_path: 
     log = load_log(SAMPLE)
     from wz_drivers.gps import gps_track, read_gps
 
-    truth = gps_track(list(read_gps(log.path("gps/probe.nmea"), Problems())), log.site,
-                      antenna_forward_m=1.2)  # fmt: skip
+    truth = gps_track(
+        list(read_gps(log.path("gps/probe.nmea"), Problems())), log.site, antenna_forward_m=1.2
+    )
     near = 0
     for stamp, track in confirmed:
         if truth.t[0] <= stamp <= truth.t[-1]:
@@ -259,7 +325,6 @@ def test_replay_over_zenoh_through_the_detector_and_tracker_processes(tmp_path: 
     # machine the node publishes fewer batches (one per release of its reorder buffer), so
     # the check here is that the probe is tracked, not how often.
     assert near >= 10, f"{near} track positions within 2 m of the probe"
-
 
 
 def test_the_drivers_node_reads_a_live_udp_unit_onto_the_bus(tmp_path: Path) -> None:
@@ -276,30 +341,61 @@ def test_the_drivers_node_reads_a_live_udp_unit_onto_the_bus(tmp_path: Path) -> 
     log = tmp_path / "live"
     log.mkdir()
     shutil.copy(SAMPLE / "site.yaml", log / "site.yaml")
-    (log / "log.yaml").write_text(yaml.safe_dump({
-        "format": "wz-field-log/1", "site": "site.yaml",
-        "sources": [{"sensor_id": UNIT, "kind": "objects", "format": "udp",
-                     "path": f"udp://127.0.0.1:{port}"}]}))  # fmt: skip
+    (log / "log.yaml").write_text(
+        yaml.safe_dump(
+            {
+                "format": "wz-field-log/1",
+                "site": "site.yaml",
+                "sources": [
+                    {
+                        "sensor_id": UNIT,
+                        "kind": "objects",
+                        "format": "udp",
+                        "path": f"udp://127.0.0.1:{port}",
+                    }
+                ],
+            }
+        )
+    )
     endpoint, router = start_router()
     env = {k: v for k, v in os.environ.items() if not k.startswith("WZ_")}
-    env.update(WZ_BUS_CONNECT_ENDPOINTS=endpoint, WZ_BUS_LISTEN_ENDPOINTS="",
-               WZ_DRIVERS_SOURCES=str(log / "log.yaml"), WZ_STATUS_PERIOD_S="0.2",
-               WZ_LOG_FORMAT="json")  # fmt: skip
+    env.update(
+        WZ_BUS_CONNECT_ENDPOINTS=endpoint,
+        WZ_BUS_LISTEN_ENDPOINTS="",
+        WZ_DRIVERS_SOURCES=str(log / "log.yaml"),
+        WZ_STATUS_PERIOD_S="0.2",
+        WZ_LOG_FORMAT="json",
+    )
     node = subprocess.Popen([sys.executable, "-m", "wz_drivers.node"], cwd=ROOT, env=env)
     settings = BusSettings(mode="client", connect_endpoints=[endpoint], listen_endpoints=[])
     mount = next(m for m in load_log(SAMPLE).site.sensors if m.sensor_id == UNIT)
     try:
-        with Bus.open(settings, site="us75-lincoln", service="test") as bus, \
-                socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp:  # fmt: skip
+        with (
+            Bus.open(settings, site="us75-lincoln", service="test") as bus,
+            socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp,
+        ):
             detections = bus.subscribe(bus.keys.detections(UNIT), DetectionBatch)
             status = bus.subscribe(bus.keys.status("drivers"), ServiceStatus, mode="ring")
             deadline = time.monotonic() + 30.0
             got: DetectionBatch | None = None
             while got is None and time.monotonic() < deadline:
-                for payload in (b"{not json", json.dumps({
-                        "time": 1_790_000_000.5, "objects": [
-                            {"id": 7, "range_m": 50.0, "azimuth_deg": 0.0, "speed_mps": 25.0,
-                             "class": "car"}]}).encode()):  # fmt: skip
+                for payload in (
+                    b"{not json",
+                    json.dumps(
+                        {
+                            "time": 1_790_000_000.5,
+                            "objects": [
+                                {
+                                    "id": 7,
+                                    "range_m": 50.0,
+                                    "azimuth_deg": 0.0,
+                                    "speed_mps": 25.0,
+                                    "class": "car",
+                                }
+                            ],
+                        }
+                    ).encode(),
+                ):
                     udp.sendto(payload, ("127.0.0.1", port))
                 got = detections.recv(0.5)
             assert got is not None, "no detections from the drivers node"

@@ -24,15 +24,28 @@ def sentence(body: str) -> str:
     return f"${body}*{reduce(xor, body.encode('ascii'), 0):02X}"
 
 
-def gga(time: str, *, quality: int = 4, talker: str = "GP", lat: str = "4045.0000",
-        lon: str = "09641.2800") -> str:  # fmt: skip
+def gga(
+    time: str,
+    *,
+    quality: int = 4,
+    talker: str = "GP",
+    lat: str = "4045.0000",
+    lon: str = "09641.2800",
+) -> str:
     return sentence(f"{talker}GGA,{time},{lat},N,{lon},W,{quality},12,0.8,365.0,M,-27.0,M,1.0,0")
 
 
-def rmc(time: str, date: str = "230625", *, speed_kn: str = "48.6", course: str = "0.5",
-        status: str = "A") -> str:  # fmt: skip
-    return sentence(f"GNRMC,{time},{status},4045.0000,N,09641.2800,W,{speed_kn},{course},"
-                    f"{date},,,D")  # fmt: skip
+def rmc(
+    time: str,
+    date: str = "230625",
+    *,
+    speed_kn: str = "48.6",
+    course: str = "0.5",
+    status: str = "A",
+) -> str:
+    return sentence(
+        f"GNRMC,{time},{status},4045.0000,N,09641.2800,W,{speed_kn},{course},{date},,,D"
+    )
 
 
 def vtg(course: str, speed_kn: str) -> str:
@@ -57,8 +70,7 @@ def site() -> Site:
 # --- NMEA -----------------------------------------------------------------------------------
 
 
-def test_nmea_epochs_merge_gga_rmc_vtg_and_report_bad_checksum_and_no_fix(
-        tmp_path: Path) -> None:  # fmt: skip
+def test_nmea_epochs_merge_gga_rmc_vtg_and_report_bad_checksum_and_no_fix(tmp_path: Path) -> None:
     bad = gga("120000.20")
     bad = bad[:-2] + ("00" if bad[-2:] != "00" else "11")
     lines = [
@@ -94,16 +106,24 @@ def test_nmea_epochs_merge_gga_rmc_vtg_and_report_bad_checksum_and_no_fix(
     assert fixes[3].speed_mps == pytest.approx(20.0 * KNOT_MPS)
     assert fixes[3].heading_deg == pytest.approx(10.0)
 
-    assert [(e.line, e.path) for e in problems.errors] == [(7, str(tmp_path / "van.nmea")),
-                                                          (9, str(tmp_path / "van.nmea"))]  # fmt: skip
+    assert [(e.line, e.path) for e in problems.errors] == [
+        (7, str(tmp_path / "van.nmea")),
+        (9, str(tmp_path / "van.nmea")),
+    ]
     assert "checksum" in problems.errors[0].reason
     assert "quality 0" in problems.errors[1].reason
     assert str(problems.errors[0]).startswith(f"{tmp_path / 'van.nmea'}:7: ")
 
 
 def test_nmea_midnight_rollover_in_gga_only_stretch(tmp_path: Path) -> None:
-    lines = [gga("235959.80"), rmc("235959.80"), gga("235959.90"), gga("000000.00"),
-             gga("000000.10"), rmc("000000.10", date="240625")]  # fmt: skip
+    lines = [
+        gga("235959.80"),
+        rmc("235959.80"),
+        gga("235959.90"),
+        gga("000000.00"),
+        gga("000000.10"),
+        rmc("000000.10", date="240625"),
+    ]
     problems = Problems()
     stamps = [f.stamp for f in read_nmea(write(tmp_path, "night.nmea", lines), problems)]
     assert not problems.errors
@@ -130,8 +150,13 @@ def test_nmea_without_any_date_reports_every_fix(tmp_path: Path) -> None:
 
 
 def test_nmea_time_going_back_is_reported_and_skipped(tmp_path: Path) -> None:
-    lines = [gga("120000.00"), rmc("120000.00"), gga("120000.10"), gga("120000.05"),
-             gga("120000.20")]  # fmt: skip
+    lines = [
+        gga("120000.00"),
+        rmc("120000.00"),
+        gga("120000.10"),
+        gga("120000.05"),
+        gga("120000.20"),
+    ]
     problems = Problems()
     fixes = list(read_nmea(write(tmp_path, "back.nmea", lines), problems))
     assert [round(f.stamp - unix(DAY, 43200.0), 3) for f in fixes] == [0.0, 0.1, 0.2]
@@ -140,8 +165,13 @@ def test_nmea_time_going_back_is_reported_and_skipped(tmp_path: Path) -> None:
 
 
 def test_nmea_garbage_lines_and_missing_file(tmp_path: Path) -> None:
-    lines = [gga("120000.00"), rmc("120000.00"), "#INSPVAXA,COM1,0,73.5,FINESTEERING",
-             "$GPGGA,120000.10,4045.0000,N", gga("120000.20")]  # fmt: skip
+    lines = [
+        gga("120000.00"),
+        rmc("120000.00"),
+        "#INSPVAXA,COM1,0,73.5,FINESTEERING",
+        "$GPGGA,120000.10,4045.0000,N",
+        gga("120000.20"),
+    ]
     problems = Problems()
     fixes = list(read_nmea(write(tmp_path, "mixed.log", lines), problems))
     assert len(fixes) == 2
@@ -206,8 +236,9 @@ def test_read_gps_chooses_by_content(tmp_path: Path) -> None:
 
 def test_fix_at_site_origin_maps_to_zero(site: Site) -> None:
     origin = site.origin
-    track = gps_track([GpsFix(1.0, origin.latitude_deg, origin.longitude_deg, origin.altitude_m)],
-                      site)  # fmt: skip
+    track = gps_track(
+        [GpsFix(1.0, origin.latitude_deg, origin.longitude_deg, origin.altitude_m)], site
+    )
     assert track.x_m[0] == pytest.approx(0.0, abs=1e-6)
     assert track.y_m[0] == pytest.approx(0.0, abs=1e-6)
     assert track.station_m[0] == pytest.approx(0.0, abs=1e-6)
@@ -215,17 +246,27 @@ def test_fix_at_site_origin_maps_to_zero(site: Site) -> None:
     assert track.heading_rad[0] == pytest.approx(math.pi / 2)  # the road's: northbound
 
 
-def _northbound_fixes(site: Site, *, forward_m: float, left_m: float,
-                      with_course: bool) -> list[GpsFix]:  # fmt: skip
+def _northbound_fixes(
+    site: Site, *, forward_m: float, left_m: float, with_course: bool
+) -> list[GpsFix]:
     """A vehicle whose reference point drives north along x = 1.75 m at 25 m/s from y = 100 m;
     the antenna ``forward_m`` ahead and ``left_m`` to its left (left of north is west)."""
     t = np.arange(0.0, 4.0, 0.1)
     x = 1.75 - left_m + 0.0 * t
     y = 100.0 + 25.0 * t + forward_m
     latitude, longitude, altitude = site.geo_frame.to_wgs84(x, y, 0.0)
-    return [GpsFix(1750680000.0 + float(tk), float(la), float(lo), float(al),
-                   25.0 if with_course else None, 0.0 if with_course else None, 4)
-            for tk, la, lo, al in zip(t, latitude, longitude, altitude, strict=True)]  # fmt: skip
+    return [
+        GpsFix(
+            1750680000.0 + float(tk),
+            float(la),
+            float(lo),
+            float(al),
+            25.0 if with_course else None,
+            0.0 if with_course else None,
+            4,
+        )
+        for tk, la, lo, al in zip(t, latitude, longitude, altitude, strict=True)
+    ]
 
 
 @pytest.mark.parametrize("with_course", [True, False])
@@ -244,8 +285,10 @@ def test_antenna_offset_is_removed(site: Site, with_course: bool) -> None:
 
 def test_stopped_vehicle_takes_the_roads_heading_and_fixes_must_increase(site: Site) -> None:
     fixes = _northbound_fixes(site, forward_m=1.0, left_m=0.0, with_course=False)
-    still = [GpsFix(f.stamp, fixes[0].latitude_deg, fixes[0].longitude_deg, f.altitude_m)
-             for f in fixes[:5]]  # fmt: skip
+    still = [
+        GpsFix(f.stamp, fixes[0].latitude_deg, fixes[0].longitude_deg, f.altitude_m)
+        for f in fixes[:5]
+    ]
     track = gps_track(still, site, antenna_forward_m=1.0)
     np.testing.assert_allclose(track.heading_rad, math.pi / 2, atol=1e-9)
     np.testing.assert_allclose(track.y_m, 100.0, atol=1e-6)

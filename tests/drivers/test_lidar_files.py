@@ -25,8 +25,14 @@ def organized_points(rows: int, columns: int, seed: int = 0) -> npt.NDArray[np.f
     return points
 
 
-def write_pcd(path: Path, points: npt.NDArray[np.float32], *, rows: int = 1, data: str = "ascii",
-              fields: tuple[str, ...] = ("x", "y", "z", "intensity")) -> Path:  # fmt: skip
+def write_pcd(
+    path: Path,
+    points: npt.NDArray[np.float32],
+    *,
+    rows: int = 1,
+    data: str = "ascii",
+    fields: tuple[str, ...] = ("x", "y", "z", "intensity"),
+) -> Path:
     """A PCD v0.7 file as PCL writes it (float32 fields)."""
     count = len(points)
     header = (
@@ -44,8 +50,9 @@ def write_pcd(path: Path, points: npt.NDArray[np.float32], *, rows: int = 1, dat
     return path
 
 
-def write_ply(path: Path, points: npt.NDArray[np.float32], *, binary: bool,
-              big_endian: bool = False) -> Path:  # fmt: skip
+def write_ply(
+    path: Path, points: npt.NDArray[np.float32], *, binary: bool, big_endian: bool = False
+) -> Path:
     properties = ["x", "y", "z", "intensity"][: points.shape[1]]
     fmt = "ascii" if not binary else "binary_big_endian" if big_endian else "binary_little_endian"
     header = (
@@ -81,8 +88,11 @@ def test_real_frame_keeps_organization_values_and_no_return_slots() -> None:
     np.testing.assert_allclose(
         sweep.points[9366], [-28.49471, 17.04936, -3.363432, 37.0], rtol=1e-6
     )
-    np.testing.assert_allclose(sweep.points.reshape(80, 1800, 4)[5, 446],
-                               [-28.54152, 17.21296, -3.376043, 111.0], rtol=1e-6)  # fmt: skip
+    np.testing.assert_allclose(
+        sweep.points.reshape(80, 1800, 4)[5, 446],
+        [-28.54152, 17.21296, -3.376043, 111.0],
+        rtol=1e-6,
+    )
     assert np.nanmax(sweep.points[:, 3]) == 251.0  # intensity in the sensor's 0-255 scale
     assert sweep.stamp == 0.0 and sweep.where == str(REAL_FRAME)
 
@@ -175,8 +185,12 @@ def test_folder_with_timestamps_csv_reports_and_skips_bad_frames(tmp_path: Path)
     frames = tmp_path / "frames"
     frames.mkdir()
     for index in range(1, 7):
-        write_pcd(frames / f"{index:06d}.pcd", organized_points(2, 8, seed=index), rows=2,
-                  data="binary" if index % 2 else "ascii")  # fmt: skip
+        write_pcd(
+            frames / f"{index:06d}.pcd",
+            organized_points(2, 8, seed=index),
+            rows=2,
+            data="binary" if index % 2 else "ascii",
+        )
     # Frame 3 truncated; frame 5's time goes back; frame 6 has no row.
     path3 = frames / "000003.pcd"
     path3.write_bytes(path3.read_bytes()[:-10])
@@ -191,13 +205,16 @@ def test_folder_with_timestamps_csv_reports_and_skips_bad_frames(tmp_path: Path)
     sweeps = list(read_frame_folder(frames, problems, timestamps=csv_path))
     assert [Path(s.where).name for s in sweeps] == ["000001.pcd", "000002.pcd", "000004.pcd"]
     assert [s.stamp for s in sweeps] == [T0, T0 + 0.1, T0 + 0.3]
-    np.testing.assert_allclose(sweeps[1].points, organized_points(2, 8, seed=2), rtol=1e-6,
-                               equal_nan=True)  # fmt: skip
+    np.testing.assert_allclose(
+        sweeps[1].points, organized_points(2, 8, seed=2), rtol=1e-6, equal_nan=True
+    )
     messages = [str(error) for error in problems.errors]
     assert len(messages) == 3, messages
     assert messages[0].startswith(f"{path3}: header says 16 points")
-    assert messages[1].startswith(f"{csv_path}:6: time 1700000000.250000 of 000005.pcd is not "
-                                  "after 1700000000.300000 (000004.pcd)")  # fmt: skip
+    assert messages[1].startswith(
+        f"{csv_path}:6: time 1700000000.250000 of 000005.pcd is not "
+        "after 1700000000.300000 (000004.pcd)"
+    )
     assert messages[2] == f"{frames / '000006.pcd'}: no row in {csv_path}: frame skipped"
 
 

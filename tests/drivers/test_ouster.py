@@ -90,9 +90,15 @@ def recording(
     folder = tmp_path_factory.mktemp("ouster")
     pcap_path, metadata_path = folder / "mast.pcap", folder / "mast.json"
     written = write_ouster_pcap(
-        sweeps, pcap_path, metadata_path, channels=BEAMS, columns_per_frame=COLUMNS,
-        vertical_min_deg=-30.0, vertical_max_deg=11.0, rate_hz=RATE_HZ,
-    )  # fmt: skip
+        sweeps,
+        pcap_path,
+        metadata_path,
+        channels=BEAMS,
+        columns_per_frame=COLUMNS,
+        vertical_min_deg=-30.0,
+        vertical_max_deg=11.0,
+        rate_hz=RATE_HZ,
+    )
     return pcap_path, metadata_path, written
 
 
@@ -122,9 +128,11 @@ def drop_records(path: Path, numbers: set[int]) -> None:
     """Rewrite a pcap without the records of these (1-based) numbers, as a capture that lost
     them would be."""
     data = path.read_bytes()
-    kept = [data[offset - 16 : offset + length]
-            for number, (offset, length) in enumerate(pcap_records(path), start=1)
-            if number not in numbers]  # fmt: skip
+    kept = [
+        data[offset - 16 : offset + length]
+        for number, (offset, length) in enumerate(pcap_records(path), start=1)
+        if number not in numbers
+    ]
     path.write_bytes(data[:24] + b"".join(kept))
 
 
@@ -198,8 +206,9 @@ def test_internal_oscillator_stamps_come_from_capture_times(
     sweeps: list[LidarSweep], tmp_path: Path
 ) -> None:
     pcap_path, metadata_path = tmp_path / "osc.pcap", tmp_path / "osc.json"
-    write_ouster_pcap(sweeps, pcap_path, metadata_path, rate_hz=RATE_HZ,
-                      timestamp_mode="TIME_FROM_INTERNAL_OSC")  # fmt: skip
+    write_ouster_pcap(
+        sweeps, pcap_path, metadata_path, rate_hz=RATE_HZ, timestamp_mode="TIME_FROM_INTERNAL_OSC"
+    )
     source = open_source(str(pcap_path), meta=[str(metadata_path)], collate=False, sensor_idx=0)
     first = next(iter(source))[0]
     source.close()
@@ -229,8 +238,7 @@ def test_an_azimuth_window_sends_a_quarter_of_the_packets_and_reads_back(
     180 - 360 j / W deg), a quarter of the packets; the returns there come back as they were,
     the rest is no return."""
     pcap_path, metadata_path = tmp_path / "window.pcap", tmp_path / "window.json"
-    written = write_ouster_pcap(sweeps, pcap_path, metadata_path,
-                                azimuth_window_deg=(135.0, 225.0))  # fmt: skip
+    written = write_ouster_pcap(sweeps, pcap_path, metadata_path, azimuth_window_deg=(135.0, 225.0))
     assert written.packets == SWEEPS * PACKETS_PER_SCAN // 4
     problems = Problems()
     read = list(read_ouster(pcap_path, metadata_path, problems))
@@ -243,11 +251,13 @@ def test_an_azimuth_window_sends_a_quarter_of_the_packets_and_reads_back(
         assert returned.sum() >= inside.sum() > 0
         got_azimuth = np.degrees(np.arctan2(got.points[returned, 1], got.points[returned, 0]))
         assert np.abs(got_azimuth).max() <= 45.0 + 360.0 / COLUMNS
-        np.testing.assert_allclose(got.points[inside, :3], simulated.points[inside, :3],
-                                   atol=XYZ_TOLERANCE_M)  # fmt: skip
+        np.testing.assert_allclose(
+            got.points[inside, :3], simulated.points[inside, :3], atol=XYZ_TOLERANCE_M
+        )
     with pytest.raises(ValueError, match="azimuth window"):
-        write_ouster_pcap(sweeps, tmp_path / "bad.pcap", tmp_path / "bad.json",
-                          azimuth_window_deg=(200.0, 100.0))  # fmt: skip
+        write_ouster_pcap(
+            sweeps, tmp_path / "bad.pcap", tmp_path / "bad.json", azimuth_window_deg=(200.0, 100.0)
+        )
 
 
 def test_an_osf_made_by_ouster_sdk_reads_the_same(
@@ -283,12 +293,14 @@ def test_points_off_the_rays_land_in_the_nearest_pixel(tmp_path: Path) -> None:
     azimuth = rng.uniform(-math.pi, math.pi, count)
     elevation = np.radians(rng.uniform(-33.0, 14.0, count))  # some beyond the field
     distance = rng.uniform(1.0, 150.0, count)
-    points = np.column_stack([
-        distance * np.cos(elevation) * np.cos(azimuth),
-        distance * np.cos(elevation) * np.sin(azimuth),
-        distance * np.sin(elevation),
-        rng.uniform(0.0, 1.0, count),
-    ]).astype(np.float32)  # fmt: skip
+    points = np.column_stack(
+        [
+            distance * np.cos(elevation) * np.cos(azimuth),
+            distance * np.cos(elevation) * np.sin(azimuth),
+            distance * np.sin(elevation),
+            rng.uniform(0.0, 1.0, count),
+        ]
+    ).astype(np.float32)
     sweep = LidarSweep(stamp=T0, points=points, rows=1, columns=0, organized=False, where="random")
     written = write_ouster_pcap([sweep], tmp_path / "r.pcap", tmp_path / "r.json", rate_hz=10)
     (read,) = list(read_ouster(tmp_path / "r.pcap", tmp_path / "r.json", Problems()))
@@ -313,24 +325,34 @@ def test_points_off_the_rays_land_in_the_nearest_pixel(tmp_path: Path) -> None:
     # On the pixel's ray: elevation of the beam, azimuth pi - 2 pi j / W.
     beam = np.radians(11.0 - step_deg * (np.flatnonzero(filled) // columns))
     ray_azimuth = math.pi - 2 * math.pi * (np.flatnonzero(filled) % columns) / columns
-    ray = np.column_stack([np.cos(beam) * np.cos(ray_azimuth), np.cos(beam) * np.sin(ray_azimuth),
-                           np.sin(beam)])  # fmt: skip
+    ray = np.column_stack(
+        [np.cos(beam) * np.cos(ray_azimuth), np.cos(beam) * np.sin(ray_azimuth), np.sin(beam)]
+    )
     assert np.abs(got[filled, :3] - ray * got_range[:, None]).max() <= 2e-5
 
 
 def test_binning_keeps_the_nearest_point_of_a_pixel() -> None:
-    info = synthetic_sensor_info(channels=16, columns_per_frame=512, vertical_min_deg=-15.0,
-                                 vertical_max_deg=15.0, rate_hz=10)  # fmt: skip
+    info = synthetic_sensor_info(
+        channels=16,
+        columns_per_frame=512,
+        vertical_min_deg=-15.0,
+        vertical_max_deg=15.0,
+        rate_hz=10,
+    )
     # Three points on one ray, ahead (+x: column W/2) on beam 7 (+1 deg of 15 .. -15).
     altitudes = np.asarray(info.beam_altitude_angles)
     up = math.radians(float(altitudes[7]))
     direction = np.array([math.cos(up), 0.0, math.sin(up)])
-    points = np.array([[*(direction * 30.0), 0.2], [*(direction * 12.0), 0.9],
-                       [*(direction * 50.0), 0.4]])  # fmt: skip
+    points = np.array(
+        [[*(direction * 30.0), 0.2], [*(direction * 12.0), 0.9], [*(direction * 50.0), 0.4]]
+    )
     range_mm, reflectivity, written = bin_range_image(
-        points, altitudes_deg=altitudes, columns=512,
-        lidar_to_sensor=np.asarray(info.lidar_to_sensor_transform), max_range_mm=(1 << 19) - 1,
-    )  # fmt: skip
+        points,
+        altitudes_deg=altitudes,
+        columns=512,
+        lidar_to_sensor=np.asarray(info.lidar_to_sensor_transform),
+        max_range_mm=(1 << 19) - 1,
+    )
     assert written == 1 and range_mm[7, 256] == 12_000 and reflectivity[7, 256] == 90
     assert np.count_nonzero(range_mm) == 1
 
@@ -387,8 +409,10 @@ def test_a_corrupt_packet_is_reported_and_its_scan_skipped(
 
     problems = Problems()
     read = list(read_ouster(pcap_path, metadata_path, problems))
-    assert [got.where.rsplit("(", 1)[1] for got in read] == ["scan 1, frame id 0)",
-                                                             "scan 3, frame id 2)"]  # fmt: skip
+    assert [got.where.rsplit("(", 1)[1] for got in read] == [
+        "scan 1, frame id 0)",
+        "scan 3, frame id 2)",
+    ]
     assert_same_sweep(read[1], sweeps[2])
     (error,) = problems.errors
     assert error.path == str(pcap_path) and error.line == bad_packet and "CRC" in error.reason
@@ -451,9 +475,15 @@ def test_packets_of_another_sensor_are_refused(
     recording: tuple[Path, Path, OusterRecording], tmp_path: Path
 ) -> None:
     pcap_path, _, _ = recording
-    other = synthetic_sensor_info(channels=BEAMS, columns_per_frame=COLUMNS,
-                                  vertical_min_deg=-30.0, vertical_max_deg=11.0,
-                                  rate_hz=RATE_HZ, serial_number=123, init_id=77)  # fmt: skip
+    other = synthetic_sensor_info(
+        channels=BEAMS,
+        columns_per_frame=COLUMNS,
+        vertical_min_deg=-30.0,
+        vertical_max_deg=11.0,
+        rate_hz=RATE_HZ,
+        serial_number=123,
+        init_id=77,
+    )
     metadata_path = tmp_path / "other.json"
     metadata_path.write_text(other.to_json_string())
     with pytest.raises(FieldDataError, match="not one lidar packet") as raised:

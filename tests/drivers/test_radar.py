@@ -47,8 +47,13 @@ def test_csv_range_azimuth_grouped_by_time(tmp_path: Path) -> None:
         assert obj.y_m == pytest.approx(range_m * math.sin(math.radians(azimuth_deg)))
         assert math.hypot(obj.x_m, obj.y_m) == pytest.approx(range_m)
     assert [o.object_id for o in objects] == [1, 2, 1, 7, 8]
-    assert [o.object_class for o in objects] == [VehicleClass.CAR, VehicleClass.TRUCK,
-        VehicleClass.UNKNOWN, VehicleClass.UNKNOWN, VehicleClass.MOTORCYCLE]  # fmt: skip
+    assert [o.object_class for o in objects] == [
+        VehicleClass.CAR,
+        VehicleClass.TRUCK,
+        VehicleClass.UNKNOWN,
+        VehicleClass.UNKNOWN,
+        VehicleClass.MOTORCYCLE,
+    ]
     assert (objects[0].speed_mps, objects[0].length_m, objects[0].width_m) == (27.5, 4.6, 1.9)
     assert (objects[2].speed_mps, objects[2].length_m) == (None, None)
 
@@ -116,21 +121,32 @@ def test_csv_missing_columns_raise_naming_what_is_accepted(tmp_path: Path) -> No
 
 def test_json_lines_reports(tmp_path: Path) -> None:
     lines = [
-        {"time": T0, "objects": [{"id": 4, "x_m": 60.0, "y_m": 3.5, "speed_mps": 25.0,
-                                  "class": "truck", "length_m": 12.0, "width_m": 2.5},
-                                 {"object_id": 5, "range_m": 10.0, "azimuth_deg": -90.0}]},
+        {
+            "time": T0,
+            "objects": [
+                {
+                    "id": 4,
+                    "x_m": 60.0,
+                    "y_m": 3.5,
+                    "speed_mps": 25.0,
+                    "class": "truck",
+                    "length_m": 12.0,
+                    "width_m": 2.5,
+                },
+                {"object_id": 5, "range_m": 10.0, "azimuth_deg": -90.0},
+            ],
+        },
         {"time_unix_s": T0 + 0.05, "objects": []},
         {"time": T0 + 0.05, "objects": [{"x_m": 1.0, "y_m": 2.0, "class": "Bus"}]},  # merged
         {"time": T0 + 0.1, "objects": [{"x_m": "n/a", "y_m": 2.0}, {"x_m": 9.0, "y_m": 0.0}]},
         {"objects": [{"x_m": 1.0, "y_m": 1.0}]},  # no time
         {"time": T0, "objects": []},  # goes back
-    ]  # fmt: skip
+    ]
     path = tmp_path / "unit.jsonl"
     path.write_text("\n".join(json.dumps(line) for line in lines) + "\n\nnot json\n")
     problems = Problems()
     reports = list(read_objects(path, problems))
-    assert [(r.stamp, len(r.objects)) for r in reports] == [(T0, 2), (T0 + 0.05, 1),
-                                                            (T0 + 0.1, 1)]  # fmt: skip
+    assert [(r.stamp, len(r.objects)) for r in reports] == [(T0, 2), (T0 + 0.05, 1), (T0 + 0.1, 1)]
     truck, side = reports[0].objects
     assert (truck.object_id, truck.object_class, truck.length_m) == (4, VehicleClass.TRUCK, 12.0)
     assert side.object_id == 5

@@ -53,12 +53,24 @@ A_AT_TAPER_S = (1000.0 - 400.0) / 29.0
 
 def truth_at(t: float) -> list[VehicleTruth]:
     return [
-        VehicleTruth(vehicle_id=vehicle_id, vehicle_class=VehicleClass.CAR, x_m=-OFFSET_M,
-                     y_m=s0 + v * t, heading_rad=math.pi / 2, speed_mps=v, accel_mps2=0.0,
-                     length_m=4.5, width_m=1.8, height_m=1.5, lane_index=0,
-                     station_m=s0 + v * t, offset_m=OFFSET_M, driver_profile=profile)
+        VehicleTruth(
+            vehicle_id=vehicle_id,
+            vehicle_class=VehicleClass.CAR,
+            x_m=-OFFSET_M,
+            y_m=s0 + v * t,
+            heading_rad=math.pi / 2,
+            speed_mps=v,
+            accel_mps2=0.0,
+            length_m=4.5,
+            width_m=1.8,
+            height_m=1.5,
+            lane_index=0,
+            station_m=s0 + v * t,
+            offset_m=OFFSET_M,
+            driver_profile=profile,
+        )
         for vehicle_id, (s0, v, profile) in VEHICLES.items()
-    ]  # fmt: skip
+    ]
 
 
 TRUTH = [(k / 20.0, truth_at(k / 20.0)) for k in range(21 * 20 + 1)]
@@ -69,14 +81,31 @@ def station(vehicle_id: str, t: float) -> float:
     return s0 + v * t
 
 
-def alert(episode: str, stamp: float, station_m: float, phase: AlertPhase = "start",
-          alert_type: AlertType = AlertType.SPEEDING) -> Alert:  # fmt: skip
-    return Alert(site=SITE.site_id, source_id="alert-service", stamp=stamp,
-                 alert_id=f"{episode}-{phase}", alert_type=alert_type,
-                 severity=AlertSeverity.WARNING, track_id=7, station_m=station_m,
-                 offset_m=OFFSET_M + 0.3, speed_mps=29.0, measured_value=29.0,
-                 threshold_value=26.8, description="test", phase=phase, episode_id=episode,
-                 onset_stamp=stamp - 1.0)  # fmt: skip
+def alert(
+    episode: str,
+    stamp: float,
+    station_m: float,
+    phase: AlertPhase = "start",
+    alert_type: AlertType = AlertType.SPEEDING,
+) -> Alert:
+    return Alert(
+        site=SITE.site_id,
+        source_id="alert-service",
+        stamp=stamp,
+        alert_id=f"{episode}-{phase}",
+        alert_type=alert_type,
+        severity=AlertSeverity.WARNING,
+        track_id=7,
+        station_m=station_m,
+        offset_m=OFFSET_M + 0.3,
+        speed_mps=29.0,
+        measured_value=29.0,
+        threshold_value=26.8,
+        description="test",
+        phase=phase,
+        episode_id=episode,
+        onset_stamp=stamp - 1.0,
+    )
 
 
 def test_truth_episodes_are_the_rules_on_the_true_kinematics() -> None:
@@ -103,10 +132,24 @@ def test_a_true_positive_false_positives_and_a_false_negative() -> None:
     ]
     report = score_alerts(SITE, TRUTH, events)
     speeding = report["speeding"]
-    assert {k: speeding[k] for k in ("true_positives", "false_positives", "false_negatives",
-                                      "duplicates", "alerts", "truth_episodes")} == {
-        "true_positives": 1, "false_positives": 3, "false_negatives": 1, "duplicates": 1,
-        "alerts": 4, "truth_episodes": 2}  # fmt: skip
+    assert {
+        k: speeding[k]
+        for k in (
+            "true_positives",
+            "false_positives",
+            "false_negatives",
+            "duplicates",
+            "alerts",
+            "truth_episodes",
+        )
+    } == {
+        "true_positives": 1,
+        "false_positives": 3,
+        "false_negatives": 1,
+        "duplicates": 1,
+        "alerts": 4,
+        "truth_episodes": 2,
+    }
     assert speeding["precision"] == pytest.approx(1 / 4)
     assert speeding["recall"] == pytest.approx(1 / 2)
     # A reaches the taper start (1000 m) at 600 / 29 s; its alert started at 1.5 s.
@@ -169,12 +212,23 @@ def test_an_alert_is_about_the_vehicle_its_track_followed() -> None:
 
 def detections_of(vehicle_id: str, stamps: list[float]) -> list[DetectionBatch]:
     return [
-        DetectionBatch(site=SITE.site_id, source_id="lidar-mast", stamp=t, frame_index=i, detections=[
-            Detection(x_m=-OFFSET_M + 0.2, y_m=station(vehicle_id, t) + 0.5,
-                      covariance_m2=[0.1, 0.0, 0.0, 0.1], object_class=VehicleClass.CAR,
-                      score=0.9)])
+        DetectionBatch(
+            site=SITE.site_id,
+            source_id="lidar-mast",
+            stamp=t,
+            frame_index=i,
+            detections=[
+                Detection(
+                    x_m=-OFFSET_M + 0.2,
+                    y_m=station(vehicle_id, t) + 0.5,
+                    covariance_m2=[0.1, 0.0, 0.0, 0.1],
+                    object_class=VehicleClass.CAR,
+                    score=0.9,
+                )
+            ],
+        )
         for i, t in enumerate(stamps)
-    ]  # fmt: skip
+    ]
 
 
 def test_observed_truth_keeps_the_vehicles_a_sensor_saw_recently() -> None:
@@ -190,6 +244,12 @@ def test_observed_truth_keeps_the_vehicles_a_sensor_saw_recently() -> None:
     assert all("C" not in vehicles for vehicles in ids.values())
     # Scored on what the sensors saw, B's speeding before 12 s is no longer a miss the chain
     # could have avoided: B's episode starts only once it is seen for the rule's hold.
-    speeding = [e for e in truth_episodes(SITE, list(observed.items()))
-                if e.alert_type is AlertType.SPEEDING]  # fmt: skip
-    assert sorted((e.vehicle_id, round(e.onset_s, 2)) for e in speeding) == [("A", 0.0), ("B", 12.0)]
+    speeding = [
+        e
+        for e in truth_episodes(SITE, list(observed.items()))
+        if e.alert_type is AlertType.SPEEDING
+    ]
+    assert sorted((e.vehicle_id, round(e.onset_s, 2)) for e in speeding) == [
+        ("A", 0.0),
+        ("B", 12.0),
+    ]

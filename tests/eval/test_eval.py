@@ -18,16 +18,39 @@ BIAS_MAP = ROOT / "deploy" / "sites" / "us75-lincoln.bias-map.json"
 
 
 def wz(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "wz_cli.main", *args], cwd=ROOT,
-                          capture_output=True, text=True, timeout=900, check=False)  # fmt: skip
+    return subprocess.run(
+        [sys.executable, "-m", "wz_cli.main", *args],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=900,
+        check=False,
+    )
 
 
 def test_wz_eval_writes_the_report_json_markdown_and_plots(tmp_path: Path) -> None:
     out = tmp_path / "eval"
-    result = wz("eval", "--duration-s", "25", "--warmup-s", "45", "--seed", "3",
-                "--max-range-m", "150", "--drop", "lidar-mast@10+2", "--json",
-                str(tmp_path / "report.json"), "--out", str(out), "--bias-map", str(BIAS_MAP),
-                "--write-bias-map", str(tmp_path / "measured.json"))  # fmt: skip
+    result = wz(
+        "eval",
+        "--duration-s",
+        "25",
+        "--warmup-s",
+        "45",
+        "--seed",
+        "3",
+        "--max-range-m",
+        "150",
+        "--drop",
+        "lidar-mast@10+2",
+        "--json",
+        str(tmp_path / "report.json"),
+        "--out",
+        str(out),
+        "--bias-map",
+        str(BIAS_MAP),
+        "--write-bias-map",
+        str(tmp_path / "measured.json"),
+    )
     assert result.returncode == 0, result.stderr[-3000:]
     report = json.loads((tmp_path / "report.json").read_text())
     # The shipped map (seed 11) was applied; this run's own map written, both sensors in it.
@@ -46,12 +69,22 @@ def test_wz_eval_writes_the_report_json_markdown_and_plots(tmp_path: Path) -> No
     assert report["rmse_speed_mps"]["fused"] < 2.0
     (dropout,) = report["dropouts"]
     assert (dropout["sensor_id"], dropout["start_s"], dropout["duration_s"]) == (
-        "lidar-mast", 10.0, 2.0)
+        "lidar-mast",
+        10.0,
+        2.0,
+    )
     assert dropout["fused_samples"] > 0 and dropout["fused_rmse_longitudinal_m"] < 3.0
     assert dropout["id_switches_from_start_to_2s_after"] >= 0
     for row in report["paper_table"]:
-        assert {"camera", "lidar", "average", "paper_kf", "fused", "fused_smoothed",
-                "fused_stored"} <= set(row)  # fmt: skip
+        assert {
+            "camera",
+            "lidar",
+            "average",
+            "paper_kf",
+            "fused",
+            "fused_smoothed",
+            "fused_stored",
+        } <= set(row)
     # The two hindsight versions (RTS over each track's updates; the published states as the
     # gateway smooths them) are scored on the same vehicles as the live tracks, and hindsight
     # does not make them worse. (Before session 10 a track still lost when the run stopped was
@@ -70,8 +103,10 @@ def test_wz_eval_writes_the_report_json_markdown_and_plots(tmp_path: Path) -> No
     # issue 6's targets, checked on the run: every one has a row, the dropout's included
     checks = {row["check"]: row for row in report["must_show"]}
     assert checks["MOTA"]["value"] == report["mota"]
-    assert checks["lidar-mast silent 2 s: identity switches to 2 s after"]["value"] == (
-        dropout["id_switches_from_start_to_2s_after"])
+    assert (
+        checks["lidar-mast silent 2 s: identity switches to 2 s after"]["value"]
+        == (dropout["id_switches_from_start_to_2s_after"])
+    )
     assert sum(1 for check in checks if check.startswith("paper table")) == 3
     markdown = (out / "eval.md").read_text()
     assert "MOTA" in markdown and "| fused |" in markdown and "hidden ones included" in markdown
@@ -95,8 +130,17 @@ def test_dropout_parsing() -> None:
 
 
 def test_wz_eval_camera_gives_errors_by_distance_for_the_three_methods(tmp_path: Path) -> None:
-    result = wz("eval-camera", "--duration-s", "20", "--warmup-s", "45", "--seed", "4",
-                "--out", str(tmp_path))  # fmt: skip
+    result = wz(
+        "eval-camera",
+        "--duration-s",
+        "20",
+        "--warmup-s",
+        "45",
+        "--seed",
+        "4",
+        "--out",
+        str(tmp_path),
+    )
     assert result.returncode == 0, result.stderr[-3000:]
     report = json.loads((tmp_path / "camera-eval.json").read_text())
     table = report["errors_by_range_m"]

@@ -41,9 +41,15 @@ def gps_truth(duration_s: float = 40.0, speed_mps: float = SPEED_MPS) -> GpsTrac
     t_rel = np.arange(0.0, duration_s, 0.1)
     y = START_M + speed_mps * t_rel
     x = np.full_like(y, VAN_X_M)
-    return GpsTrack(t=T0 + t_rel, x_m=x, y_m=y, station_m=y, offset_m=-x,
-                    speed_mps=np.full_like(y, speed_mps),
-                    heading_rad=np.full_like(y, np.pi / 2))  # fmt: skip
+    return GpsTrack(
+        t=T0 + t_rel,
+        x_m=x,
+        y_m=y,
+        station_m=y,
+        offset_m=-x,
+        speed_mps=np.full_like(y, speed_mps),
+        heading_rad=np.full_like(y, np.pi / 2),
+    )
 
 
 def radar_camera(rng: np.random.Generator) -> SourceObservations:
@@ -58,9 +64,11 @@ def radar_camera(rng: np.random.Generator) -> SourceObservations:
     other_lane_y = van_y(true_rel) + 2.0
     ahead_y = START_M + 30.0 + 30.0 * true_rel  # 30 m/s, from 30 m ahead
     times = np.concatenate([stamps_rel, stamps_rel, stamps_rel]) + T0
-    return SourceObservations(times_s=times,
-                              x_m=np.concatenate([van_x, other_lane_x, np.full(n, VAN_X_M)]),
-                              y_m=np.concatenate([van_yy, other_lane_y, ahead_y]))  # fmt: skip
+    return SourceObservations(
+        times_s=times,
+        x_m=np.concatenate([van_x, other_lane_x, np.full(n, VAN_X_M)]),
+        y_m=np.concatenate([van_yy, other_lane_y, ahead_y]),
+    )
 
 
 def lidar(rng: np.random.Generator) -> SourceObservations:
@@ -73,18 +81,24 @@ def lidar(rng: np.random.Generator) -> SourceObservations:
     return SourceObservations(
         times_s=np.concatenate([stamps_rel, stamps_rel]) + T0,
         x_m=np.concatenate([VAN_X_M + rng.normal(0.0, 0.1, n), np.full(n, -1.75)]),
-        y_m=np.concatenate([van_y(stamps_rel) + rng.normal(0.0, 0.1, n),
-                            van_y(stamps_rel) - 1.0]),
-        ids=np.concatenate([ids, np.full(n, 3)]))  # fmt: skip
+        y_m=np.concatenate([van_y(stamps_rel) + rng.normal(0.0, 0.1, n), van_y(stamps_rel) - 1.0]),
+        ids=np.concatenate([ids, np.full(n, 3)]),
+    )
 
 
 @pytest.fixture(scope="module")
 def result() -> FieldResult:
     rng = np.random.default_rng(7)
-    settings = FieldSettings(station_window_m=(START_M + 5.0 * SPEED_MPS,
-                                               START_M + 35.0 * SPEED_MPS))  # fmt: skip
-    return evaluate_field(gps_truth(), {"radar-camera": radar_camera(rng), "lidar": lidar(rng)},
-                          ROAD, settings, clock_offsets_s={"lidar": 0.0})  # fmt: skip
+    settings = FieldSettings(
+        station_window_m=(START_M + 5.0 * SPEED_MPS, START_M + 35.0 * SPEED_MPS)
+    )
+    return evaluate_field(
+        gps_truth(),
+        {"radar-camera": radar_camera(rng), "lidar": lidar(rng)},
+        ROAD,
+        settings,
+        clock_offsets_s={"lidar": 0.0},
+    )
 
 
 def test_clock_offset_recovered_and_errors_as_expected(result: FieldResult) -> None:
@@ -128,8 +142,9 @@ def test_availability_and_longest_gap_exact(result: FieldResult) -> None:
 
 def test_default_window_spans_the_associations() -> None:
     rng = np.random.default_rng(3)
-    outcome = evaluate_field(gps_truth(), {"lidar": lidar(rng)}, ROAD,
-                             clock_offsets_s={"lidar": 0.0})  # fmt: skip
+    outcome = evaluate_field(
+        gps_truth(), {"lidar": lidar(rng)}, ROAD, clock_offsets_s={"lidar": 0.0}
+    )
     assert outcome.station_window_m is not None
     low, high = outcome.station_window_m
     assert low == pytest.approx(START_M + 5.0 * SPEED_MPS)
@@ -139,7 +154,9 @@ def test_default_window_spans_the_associations() -> None:
 
 def test_table_and_dict_render(result: FieldResult) -> None:
     table = markdown_table(result)
-    assert table.startswith("| source | samples | RMSE distance [m] | RMSE longitudinal [m] | RMSE lateral [m]")
+    assert table.startswith(
+        "| source | samples | RMSE distance [m] | RMSE longitudinal [m] | RMSE lateral [m]"
+    )
     rows = [line for line in table.splitlines() if line.startswith("| radar-camera |")]
     assert len(rows) == 1 and "+0.3" in rows[0]
     assert "| lidar | " in table and "(given)" in table and "95.0" in table
@@ -161,10 +178,14 @@ def test_table_and_dict_render(result: FieldResult) -> None:
 
 def test_a_source_that_never_sees_the_van(result: FieldResult) -> None:
     rng = np.random.default_rng(5)
-    blind = SourceObservations(times_s=T0 + np.arange(5.0, 35.0, 0.1),
-                               x_m=np.full(300, -30.0), y_m=rng.uniform(0, 1000, 300))  # fmt: skip
-    outcome = evaluate_field(gps_truth(), {"lidar": lidar(rng), "blind": blind}, ROAD,
-                             clock_offsets_s={"lidar": 0.0})  # fmt: skip
+    blind = SourceObservations(
+        times_s=T0 + np.arange(5.0, 35.0, 0.1),
+        x_m=np.full(300, -30.0),
+        y_m=rng.uniform(0, 1000, 300),
+    )
+    outcome = evaluate_field(
+        gps_truth(), {"lidar": lidar(rng), "blind": blind}, ROAD, clock_offsets_s={"lidar": 0.0}
+    )
     row = outcome.sources["blind"]
     assert row.longitudinal.count == 0 and row.longitudinal.rmse_m is None
     assert not row.clock.estimated and "too few" in row.clock.note
@@ -175,9 +196,11 @@ def test_a_source_that_never_sees_the_van(result: FieldResult) -> None:
 def test_offset_not_estimated_for_a_stopped_van() -> None:
     rng = np.random.default_rng(11)
     truth = gps_truth(duration_s=10.0, speed_mps=0.0)
-    seen = SourceObservations(times_s=T0 + np.arange(1.0, 9.0, 0.1),
-                              x_m=VAN_X_M + rng.normal(0, 0.1, 80),
-                              y_m=START_M + rng.normal(0, 0.1, 80))  # fmt: skip
+    seen = SourceObservations(
+        times_s=T0 + np.arange(1.0, 9.0, 0.1),
+        x_m=VAN_X_M + rng.normal(0, 0.1, 80),
+        y_m=START_M + rng.normal(0, 0.1, 80),
+    )
     clock = estimate_clock_offset(truth, seen, ROAD)
     assert clock.offset_s == 0.0 and not clock.estimated and "speed" in clock.note
     assert len(associate(truth, seen, ROAD)) == 80
@@ -189,5 +212,4 @@ def test_plot_is_written(result: FieldResult, tmp_path: Path) -> None:
 
 
 def test_core_is_independent_of_drivers_and_middleware() -> None:
-    assert not top_level_imports(field_module) & {"wz_drivers", "wz_simulator", "zenoh",
-                                                 "fastapi"}  # fmt: skip
+    assert not top_level_imports(field_module) & {"wz_drivers", "wz_simulator", "zenoh", "fastapi"}

@@ -13,22 +13,40 @@ def _row(vehicle: str, fused_lat: float, average_lat: float, samples: int = 20) 
     def cells(lon: float, lat: float) -> dict[str, float]:
         return {"longitudinal_m": lon, "lateral_m": lat}
 
-    return {"vehicle_id": vehicle, "samples": samples, "camera": cells(20.0, 3.0),
-            "lidar": cells(15.0, 2.0), "average": cells(8.0, average_lat),
-            "paper_kf": cells(9.0, 1.0), "fused": cells(5.0, fused_lat),
-            "fused_smoothed": cells(4.0, 0.3), "fused_stored": cells(4.5, 0.35)}  # fmt: skip
+    return {
+        "vehicle_id": vehicle,
+        "samples": samples,
+        "camera": cells(20.0, 3.0),
+        "lidar": cells(15.0, 2.0),
+        "average": cells(8.0, average_lat),
+        "paper_kf": cells(9.0, 1.0),
+        "fused": cells(5.0, fused_lat),
+        "fused_smoothed": cells(4.0, 0.3),
+        "fused_stored": cells(4.5, 0.35),
+    }
 
 
 def _report(table: list[dict[str, Any]]) -> dict[str, Any]:
     fused = {"rmse_longitudinal_m": 0.28, "rmse_lateral_m": 0.14, "rmse_speed_mps": 0.34}
     report: dict[str, Any] = {
-        "max_range_m": 150.0, "sources": {"fused": fused}, "mota": 0.967,
-        "id_switches_per_100_vehicles": 0.83, "paper_table": table,
-        "dropouts": [{"sensor_id": "lidar-mast", "start_s": 300.0, "duration_s": 2.0,
-                      "fused_samples": 164, "fused_rmse_longitudinal_m": 0.78,
-                      "fused_rmse_lateral_m": 0.23, "fused_max_abs_error_m": 2.86,
-                      "id_switches_from_start_to_2s_after": 0}],
-    }  # fmt: skip
+        "max_range_m": 150.0,
+        "sources": {"fused": fused},
+        "mota": 0.967,
+        "id_switches_per_100_vehicles": 0.83,
+        "paper_table": table,
+        "dropouts": [
+            {
+                "sensor_id": "lidar-mast",
+                "start_s": 300.0,
+                "duration_s": 2.0,
+                "fused_samples": 164,
+                "fused_rmse_longitudinal_m": 0.78,
+                "fused_rmse_lateral_m": 0.23,
+                "fused_max_abs_error_m": 2.86,
+                "id_switches_from_start_to_2s_after": 0,
+            }
+        ],
+    }
     report["paper_table_summary"] = table_summary(table)
     return report
 
@@ -47,15 +65,17 @@ def test_each_target_fails_on_its_own() -> None:
     good = _report([_row(f"v{i}", 0.5, 1.0) for i in range(10)])
     breaks: dict[str, Callable[[dict[str, Any]], object]] = {
         "fused RMSE lateral within 150 m": lambda r: r["sources"]["fused"].update(
-            rmse_lateral_m=0.31),
+            rmse_lateral_m=0.31
+        ),
         "MOTA": lambda r: r.update(mota=0.949),
-        "identity switches per 100 vehicles": lambda r: r.update(
-            id_switches_per_100_vehicles=1.2),
+        "identity switches per 100 vehicles": lambda r: r.update(id_switches_per_100_vehicles=1.2),
         "lidar-mast silent 2 s: fused RMSE lon / lat inside it": lambda r: r["dropouts"][0].update(
-            fused_rmse_lateral_m=0.4),
+            fused_rmse_lateral_m=0.4
+        ),
         "lidar-mast silent 2 s: identity switches to 2 s after": lambda r: r["dropouts"][0].update(
-            id_switches_from_start_to_2s_after=1),
-    }  # fmt: skip
+            id_switches_from_start_to_2s_after=1
+        ),
+    }
     for check, breaking in breaks.items():
         report = copy.deepcopy(good)
         breaking(report)
@@ -76,8 +96,12 @@ def test_the_paper_table_needs_nine_in_ten_of_at_least_ten_vehicles() -> None:
     table[0]["fused"]["lateral_m"] = 1.1
     assert table_summary(table)["fused_lateral_losses_to_average_within_1cm"] == 1
     # nine table rows are too few, whatever the share
-    assert _holds(_report(table[:9]))[
-        "paper table, stored track below camera, LiDAR and average on both axes"] is False
+    assert (
+        _holds(_report(table[:9]))[
+            "paper table, stored track below camera, LiDAR and average on both axes"
+        ]
+        is False
+    )
 
 
 def test_a_range_other_than_150_m_cannot_tell_the_rmse_targets() -> None:

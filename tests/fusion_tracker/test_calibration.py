@@ -35,8 +35,7 @@ MAST_STATION = float(SITE.road_frame.to_road(7.5, 980.0)[0])  # the LiDAR's stat
 
 def measurement_at(station_m: float, offset_m: float, sensor: str = "lidar-mast") -> Measurement:
     x, y = SITE.road_frame.to_site(station_m, offset_m)
-    return Measurement(x_m=float(x), y_m=float(y), covariance_m2=np.eye(2) * 0.04,
-                       sensor_id=sensor)  # fmt: skip
+    return Measurement(x_m=float(x), y_m=float(y), covariance_m2=np.eye(2) * 0.04, sensor_id=sensor)
 
 
 def road(m: Measurement) -> tuple[float, float]:
@@ -52,8 +51,9 @@ def test_fit_recovers_each_cells_median_and_leaves_thin_cells_out() -> None:
         lateral = 0.05 + rng.normal(0.0, 0.02) + (3.0 if rng.random() < 0.1 else 0.0)
         errors.append(("lidar-mast", MAST_STATION - 55.0 + rng.uniform(-4, 4), -1.83, lateral))
     # lane 1, same bin: -0.03
-    errors += [("lidar-mast", MAST_STATION - 55.0, 1.83, -0.03 + rng.normal(0, 0.01))
-               for _ in range(100)]  # fmt: skip
+    errors += [
+        ("lidar-mast", MAST_STATION - 55.0, 1.83, -0.03 + rng.normal(0, 0.01)) for _ in range(100)
+    ]
     # too few for a cell; a sensor the site does not have; off the road; a NaN
     errors += [("lidar-mast", MAST_STATION - 95.0, -1.83, 0.5)] * 29
     errors += [("lidar-elsewhere", MAST_STATION - 55.0, -1.83, 0.5)] * 50
@@ -69,11 +69,23 @@ def test_fit_recovers_each_cells_median_and_leaves_thin_cells_out() -> None:
     assert bias_map.site_id == SITE.site_id and bias_map.source == "test"
 
 
-def one_cell_map(bias_m: float, relative_station_m: float = -60.0, lane: int = 0,
-                 sensor: str = "lidar-mast") -> BiasMap:  # fmt: skip
-    return BiasMap(site_id=SITE.site_id, bin_m=10.0, sensors={sensor: [BiasCell(
-        lane_index=lane, relative_station_m=relative_station_m, lateral_bias_m=bias_m,
-        samples=100)]})  # fmt: skip
+def one_cell_map(
+    bias_m: float, relative_station_m: float = -60.0, lane: int = 0, sensor: str = "lidar-mast"
+) -> BiasMap:
+    return BiasMap(
+        site_id=SITE.site_id,
+        bin_m=10.0,
+        sensors={
+            sensor: [
+                BiasCell(
+                    lane_index=lane,
+                    relative_station_m=relative_station_m,
+                    lateral_bias_m=bias_m,
+                    samples=100,
+                )
+            ]
+        },
+    )
 
 
 def test_correction_moves_across_the_road_by_minus_the_cells_bias() -> None:
@@ -144,22 +156,28 @@ def lidar_batch(k: int, offset_m: float) -> DetectionBatch:
     """One car in lane 0 at 25 m/s, 90-15 m upstream of the mast, seen at ``offset_m``."""
     t = 0.05 * k
     x, y = SITE.road_frame.to_site(MAST_STATION - 90.0 + 25.0 * t, offset_m)
-    detection = Detection(x_m=float(x), y_m=float(y), covariance_m2=[0.04, 0.0, 0.0, 0.04],
-                          object_class="car")  # fmt: skip
-    return DetectionBatch(site=SITE.site_id, source_id="lidar-mast", stamp=t, frame_index=k,
-                          detections=[detection])  # fmt: skip
+    detection = Detection(
+        x_m=float(x), y_m=float(y), covariance_m2=[0.04, 0.0, 0.0, 0.04], object_class="car"
+    )
+    return DetectionBatch(
+        site=SITE.site_id, source_id="lidar-mast", stamp=t, frame_index=k, detections=[detection]
+    )
 
 
 def test_fusion_core_removes_the_bias_of_its_map(tmp_path: Path) -> None:
     """A LiDAR that sees a car 0.15 m left of where it drives: with the map, the track is on
     the car's line; without it, 0.15 m off."""
-    cells = [BiasCell(lane_index=0, relative_station_m=-10.0 * k, lateral_bias_m=0.15,
-                      samples=100) for k in range(1, 11)]  # fmt: skip
+    cells = [
+        BiasCell(lane_index=0, relative_station_m=-10.0 * k, lateral_bias_m=0.15, samples=100)
+        for k in range(1, 11)
+    ]
     path = tmp_path / "bias.json"
     write_bias_map(path, BiasMap(site_id=SITE.site_id, sensors={"lidar-mast": cells}))
     offsets = {}
-    for name, settings in (("plain", FusionTrackerSettings()),
-                           ("mapped", FusionTrackerSettings(bias_map=path))):  # fmt: skip
+    for name, settings in (
+        ("plain", FusionTrackerSettings()),
+        ("mapped", FusionTrackerSettings(bias_map=path)),
+    ):
         core = FusionCore(SITE, settings, report=lambda r, d: None)
         outputs: list[TrackBatch] = []
         for k in range(60):
@@ -174,7 +192,13 @@ def test_the_node_will_not_start_with_a_bad_map(tmp_path: Path) -> None:
     path = tmp_path / "bias.json"
     path.write_text('{"site_id": "us75-lincoln", "sensors": {"lidar-mast": [{"lane_index": 0')
     env = {"PATH": "/usr/bin:/bin", "WZ_FUSION_BIAS_MAP": str(path)}
-    result = subprocess.run([sys.executable, "-m", "wz_fusion_tracker.node"], cwd=ROOT, env=env,
-                            capture_output=True, text=True, timeout=60)  # fmt: skip
+    result = subprocess.run(
+        [sys.executable, "-m", "wz_fusion_tracker.node"],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert result.returncode != 0
     assert "bias map" in result.stderr and "not JSON" in result.stderr

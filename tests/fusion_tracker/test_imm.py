@@ -51,8 +51,11 @@ def test_the_mixture_moments_of_two_gaussians() -> None:
 def _lane_change_truth(times: np.ndarray) -> np.ndarray:
     """A car at 28 m/s along x that keeps its lane, changes lanes (3.6 m in y over 3 s, a
     half-cosine) at t = 10 s, and keeps its new lane."""
-    y = np.where(times < 10.0, 0.0,
-                 np.where(times > 13.0, 3.6, 1.8 * (1.0 - np.cos(np.pi * (times - 10.0) / 3.0))))  # fmt: skip
+    y = np.where(
+        times < 10.0,
+        0.0,
+        np.where(times > 13.0, 3.6, 1.8 * (1.0 - np.cos(np.pi * (times - 10.0) / 3.0))),
+    )
     return np.stack([28.0 * times, y], axis=1)
 
 
@@ -79,8 +82,9 @@ def test_agrees_with_filterpys_imm_estimator_on_a_seeded_sequence() -> None:
         kf.H, kf.R = position_h(), R
         filters.append(kf)
     bank = IMMStateBank(SOJOURN_S)
-    reference = IMMEstimator(filters, bank.initial_probabilities.copy(),
-                             two_mode_transition(np.array(dt), *SOJOURN_S))  # fmt: skip
+    reference = IMMEstimator(
+        filters, bank.initial_probabilities.copy(), two_mode_transition(np.array(dt), *SOJOURN_S)
+    )
     slot = bank.add(x0, P0, 0.0)
     slots = np.array([slot])
     for k, t in enumerate(times):
@@ -114,17 +118,22 @@ def test_with_two_equal_modes_it_is_the_single_model_bank() -> None:
     everyone = np.arange(6)
     np.testing.assert_allclose(imm.states(everyone), single.states(everyone), atol=1e-9)
     np.testing.assert_allclose(imm.covariances(everyone), single.covariances(everyone), atol=1e-9)
-    np.testing.assert_allclose(imm.mode_probabilities(everyone),
-                               np.broadcast_to(imm.initial_probabilities, (6, 2)), atol=1e-9)  # fmt: skip
+    np.testing.assert_allclose(
+        imm.mode_probabilities(everyone),
+        np.broadcast_to(imm.initial_probabilities, (6, 2)),
+        atol=1e-9,
+    )
 
 
-def _track_lateral(bank_kind: str, z: np.ndarray, times: np.ndarray, R: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def _track_lateral(
+    bank_kind: str, z: np.ndarray, times: np.ndarray, R: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Filtered lateral positions over the run, and the manoeuvre probability (IMM only)."""
     bank: IMMStateBank | TrackStateBank
     bank = IMMStateBank(SOJOURN_S) if bank_kind == "imm" else TrackStateBank()
-    slots = np.array([bank.add([z[0, 0], z[0, 1], 28.0, 0.0], np.diag([0.1, 0.1, 1.0, 1.0]),
-                               times[0])])  # fmt: skip
+    slots = np.array(
+        [bank.add([z[0, 0], z[0, 1], 28.0, 0.0], np.diag([0.1, 0.1, 1.0, 1.0]), times[0])]
+    )
     lateral, manoeuvre = [], []
     for k in range(1, len(times)):
         if bank_kind == "imm":

@@ -40,16 +40,33 @@ def truth_at(t: float) -> list[tuple[float, float]]:
     return [(x, y + v * t) for x, y, v in VEHICLES]
 
 
-def batch(sensor: str, index: int, t: float, rng: np.random.Generator, std: float,
-          covariance: list[float] | None = None, site: str | None = None) -> DetectionBatch:  # fmt: skip
+def batch(
+    sensor: str,
+    index: int,
+    t: float,
+    rng: np.random.Generator,
+    std: float,
+    covariance: list[float] | None = None,
+    site: str | None = None,
+) -> DetectionBatch:
     detections = [
-        Detection(x_m=x + rng.normal(0, std), y_m=y + rng.normal(0, std),
-                  covariance_m2=covariance or [std**2, 0.0, 0.0, std**2], object_class="car",
-                  length_m=4.6, width_m=1.8)
+        Detection(
+            x_m=x + rng.normal(0, std),
+            y_m=y + rng.normal(0, std),
+            covariance_m2=covariance or [std**2, 0.0, 0.0, std**2],
+            object_class="car",
+            length_m=4.6,
+            width_m=1.8,
+        )
         for x, y in truth_at(t)
-    ]  # fmt: skip
-    return DetectionBatch(site=site or SITE.site_id, source_id=sensor, stamp=t,
-                          frame_index=index, detections=detections)  # fmt: skip
+    ]
+    return DetectionBatch(
+        site=site or SITE.site_id,
+        source_id=sensor,
+        stamp=t,
+        frame_index=index,
+        detections=detections,
+    )
 
 
 def test_core_publishes_a_batch_per_output_period_with_road_coordinates() -> None:
@@ -63,8 +80,9 @@ def test_core_publishes_a_batch_per_output_period_with_road_coordinates() -> Non
     assert [b.cycle_index for b in outputs] == list(range(len(outputs)))
     last = outputs[-1]
     assert len(last.tracks) == 2
-    for track, (x, y) in zip(sorted(last.tracks, key=lambda t: t.x_m), truth_at(last.stamp),
-                             strict=True):  # fmt: skip
+    for track, (x, y) in zip(
+        sorted(last.tracks, key=lambda t: t.x_m), truth_at(last.stamp), strict=True
+    ):
         assert math.hypot(track.x_m - x, track.y_m - y) < 0.5
         station, offset = SITE.road_frame.to_road(x, y)
         assert track.station_m == pytest.approx(float(station), abs=0.5)
@@ -77,7 +95,9 @@ def test_track_batches_carry_the_process_noise_of_the_trackers_settings() -> Non
     """The gateway smooths with what the batches carry: the tracker's settings, which are the
     motion model's defaults unless changed."""
     assert process_noise(TrackerSettings()) == ProcessNoise()
-    tracker = TrackerSettings(sigma_along_mps2=2.5, sigma_across_mps2=1.5, heading_min_speed_mps=1.0)
+    tracker = TrackerSettings(
+        sigma_along_mps2=2.5, sigma_across_mps2=1.5, heading_min_speed_mps=1.0
+    )
     core = FusionCore(SITE, FusionTrackerSettings(tracker=tracker), report=lambda r, d: None)
     rng = np.random.default_rng(3)
     outputs: list[TrackBatch] = []
@@ -101,8 +121,9 @@ def test_the_imm_motion_model_is_chosen_from_the_environment_and_tracks(
         outputs += core.add(batch("lidar-mast", k, 0.05 * k, rng, 0.2))
     last = outputs[-1]
     assert len(last.tracks) == 2
-    for track, (x, y) in zip(sorted(last.tracks, key=lambda t: t.x_m), truth_at(last.stamp),
-                             strict=True):  # fmt: skip
+    for track, (x, y) in zip(
+        sorted(last.tracks, key=lambda t: t.x_m), truth_at(last.stamp), strict=True
+    ):
         assert math.hypot(track.x_m - x, track.y_m - y) < 0.5
     monkeypatch.setenv("WZ_FUSION_TRACKER__MOTION_MODEL", "kalman")
     with pytest.raises(ValueError, match="motion_model"):
@@ -131,25 +152,30 @@ def test_core_starts_a_new_run_when_a_sensor_starts_again() -> None:
     assert [b.cycle_index for b in second] == list(range(len(first), len(first) + len(second)))
     new_ids = {t.track_id for t in second[-1].tracks}
     assert len(new_ids) == 2 and min(new_ids) > max(old_ids)  # never reused
-    for track, (x, y) in zip(sorted(second[-1].tracks, key=lambda t: t.x_m),
-                             truth_at(second[-1].stamp), strict=True):  # fmt: skip
+    for track, (x, y) in zip(
+        sorted(second[-1].tracks, key=lambda t: t.x_m), truth_at(second[-1].stamp), strict=True
+    ):
         assert math.hypot(track.x_m - x, track.y_m - y) < 0.5
 
 
 def test_node_process_tracks_two_sensors_and_survives_bad_input(port: int) -> None:
     settings = BusSettings(listen_endpoints=[f"tcp/127.0.0.1:{port}"], connect_endpoints=[])
     env = {k: v for k, v in os.environ.items() if not k.startswith("WZ_")}
-    env.update(WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{port}", WZ_BUS_LISTEN_ENDPOINTS="",
-               WZ_STATUS_PERIOD_S="0.2", WZ_LOG_FORMAT="json")  # fmt: skip
+    env.update(
+        WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{port}",
+        WZ_BUS_LISTEN_ENDPOINTS="",
+        WZ_STATUS_PERIOD_S="0.2",
+        WZ_LOG_FORMAT="json",
+    )
     rng = np.random.default_rng(5)
     with Bus.open(settings, site=SITE.site_id, service="node-test") as bus:
         lidar = bus.publisher(bus.keys.detections("lidar-mast"), DetectionBatch, block=True)
         camera = bus.publisher(bus.keys.detections("camera-mast"), DetectionBatch, block=True)
         tracks = bus.subscribe(bus.keys.tracks, TrackBatch)
-        status = bus.subscribe(bus.keys.status("fusion-tracker"), ServiceStatus, mode="ring",
-                               capacity=1)  # fmt: skip
-        node = subprocess.Popen([sys.executable, "-m", "wz_fusion_tracker.node"], cwd=ROOT,
-                                env=env)  # fmt: skip
+        status = bus.subscribe(
+            bus.keys.status("fusion-tracker"), ServiceStatus, mode="ring", capacity=1
+        )
+        node = subprocess.Popen([sys.executable, "-m", "wz_fusion_tracker.node"], cwd=ROOT, env=env)
         try:
             assert lidar.wait_for_subscribers(30.0), "the node never subscribed"
             assert camera.wait_for_subscribers(10.0)
@@ -173,11 +199,11 @@ def test_node_process_tracks_two_sensors_and_survives_bad_input(port: int) -> No
             ids = {t.track_id for t in last.tracks}
             assert all({t.track_id for t in b.tracks} == ids for b in received if b.stamp > 1.0)
             for track in last.tracks:
-                error = min(math.hypot(track.x_m - x, track.y_m - y)
-                            for x, y in truth_at(last.stamp))  # fmt: skip
+                error = min(
+                    math.hypot(track.x_m - x, track.y_m - y) for x, y in truth_at(last.stamp)
+                )
                 assert error < 0.5
-                assert track.speed_mps == pytest.approx(
-                    25.0 if track.x_m < 0 else 30.0, abs=1.0)
+                assert track.speed_mps == pytest.approx(25.0 if track.x_m < 0 else 30.0, abs=1.0)
             (latest,) = bus.query(bus.keys.tracks_latest, TrackBatch)
             assert latest.stamp >= last.stamp
 

@@ -168,8 +168,14 @@ def test_the_pre_gate_of_many_pairs_loses_no_pair_within_its_bound(with_offsets:
     (long along the road, some uncertain ones), 280 measurements, offsets up to 0.1 s."""
     rng = np.random.default_rng(3)
     n_tracks, n_meas = 300, 280
-    x = np.column_stack([rng.uniform(0, 1500, n_tracks), rng.integers(0, 4, n_tracks) * 3.6,
-                         rng.uniform(15, 35, n_tracks), rng.normal(0, 0.5, n_tracks)])  # fmt: skip
+    x = np.column_stack(
+        [
+            rng.uniform(0, 1500, n_tracks),
+            rng.integers(0, 4, n_tracks) * 3.6,
+            rng.uniform(15, 35, n_tracks),
+            rng.normal(0, 0.5, n_tracks),
+        ]
+    )
     A = rng.normal(0, 1, (n_tracks, 4, 4)) * rng.choice([0.2, 1.0, 4.0], n_tracks)[:, None, None]
     P = A @ A.transpose(0, 2, 1) + np.diag([0.5, 0.05, 1.0, 0.1])
     near = rng.integers(0, n_tracks, n_meas)  # each measurement near some track
@@ -185,9 +191,10 @@ def test_the_pre_gate_of_many_pairs_loses_no_pair_within_its_bound(with_offsets:
         for lo in range(0, n_tracks, 5):
             for mlo in range(0, n_meas, 56):
                 block = slice(lo, lo + 5), slice(mlo, mlo + 56)
-                b_off = None if offsets is None else offsets[mlo:mlo + 56]
+                b_off = None if offsets is None else offsets[mlo : mlo + 56]
                 exact_d2[block], exact_log_det[block] = association.innovation_statistics(
-                    x[lo:lo + 5], P[lo:lo + 5], z[mlo:mlo + 56], R[mlo:mlo + 56], b_off)
+                    x[lo : lo + 5], P[lo : lo + 5], z[mlo : mlo + 56], R[mlo : mlo + 56], b_off
+                )
         within = exact_d2 <= max_d2
         assert within.any() and (~within).any()
         np.testing.assert_allclose(d2[within], exact_d2[within], rtol=1e-12)
@@ -241,7 +248,9 @@ def test_cascade_serves_confirmed_tracks_first() -> None:
 
 
 @BOTH_MODELS
-def test_two_vehicles_two_asynchronous_sensors_one_track_each_no_switch_low_error(settings: TrackerSettings) -> None:
+def test_two_vehicles_two_asynchronous_sensors_one_track_each_no_switch_low_error(
+    settings: TrackerSettings,
+) -> None:
     vehicles = [Vehicle(0.0, 0.0, 25.0, local_id=1), Vehicle(-30.0, 20.0, 30.0, -1.0, local_id=2)]
     tracker = MultiTargetTracker(settings)
     snapshots = feed(tracker, scene(vehicles, duration_s=10.0, seed=1))
@@ -285,7 +294,9 @@ def test_an_overtake_in_the_adjacent_lane_keeps_both_identities(settings: Tracke
 
 
 @BOTH_MODELS
-def test_a_sensor_silent_for_two_seconds_the_tracks_continue_on_the_other(settings: TrackerSettings) -> None:
+def test_a_sensor_silent_for_two_seconds_the_tracks_continue_on_the_other(
+    settings: TrackerSettings,
+) -> None:
     vehicles = [Vehicle(0.0, 0.0, 25.0, local_id=1), Vehicle(0.0, 10.0, 20.0, local_id=2)]
 
     def lidar_down(sensor: str, t: float) -> bool:
@@ -353,7 +364,9 @@ def test_both_sensors_silent_longer_than_max_coast_deletes_the_tracks() -> None:
 
 
 @BOTH_MODELS
-def test_out_of_order_batches_within_the_window_give_the_same_tracks(settings: TrackerSettings) -> None:
+def test_out_of_order_batches_within_the_window_give_the_same_tracks(
+    settings: TrackerSettings,
+) -> None:
     vehicles = [Vehicle(0.0, 0.0, 25.0, local_id=1), Vehicle(10.0, 3.6, 20.0, local_id=2)]
     in_order = scene(vehicles, duration_s=4.0, seed=4)
     # Every camera batch arrives after the LiDAR batch that follows it (up to 67 ms late).
@@ -435,8 +448,15 @@ def test_a_measurement_too_uncertain_to_locate_a_vehicle_starts_no_track(
     covariance = range_std_m**2 * np.outer(u, u) + 0.3**2 * np.outer(n, n)
     for k in range(12):
         stamp = k * 0.1
-        tracker.add(CAMERA, stamp, [Measurement(x_m=150.0 - 25.0 * stamp, y_m=1.8,
-                                                covariance_m2=covariance, object_class="car")])
+        tracker.add(
+            CAMERA,
+            stamp,
+            [
+                Measurement(
+                    x_m=150.0 - 25.0 * stamp, y_m=1.8, covariance_m2=covariance, object_class="car"
+                )
+            ],
+        )
     tracker.flush()
     assert (tracker.counters.tracks_started > 0) is starts
     assert (tracker.counters.measurements_unlocated > 0) is not starts
@@ -568,21 +588,46 @@ def test_class_vote_size_median_speed_and_heading() -> None:
     assert track.heading_rad == pytest.approx(math.atan2(4.0, 3.0), abs=0.05)
 
 
-def test_class_ties_go_to_the_latest_vote_sizes_keep_a_window_and_a_new_track_starts_clean() -> None:
+def test_class_ties_go_to_the_latest_vote_sizes_keep_a_window_and_a_new_track_starts_clean() -> (
+    None
+):
     """The per-track bookkeeping held as arrays over slots: a tie in the class vote goes to
     the class voted last; sizes are the median of the last ``size_window`` (an even count
     averages the middle two); a deleted track's slot, taken by a new track, carries nothing
     of the old one over (hits, class, sizes, sensors)."""
-    settings = TrackerSettings(reorder_window_s=0.0, size_window=4, lost_memory_s=0.0,
-                               confirm_hits=2, confirm_min_age_s=0.0)  # fmt: skip
+    settings = TrackerSettings(
+        reorder_window_s=0.0,
+        size_window=4,
+        lost_memory_s=0.0,
+        confirm_hits=2,
+        confirm_min_age_s=0.0,
+    )
     tracker = MultiTargetTracker(settings)
-    votes = [("car", 0.5, 4.0), ("truck", 0.5, 10.0), ("car", 0.5, 4.2), ("truck", 0.5, 9.0),
-             ("truck", 0.0, 8.0), ("car", 0.0, 6.0)]  # fmt: skip
+    votes = [
+        ("car", 0.5, 4.0),
+        ("truck", 0.5, 10.0),
+        ("car", 0.5, 4.2),
+        ("truck", 0.5, 9.0),
+        ("truck", 0.0, 8.0),
+        ("car", 0.0, 6.0),
+    ]
     for k, (object_class, score, length) in enumerate(votes):
         t = 0.1 * k
-        tracker.add(LIDAR, t, [Measurement(x_m=20.0 * t, y_m=0.0, covariance_m2=np.eye(2) * 0.01,
-                                           object_class=object_class, score=score,
-                                           length_m=length, width_m=2.0 + k)])  # fmt: skip
+        tracker.add(
+            LIDAR,
+            t,
+            [
+                Measurement(
+                    x_m=20.0 * t,
+                    y_m=0.0,
+                    covariance_m2=np.eye(2) * 0.01,
+                    object_class=object_class,
+                    score=score,
+                    length_m=length,
+                    width_m=2.0 + k,
+                )
+            ],
+        )
     (track,) = tracker.tracks()
     # car 1.0 and truck 1.0 (the zero-score votes add nothing): the latest vote, car, wins
     assert track.object_class == "car"
@@ -670,11 +715,18 @@ def test_a_box_whose_radar_speed_is_another_vehicles_is_not_taken_by_the_near_tr
         )
         for k in range(40):  # the car alone for 2 s, then the merged box 5 times
             t = 0.05 * k
-            car = Measurement(x_m=20.0 * t, y_m=0.0, covariance_m2=np.eye(2) * 0.04,
-                              speed_mps=20.0)  # fmt: skip
-            tracker.add(LIDAR if k < 35 else CAMERA, t, [car] if k < 35 else [
-                Measurement(x_m=20.0 * t, y_m=0.6, covariance_m2=np.diag([0.3, 0.3]),
-                            speed_mps=32.0)])  # fmt: skip
+            car = Measurement(x_m=20.0 * t, y_m=0.0, covariance_m2=np.eye(2) * 0.04, speed_mps=20.0)
+            tracker.add(
+                LIDAR if k < 35 else CAMERA,
+                t,
+                [car]
+                if k < 35
+                else [
+                    Measurement(
+                        x_m=20.0 * t, y_m=0.6, covariance_m2=np.diag([0.3, 0.3]), speed_mps=32.0
+                    )
+                ],
+            )
         tracker.flush()
         return tracker.tracks()
 
@@ -688,14 +740,26 @@ def test_a_box_whose_radar_speed_is_another_vehicles_is_not_taken_by_the_near_tr
     tracker = MultiTargetTracker(TrackerSettings(reorder_window_s=0.0), heading_at=lambda x, y: 0.0)
     for k in range(40):
         t = 0.05 * k
-        tracker.add(LIDAR, t, [Measurement(x_m=20.0 * t, y_m=0.0, covariance_m2=np.eye(2) * 0.04,
-                                           speed_mps=20.0 if k < 35 else 17.0)])  # fmt: skip
+        tracker.add(
+            LIDAR,
+            t,
+            [
+                Measurement(
+                    x_m=20.0 * t,
+                    y_m=0.0,
+                    covariance_m2=np.eye(2) * 0.04,
+                    speed_mps=20.0 if k < 35 else 17.0,
+                )
+            ],
+        )
     tracker.flush()
     assert len(tracker.tracks()) == 1 and tracker.counters.tracks_started == 1
 
 
 @BOTH_MODELS
-def test_the_history_is_the_filters_and_rts_smoothing_it_lowers_the_error(settings: TrackerSettings) -> None:
+def test_the_history_is_the_filters_and_rts_smoothing_it_lowers_the_error(
+    settings: TrackerSettings,
+) -> None:
     vehicles = [Vehicle(0.0, 0.0, 25.0, local_id=1)]
     tracker = MultiTargetTracker(settings)
     feed(tracker, scene(vehicles, duration_s=6.0, seed=10))
@@ -742,9 +806,18 @@ def test_measurements_captured_after_the_stamp_are_not_biased() -> None:
         for k in range(60):
             t = 0.05 * k
             seen_at = t + delta
-            tracker.add(LIDAR, t, [Measurement(
-                x_m=speed * seen_at, y_m=0.0, covariance_m2=cov,
-                time_offset_s=delta if with_offset else 0.0)])  # fmt: skip
+            tracker.add(
+                LIDAR,
+                t,
+                [
+                    Measurement(
+                        x_m=speed * seen_at,
+                        y_m=0.0,
+                        covariance_m2=cov,
+                        time_offset_s=delta if with_offset else 0.0,
+                    )
+                ],
+            )
         (track,) = tracker.tracks(0.05 * 59)
         return track.x_m - speed * 0.05 * 59
 
@@ -758,15 +831,19 @@ def test_a_duplicate_track_is_merged_into_the_older_one() -> None:
     With merging off, the duplicate stays."""
 
     def confirmed_ids(merge_distance_m: float) -> list[int]:
-        tracker = MultiTargetTracker(TrackerSettings(reorder_window_s=0.0,
-                                                     merge_distance_m=merge_distance_m))  # fmt: skip
+        tracker = MultiTargetTracker(
+            TrackerSettings(reorder_window_s=0.0, merge_distance_m=merge_distance_m)
+        )
         tight, loose = np.eye(2) * 0.01, np.eye(2) * 0.02
         for k in range(40):
             t = 0.05 * k
             tracker.add(LIDAR, t, [Measurement(x_m=25.0 * t, y_m=0.0, covariance_m2=tight)])
             if k >= 20 and k % 2 == 0:
-                tracker.add(CAMERA, t + 0.001, [Measurement(
-                    x_m=25.0 * t + 2.0, y_m=0.0, covariance_m2=loose)])  # fmt: skip
+                tracker.add(
+                    CAMERA,
+                    t + 0.001,
+                    [Measurement(x_m=25.0 * t + 2.0, y_m=0.0, covariance_m2=loose)],
+                )
         return [s.track_id for s in tracker.tracks() if s.status != "tentative"]
 
     assert confirmed_ids(2.5) == [1]
@@ -781,8 +858,9 @@ def test_a_vehicle_back_from_a_gap_keeps_its_identity() -> None:
     cov = np.eye(2) * 1e-4
 
     def ids(**changes: float) -> tuple[set[int], TrackerCounters]:
-        tracker = MultiTargetTracker(TrackerSettings(reorder_window_s=0.0, **changes),
-                                     heading_at=lambda x, y: 0.0)  # fmt: skip
+        tracker = MultiTargetTracker(
+            TrackerSettings(reorder_window_s=0.0, **changes), heading_at=lambda x, y: 0.0
+        )
         seen: set[int] = set()
         for k in range(60):
             t = 0.05 * k
@@ -812,15 +890,19 @@ def test_a_vehicle_hidden_past_its_coast_resumes_its_id_when_it_comes_back() -> 
     cov = np.eye(2) * 1e-4
 
     def run(hidden_s: float, **changes: float) -> tuple[list[set[int]], MultiTargetTracker]:
-        tracker = MultiTargetTracker(TrackerSettings(reorder_window_s=0.0, **changes),
-                                     heading_at=lambda x, y: 0.0)  # fmt: skip
+        tracker = MultiTargetTracker(
+            TrackerSettings(reorder_window_s=0.0, **changes), heading_at=lambda x, y: 0.0
+        )
         published: list[set[int]] = []
         for k in range(int((4.0 + hidden_s) / 0.05)):
             t = 0.05 * k
             hidden = 1.0 <= t < 1.0 + hidden_s
             jump = 3.0 if t >= 1.0 + hidden_s else 0.0
-            tracker.add(LIDAR, t, [] if hidden else [
-                Measurement(x_m=30.0 * t + jump, y_m=0.0, covariance_m2=cov)])  # fmt: skip
+            tracker.add(
+                LIDAR,
+                t,
+                [] if hidden else [Measurement(x_m=30.0 * t + jump, y_m=0.0, covariance_m2=cov)],
+            )
             published.append({s.track_id for s in tracker.tracks() if s.status != "tentative"})
         return published, tracker
 
@@ -847,16 +929,20 @@ def test_the_hand_over_does_not_depend_on_duplicate_merging() -> None:
     ``max_coast_s``, its track lost) that comes back 3 m ahead of its old track's prediction
     still gets its id back: the hand-over is a step of its own. (It once ran only inside the
     merging, so turning merging off turned it off too and the car came back as track 2.)"""
-    tracker = MultiTargetTracker(TrackerSettings(reorder_window_s=0.0, merge_distance_m=0.0),
-                                 heading_at=lambda x, y: 0.0)  # fmt: skip
+    tracker = MultiTargetTracker(
+        TrackerSettings(reorder_window_s=0.0, merge_distance_m=0.0), heading_at=lambda x, y: 0.0
+    )
     cov = np.eye(2) * 1e-4
     published: set[int] = set()
     for k in range(int(6.5 / 0.05)):
         t = 0.05 * k
         hidden = 1.0 <= t < 3.5
         jump = 3.0 if t >= 3.5 else 0.0
-        tracker.add(LIDAR, t, [] if hidden else [
-            Measurement(x_m=30.0 * t + jump, y_m=0.0, covariance_m2=cov)])  # fmt: skip
+        tracker.add(
+            LIDAR,
+            t,
+            [] if hidden else [Measurement(x_m=30.0 * t + jump, y_m=0.0, covariance_m2=cov)],
+        )
         published |= {s.track_id for s in tracker.tracks() if s.status != "tentative"}
     assert published == {1}
     assert tracker.counters.tracks_resumed == 1 and tracker.counters.tracks_handed_over == 1
@@ -881,14 +967,18 @@ def test_a_vehicle_that_braked_while_hidden_keeps_its_id_and_an_impossible_one_d
         return 93.0 + 25.0 * (t - 3.0)  # 3 m ahead of the old track's 90 m, 25 m/s
 
     def published_ids(ahead: bool = False, **changes: float) -> set[int]:
-        tracker = MultiTargetTracker(TrackerSettings(reorder_window_s=0.0, **changes),
-                                     heading_at=lambda x, y: 0.0)  # fmt: skip
+        tracker = MultiTargetTracker(
+            TrackerSettings(reorder_window_s=0.0, **changes), heading_at=lambda x, y: 0.0
+        )
         seen: set[int] = set()
         for k in range(int(5.0 / 0.05)):
             t = 0.05 * k
             hidden = 1.0 <= t < 3.0
-            tracker.add(LIDAR, t, [] if hidden else [
-                Measurement(x_m=x_of(t, ahead), y_m=0.0, covariance_m2=cov)])  # fmt: skip
+            tracker.add(
+                LIDAR,
+                t,
+                [] if hidden else [Measurement(x_m=x_of(t, ahead), y_m=0.0, covariance_m2=cov)],
+            )
             seen |= {s.track_id for s in tracker.tracks() if s.status != "tentative"}
         return seen
 
@@ -933,16 +1023,18 @@ def test_a_lost_track_sliding_across_the_road_is_not_handed_a_vehicle() -> None:
     id 1. The same track moving across at 1 m/s (a lane change) is handed the vehicle."""
 
     def published_ids(lateral_mps: float, **changes: float) -> set[int]:
-        tracker = MultiTargetTracker(TrackerSettings(reorder_window_s=0.0, **changes),
-                                     heading_at=lambda x, y: 0.0)  # fmt: skip
+        tracker = MultiTargetTracker(
+            TrackerSettings(reorder_window_s=0.0, **changes), heading_at=lambda x, y: 0.0
+        )
         cov = np.eye(2) * 1e-4
         seen: set[int] = set()
         for k in range(int(4.0 / 0.05)):
             t = 0.05 * k
             hidden = 1.0 <= t < 2.8
             y = -lateral_mps * min(t, 1.0)
-            tracker.add(LIDAR, t, [] if hidden else [
-                Measurement(x_m=30.0 * t, y_m=y, covariance_m2=cov)])  # fmt: skip
+            tracker.add(
+                LIDAR, t, [] if hidden else [Measurement(x_m=30.0 * t, y_m=y, covariance_m2=cov)]
+            )
             if t >= 2.6:
                 seen |= {s.track_id for s in tracker.tracks() if s.status != "tentative"}
         return seen
@@ -963,14 +1055,19 @@ def test_a_published_young_track_keeps_the_vehicle_and_the_old_track_ends() -> N
     for k in range(int(2.5 / 0.05)):
         t = 0.05 * k
         if t < 1.0:
-            tracker.add(LIDAR, t, [Measurement(x_m=30.0 * t, y_m=0.0, covariance_m2=np.eye(2) * 1e-4)])
+            tracker.add(
+                LIDAR, t, [Measurement(x_m=30.0 * t, y_m=0.0, covariance_m2=np.eye(2) * 1e-4)]
+            )
         if t >= 0.5:
-            tracker.add(CAMERA, t + 0.001, [
-                Measurement(x_m=30.0 * t + 5.0, y_m=0.0, covariance_m2=np.eye(2) * 0.04)])  # fmt: skip
+            tracker.add(
+                CAMERA,
+                t + 0.001,
+                [Measurement(x_m=30.0 * t + 5.0, y_m=0.0, covariance_m2=np.eye(2) * 0.04)],
+            )
         published.append(sorted(s.track_id for s in tracker.tracks() if s.status != "tentative"))
     assert [1, 2] in published  # both published while the LiDAR still saw the car
     assert published[-1] == [2]
-    assert all(ids != [1] for ids in published[published.index([1, 2]):])  # never back to 1
+    assert all(ids != [1] for ids in published[published.index([1, 2]) :])  # never back to 1
     assert tracker.counters.tracks_superseded == 1 and tracker.counters.tracks_handed_over == 0
     (ended,) = tracker.pop_finished_histories()
     assert ended.track_id == 1 and ended.stamps_s[-1] == pytest.approx(0.95)
@@ -987,8 +1084,15 @@ def test_a_resumed_track_is_smoothed_run_by_run_and_a_lost_one_is_still_unfinish
     for k in range(int(6.5 / 0.05)):
         t = 0.05 * k
         hidden = 1.0 <= t < 3.5
-        tracker.add(LIDAR, t, [] if hidden else [
-            Measurement(x_m=30.0 * t + (3.0 if t >= 3.5 else 0.0), y_m=0.0, covariance_m2=cov)])  # fmt: skip
+        tracker.add(
+            LIDAR,
+            t,
+            []
+            if hidden
+            else [
+                Measurement(x_m=30.0 * t + (3.0 if t >= 3.5 else 0.0), y_m=0.0, covariance_m2=cov)
+            ],
+        )
     assert tracker.counters.tracks_resumed == 1
     (history,) = tracker.unfinished_histories()
     assert history.track_id == 1
@@ -997,8 +1101,13 @@ def test_a_resumed_track_is_smoothed_run_by_run_and_a_lost_one_is_still_unfinish
     assert history.stamps_s[second.start] == pytest.approx(3.5)
     x_smooth, P_smooth = smooth_history(history)
     for run in (first, second):
-        x_run, P_run = rts_smooth(history.stamps_s[run], history.x_filt[run], history.P_filt[run],
-                                  x_pred=history.x_pred[run], P_pred=history.P_pred[run])  # fmt: skip
+        x_run, P_run = rts_smooth(
+            history.stamps_s[run],
+            history.x_filt[run],
+            history.P_filt[run],
+            x_pred=history.x_pred[run],
+            P_pred=history.P_pred[run],
+        )
         np.testing.assert_array_equal(x_smooth[run], x_run)
         np.testing.assert_array_equal(P_smooth[run], P_run)
     # nothing of the young track (3 m ahead of the old one's prediction) leaks back
@@ -1007,8 +1116,9 @@ def test_a_resumed_track_is_smoothed_run_by_run_and_a_lost_one_is_still_unfinish
     lost = MultiTargetTracker(TrackerSettings(reorder_window_s=0.0))
     for k in range(int(3.5 / 0.05)):  # seen 1 s, then 2.5 s of empty frames: coast, then lost
         t = 0.05 * k
-        lost.add(LIDAR, t, [Measurement(x_m=30.0 * t, y_m=0.0, covariance_m2=cov)] if t < 1.0
-                 else [])  # fmt: skip
+        lost.add(
+            LIDAR, t, [Measurement(x_m=30.0 * t, y_m=0.0, covariance_m2=cov)] if t < 1.0 else []
+        )
     assert lost.tracks() == [] and lost.pop_finished_histories() == []
     (unfinished,) = lost.unfinished_histories()
     assert unfinished.track_id == 1 and unfinished.stamps_s[-1] == pytest.approx(0.95)
@@ -1020,20 +1130,21 @@ def test_a_stray_young_track_behind_a_briefly_unseen_vehicle_takes_nothing_over(
     truck's track was, so it never took the truck up: no hand-over; the truck's track keeps
     its own state and speed when the truck is seen again."""
     cov = np.eye(2) * 1e-4
-    tracker = MultiTargetTracker(TrackerSettings(reorder_window_s=0.0),
-                                 heading_at=lambda x, y: 0.0)  # fmt: skip
+    tracker = MultiTargetTracker(TrackerSettings(reorder_window_s=0.0), heading_at=lambda x, y: 0.0)
     for k in range(60):
         t = 0.05 * k
         measurements = []
         if not 2.0 <= t < 2.25:
-            measurements.append(Measurement(x_m=25.0 * t, y_m=0.0, covariance_m2=cov,
-                                            object_class="truck"))  # fmt: skip
+            measurements.append(
+                Measurement(x_m=25.0 * t, y_m=0.0, covariance_m2=cov, object_class="truck")
+            )
         if k in (36, 37):  # t = 1.80, 1.85: the stray boxes
             measurements.append(Measurement(x_m=25.0 * t - 7.0, y_m=0.0, covariance_m2=cov))
         tracker.add(LIDAR, t, measurements)
         if 2.0 <= t < 2.25:  # the camera's batches, about a car far away
-            tracker.add(CAMERA, t + 0.01, [Measurement(x_m=-100.0, y_m=3.6,
-                                                       covariance_m2=np.eye(2))])  # fmt: skip
+            tracker.add(
+                CAMERA, t + 0.01, [Measurement(x_m=-100.0, y_m=3.6, covariance_m2=np.eye(2))]
+            )
     tracker.flush()
     assert tracker.counters.tracks_handed_over == 0
     truck = next(s for s in tracker.tracks() if s.track_id == 1)
@@ -1049,8 +1160,9 @@ def test_huber_update_limits_an_outlier_and_leaves_ordinary_measurements_alone()
     cov = np.eye(2) * LIDAR_STD_M**2
 
     def last_y(offset_m: float, huber_k: float) -> float:
-        tracker = MultiTargetTracker(TrackerSettings(reorder_window_s=0.0, huber_k=huber_k),
-                                     heading_at=lambda x, y: 0.0)  # fmt: skip
+        tracker = MultiTargetTracker(
+            TrackerSettings(reorder_window_s=0.0, huber_k=huber_k), heading_at=lambda x, y: 0.0
+        )
         for k in range(41):
             t = 0.05 * k
             y = offset_m if k == 40 else 0.0

@@ -67,8 +67,9 @@ class Page:
 
     def evaluate(self, expression: str) -> Any:
         """The value of a JavaScript expression in the page (JSON-able values only)."""
-        result = self.call("Runtime.evaluate", expression=expression, returnByValue=True,
-                           awaitPromise=True)  # fmt: skip
+        result = self.call(
+            "Runtime.evaluate", expression=expression, returnByValue=True, awaitPromise=True
+        )
         if "exceptionDetails" in result:
             raise CdpError(f"{expression!r} threw: {result['exceptionDetails']}")
         return result["result"].get("value")
@@ -104,24 +105,39 @@ class Page:
                 found.append(f"console.{params['type']}: {values}")
             elif method == "Log.entryAdded" and params["entry"].get("level") == "error":
                 entry = params["entry"]
-                found.append(f"log ({entry.get('source')}): {entry.get('text')} "
-                             f"{entry.get('url', '')}")  # fmt: skip
+                found.append(
+                    f"log ({entry.get('source')}): {entry.get('text')} {entry.get('url', '')}"
+                )
         return found
 
 
 @contextmanager
-def chromium(profile_dir: Path, *, width: int = 1600, height: int = 1000,
-             timeout_s: float = 30.0) -> Iterator[Page]:  # fmt: skip
+def chromium(
+    profile_dir: Path, *, width: int = 1600, height: int = 1000, timeout_s: float = 30.0
+) -> Iterator[Page]:
     """A headless Chromium with one blank page, its runtime, log and page events on."""
     profile_dir.mkdir(parents=True, exist_ok=True)
     process = subprocess.Popen(
-        [chromium_path(), "--headless", "--no-sandbox", "--disable-gpu",
-         "--disable-background-networking", "--remote-debugging-port=0",
-         f"--user-data-dir={profile_dir}", f"--window-size={width},{height}",
-         "--no-first-run", "--no-default-browser-check", "--disable-extensions",
-         "--hide-scrollbars", "--force-device-scale-factor=1", "--mute-audio", "about:blank"],
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-    )  # fmt: skip
+        [
+            chromium_path(),
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-background-networking",
+            "--remote-debugging-port=0",
+            f"--user-data-dir={profile_dir}",
+            f"--window-size={width},{height}",
+            "--no-first-run",
+            "--no-default-browser-check",
+            "--disable-extensions",
+            "--hide-scrollbars",
+            "--force-device-scale-factor=1",
+            "--mute-audio",
+            "about:blank",
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     page: Page | None = None
     try:
         port_file = profile_dir / "DevToolsActivePort"
@@ -135,8 +151,11 @@ def chromium(profile_dir: Path, *, width: int = 1600, height: int = 1000,
         port = int(port_file.read_text().split()[0])
         targets: list[dict[str, Any]] = []
         while not targets:
-            targets = [t for t in httpx.get(f"http://127.0.0.1:{port}/json/list",
-                                            timeout=5.0).json() if t["type"] == "page"]  # fmt: skip
+            targets = [
+                t
+                for t in httpx.get(f"http://127.0.0.1:{port}/json/list", timeout=5.0).json()
+                if t["type"] == "page"
+            ]
             if not targets:
                 if time.monotonic() > deadline:
                     raise TimeoutError("chromium has no page")
@@ -144,8 +163,13 @@ def chromium(profile_dir: Path, *, width: int = 1600, height: int = 1000,
         page = Page(targets[0]["webSocketDebuggerUrl"], timeout_s)
         for domain in ("Runtime", "Log", "Page"):
             page.call(f"{domain}.enable")
-        page.call("Emulation.setDeviceMetricsOverride", width=width, height=height,
-                  deviceScaleFactor=1, mobile=False)  # fmt: skip
+        page.call(
+            "Emulation.setDeviceMetricsOverride",
+            width=width,
+            height=height,
+            deviceScaleFactor=1,
+            mobile=False,
+        )
         yield page
     finally:
         if page is not None:

@@ -63,53 +63,108 @@ def open_storage(settings: GatewaySettings) -> Storage:
     return storage
 
 
-def car_batches(track_id: int, station0_m: float, speed_mps: float, start_s: float, count: int,
-                *, offset_m: float = -1.83, period_s: float = 0.1,
-                first_cycle: int = 0) -> list[TrackBatch]:  # fmt: skip
+def car_batches(
+    track_id: int,
+    station0_m: float,
+    speed_mps: float,
+    start_s: float,
+    count: int,
+    *,
+    offset_m: float = -1.83,
+    period_s: float = 0.1,
+    first_cycle: int = 0,
+) -> list[TrackBatch]:
     """One car driving at a constant speed: a batch every ``period_s``."""
     return [
-        batch(start_s + k * period_s,
-              [make_track(track_id, station0_m + speed_mps * k * period_s, speed_mps,
-                          offset_m=offset_m)],
-              first_cycle + k)
+        batch(
+            start_s + k * period_s,
+            [
+                make_track(
+                    track_id, station0_m + speed_mps * k * period_s, speed_mps, offset_m=offset_m
+                )
+            ],
+            first_cycle + k,
+        )
         for k in range(count)
-    ]  # fmt: skip
+    ]
 
 
-def sample_alert(alert_id: str, stamp: float, *, alert_type: AlertType = AlertType.SPEEDING,
-                 severity: AlertSeverity = AlertSeverity.WARNING, phase: AlertPhase = "start",
-                 track: Track | None = None, track_id: int | None = 1) -> Alert:  # fmt: skip
+def sample_alert(
+    alert_id: str,
+    stamp: float,
+    *,
+    alert_type: AlertType = AlertType.SPEEDING,
+    severity: AlertSeverity = AlertSeverity.WARNING,
+    phase: AlertPhase = "start",
+    track: Track | None = None,
+    track_id: int | None = 1,
+) -> Alert:
     return Alert(
-        site=SITE.site_id, source_id="alert-service", stamp=stamp, alert_id=alert_id,
-        alert_type=alert_type, severity=severity, track_id=track_id, station_m=700.0,
-        offset_m=-1.83, speed_mps=29.0, measured_value=29.0, threshold_value=26.8,
-        description="speeding: 65 mph in the 55 mph zone", phase=phase,
-        episode_id=f"ep-{alert_id}", onset_stamp=max(0.0, stamp - 1.0), value_unit="m/s",
-        evidence={"speed_limit_mps": 24.587}, track=track,
-    )  # fmt: skip
+        site=SITE.site_id,
+        source_id="alert-service",
+        stamp=stamp,
+        alert_id=alert_id,
+        alert_type=alert_type,
+        severity=severity,
+        track_id=track_id,
+        station_m=700.0,
+        offset_m=-1.83,
+        speed_mps=29.0,
+        measured_value=29.0,
+        threshold_value=26.8,
+        description="speeding: 65 mph in the 55 mph zone",
+        phase=phase,
+        episode_id=f"ep-{alert_id}",
+        onset_stamp=max(0.0, stamp - 1.0),
+        value_unit="m/s",
+        evidence={"speed_limit_mps": 24.587},
+        track=track,
+    )
 
 
-def devices_state(stamp: float, *, beacon_on: bool, sign_text: str,
-                  cause: AlertType | None) -> RoadsideDeviceState:  # fmt: skip
-    return RoadsideDeviceState(site=SITE.site_id, source_id="alert-service", stamp=stamp,
-                               beacon_on=beacon_on, sign_text=sign_text, cause=cause)  # fmt: skip
+def devices_state(
+    stamp: float, *, beacon_on: bool, sign_text: str, cause: AlertType | None
+) -> RoadsideDeviceState:
+    return RoadsideDeviceState(
+        site=SITE.site_id,
+        source_id="alert-service",
+        stamp=stamp,
+        beacon_on=beacon_on,
+        sign_text=sign_text,
+        cause=cause,
+    )
 
 
 def service_status(service: str, stamp: float, received_hz: dict[str, float]) -> ServiceStatus:
-    return ServiceStatus(site=SITE.site_id, source_id=service, stamp=stamp, service=service,
-                         state=ServiceState.RUNNING, uptime_s=10.0, pid=1234,
-                         received_hz=received_hz)  # fmt: skip
+    return ServiceStatus(
+        site=SITE.site_id,
+        source_id=service,
+        stamp=stamp,
+        service=service,
+        state=ServiceState.RUNNING,
+        uptime_s=10.0,
+        pid=1234,
+        received_hz=received_hz,
+    )
 
 
 @contextmanager
-def live_server(settings: GatewaySettings, storage: Storage,
-                metrics: GatewayMetrics | None = None, *, site: Site | Sites = SITE,
-                clock: Callable[[], float] = time.time) -> Iterator[str]:  # fmt: skip
+def live_server(
+    settings: GatewaySettings,
+    storage: Storage,
+    metrics: GatewayMetrics | None = None,
+    *,
+    site: Site | Sites = SITE,
+    clock: Callable[[], float] = time.time,
+) -> Iterator[str]:
     """The app on uvicorn on a free loopback port, in a thread; yields its base URL."""
     port = free_port()
     app = create_app(settings, storage, site=site, metrics=metrics, clock=clock)
-    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_config=None,
-                                           access_log=False, lifespan="off"))  # fmt: skip
+    server = uvicorn.Server(
+        uvicorn.Config(
+            app, host="127.0.0.1", port=port, log_config=None, access_log=False, lifespan="off"
+        )
+    )
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()
     deadline = time.monotonic() + 10.0
@@ -128,16 +183,22 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 @contextmanager
-def gateway_process(bus_port: int, http_port: int, data_dir: Path, *, keys: bool = True,
-                    **settings: str) -> Iterator[subprocess.Popen[bytes]]:  # fmt: skip
+def gateway_process(
+    bus_port: int, http_port: int, data_dir: Path, *, keys: bool = True, **settings: str
+) -> Iterator[subprocess.Popen[bytes]]:
     """The gateway node as its own process, a client of the bus at ``bus_port``, serving HTTP
     on ``http_port`` and storing in ``data_dir``; ``keys``: the read and admin keys of these
     tests configured; ``settings``: more ``WZ_GATEWAY_<NAME>`` values (``dev_mode="true"``).
     Stopped with SIGTERM, and it must then exit cleanly; one a test killed is left as is."""
     env = {k: v for k, v in os.environ.items() if not k.startswith("WZ_")}
-    env.update(WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{bus_port}", WZ_BUS_LISTEN_ENDPOINTS="",
-               WZ_STATUS_PERIOD_S="0.2", WZ_LOG_FORMAT="json",
-               WZ_GATEWAY_PORT=str(http_port), WZ_GATEWAY_DATA_DIR=str(data_dir))  # fmt: skip
+    env.update(
+        WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{bus_port}",
+        WZ_BUS_LISTEN_ENDPOINTS="",
+        WZ_STATUS_PERIOD_S="0.2",
+        WZ_LOG_FORMAT="json",
+        WZ_GATEWAY_PORT=str(http_port),
+        WZ_GATEWAY_DATA_DIR=str(data_dir),
+    )
     if keys:
         env["WZ_GATEWAY_API_KEYS"] = f"read:{READ_KEY},admin:{ADMIN_KEY}"
     env.update({f"WZ_GATEWAY_{name.upper()}": value for name, value in settings.items()})

@@ -24,18 +24,25 @@ def main() -> None:
     parser.add_argument("out", type=Path, help="the PNG to write")
     parser.add_argument("--tracks", type=int, default=6, help="least vehicles on the page")
     parser.add_argument("--alerts", type=int, default=1, help="least alerts in the list")
-    parser.add_argument("--when", default="true", help="and this JavaScript condition, e.g. "
-                        "'window.wzLive.tracks.some(t => t.speed_mps > 27)'")
+    parser.add_argument(
+        "--when",
+        default="true",
+        help="and this JavaScript condition, e.g. "
+        "'window.wzLive.tracks.some(t => t.speed_mps > 27)'",
+    )
     parser.add_argument("--timeout", type=float, default=600.0, help="give up after [s]")
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     logging.getLogger("httpx").setLevel(logging.WARNING)
     with tempfile.TemporaryDirectory() as profile, chromium(Path(profile)) as page:
         page.call("Page.navigate", url=args.url)
-        page.wait_for(f"document.body && Number(document.body.dataset.trackCount) >= {args.tracks}"
-                      f" && Number(document.body.dataset.alertCount) >= {args.alerts}"
-                      f" && ({args.when})",
-                      f"{args.tracks} tracks and {args.alerts} alerts", args.timeout)  # fmt: skip
+        page.wait_for(
+            f"document.body && Number(document.body.dataset.trackCount) >= {args.tracks}"
+            f" && Number(document.body.dataset.alertCount) >= {args.alerts}"
+            f" && ({args.when})",
+            f"{args.tracks} tracks and {args.alerts} alerts",
+            args.timeout,
+        )
         page.screenshot(args.out)
         errors = page.errors()
     log.info("wrote %s%s", args.out, f"; the page's errors: {errors}" if errors else "")

@@ -41,15 +41,16 @@ def fill(storage: Storage) -> None:
     """Two cars, 50 batches of two points each, the newest at 4.9 s; four alerts."""
     left = car_batches(1, 800.0, 30.0, 0.0, 50)
     right = car_batches(2, 820.0, 20.0, 0.0, 50, offset_m=1.83)
-    messages: list[Message] = [batch(a.stamp, [*a.tracks, *b.tracks], a.cycle_index)
-                               for a, b in zip(left, right, strict=True)]  # fmt: skip
+    messages: list[Message] = [
+        batch(a.stamp, [*a.tracks, *b.tracks], a.cycle_index)
+        for a, b in zip(left, right, strict=True)
+    ]
     messages += [
         sample_alert("a1", 1.0),
-        sample_alert("a2", 2.0, alert_type=AlertType.HARD_BRAKING,
-                     severity=AlertSeverity.CRITICAL),
+        sample_alert("a2", 2.0, alert_type=AlertType.HARD_BRAKING, severity=AlertSeverity.CRITICAL),
         sample_alert("a3", 3.0, alert_type=AlertType.QUEUE, track_id=None),
         sample_alert("a4", 4.0, phase="clear"),
-    ]  # fmt: skip
+    ]
     storage.ingest(messages, geo=SITE.geo_frame, received_at=NOW)
 
 
@@ -61,14 +62,20 @@ class Api:
         self.storage = storage
         self.metrics = metrics
 
-    def get(self, path: str, headers: dict[str, str] | None = READ, **params: Any) -> httpx.Response:
+    def get(
+        self, path: str, headers: dict[str, str] | None = READ, **params: Any
+    ) -> httpx.Response:
         return self.client.get(path, headers=headers, params=params)
 
 
 @pytest.fixture(scope="module")
 def api(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Api]:
-    settings = gateway_settings(tmp_path_factory.mktemp("api"), max_page_size=500,
-                                rate_limit_per_s=1000.0, rate_limit_burst=1000)  # fmt: skip
+    settings = gateway_settings(
+        tmp_path_factory.mktemp("api"),
+        max_page_size=500,
+        rate_limit_per_s=1000.0,
+        rate_limit_burst=1000,
+    )
     storage = open_storage(settings)
     fill(storage)
     metrics = GatewayMetrics()
@@ -96,8 +103,7 @@ def test_reads_need_a_valid_key(api: Api) -> None:
     response = api.get("/v1/tracks/live", headers=None)
     assert_problem(response, 401, "API key is needed", "X-API-Key")
     assert response.headers["www-authenticate"].startswith("Bearer")
-    assert_problem(api.get("/v1/tracks/live", headers={"X-API-Key": "wzk_nope"}), 401,
-                   "not valid")  # fmt: skip
+    assert_problem(api.get("/v1/tracks/live", headers={"X-API-Key": "wzk_nope"}), 401, "not valid")
     assert api.get("/v1/tracks/live").status_code == 200
     bearer = {"Authorization": f"Bearer {READ_KEY}"}
     assert api.get("/v1/tracks/live", headers=bearer).status_code == 200
@@ -106,8 +112,9 @@ def test_reads_need_a_valid_key(api: Api) -> None:
 
 def test_admin_routes_need_the_admin_scope_and_keys_can_be_made_and_revoked(api: Api) -> None:
     assert_problem(api.get("/v1/admin/api-keys"), 403, "scope 'read'", "'admin' is needed")
-    made = api.client.post("/v1/admin/api-keys", headers=ADMIN,
-                           json={"scope": "read", "name": "dashboard"})  # fmt: skip
+    made = api.client.post(
+        "/v1/admin/api-keys", headers=ADMIN, json={"scope": "read", "name": "dashboard"}
+    )
     assert made.status_code == 201, made.text
     key = made.json()
     assert key["scope"] == "read" and key["origin"] == "api" and key["secret"].startswith("wzk_")
@@ -118,15 +125,19 @@ def test_admin_routes_need_the_admin_scope_and_keys_can_be_made_and_revoked(api:
     revoked = api.client.delete(f"/v1/admin/api-keys/{key['key_id']}", headers=ADMIN)
     assert revoked.status_code == 204 and revoked.content == b""
     assert_problem(api.get("/v1/site", headers={"X-API-Key": key["secret"]}), 401, "not valid")
-    assert_problem(api.client.delete(f"/v1/admin/api-keys/{key['key_id']}", headers=ADMIN),
-                   404, key["key_id"])  # fmt: skip
+    assert_problem(
+        api.client.delete(f"/v1/admin/api-keys/{key['key_id']}", headers=ADMIN), 404, key["key_id"]
+    )
     # A bad body is refused and nothing is made.
     before = len(KeyStore(api.storage.engine).all(include_revoked=True))
     bad = api.client.post("/v1/admin/api-keys", headers=ADMIN, json={"scope": "root", "name": ""})
     body = assert_problem(bad, 422, "body field 'scope'")
     assert {e["location"] for e in body["errors"]} == {"body.scope", "body.name"}
-    not_json = api.client.post("/v1/admin/api-keys", content=b"{not json",
-                               headers={**ADMIN, "Content-Type": "application/json"})  # fmt: skip
+    not_json = api.client.post(
+        "/v1/admin/api-keys",
+        content=b"{not json",
+        headers={**ADMIN, "Content-Type": "application/json"},
+    )
     assert_problem(not_json, 422, "the request body", "JSON")
     assert len(KeyStore(api.storage.engine).all(include_revoked=True)) == before
 
@@ -134,15 +145,19 @@ def test_admin_routes_need_the_admin_scope_and_keys_can_be_made_and_revoked(api:
 def test_oversize_bodies_get_413_announced_or_streamed(api: Api) -> None:
     big = b'{"scope": "read", "name": "' + b"x" * 100_000 + b'"}'
     headers = {**ADMIN, "Content-Type": "application/json"}
-    assert_problem(api.client.post("/v1/admin/api-keys", headers=headers, content=big), 413,
-                   "over the limit")  # fmt: skip
+    assert_problem(
+        api.client.post("/v1/admin/api-keys", headers=headers, content=big), 413, "over the limit"
+    )
 
     def chunks() -> Iterator[bytes]:  # no Content-Length: the limit counts what arrives
         for start in range(0, len(big), 8192):
             yield big[start : start + 8192]
 
-    assert_problem(api.client.post("/v1/admin/api-keys", headers=headers, content=chunks()), 413,
-                   "over the limit")  # fmt: skip
+    assert_problem(
+        api.client.post("/v1/admin/api-keys", headers=headers, content=chunks()),
+        413,
+        "over the limit",
+    )
 
 
 # --- reading ------------------------------------------------------------------------------
@@ -198,16 +213,20 @@ def test_csv_and_geojson_exports(api: Api) -> None:
     as_json = api.get("/v1/trajectories", limit=20).json()["points"]
     assert [float(r["speed_mps"]) for r in rows] == [p["speed_mps"] for p in as_json]
     assert rows[0]["length_m"] == ""  # missing values are empty cells
-    assert response.headers["x-next-cursor"] == api.get("/v1/trajectories", limit=20).json()[
-        "next_cursor"]
+    assert (
+        response.headers["x-next-cursor"]
+        == api.get("/v1/trajectories", limit=20).json()["next_cursor"]
+    )
 
     geo = api.get("/v1/trajectories", limit=20, format="geojson")
     assert geo.headers["content-type"] == "application/geo+json"
     collection = geo.json()
     assert collection["type"] == "FeatureCollection" and len(collection["features"]) == 20
     first = collection["features"][0]
-    assert first["geometry"] == {"type": "Point", "coordinates": [as_json[0]["longitude_deg"],
-                                                                  as_json[0]["latitude_deg"]]}
+    assert first["geometry"] == {
+        "type": "Point",
+        "coordinates": [as_json[0]["longitude_deg"], as_json[0]["latitude_deg"]],
+    }
     assert first["properties"]["track_id"] == as_json[0]["track_id"]
     path = api.get("/v1/tracks/2", format="geojson").json()["features"][0]
     assert path["geometry"]["type"] == "LineString"
@@ -217,10 +236,11 @@ def test_csv_and_geojson_exports(api: Api) -> None:
 def test_alerts_with_filters(api: Api) -> None:
     body = api.get("/v1/alerts").json()
     assert [a["alert_id"] for a in body["alerts"]] == ["a4", "a3", "a2", "a1"]
-    response = api.client.get("/v1/alerts?type=queue&type=hard_braking&order=oldest",
-                              headers=READ)  # fmt: skip
+    response = api.client.get("/v1/alerts?type=queue&type=hard_braking&order=oldest", headers=READ)
     assert [a["alert_id"] for a in response.json()["alerts"]] == ["a2", "a3"]
-    assert [a["alert_id"] for a in api.get("/v1/alerts", severity="critical").json()["alerts"]] == ["a2"]  # fmt: skip
+    assert [a["alert_id"] for a in api.get("/v1/alerts", severity="critical").json()["alerts"]] == [
+        "a2"
+    ]
     assert [a["alert_id"] for a in api.get("/v1/alerts", phase="clear").json()["alerts"]] == ["a4"]
     page = api.get("/v1/alerts", limit=3)
     assert page.json()["count"] == 3 and "next" in page.links
@@ -229,7 +249,11 @@ def test_alerts_with_filters(api: Api) -> None:
 @pytest.mark.parametrize(
     ("path", "params", "fragments"),
     [
-        ("/v1/trajectories", {"limit": 0}, ("query parameter 'limit'", "greater than or equal to 1")),
+        (
+            "/v1/trajectories",
+            {"limit": 0},
+            ("query parameter 'limit'", "greater than or equal to 1"),
+        ),
         ("/v1/trajectories", {"limit": "ten"}, ("query parameter 'limit'", "valid integer")),
         ("/v1/trajectories", {"limit": 501}, ("query parameter 'limit'", "at most 500 per page")),
         ("/v1/trajectories", {"start": 5, "end": 1}, ("start (5.0) is greater than end (1.0)",)),
@@ -245,8 +269,9 @@ def test_alerts_with_filters(api: Api) -> None:
         ("/v1/alerts", {"order": "random"}, ("query parameter 'order'",)),
     ],
 )
-def test_bad_input_gets_a_clear_422(api: Api, path: str, params: dict[str, Any],
-                                    fragments: tuple[str, ...]) -> None:  # fmt: skip
+def test_bad_input_gets_a_clear_422(
+    api: Api, path: str, params: dict[str, Any], fragments: tuple[str, ...]
+) -> None:
     body = assert_problem(api.get(path, **params), 422, *fragments)
     assert body["errors"] and body["instance"] == path
 
@@ -254,12 +279,17 @@ def test_bad_input_gets_a_clear_422(api: Api, path: str, params: dict[str, Any],
 def test_operations_endpoints_need_no_key(api: Api) -> None:
     assert api.get("/healthz", headers=None).json() == {"status": "ok"}
     ready = api.get("/readyz", headers=None)
-    assert ready.status_code == 200 and ready.json() == {"status": "ready",
-                                                         "checks": {"database": "ok"}}
+    assert ready.status_code == 200 and ready.json() == {
+        "status": "ready",
+        "checks": {"database": "ok"},
+    }
     api.get("/v1/trajectories", limit=1)
     metrics = api.get("/metrics", headers=None)
     assert metrics.headers["content-type"].startswith("text/plain")
-    assert 'wz_gateway_http_requests_total{method="GET",route="/v1/trajectories",status="200"}' in metrics.text  # fmt: skip
+    assert (
+        'wz_gateway_http_requests_total{method="GET",route="/v1/trajectories",status="200"}'
+        in metrics.text
+    )
     assert_problem(api.get("/nowhere", headers=None), 404, "/nowhere")
     assert_problem(api.client.put("/v1/site", headers=READ), 405, "PUT")
 
@@ -303,8 +333,7 @@ def test_dev_mode_reads_without_a_key_but_not_admin(tmp_path: Path) -> None:
 def test_rate_limit_per_key(tmp_path: Path) -> None:
     settings = gateway_settings(tmp_path, rate_limit_per_s=0.5, rate_limit_burst=3)
     storage = open_storage(settings)
-    storage.ingest([batch(0.0, [make_track(1, 900.0, 10.0)])], geo=SITE.geo_frame,
-                   received_at=NOW)  # fmt: skip
+    storage.ingest([batch(0.0, [make_track(1, 900.0, 10.0)])], geo=SITE.geo_frame, received_at=NOW)
     with live_server(settings, storage) as url:
         codes = [httpx.get(f"{url}/v1/tracks/live", headers=READ).status_code for _ in range(4)]
         assert codes == [200, 200, 200, 429]
@@ -320,9 +349,14 @@ def test_cors_only_for_configured_origins(tmp_path: Path) -> None:
     settings = gateway_settings(tmp_path, cors_origins=["https://dash.example"])
     storage = open_storage(settings)
     with live_server(settings, storage) as url:
-        preflight = httpx.options(f"{url}/v1/alerts", headers={
-            "Origin": "https://dash.example", "Access-Control-Request-Method": "GET",
-            "Access-Control-Request-Headers": "x-api-key"})  # fmt: skip
+        preflight = httpx.options(
+            f"{url}/v1/alerts",
+            headers={
+                "Origin": "https://dash.example",
+                "Access-Control-Request-Method": "GET",
+                "Access-Control-Request-Headers": "x-api-key",
+            },
+        )
         assert preflight.status_code == 200
         assert preflight.headers["access-control-allow-origin"] == "https://dash.example"
         allowed = httpx.get(f"{url}/v1/alerts", headers={**READ, "Origin": "https://dash.example"})

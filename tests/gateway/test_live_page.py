@@ -41,26 +41,48 @@ def traffic(stamp: float, cycle_index: int) -> TrackBatch:
     for track_id, vehicle_class, station0, offset, speed, length, width in VEHICLES:
         laps, along = divmod(station0 - 800.0 + speed * stamp, 350.0)
         station = 800.0 + along
-        tracks.append(Track(
-            track_id=track_id + 100 * int(laps), x_m=-offset, y_m=station, vx_mps=0.0,
-            vy_mps=speed, covariance=[0.0] * 16, station_m=station, offset_m=offset,
-            speed_mps=speed, heading_rad=1.5707963267948966,
-            lane_index=int(SITE.lane_index_at(offset)), object_class=vehicle_class, age_s=2.0,
-            hits=40, confirmed=True, sources=["lidar-mast", "camera-mast"], length_m=length,
-            width_m=width,
-        ))  # fmt: skip
-    return TrackBatch(site=SITE.site_id, source_id="fusion-tracker", stamp=stamp,
-                      cycle_index=cycle_index, tracks=tracks)  # fmt: skip
+        tracks.append(
+            Track(
+                track_id=track_id + 100 * int(laps),
+                x_m=-offset,
+                y_m=station,
+                vx_mps=0.0,
+                vy_mps=speed,
+                covariance=[0.0] * 16,
+                station_m=station,
+                offset_m=offset,
+                speed_mps=speed,
+                heading_rad=1.5707963267948966,
+                lane_index=int(SITE.lane_index_at(offset)),
+                object_class=vehicle_class,
+                age_s=2.0,
+                hits=40,
+                confirmed=True,
+                sources=["lidar-mast", "camera-mast"],
+                length_m=length,
+                width_m=width,
+            )
+        )
+    return TrackBatch(
+        site=SITE.site_id,
+        source_id="fusion-tracker",
+        stamp=stamp,
+        cycle_index=cycle_index,
+        tracks=tracks,
+    )
 
 
-def test_live_page_shows_tracks_moving_and_the_alert_without_errors(port: int,
-                                                                     tmp_path: Path) -> None:  # fmt: skip
+def test_live_page_shows_tracks_moving_and_the_alert_without_errors(
+    port: int, tmp_path: Path
+) -> None:
     settings = BusSettings(listen_endpoints=[f"tcp/127.0.0.1:{port}"], connect_endpoints=[])
     http_port = free_port()
     base = f"http://127.0.0.1:{http_port}"
     stop = threading.Event()
-    with Bus.open(settings, site=SITE.site_id, service="live-page-test") as bus, \
-            gateway_process(port, http_port, tmp_path / "data", keys=False, dev_mode="true"):  # fmt: skip
+    with (
+        Bus.open(settings, site=SITE.site_id, service="live-page-test") as bus,
+        gateway_process(port, http_port, tmp_path / "data", keys=False, dev_mode="true"),
+    ):
         tracks = bus.publisher(bus.keys.tracks, TrackBatch)
         alerts = bus.publisher(bus.keys.alerts(AlertType.SPEEDING.value), Alert)
         assert tracks.wait_for_subscribers(30.0), "the gateway never subscribed to tracks"
@@ -78,8 +100,10 @@ def test_live_page_shows_tracks_moving_and_the_alert_without_errors(port: int,
             eventually(lambda: httpx.get(f"{base}/readyz").status_code == 200 or None, "ready")
             with chromium(tmp_path / "chromium") as page:
                 page.call("Page.navigate", url=f"{base}/")
-                page.wait_for("document.body && Number(document.body.dataset.trackCount) > 0",
-                              "tracks on the page")  # fmt: skip
+                page.wait_for(
+                    "document.body && Number(document.body.dataset.trackCount) > 0",
+                    "tracks on the page",
+                )
                 assert page.evaluate("location.pathname") == "/live"  # / redirects there
                 assert page.evaluate("document.body.dataset.connection") == "live"
                 title = page.evaluate("document.getElementById('site-name').textContent")
@@ -96,12 +120,17 @@ def test_live_page_shows_tracks_moving_and_the_alert_without_errors(port: int,
                 assert moved and all(distance > 15.0 for distance in moved), (before, after)
                 assert {t["y_m"] for t in second} != {t["y_m"] for t in first}
 
-                alert = sample_alert("live-page-1", page.evaluate("window.wzLive.stamp"),
-                                     track_id=13, severity=AlertSeverity.CRITICAL)  # fmt: skip
+                alert = sample_alert(
+                    "live-page-1",
+                    page.evaluate("window.wzLive.stamp"),
+                    track_id=13,
+                    severity=AlertSeverity.CRITICAL,
+                )
                 alerts.put(alert)
                 selector = f"#alerts li[data-alert-id='{alert.alert_id}']"
-                text = page.wait_for(f"document.querySelector(\"{selector}\")?.textContent",
-                                     "the alert in the list")  # fmt: skip
+                text = page.wait_for(
+                    f'document.querySelector("{selector}")?.textContent', "the alert in the list"
+                )
                 assert "Speeding" in text and "track #13" in text and "critical" in text
                 assert page.evaluate("document.body.dataset.alertCount") == "1"
                 assert page.evaluate("window.wzLive.alerts") == [alert.alert_id]

@@ -31,10 +31,12 @@ READ = {"X-API-Key": READ_KEY}
 T = TypeVar("T")
 
 
-
-
-def wait_for(subscription: Subscription[T], condition: Callable[[T], bool], what: str,
-             timeout_s: float = 20.0) -> T:  # fmt: skip
+def wait_for(
+    subscription: Subscription[T],
+    condition: Callable[[T], bool],
+    what: str,
+    timeout_s: float = 20.0,
+) -> T:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         message = subscription.recv(0.5)
@@ -45,12 +47,16 @@ def wait_for(subscription: Subscription[T], condition: Callable[[T], bool], what
 
 def points_count(http: httpx.Client) -> int:
     """The fused points stored (a track that has ended also has smoothed ones)."""
-    return len(http.get("/v1/trajectories", headers=READ,
-                        params={"limit": 10_000, "smoothed": "false"}).json()["points"])  # fmt: skip
+    return len(
+        http.get(
+            "/v1/trajectories", headers=READ, params={"limit": 10_000, "smoothed": "false"}
+        ).json()["points"]
+    )
 
 
-def test_node_stores_the_bus_serves_it_and_keeps_it_across_restarts(port: int,
-                                                                    tmp_path: Path) -> None:  # fmt: skip
+def test_node_stores_the_bus_serves_it_and_keeps_it_across_restarts(
+    port: int, tmp_path: Path
+) -> None:
     settings = BusSettings(listen_endpoints=[f"tcp/127.0.0.1:{port}"], connect_endpoints=[])
     http_port = free_port()
     http = httpx.Client(base_url=f"http://127.0.0.1:{http_port}", timeout=5.0)
@@ -60,16 +66,16 @@ def test_node_stores_the_bus_serves_it_and_keeps_it_across_restarts(port: int,
         tracks = bus.publisher(bus.keys.tracks, TrackBatch)
         alerts = bus.publisher(bus.keys.alerts(AlertType.SPEEDING.value), Alert)
         devices = bus.publisher(bus.keys.devices_state, RoadsideDeviceState)
-        status = bus.subscribe(bus.keys.status("gateway"), ServiceStatus, mode="ring",
-                               capacity=1)  # fmt: skip
+        status = bus.subscribe(bus.keys.status("gateway"), ServiceStatus, mode="ring", capacity=1)
         with gateway_process(port, http_port, tmp_path / "data") as node:
             assert tracks.wait_for_subscribers(30.0), "the gateway never subscribed to tracks"
             assert alerts.wait_for_subscribers(10.0) and devices.wait_for_subscribers(10.0)
             for message in batches:
                 tracks.put(message)
             alerts.put(alert)
-            devices.put(devices_state(1.5, beacon_on=True, sign_text="SLOW DOWN",
-                                      cause=AlertType.SPEEDING))  # fmt: skip
+            devices.put(
+                devices_state(1.5, beacon_on=True, sign_text="SLOW DOWN", cause=AlertType.SPEEDING)
+            )
 
             eventually(lambda: points_count(http) == 30 or None, "30 stored track points")
             live = http.get("/v1/tracks/live", headers=READ).json()
@@ -80,26 +86,40 @@ def test_node_stores_the_bus_serves_it_and_keeps_it_across_restarts(port: int,
             )
             assert [Alert.model_validate(a) for a in stored] == [alert]
             feed = http.get("/v1/wzdx/device-feed", headers=READ).json()
-            beacon = next(f for f in feed["features"]
-                          if f["properties"]["core_details"]["device_type"] == "flashing-beacon")
-            assert beacon["properties"]["is_flashing"] is True  # fmt: skip
+            beacon = next(
+                f
+                for f in feed["features"]
+                if f["properties"]["core_details"]["device_type"] == "flashing-beacon"
+            )
+            assert beacon["properties"]["is_flashing"] is True
             trajectory = http.get("/v1/tracks/7", headers=READ, params={"format": "csv"})
             assert trajectory.text.count("\n") == 31  # header and 30 rows
 
             # Bad input: counted, dropped, and the node carries on.
             tracks.put_bytes(b"\x00 not a track batch")
-            tracks.put(TrackBatch(site="elsewhere", source_id="tracker", stamp=9.0,
-                                  cycle_index=90, tracks=[]))  # fmt: skip
+            tracks.put(
+                TrackBatch(
+                    site="elsewhere", source_id="tracker", stamp=9.0, cycle_index=90, tracks=[]
+                )
+            )
             key = bus.keys.tracks
-            counted = wait_for(status, lambda s: all(
-                s.invalid_counts.get(f"{key}|{reason}", 0) == 1
-                for reason in ("bad_json", "wrong_site")), "bad_json and wrong_site counted")  # fmt: skip
+            counted = wait_for(
+                status,
+                lambda s: all(
+                    s.invalid_counts.get(f"{key}|{reason}", 0) == 1
+                    for reason in ("bad_json", "wrong_site")
+                ),
+                "bad_json and wrong_site counted",
+            )
             assert counted.state.value == "running" and node.poll() is None
             metrics = http.get("/metrics").text
             assert f'wz_gateway_bus_invalid_total{{key="{key}",reason="bad_json"}} 1.0' in metrics
             assert "wz_gateway_ingested_track_points_total 30.0" in metrics
-            assert http.get("/readyz").json()["checks"] == {"database": "ok", "bus": "ok",
-                                                            "writer": "ok"}  # fmt: skip
+            assert http.get("/readyz").json()["checks"] == {
+                "database": "ok",
+                "bus": "ok",
+                "writer": "ok",
+            }
             assert points_count(http) == 30
 
         # Stopped (SIGTERM, exit 0) and started again on the same file: all of it is there.
@@ -108,7 +128,8 @@ def test_node_stores_the_bus_serves_it_and_keeps_it_across_restarts(port: int,
             assert points_count(http) == 30
             again = http.get("/v1/alerts", headers=READ).json()["alerts"]
             assert [Alert.model_validate(a) for a in again] == [alert]
-            keys: list[dict[str, Any]] = http.get("/v1/admin/api-keys",
-                                                  headers={"X-API-Key": ADMIN_KEY}).json()  # fmt: skip
+            keys: list[dict[str, Any]] = http.get(
+                "/v1/admin/api-keys", headers={"X-API-Key": ADMIN_KEY}
+            ).json()
             assert sorted(k["scope"] for k in keys) == ["admin", "read"]  # not added twice
     http.close()

@@ -30,15 +30,22 @@ from wz_shared.messages import AlertType, Message
 
 @pytest.fixture(scope="module")
 def gateway_app(tmp_path_factory: pytest.TempPathFactory) -> Iterator[FastAPI]:
-    gateway = gateway_settings(tmp_path_factory.mktemp("openapi"), max_page_size=200,
-                               rate_limit_per_s=1e6, rate_limit_burst=1_000_000)  # fmt: skip
+    gateway = gateway_settings(
+        tmp_path_factory.mktemp("openapi"),
+        max_page_size=200,
+        rate_limit_per_s=1e6,
+        rate_limit_burst=1_000_000,
+    )
     storage = open_storage(gateway)
-    messages: list[Message] = [*car_batches(1, 900.0, 25.0, 0.0, 60),
-                               *car_batches(2, 905.0, 20.0, 0.0, 60, offset_m=1.83)]  # fmt: skip
+    messages: list[Message] = [
+        *car_batches(1, 900.0, 25.0, 0.0, 60),
+        *car_batches(2, 905.0, 20.0, 0.0, 60, offset_m=1.83),
+    ]
     messages += [sample_alert(f"a{k}", float(k)) for k in range(5)]
-    messages += [devices_state(5.0, beacon_on=True, sign_text="SLOW DOWN",
-                               cause=AlertType.SPEEDING),
-                 service_status("alert-service", 5.0, {})]  # fmt: skip
+    messages += [
+        devices_state(5.0, beacon_on=True, sign_text="SLOW DOWN", cause=AlertType.SPEEDING),
+        service_status("alert-service", 5.0, {}),
+    ]
     storage.ingest(messages, geo=SITE.geo_frame, received_at=1_750_000_000.0)
     yield create_app(gateway, storage, site=SITE)
     storage.close()
@@ -54,8 +61,9 @@ def test_every_operation_conforms_and_never_fails_on_the_server(
     deployment's ``max_page_size``) is valid to the schema and rightly refused with 422."""
     api = schemathesis.openapi.from_asgi("/openapi.json", gateway_app)
     # The live stream never ends: tests/gateway/test_stream.py checks it.
-    operations = [op for op in (result.ok() for result in api.get_all_operations())
-                  if op.path != "/v1/stream"]  # fmt: skip
+    operations = [
+        op for op in (result.ok() for result in api.get_all_operations()) if op.path != "/v1/stream"
+    ]
     assert len(operations) == 13 + 7  # 7: /v1/webhooks
     checked = 0
     for operation in operations:
@@ -66,11 +74,17 @@ def test_every_operation_conforms_and_never_fails_on_the_server(
             continue  # nothing to make invalid
 
         @given(case=operation.as_strategy(generation_mode=mode))
-        @settings(max_examples=30, deadline=None, database=None, derandomize=True,
-                  suppress_health_check=list(HealthCheck))  # fmt: skip
+        @settings(
+            max_examples=30,
+            deadline=None,
+            database=None,
+            derandomize=True,
+            suppress_health_check=list(HealthCheck),
+        )
         def check(case: Any) -> None:
-            case.call_and_validate(headers={"X-API-Key": ADMIN_KEY},
-                                   excluded_checks=[positive_data_acceptance])
+            case.call_and_validate(
+                headers={"X-API-Key": ADMIN_KEY}, excluded_checks=[positive_data_acceptance]
+            )
 
         check()
         checked += 1

@@ -30,19 +30,33 @@ PARQUET = "application/vnd.apache.parquet"
 
 @pytest.fixture(scope="module")
 def http(tmp_path_factory: pytest.TempPathFactory) -> Iterator[httpx.Client]:
-    settings = gateway_settings(tmp_path_factory.mktemp("parquet"), rate_limit_per_s=1e6,
-                                rate_limit_burst=1_000_000)  # fmt: skip
+    settings = gateway_settings(
+        tmp_path_factory.mktemp("parquet"), rate_limit_per_s=1e6, rate_limit_burst=1_000_000
+    )
     storage = open_storage(settings)
-    batches = [*car_batches(1, 900.0, 25.0, 0.0, 40),
-               *car_batches(2, 905.0, 20.0, 0.0, 40, offset_m=1.83)]  # fmt: skip
+    batches = [
+        *car_batches(1, 900.0, 25.0, 0.0, 40),
+        *car_batches(2, 905.0, 20.0, 0.0, 40, offset_m=1.83),
+    ]
     # the size on the second half of track 1 only: nulls in the other rows
-    batches = [b.model_copy(update={"tracks": [t.model_copy(update={"length_m": 4.5})
-                                               if t.track_id == 1 and b.stamp >= 2.0 else t
-                                               for t in b.tracks]})
-               for b in batches]  # fmt: skip
+    batches = [
+        b.model_copy(
+            update={
+                "tracks": [
+                    t.model_copy(update={"length_m": 4.5})
+                    if t.track_id == 1 and b.stamp >= 2.0
+                    else t
+                    for t in b.tracks
+                ]
+            }
+        )
+        for b in batches
+    ]
     storage.ingest(batches, geo=SITE.geo_frame, received_at=1_750_000_000.0)
-    with live_server(settings, storage) as base, \
-            httpx.Client(base_url=base, headers={"X-API-Key": READ_KEY}, timeout=10.0) as client:  # fmt: skip
+    with (
+        live_server(settings, storage) as base,
+        httpx.Client(base_url=base, headers={"X-API-Key": READ_KEY}, timeout=10.0) as client,
+    ):
         yield client
     storage.close()
 
@@ -60,8 +74,11 @@ def test_trajectories_as_parquet_hold_the_csv_columns_typed_and_the_json_values(
     response = http.get("/v1/trajectories", params={"format": "parquet", "limit": 100})
     table = read_parquet(response)
     assert 'filename="trajectories.parquet"' in response.headers["content-disposition"]
-    header = next(csv.reader(io.StringIO(
-        http.get("/v1/trajectories", params={"format": "csv", "limit": 1}).text)))  # fmt: skip
+    header = next(
+        csv.reader(
+            io.StringIO(http.get("/v1/trajectories", params={"format": "csv", "limit": 1}).text)
+        )
+    )
     assert table.column_names == header == list(TRACK_POINT_FIELDS)
     assert table.schema.equals(PARQUET_SCHEMA)
     types = {field.name: field.type for field in table.schema}
@@ -86,8 +103,10 @@ def test_parquet_pages_carry_the_cursor_in_the_headers(http: httpx.Client) -> No
         if cursor is None:
             assert "link" not in response.headers
             break
-        assert response.headers["link"].endswith('; rel="next"') and f"cursor={cursor}" in \
-            response.headers["link"]  # fmt: skip
+        assert (
+            response.headers["link"].endswith('; rel="next"')
+            and f"cursor={cursor}" in response.headers["link"]
+        )
         params = {**params, "cursor": cursor}
     assert pages == 3  # 80 points by 30
     everything = http.get("/v1/trajectories", params={"limit": 1000}).json()["points"]
@@ -102,8 +121,9 @@ def test_one_track_as_parquet(http: httpx.Client) -> None:
     assert table.column("stamp").to_pylist() == sorted(table.column("stamp").to_pylist())
 
 
-def test_an_empty_page_is_a_parquet_file_with_the_columns_and_no_rows(http: httpx.Client,
-                                                                       tmp_path: Path) -> None:  # fmt: skip
+def test_an_empty_page_is_a_parquet_file_with_the_columns_and_no_rows(
+    http: httpx.Client, tmp_path: Path
+) -> None:
     response = http.get("/v1/trajectories", params={"format": "parquet", "start": 1000.0})
     table = read_parquet(response)
     assert table.num_rows == 0 and table.schema.equals(PARQUET_SCHEMA)

@@ -35,10 +35,13 @@ from wz_shared.site import SiteFileError
 
 NOW = 1_750_000_000.0
 #: A second trailer, 40 km away (another origin: its tracks land elsewhere on the map).
-OTHER = SITE.model_copy(update={
-    "site_id": "i80-york", "name": "I-80 near York",
-    "origin": SITE.origin.model_copy(update={"latitude_deg": SITE.origin.latitude_deg + 0.36}),
-})  # fmt: skip
+OTHER = SITE.model_copy(
+    update={
+        "site_id": "i80-york",
+        "name": "I-80 near York",
+        "origin": SITE.origin.model_copy(update={"latitude_deg": SITE.origin.latitude_deg + 0.36}),
+    }
+)
 BOTH = Sites([SITE, OTHER])
 
 
@@ -47,8 +50,9 @@ def of_site(message: TrackBatch | Alert, site_id: str) -> TrackBatch | Alert:
 
 
 def test_sites_from_files_and_folders(tmp_path: Path) -> None:
-    source = yaml.safe_load((Path(__file__).parents[2] / "deploy/sites/us75-lincoln.yaml")
-                            .read_text())  # fmt: skip
+    source = yaml.safe_load(
+        (Path(__file__).parents[2] / "deploy/sites/us75-lincoln.yaml").read_text()
+    )
     folder = tmp_path / "sites"
     folder.mkdir()
     for site_id in ("b-site", "a-site"):
@@ -79,21 +83,31 @@ def test_two_sites_stored_apart_same_alert_ids_and_foreign_sites_refused(
     storage = open_storage(settings)
     reports: list[tuple[str, str]] = []
     finishers = SiteFinishers.of(storage, BOTH, settings, GatewayMetrics(), clock=lambda: NOW)
-    writer = Writer(storage, BOTH, settings, GatewayMetrics(), finisher=finishers,
-                    report=lambda key, reason, _: reports.append((key, reason)),
-                    clock=lambda: NOW)  # fmt: skip
+    writer = Writer(
+        storage,
+        BOTH,
+        settings,
+        GatewayMetrics(),
+        finisher=finishers,
+        report=lambda key, reason, _: reports.append((key, reason)),
+        clock=lambda: NOW,
+    )
     try:
         for site in (SITE, OTHER):
             for message in car_batches(1, 600.0, 25.0, 0.0, 30):
                 writer.offer(f"wz/{site.site_id}/tracks", of_site(message, site.site_id))
             for alert_id in ("ep-1-0", "ep-1-1"):
-                writer.offer(f"wz/{site.site_id}/alerts/speeding",
-                             of_site(sample_alert(alert_id, 1.0), site.site_id))  # fmt: skip
+                writer.offer(
+                    f"wz/{site.site_id}/alerts/speeding",
+                    of_site(sample_alert(alert_id, 1.0), site.site_id),
+                )
         writer.offer("wz/us75-lincoln/alerts/speeding", sample_alert("ep-1-0", 1.0))  # again
         writer.offer("wz/elsewhere/alerts/speeding", of_site(sample_alert("x", 1.0), "elsewhere"))
         writer.offer("wz/i80-york/alerts/speeding", sample_alert("spoof", 1.0))  # site: lincoln
-        assert reports == [("wz/elsewhere/alerts/speeding", "wrong_site"),
-                           ("wz/i80-york/alerts/speeding", "wrong_site")]  # fmt: skip
+        assert reports == [
+            ("wz/elsewhere/alerts/speeding", "wrong_site"),
+            ("wz/i80-york/alerts/speeding", "wrong_site"),
+        ]
         writer.stop.set()
         writer.run()
         assert writer.written == 2 * 32 + 1
@@ -106,7 +120,9 @@ def test_two_sites_stored_apart_same_alert_ids_and_foreign_sites_refused(
         york = storage.points(PointQuery(site=OTHER.site_id, limit=1)).items[0]
         assert york.latitude_deg - lincoln.latitude_deg == pytest.approx(0.36, abs=1e-3)
         assert len(storage.alerts(AlertQuery(site=None)).items) == 4
-        assert TrackLifeStore(storage.engine).unfinished(OTHER.site_id)  # each site's lives recorded
+        assert TrackLifeStore(storage.engine).unfinished(
+            OTHER.site_id
+        )  # each site's lives recorded
     finally:
         storage.close()
 
@@ -118,21 +134,31 @@ def test_api_serves_each_site_with_a_site_parameter(tmp_path: Path) -> None:
         for site, speed in ((SITE, 25.0), (OTHER, 31.0)):
             messages = [of_site(m, site.site_id) for m in car_batches(4, 600.0, speed, 0.0, 5)]
             messages.append(of_site(sample_alert("ep-7-0", 0.2), site.site_id))
-            messages.append(devices_state(0.3, beacon_on=True, sign_text="SLOW DOWN", cause=None)
-                            .model_copy(update={"site": site.site_id}))  # fmt: skip
+            messages.append(
+                devices_state(0.3, beacon_on=True, sign_text="SLOW DOWN", cause=None).model_copy(
+                    update={"site": site.site_id}
+                )
+            )
             storage.ingest(messages, geo=site.geo_frame, received_at=NOW)
-        with live_server(settings, storage, site=BOTH, clock=lambda: NOW + 1.0) as url, \
-                httpx.Client(base_url=url, headers={"X-API-Key": ADMIN_KEY}) as http:
+        with (
+            live_server(settings, storage, site=BOTH, clock=lambda: NOW + 1.0) as url,
+            httpx.Client(base_url=url, headers={"X-API-Key": ADMIN_KEY}) as http,
+        ):
             assert http.get("/v1/sites").json() == [
                 {"site_id": SITE.site_id, "name": SITE.name, "default": True},
-                {"site_id": OTHER.site_id, "name": OTHER.name, "default": False}]  # fmt: skip
+                {"site_id": OTHER.site_id, "name": OTHER.name, "default": False},
+            ]
             assert http.get("/v1/site").json()["site_id"] == SITE.site_id
             assert http.get("/v1/site", params={"site": OTHER.site_id}).json()["name"] == OTHER.name
             unknown = http.get("/v1/trajectories", params={"site": "nowhere"})
             assert unknown.status_code == 404 and "serves us75-lincoln, i80-york" in unknown.text
-            speeds = {site: {p["speed_mps"] for p in http.get(
-                "/v1/trajectories", params={"site": site}).json()["points"]}
-                for site in BOTH.ids}  # fmt: skip
+            speeds = {
+                site: {
+                    p["speed_mps"]
+                    for p in http.get("/v1/trajectories", params={"site": site}).json()["points"]
+                }
+                for site in BOTH.ids
+            }
             assert speeds == {SITE.site_id: {25.0}, OTHER.site_id: {31.0}}
             live = http.get("/v1/tracks/live", params={"site": OTHER.site_id}).json()
             assert live["site"] == OTHER.site_id and live["tracks"][0]["speed_mps"] == 31.0
@@ -141,12 +167,14 @@ def test_api_serves_each_site_with_a_site_parameter(tmp_path: Path) -> None:
             assert http.get("/v1/alerts").json()["count"] == 1
             every = http.get("/v1/alerts", params={"site": "*"}).json()
             assert every["site"] == "*" and sorted(a["site"] for a in every["alerts"]) == sorted(
-                BOTH.ids)  # fmt: skip
+                BOTH.ids
+            )
             feed = http.get("/v1/wzdx/device-feed").json()
             sources = {s["data_source_id"] for s in feed["feed_info"]["data_sources"]}
             assert len(sources) == 2
-            assert {f["properties"]["core_details"]["data_source_id"]
-                    for f in feed["features"]} == sources  # fmt: skip
+            assert {
+                f["properties"]["core_details"]["data_source_id"] for f in feed["features"]
+            } == sources
             one = http.get("/v1/wzdx/device-feed", params={"site": OTHER.site_id}).json()
             assert len(one["features"]) * 2 == len(feed["features"])
     finally:
@@ -162,32 +190,65 @@ def test_migration_4_keeps_the_alerts_and_makes_ids_unique_per_site(tmp_path: Pa
         schema_version.create(connection)
         for migration in MIGRATIONS[:3]:
             migration.apply(connection)
-            connection.execute(insert(schema_version).values(
-                version=migration.version, description=migration.description, applied_at=NOW))
+            connection.execute(
+                insert(schema_version).values(
+                    version=migration.version, description=migration.description, applied_at=NOW
+                )
+            )
         for k in range(3):
             alert = sample_alert(f"ep-{k}", float(k))
-            connection.execute(insert(alerts).values(
-                alert_id=alert.alert_id, site=alert.site, source_id=alert.source_id,
-                episode_id=alert.episode_id, phase=alert.phase, alert_type="speeding",
-                severity="warning", stamp=alert.stamp, onset_stamp=None, track_id=1,
-                station_m=700.0, offset_m=-1.8, speed_mps=29.0, measured_value=29.0,
-                threshold_value=26.8, value_unit="m/s", description="d", evidence={},
-                track=None, received_at=NOW))  # fmt: skip
+            connection.execute(
+                insert(alerts).values(
+                    alert_id=alert.alert_id,
+                    site=alert.site,
+                    source_id=alert.source_id,
+                    episode_id=alert.episode_id,
+                    phase=alert.phase,
+                    alert_type="speeding",
+                    severity="warning",
+                    stamp=alert.stamp,
+                    onset_stamp=None,
+                    track_id=1,
+                    station_m=700.0,
+                    offset_m=-1.8,
+                    speed_mps=29.0,
+                    measured_value=29.0,
+                    threshold_value=26.8,
+                    value_unit="m/s",
+                    description="d",
+                    evidence={},
+                    track=None,
+                    received_at=NOW,
+                )
+            )
     engine.dispose()
     storage = Storage.open(f"sqlite:///{path}")
     try:
         assert storage.current_schema_version() == SCHEMA_VERSION == 5
         assert [a.alert_id for a in storage.alerts(AlertQuery(site=SITE.site_id)).items] == [
-            "ep-2", "ep-1", "ep-0"]  # fmt: skip
-        result = storage.ingest([of_site(sample_alert("ep-1", 5.0), OTHER.site_id),
-                                 sample_alert("ep-1", 5.0)], geo=BOTH.default.geo_frame,
-                                received_at=NOW)  # fmt: skip
+            "ep-2",
+            "ep-1",
+            "ep-0",
+        ]
+        result = storage.ingest(
+            [of_site(sample_alert("ep-1", 5.0), OTHER.site_id), sample_alert("ep-1", 5.0)],
+            geo=BOTH.default.geo_frame,
+            received_at=NOW,
+        )
         assert (result.alerts, result.duplicate_alerts) == (1, 1)
     finally:
         storage.close()
     with sqlite3.connect(path) as raw:
-        names = {row[0] for row in raw.execute(
-            "SELECT name FROM sqlite_master WHERE tbl_name = 'alerts' AND type = 'index'")}
-        assert {"ux_alerts_site_alert", "ix_alerts_site_stamp", "ix_alerts_episode",
-                "ix_alerts_received_at"} <= names  # fmt: skip
+        names = {
+            row[0]
+            for row in raw.execute(
+                "SELECT name FROM sqlite_master WHERE tbl_name = 'alerts' AND type = 'index'"
+            )
+        }
+        assert {
+            "ux_alerts_site_alert",
+            "ix_alerts_site_stamp",
+            "ix_alerts_episode",
+            "ix_alerts_received_at",
+        } <= names
         assert raw.execute("SELECT count(*) FROM alerts").fetchone() == (4,)

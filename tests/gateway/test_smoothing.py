@@ -17,16 +17,26 @@ def test_a_smoothed_trajectory_gets_its_road_position_lane_and_wgs84_again() -> 
     station, offset = SITE.road_frame.to_road(car.x_filt[:, 0], car.x_filt[:, 1])
     latitude, longitude, _ = SITE.geo_frame.to_wgs84(car.x_filt[:, 0], car.x_filt[:, 1])
     stored = StoredTrajectory(
-        track_id=5, stamp=car.stamps_s, x_m=car.x_filt[:, 0], y_m=car.x_filt[:, 1],
-        vx_mps=car.x_filt[:, 2], vy_mps=car.x_filt[:, 3], covariance=car.P_filt,
-        latitude_deg=latitude, longitude_deg=longitude, station_m=station, offset_m=offset,
+        track_id=5,
+        stamp=car.stamps_s,
+        x_m=car.x_filt[:, 0],
+        y_m=car.x_filt[:, 1],
+        vx_mps=car.x_filt[:, 2],
+        vy_mps=car.x_filt[:, 3],
+        covariance=car.P_filt,
+        latitude_deg=latitude,
+        longitude_deg=longitude,
+        station_m=station,
+        offset_m=offset,
         lane_index=SITE.lane_index_at(offset).astype(np.int64),
         speed_mps=np.hypot(car.x_filt[:, 2], car.x_filt[:, 3]),
         heading_rad=np.arctan2(car.x_filt[:, 3], car.x_filt[:, 2]),
-        object_class=("unknown",) * (n - 1) + ("car",), status=("tentative",) + ("confirmed",) * (n - 1),
-        length_m=np.r_[np.full(n - 1, np.nan), 4.4], width_m=np.r_[np.full(n - 1, np.nan), 1.8],
+        object_class=("unknown",) * (n - 1) + ("car",),
+        status=("tentative",) + ("confirmed",) * (n - 1),
+        length_m=np.r_[np.full(n - 1, np.nan), 4.4],
+        width_m=np.r_[np.full(n - 1, np.nan), 1.8],
         received_at=1000.0 + car.stamps_s,
-    )  # fmt: skip
+    )
     noise = ProcessNoise(1.0, 0.5)
     smoothed = smooth_trajectory(stored, SITE, noise)
     x_s, _ = rts_smooth(car.stamps_s, car.x_filt, car.P_filt, noise)

@@ -47,15 +47,22 @@ def fill(storage: Storage, received_at: float = NOW) -> None:
     """Two cars for 5 s (50 batches, two points each at the same stamps), three alerts."""
     left = car_batches(1, 800.0, 30.0, 0.0, 50)
     right = car_batches(2, 820.0, 20.0, 0.0, 50, offset_m=1.83)
-    batches = [batch(a.stamp, [*a.tracks, *b.tracks], a.cycle_index)
-               for a, b in zip(left, right, strict=True)]  # fmt: skip
+    batches = [
+        batch(a.stamp, [*a.tracks, *b.tracks], a.cycle_index)
+        for a, b in zip(left, right, strict=True)
+    ]
     storage.ingest(batches, geo=SITE.geo_frame, received_at=received_at)
     alerts = [
         sample_alert("a1", 1.0, track=make_track(1, 830.0, 30.0)),
-        sample_alert("a2", 2.0, alert_type=AlertType.HARD_BRAKING,
-                     severity=AlertSeverity.CRITICAL, track_id=2),
+        sample_alert(
+            "a2",
+            2.0,
+            alert_type=AlertType.HARD_BRAKING,
+            severity=AlertSeverity.CRITICAL,
+            track_id=2,
+        ),
         sample_alert("a3", 3.0, phase="clear"),
-    ]  # fmt: skip
+    ]
     storage.ingest(alerts, geo=SITE.geo_frame, received_at=received_at)
 
 
@@ -71,10 +78,14 @@ def test_migration_from_empty_then_reopen_keeps_everything(tmp_path: Path) -> No
     names = set(inspect(storage.engine).get_table_names())
     assert names == {t.name for t in metadata.sorted_tables}
     fill(storage)
-    storage.ingest([devices_state(4.0, beacon_on=True, sign_text="SLOW DOWN",
-                                  cause=AlertType.SPEEDING),
-                    service_status("alert-service", 4.0, {"k": 1.0})],
-                   geo=SITE.geo_frame, received_at=NOW)  # fmt: skip
+    storage.ingest(
+        [
+            devices_state(4.0, beacon_on=True, sign_text="SLOW DOWN", cause=AlertType.SPEEDING),
+            service_status("alert-service", 4.0, {"k": 1.0}),
+        ],
+        geo=SITE.geo_frame,
+        received_at=NOW,
+    )
     before_points = storage.points(PointQuery(site=SITE.site_id, limit=1000)).items
     before_alerts = storage.alerts(AlertQuery(site=SITE.site_id)).items
     storage.close()
@@ -82,7 +93,8 @@ def test_migration_from_empty_then_reopen_keeps_everything(tmp_path: Path) -> No
     with sqlite3.connect(path) as raw:
         assert raw.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
         assert raw.execute("SELECT version FROM schema_version ORDER BY version").fetchall() == [
-            (m.version,) for m in MIGRATIONS]  # fmt: skip
+            (m.version,) for m in MIGRATIONS
+        ]
 
     reopened = Storage.open(url_of(path))
     try:
@@ -92,7 +104,8 @@ def test_migration_from_empty_then_reopen_keeps_everything(tmp_path: Path) -> No
         assert reopened.alerts(AlertQuery(site=SITE.site_id)).items == before_alerts
         first = before_alerts[-1]  # newest first: a1 is last
         assert first.alert_id == "a1" and first == sample_alert(
-            "a1", 1.0, track=make_track(1, 830.0, 30.0))
+            "a1", 1.0, track=make_track(1, 830.0, 30.0)
+        )
         devices = reopened.latest(SITE.site_id, "devices")
         assert devices is not None
         assert RoadsideDeviceState.model_validate_json(devices.body).sign_text == "SLOW DOWN"
@@ -109,8 +122,9 @@ def test_a_newer_database_is_refused_untouched(tmp_path: Path) -> None:
     fill(storage)
     storage.close()
     with sqlite3.connect(path) as raw:
-        raw.execute("INSERT INTO schema_version VALUES (?, 'from the future', 0)",
-                    (SCHEMA_VERSION + 1,))  # fmt: skip
+        raw.execute(
+            "INSERT INTO schema_version VALUES (?, 'from the future', 0)", (SCHEMA_VERSION + 1,)
+        )
     with pytest.raises(StorageError, match=f"schema version {SCHEMA_VERSION + 1}.*nothing was"):
         Storage.open(url_of(path))
     with sqlite3.connect(path) as raw:
@@ -144,8 +158,9 @@ def test_pages_never_skip_or_repeat_and_survive_new_rows(tmp_path: Path) -> None
         seen += [(p.track_id, p.stamp) for p in page.items]
         pages += 1
         if pages == 3:  # rows arriving mid-walk come after what was read, at the end
-            storage.ingest([batch(9.0, [make_track(5, 900.0, 10.0)], 90)], geo=SITE.geo_frame,
-                           received_at=NOW)  # fmt: skip
+            storage.ingest(
+                [batch(9.0, [make_track(5, 900.0, 10.0)], 90)], geo=SITE.geo_frame, received_at=NOW
+            )
         if page.next_cursor is None:
             break
         cursor = page.next_cursor
@@ -169,8 +184,7 @@ def test_point_filters(tmp_path: Path) -> None:
     lat0, lon0, _ = SITE.geo_frame.to_wgs84(1.0, 799.0)
     lat1, lon1, _ = SITE.geo_frame.to_wgs84(2.5, 850.0)
     box = (float(lon0), float(lat0), float(lon1), float(lat1))
-    assert all_points(storage, bbox_deg=box) == all_points(
-        storage, track_id=1, station_max_m=850.0)
+    assert all_points(storage, bbox_deg=box) == all_points(storage, track_id=1, station_max_m=850.0)
     assert all_points(storage, smoothed=True) == []
     assert all_points(storage, smoothed=False) == all_points(storage)
     storage.close()
@@ -204,11 +218,13 @@ def test_alerts_filters_order_duplicates(tmp_path: Path) -> None:
 
 def test_ingest_refuses_unknown_messages_before_writing(tmp_path: Path) -> None:
     storage = Storage.open(url_of(tmp_path / "g.sqlite3"))
-    stray = DetectionBatch(site=SITE.site_id, source_id="lidar", stamp=0.0, frame_index=0,
-                           detections=[])  # fmt: skip
+    stray = DetectionBatch(
+        site=SITE.site_id, source_id="lidar", stamp=0.0, frame_index=0, detections=[]
+    )
     with pytest.raises(TypeError, match="DetectionBatch"):
-        storage.ingest([batch(0.0, [make_track(1, 900.0, 10.0)]), stray], geo=SITE.geo_frame,
-                       received_at=NOW)  # fmt: skip
+        storage.ingest(
+            [batch(0.0, [make_track(1, 900.0, 10.0)]), stray], geo=SITE.geo_frame, received_at=NOW
+        )
     assert storage.count("track_points") == 0 and storage.latest(SITE.site_id, "tracks") is None
     storage.close()
 
@@ -216,8 +232,11 @@ def test_ingest_refuses_unknown_messages_before_writing(tmp_path: Path) -> None:
 def test_retention_deletes_only_what_is_older(tmp_path: Path) -> None:
     storage = Storage.open(url_of(tmp_path / "g.sqlite3"))
     fill(storage, received_at=NOW - 40 * DAY_S)  # 40 days old
-    storage.ingest([batch(10.0, [make_track(9, 900.0, 10.0)], 100), sample_alert("new", 10.0)],
-                   geo=SITE.geo_frame, received_at=NOW)  # fmt: skip
+    storage.ingest(
+        [batch(10.0, [make_track(9, 900.0, 10.0)], 100), sample_alert("new", 10.0)],
+        geo=SITE.geo_frame,
+        received_at=NOW,
+    )
     deleted = storage.purge(NOW, retention_days=30.0, alert_retention_days=365.0)
     assert deleted["track_points"] == 100 and deleted["alerts"] == 0
     assert all_points(storage) == [(9, 10.0)]
@@ -270,10 +289,12 @@ def test_schema_and_upserts_compile_for_postgresql(tmp_path: Path) -> None:
     assert "id BIGSERIAL" in ddl and "DOUBLE PRECISION" in ddl
     storage = Storage.open(url_of(tmp_path / "g.sqlite3"))
     storage.dialect = "postgresql"  # build the PostgreSQL statements with the same code
-    stmt = storage._insert(metadata.tables["latest"]).values(site="s", name="n", stamp=0.0,
-                                                             received_at=0.0, body="{}")  # fmt: skip
+    stmt = storage._insert(metadata.tables["latest"]).values(
+        site="s", name="n", stamp=0.0, received_at=0.0, body="{}"
+    )
     upsert = stmt.on_conflict_do_update(  # type: ignore[attr-defined]
-        index_elements=["site", "name"], set_={"body": stmt.excluded.body}  # type: ignore[attr-defined]
+        index_elements=["site", "name"],
+        set_={"body": stmt.excluded.body},  # type: ignore[attr-defined]
     )
     assert "ON CONFLICT (site, name) DO UPDATE" in str(upsert.compile(dialect=dialect))
     storage.close()

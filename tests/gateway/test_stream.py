@@ -153,16 +153,32 @@ def test_close_ends_every_stream_and_the_client_limit_holds() -> None:
 
 def test_compact_tracks_keeps_what_a_view_draws_rounded() -> None:
     track = make_track(7, 912.3456, 27.123456, offset_m=1.834567, length_m=4.56789)
-    batch = TrackBatch(site=SITE.site_id, source_id="tracker", stamp=12.5, cycle_index=250,
-                       tracks=[track])  # fmt: skip
+    batch = TrackBatch(
+        site=SITE.site_id, source_id="tracker", stamp=12.5, cycle_index=250, tracks=[track]
+    )
     data = compact_tracks(batch, received_at=1_750_000_000.12345)
     assert data == {
-        "site": SITE.site_id, "stamp": 12.5, "cycle_index": 250, "received_at": 1_750_000_000.123,
-        "tracks": [{"track_id": 7, "x_m": -1.83, "y_m": 912.35, "station_m": 912.35,
-                    "offset_m": 1.83, "speed_mps": 27.12, "heading_rad": 1.571,
-                    "lane_index": 1, "object_class": "unknown", "status": "confirmed",
-                    "length_m": 4.57, "width_m": None}],
-    }  # fmt: skip
+        "site": SITE.site_id,
+        "stamp": 12.5,
+        "cycle_index": 250,
+        "received_at": 1_750_000_000.123,
+        "tracks": [
+            {
+                "track_id": 7,
+                "x_m": -1.83,
+                "y_m": 912.35,
+                "station_m": 912.35,
+                "offset_m": 1.83,
+                "speed_mps": 27.12,
+                "heading_rad": 1.571,
+                "lane_index": 1,
+                "object_class": "unknown",
+                "status": "confirmed",
+                "length_m": 4.57,
+                "width_m": None,
+            }
+        ],
+    }
 
 
 # --- GET /v1/stream on a real server ---------------------------------------------------------
@@ -176,8 +192,11 @@ def serving(settings: GatewaySettings, storage: Storage) -> Iterator[tuple[str, 
     writer = Writer(storage, SITE, settings, metrics, report=lambda *_: None, live=live)
     app = create_app(settings, storage, site=SITE, metrics=metrics, live=live)
     port = free_port()
-    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_config=None,
-                                           access_log=False, lifespan="off"))  # fmt: skip
+    server = uvicorn.Server(
+        uvicorn.Config(
+            app, host="127.0.0.1", port=port, log_config=None, access_log=False, lifespan="off"
+        )
+    )
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()
     deadline = time.monotonic() + 10.0
@@ -219,13 +238,16 @@ def storage(tmp_path: Path) -> Iterator[Storage]:
     storage.close()
 
 
-def test_stream_sends_stored_tracks_and_alerts_as_server_sent_events(tmp_path: Path,
-                                                                     storage: Storage) -> None:  # fmt: skip
+def test_stream_sends_stored_tracks_and_alerts_as_server_sent_events(
+    tmp_path: Path, storage: Storage
+) -> None:
     settings = gateway_settings(tmp_path, stream_heartbeat_s=0.2)
     batches = car_batches(5, 900.0, 25.0, 0.0, 10)
     alert = sample_alert("sse-1", 0.5, track_id=5)
-    with serving(settings, storage) as (base, writer), \
-            httpx.Client(base_url=base, timeout=10.0) as http:  # fmt: skip
+    with (
+        serving(settings, storage) as (base, writer),
+        httpx.Client(base_url=base, timeout=10.0) as http,
+    ):
         with http.stream("GET", "/v1/stream", headers=READ) as response:
             assert response.status_code == 200
             assert response.headers["content-type"].startswith("text/event-stream")
@@ -244,8 +266,9 @@ def test_stream_sends_stored_tracks_and_alerts_as_server_sent_events(tmp_path: P
             (sent,) = read_events(lines, 1, {"alert"})
             assert Alert.model_validate_json(sent["data"]) == alert
             assert sent["id"].endswith("-3")  # after the first batch and the group's newest
-        with http.stream("GET", "/v1/stream", headers=READ,
-                         params={"event": "alert"}) as alerts_only:  # fmt: skip
+        with http.stream(
+            "GET", "/v1/stream", headers=READ, params={"event": "alert"}
+        ) as alerts_only:
             lines = alerts_only.iter_lines()
             assert writer.write([*car_batches(5, 1150.0, 25.0, 1.0, 3), sample_alert("sse-2", 1.1)])
             (event,) = read_events(lines, 1, {"alert", "tracks"})
@@ -254,15 +277,20 @@ def test_stream_sends_stored_tracks_and_alerts_as_server_sent_events(tmp_path: P
         assert [a["alert_id"] for a in stored] == ["sse-2", "sse-1"]
 
 
-def test_a_client_that_never_reads_does_not_hold_up_ingestion(tmp_path: Path,
-                                                              storage: Storage) -> None:  # fmt: skip
+def test_a_client_that_never_reads_does_not_hold_up_ingestion(
+    tmp_path: Path, storage: Storage
+) -> None:
     """A client whose socket takes 4 KiB and never reads, beside one that reads: 3000 alerts of
     2 KiB (6 MiB, more than the sockets hold) are stored at the writer's own pace; the slow
     client's oldest events are dropped, the reading client gets the newest."""
     settings = gateway_settings(tmp_path, stream_queue_capacity=256)
     evidence = {f"evidence_value_{k:02d}_m": float(k) for k in range(40)}
-    alerts = [sample_alert(f"slow-{k:04d}", k * 0.01).model_copy(
-        update={"evidence": evidence, "description": "d" * 400}) for k in range(3000)]  # fmt: skip
+    alerts = [
+        sample_alert(f"slow-{k:04d}", k * 0.01).model_copy(
+            update={"evidence": evidence, "description": "d" * 400}
+        )
+        for k in range(3000)
+    ]
     with serving(settings, storage) as (base, writer):
         live = writer.live
         assert live is not None
@@ -270,14 +298,19 @@ def test_a_client_that_never_reads_does_not_hold_up_ingestion(tmp_path: Path,
         slow = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         slow.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
         slow.connect(("127.0.0.1", port))
-        slow.sendall(f"GET /v1/stream?event=alert HTTP/1.1\r\nHost: gateway\r\n"
-                     f"X-API-Key: {READ_KEY}\r\n\r\n".encode())  # fmt: skip
+        slow.sendall(
+            f"GET /v1/stream?event=alert HTTP/1.1\r\nHost: gateway\r\n"
+            f"X-API-Key: {READ_KEY}\r\n\r\n".encode()
+        )
         received: list[str] = []
 
         def read_fast() -> None:
-            with httpx.Client(base_url=base, timeout=30.0) as http, \
-                    http.stream("GET", "/v1/stream", headers=READ,
-                                params={"event": "alert"}) as response:  # fmt: skip
+            with (
+                httpx.Client(base_url=base, timeout=30.0) as http,
+                http.stream(
+                    "GET", "/v1/stream", headers=READ, params={"event": "alert"}
+                ) as response,
+            ):
                 for line in response.iter_lines():
                     if line.startswith("data: "):
                         received.append(json.loads(line[6:])["alert_id"])
@@ -291,7 +324,7 @@ def test_a_client_that_never_reads_does_not_hold_up_ingestion(tmp_path: Path,
             assert time.monotonic() < deadline, "the two clients never connected"
             time.sleep(0.01)
         for first in range(0, len(alerts), 100):
-            assert writer.write(alerts[first:first + 100])
+            assert writer.write(alerts[first : first + 100])
         reader.join(30.0)
         slow.close()
         assert writer.written == len(alerts)
@@ -301,8 +334,7 @@ def test_a_client_that_never_reads_does_not_hold_up_ingestion(tmp_path: Path,
 
 def test_keys_limits_and_the_page_routes(tmp_path: Path, storage: Storage) -> None:
     settings = gateway_settings(tmp_path, stream_max_clients=1)
-    with serving(settings, storage) as (base, _), \
-            httpx.Client(base_url=base, timeout=10.0) as http:  # fmt: skip
+    with serving(settings, storage) as (base, _), httpx.Client(base_url=base, timeout=10.0) as http:
         refused = http.get("/v1/stream")
         assert refused.status_code == 401
         assert refused.headers["content-type"] == "application/problem+json"
@@ -319,8 +351,11 @@ def test_keys_limits_and_the_page_routes(tmp_path: Path, storage: Storage) -> No
         page = http.get("/live")  # no key: the page holds no data
         assert page.status_code == 200 and page.headers["content-type"].startswith("text/html")
         assert "default-src 'self'" in page.headers["content-security-policy"]
-        for name, kind in [("live.js", "javascript"), ("live.css", "text/css"),
-                           ("favicon.svg", "image/svg+xml")]:  # fmt: skip
+        for name, kind in [
+            ("live.js", "javascript"),
+            ("live.css", "text/css"),
+            ("favicon.svg", "image/svg+xml"),
+        ]:
             asset = http.get(f"/static/{name}")
             assert asset.status_code == 200 and kind in asset.headers["content-type"], name
             assert f"/static/{name}" in page.text
@@ -331,8 +366,10 @@ def test_keys_limits_and_the_page_routes(tmp_path: Path, storage: Storage) -> No
 
 def test_dev_mode_streams_without_a_key(tmp_path: Path, storage: Storage) -> None:
     settings = GatewaySettings(data_dir=tmp_path / "data", dev_mode=True, port=0)
-    with serving(settings, storage) as (base, writer), \
-            httpx.stream("GET", f"{base}/v1/stream", params={"event": "tracks"}) as response:  # fmt: skip
+    with (
+        serving(settings, storage) as (base, writer),
+        httpx.stream("GET", f"{base}/v1/stream", params={"event": "tracks"}) as response,
+    ):
         assert response.status_code == 200
         assert writer.write(car_batches(2, 950.0, 20.0, 0.0, 1))
         (event,) = read_events(response.iter_lines(), 1, {"tracks"})

@@ -40,10 +40,12 @@ READ = {"X-API-Key": READ_KEY}
 # --- the decision alone -----------------------------------------------------------------------
 
 
-def ended_ids(ends: TrackEnds, stamp: float, track_ids: Iterable[int],
-              received_at: float = T0) -> list[int]:  # fmt: skip
-    change = ends.observe(batch(stamp, [make_track(i, 900.0, 20.0) for i in track_ids]),
-                          received_at)  # fmt: skip
+def ended_ids(
+    ends: TrackEnds, stamp: float, track_ids: Iterable[int], received_at: float = T0
+) -> list[int]:
+    change = ends.observe(
+        batch(stamp, [make_track(i, 900.0, 20.0) for i in track_ids]), received_at
+    )
     return sorted(life.track_id for life in change.ended)
 
 
@@ -94,8 +96,9 @@ class Gateway:
     writer: Writer
     now: list[float]
 
-    def feed(self, messages: Iterable[Message], *, period_s: float = 0.05,
-             smooth: bool = True) -> None:  # fmt: skip
+    def feed(
+        self, messages: Iterable[Message], *, period_s: float = 0.05, smooth: bool = True
+    ) -> None:
         assert self.writer.finisher is not None
         for message in messages:
             self.now[0] += period_s
@@ -104,8 +107,9 @@ class Gateway:
                 self.writer.finisher.work(budget_s=10.0)
 
     def points(self, track_id: int, smoothed: bool) -> list[tuple[float, float, float]]:
-        page = self.storage.points(PointQuery(site=SITE.site_id, track_id=track_id,
-                                              smoothed=smoothed, limit=100_000))  # fmt: skip
+        page = self.storage.points(
+            PointQuery(site=SITE.site_id, track_id=track_id, smoothed=smoothed, limit=100_000)
+        )
         return [(p.stamp, p.x_m, p.y_m) for p in page.items]
 
 
@@ -115,8 +119,15 @@ def start_gateway(settings: GatewaySettings, storage: Storage, now: list[float])
     def clock() -> float:
         return now[0]
 
-    writer = Writer(storage, SITE, settings, metrics, report=lambda *_: None, clock=clock,
-                    finisher=TrackFinisher.of(storage, SITE, settings, metrics, clock=clock))  # fmt: skip
+    writer = Writer(
+        storage,
+        SITE,
+        settings,
+        metrics,
+        report=lambda *_: None,
+        clock=clock,
+        finisher=TrackFinisher.of(storage, SITE, settings, metrics, clock=clock),
+    )
     assert writer.finisher is not None
     writer.finisher.resume()
     writer.finisher.work(budget_s=10.0)
@@ -134,7 +145,8 @@ def gateway(tmp_path: Path) -> Iterator[Gateway]:
 def tracks_rows(storage: Storage) -> list[tuple[int, float | None, int | None]]:
     with storage.engine.connect() as connection:
         rows = connection.exec_driver_sql(
-            "SELECT track_id, ended_at, smoothed_points FROM tracks ORDER BY id").all()
+            "SELECT track_id, ended_at, smoothed_points FROM tracks ORDER BY id"
+        ).all()
     return [(row[0], row[1], row[2]) for row in rows]
 
 
@@ -143,8 +155,9 @@ def two_cars(seed: int = 11) -> tuple[list[TrackBatch], int]:
     4.95 s; the batches from 7.95 s on come with car 7 missing for just under, then over 3 s."""
     car7 = filtered_car(seed=seed, count=100, station0_m=800.0)
     car8 = filtered_car(seed=seed + 1, count=180, station0_m=700.0, offset_m=1.83)
-    batches = merged_batches((car7.stamps_s, car_tracks(7, car7)),
-                             (car8.stamps_s, car_tracks(8, car8)))  # fmt: skip
+    batches = merged_batches(
+        (car7.stamps_s, car_tracks(7, car7)), (car8.stamps_s, car_tracks(8, car8))
+    )
     return batches, 100
 
 
@@ -153,9 +166,9 @@ def test_a_track_is_smoothed_only_once_it_is_missing_longer_than_the_timeout(
 ) -> None:
     batches, n7 = two_cars()
     just_under = next(k for k, b in enumerate(batches) if b.stamp > 4.95 + 2.96)  # 7.95 s
-    gateway.feed(batches[:just_under + 1])  # up to 3.0 s missing
+    gateway.feed(batches[: just_under + 1])  # up to 3.0 s missing
     assert gateway.points(7, smoothed=True) == []
-    gateway.feed(batches[just_under + 1:just_under + 2])  # 3.05 s missing
+    gateway.feed(batches[just_under + 1 : just_under + 2])  # 3.05 s missing
     smoothed, fused = gateway.points(7, smoothed=True), gateway.points(7, smoothed=False)
     assert len(smoothed) == len(fused) == n7
     assert [p[0] for p in smoothed] == [p[0] for p in fused]  # same stamps
@@ -169,13 +182,18 @@ NOISE = ProcessNoise(1.5, 0.8, 1.0)
 
 def test_the_stored_smoothed_points_are_the_rts_smoothed_fused_ones(gateway: Gateway) -> None:
     # the tracker's motion model, which its batches carry
-    car = filtered_car(seed=21, count=160, sigma_a_mps2=NOISE.sigma_along_mps2,
-                       sigma_across_mps2=NOISE.sigma_across_mps2)  # fmt: skip
+    car = filtered_car(
+        seed=21,
+        count=160,
+        sigma_a_mps2=NOISE.sigma_along_mps2,
+        sigma_across_mps2=NOISE.sigma_across_mps2,
+    )
     batches = merged_batches((car.stamps_s, car_tracks(3, car)), process_noise=NOISE)
     later = [batch(11.0 + 0.05 * k, [make_track(4, 900.0, 20.0)], 200 + k) for k in range(5)]
     gateway.feed([*batches, *later])
-    stored = gateway.storage.points(PointQuery(site=SITE.site_id, track_id=3, smoothed=True,
-                                               limit=1000)).items  # fmt: skip
+    stored = gateway.storage.points(
+        PointQuery(site=SITE.site_id, track_id=3, smoothed=True, limit=1000)
+    ).items
     x_s, _ = rts_smooth(car.stamps_s, car.x_filt, car.P_filt, NOISE)
     got = np.array([[p.x_m, p.y_m, p.vx_mps, p.vy_mps] for p in stored])
     # the covariances went through JSON and back: equal to the last bits
@@ -188,7 +206,7 @@ def test_the_stored_smoothed_points_are_the_rts_smoothed_fused_ones(gateway: Gat
     truth_error = {
         name: float(np.sqrt(np.mean(np.sum((xs[20:, :2] - car.truth[20:, :2]) ** 2, axis=1))))
         for name, xs in (("fused", car.x_filt), ("smoothed", got))
-    }  # fmt: skip
+    }
     assert truth_error["smoothed"] < truth_error["fused"]
     assert gateway.metrics.smoothed_tracks._value.get() == 1.0
     assert gateway.metrics.smoothed_points._value.get() == len(stored)
@@ -225,7 +243,8 @@ def test_a_restart_takes_up_unfinished_tracks_and_smooths_nothing_twice(tmp_path
     batches, n7 = two_cars(seed=31)  # stamps 0 to 8.95 s
     for k in range(120, 141):  # car 9 from 6.0 to 7.0 s
         batches[k] = batches[k].model_copy(
-            update={"tracks": [*batches[k].tracks, make_track(9, 600.0 + k, 20.0)]})
+            update={"tracks": [*batches[k].tracks, make_track(9, 600.0 + k, 20.0)]}
+        )
     first = start_gateway(settings, storage, [T0])
     first.feed(batches)
     assert len(first.points(7, smoothed=True)) == n7
@@ -241,8 +260,9 @@ def test_a_restart_takes_up_unfinished_tracks_and_smooths_nothing_twice(tmp_path
     assert sorted(second.writer.finisher.ends.open) == [8]
     assert len(second.points(9, smoothed=True)) == 21
     second.feed(batch(10.05 + 0.05 * k, [car8], 500 + k) for k in range(1, 40))  # to 12 s
-    second.feed(batch(12.0 + 0.05 * k, [make_track(10, 500.0, 20.0)], 600 + k)
-                for k in range(1, 62))  # fmt: skip
+    second.feed(
+        batch(12.0 + 0.05 * k, [make_track(10, 500.0, 20.0)], 600 + k) for k in range(1, 62)
+    )
     fused8 = second.points(8, smoothed=False)
     assert len(fused8) == 180 + 1 + 39
     assert [p[0] for p in second.points(8, smoothed=True)] == [p[0] for p in fused8]
@@ -254,28 +274,40 @@ def test_a_restart_takes_up_unfinished_tracks_and_smooths_nothing_twice(tmp_path
 
 @pytest.mark.parametrize("recorded", [True, False])
 def test_a_life_taken_up_after_a_restart_is_smoothed_with_its_recorded_process_noise(
-    tmp_path: Path, recorded: bool,
+    tmp_path: Path,
+    recorded: bool,
 ) -> None:
     """Car 3's batches carry ``NOISE``; the process stops while it goes on, and the next one
     ends it with batches of the model's defaults: smoothed with ``NOISE``, recorded with its
     life, or with the defaults where the row has none (a life recorded before migration 5)."""
     settings = gateway_settings(tmp_path)
     storage = open_storage(settings)
-    car = filtered_car(seed=23, count=80, sigma_a_mps2=NOISE.sigma_along_mps2,
-                       sigma_across_mps2=NOISE.sigma_across_mps2)  # fmt: skip
+    car = filtered_car(
+        seed=23,
+        count=80,
+        sigma_a_mps2=NOISE.sigma_along_mps2,
+        sigma_across_mps2=NOISE.sigma_across_mps2,
+    )
     first = start_gateway(settings, storage, [T0])
     first.feed(merged_batches((car.stamps_s, car_tracks(3, car)), process_noise=NOISE))
     if not recorded:
         with storage.engine.begin() as connection:
-            connection.exec_driver_sql("UPDATE tracks SET sigma_along_mps2 = NULL, "
-                                       "sigma_across_mps2 = NULL, heading_min_speed_mps = NULL")  # fmt: skip
+            connection.exec_driver_sql(
+                "UPDATE tracks SET sigma_along_mps2 = NULL, "
+                "sigma_across_mps2 = NULL, heading_min_speed_mps = NULL"
+            )
     second = start_gateway(settings, storage, [first.now[0] + 1.0])
     assert second.writer.finisher is not None and sorted(second.writer.finisher.ends.open) == [3]
     second.feed(batch(7.5 + 0.05 * k, [make_track(4, 900.0, 20.0)], 100 + k) for k in range(5))
-    got = np.array([[p.x_m, p.y_m, p.vx_mps, p.vy_mps] for p in second.storage.points(
-        PointQuery(site=SITE.site_id, track_id=3, smoothed=True, limit=1000)).items])  # fmt: skip
-    x_s, _ = rts_smooth(car.stamps_s, car.x_filt, car.P_filt,
-                        NOISE if recorded else ProcessNoise())  # fmt: skip
+    got = np.array(
+        [
+            [p.x_m, p.y_m, p.vx_mps, p.vy_mps]
+            for p in second.storage.points(
+                PointQuery(site=SITE.site_id, track_id=3, smoothed=True, limit=1000)
+            ).items
+        ]
+    )
+    x_s, _ = rts_smooth(car.stamps_s, car.x_filt, car.P_filt, NOISE if recorded else ProcessNoise())
     np.testing.assert_allclose(got, x_s, rtol=0.0, atol=1e-9)
     storage.close()
 
@@ -298,8 +330,9 @@ def test_retention_deletes_the_smoothed_points_with_the_fused_ones(gateway: Gate
     # Track 2's points (fused and smoothed) arrived over a minute before track 3's.
     cutoff = T0 + 30.0
     days = gateway.settings.retention_days
-    deleted = gateway.storage.purge(cutoff + days * 86400.0, retention_days=days,
-                                    alert_retention_days=365.0)  # fmt: skip
+    deleted = gateway.storage.purge(
+        cutoff + days * 86400.0, retention_days=days, alert_retention_days=365.0
+    )
     assert deleted["track_points"] == 80 and deleted["tracks"] == 1
     assert gateway.points(2, smoothed=True) == [] and gateway.points(2, smoothed=False) == []
     assert len(gateway.points(3, smoothed=False)) == 5
@@ -309,8 +342,11 @@ def test_retention_deletes_the_smoothed_points_with_the_fused_ones(gateway: Gate
 def test_smoothed_trajectory_over_http(gateway: Gateway) -> None:
     batches, n7 = two_cars(seed=41)
     gateway.feed(batches)
-    with live_server(gateway.settings, gateway.storage) as base, \
-            httpx.Client(base_url=base, headers=READ, timeout=10.0) as http:  # fmt: skip
+    with (
+        live_server(gateway.settings, gateway.storage) as base,
+        httpx.Client(base_url=base, headers=READ, timeout=10.0) as http,
+    ):
+
         def points(path: str, **params: str | int) -> list[dict[str, Any]]:
             response = http.get(path, params=params)
             assert response.status_code == 200, response.text
@@ -343,13 +379,26 @@ def test_an_older_database_gets_the_covariances_and_the_track_lives(tmp_path: Pa
         schema_version.create(connection)
         for migration in MIGRATIONS[:2]:
             migration.apply(connection)
-            connection.execute(insert(schema_version).values(
-                version=migration.version, description=migration.description, applied_at=T0))
+            connection.execute(
+                insert(schema_version).values(
+                    version=migration.version, description=migration.description, applied_at=T0
+                )
+            )
         old = [c for c in track_points.c if c.name not in ("id", "covariance")]
-        connection.execute(insert(track_points).values(
-            {c.name: 0.0 for c in old} | {"site": SITE.site_id, "track_id": 5, "stamp": 1.0,
-                                          "lane_index": 0, "object_class": "car",
-                                          "status": "confirmed", "smoothed": False}))  # fmt: skip
+        connection.execute(
+            insert(track_points).values(
+                {c.name: 0.0 for c in old}
+                | {
+                    "site": SITE.site_id,
+                    "track_id": 5,
+                    "stamp": 1.0,
+                    "lane_index": 0,
+                    "object_class": "car",
+                    "status": "confirmed",
+                    "smoothed": False,
+                }
+            )
+        )
     engine.dispose()
     storage = open_storage(settings)
     try:
@@ -364,7 +413,8 @@ def test_an_older_database_gets_the_covariances_and_the_track_lives(tmp_path: Pa
 
 
 def test_a_life_the_database_refuses_is_tried_again_then_left_to_the_next_start(
-    gateway: Gateway, caplog: pytest.LogCaptureFixture,
+    gateway: Gateway,
+    caplog: pytest.LogCaptureFixture,
 ) -> None:
     gateway.feed(batch(0.05 * k, [make_track(2, 900.0 + k, 20.0)], k) for k in range(10))
     finisher = gateway.writer.finisher

@@ -50,8 +50,7 @@ def test_summary_against_the_closed_forms() -> None:
         speed_mps=np.array([20.0, 30.0, 25.0, 25.0]),
         length_m=np.array([4.5, 12.0, 4.5, 4.5]),
     )
-    summary = summarize(crossings, 0.0, 60.0, [0, 1], detector_station_m=950.0,
-                        zone_length_m=2.0)  # fmt: skip
+    summary = summarize(crossings, 0.0, 60.0, [0, 1], detector_station_m=950.0, zone_length_m=2.0)
     right, left = summary.lanes
     assert (right.vehicles, left.vehicles, summary.vehicles) == (2, 1, 3)
     assert right.volume_vph == pytest.approx(120.0) and left.volume_vph == pytest.approx(60.0)

@@ -35,13 +35,16 @@ def http(tmp_path_factory: pytest.TempPathFactory) -> Iterator[httpx.Client]:
 
 
 @contextmanager
-def gateway(tmp_path: Path, **overrides: Any) -> Iterator[tuple[httpx.Client, Storage,
-                                                                GatewaySettings]]:  # fmt: skip
+def gateway(
+    tmp_path: Path, **overrides: Any
+) -> Iterator[tuple[httpx.Client, Storage, GatewaySettings]]:
     settings = gateway_settings(tmp_path, **overrides)
     storage = open_storage(settings)
     try:
-        with live_server(settings, storage) as base_url, httpx.Client(base_url=base_url,
-                                                                     timeout=10.0) as http:  # fmt: skip
+        with (
+            live_server(settings, storage) as base_url,
+            httpx.Client(base_url=base_url, timeout=10.0) as http,
+        ):
             yield http, storage, settings
     finally:
         storage.close()
@@ -49,20 +52,32 @@ def gateway(tmp_path: Path, **overrides: Any) -> Iterator[tuple[httpx.Client, St
 
 def test_a_subscription_is_made_listed_tested_rotated_and_deleted(tmp_path: Path) -> None:
     with gateway(tmp_path) as (http, _, settings):
-        made = http.post("/v1/webhooks", headers=ADMIN, json={
-            "url": PUBLIC_URL, "event_types": ["alert.speeding", "alert.queue"],
-            "min_severity": "warning", "phases": ["start", "update"],
-            "description": "traffic management centre"})  # fmt: skip
+        made = http.post(
+            "/v1/webhooks",
+            headers=ADMIN,
+            json={
+                "url": PUBLIC_URL,
+                "event_types": ["alert.speeding", "alert.queue"],
+                "min_severity": "warning",
+                "phases": ["start", "update"],
+                "description": "traffic management centre",
+            },
+        )
         assert made.status_code == 201, made.text
         created = made.json()
         subscription_id, secret = created.pop("subscription_id"), created.pop("secret")
         assert secret.startswith("whsec_") and subscription_id.startswith("wh_")
-        assert created == {"url": PUBLIC_URL, "event_types": ["alert.speeding", "alert.queue"],
-                           "min_severity": "warning", "phases": ["start", "update"],
-                           "description": "traffic management centre",
-                           "created_at": pytest.approx(time.time(), abs=30),
-                           "disabled_at": None, "disabled_reason": None,
-                           "previous_secret_until": None}  # fmt: skip
+        assert created == {
+            "url": PUBLIC_URL,
+            "event_types": ["alert.speeding", "alert.queue"],
+            "min_severity": "warning",
+            "phases": ["start", "update"],
+            "description": "traffic management centre",
+            "created_at": pytest.approx(time.time(), abs=30),
+            "disabled_at": None,
+            "disabled_reason": None,
+            "previous_secret_until": None,
+        }
 
         listed = http.get("/v1/webhooks", headers=ADMIN).json()
         assert [w["subscription_id"] for w in listed] == [subscription_id]
@@ -77,7 +92,8 @@ def test_a_subscription_is_made_listed_tested_rotated_and_deleted(tmp_path: Path
         assert test_event["event_type"] == "webhook.test"
         events = http.get(f"/v1/webhooks/{subscription_id}/events", headers=ADMIN).json()
         assert [(e["event_id"], e["state"], e["attempts"]) for e in events] == [
-            (test_event["event_id"], "pending", 0)]  # fmt: skip
+            (test_event["event_id"], "pending", 0)
+        ]
 
         rotated = http.post(f"/v1/webhooks/{subscription_id}/rotate-secret", headers=ADMIN)
         assert rotated.status_code == 200
@@ -87,14 +103,20 @@ def test_a_subscription_is_made_listed_tested_rotated_and_deleted(tmp_path: Path
         assert until == pytest.approx(time.time() + settings.webhook_secret_grace_s, abs=30)
 
         assert http.delete(f"/v1/webhooks/{subscription_id}", headers=ADMIN).status_code == 204
-        for method, path in [("GET", ""), ("DELETE", ""), ("POST", "/test"),
-                             ("POST", "/rotate-secret"), ("GET", "/events")]:  # fmt: skip
+        for method, path in [
+            ("GET", ""),
+            ("DELETE", ""),
+            ("POST", "/test"),
+            ("POST", "/rotate-secret"),
+            ("GET", "/events"),
+        ]:
             gone = http.request(method, f"/v1/webhooks/{subscription_id}{path}", headers=ADMIN)
             assert gone.status_code == 404 and gone.headers["content-type"] == PROBLEM
             assert gone.json()["detail"] == f"no webhook subscription {subscription_id}"
         bad_id = http.get("/v1/webhooks/not-an-id", headers=ADMIN)
         assert bad_id.status_code == 422 and bad_id.json()["errors"][0]["location"] == (
-            "path.subscription_id")  # fmt: skip
+            "path.subscription_id"
+        )
 
 
 @pytest.mark.parametrize(
@@ -112,8 +134,9 @@ def test_a_subscription_is_made_listed_tested_rotated_and_deleted(tmp_path: Path
         ("http://224.0.0.251/", "224.0.0.251 is a multicast address"),
     ],
 )
-def test_private_and_internal_addresses_are_refused(http: httpx.Client, url: str,
-                                                    reason: str) -> None:  # fmt: skip
+def test_private_and_internal_addresses_are_refused(
+    http: httpx.Client, url: str, reason: str
+) -> None:
     answer = http.post("/v1/webhooks", headers=ADMIN, json={"url": url})
     assert answer.status_code == 422 and answer.headers["content-type"] == PROBLEM
     problem = answer.json()
@@ -134,8 +157,9 @@ def test_private_and_internal_addresses_are_refused(http: httpx.Client, url: str
         ("http://no-such-host.invalid/hook", "does not resolve"),
     ],
 )
-def test_other_schemes_credentials_and_unknown_hosts_are_refused(http: httpx.Client, url: str,
-                                                                 reason: str) -> None:  # fmt: skip
+def test_other_schemes_credentials_and_unknown_hosts_are_refused(
+    http: httpx.Client, url: str, reason: str
+) -> None:
     answer = http.post("/v1/webhooks", headers=ADMIN, json={"url": url})
     assert answer.status_code == 422 and reason in answer.json()["detail"], answer.text
 
@@ -147,7 +171,7 @@ def test_unknown_event_types_and_filters_are_refused(http: httpx.Client) -> None
         ({"url": PUBLIC_URL, "min_severity": "severe"}, "body.min_severity"),
         ({"url": PUBLIC_URL, "phases": ["begin"]}, "body.phases.0"),
         ({"url": PUBLIC_URL, "secret": "whsec_AAAA"}, "body.secret"),  # never chosen
-    ]:  # fmt: skip
+    ]:
         answer = http.post("/v1/webhooks", headers=ADMIN, json=body)
         assert answer.status_code == 422, body
         assert answer.json()["errors"][0]["location"] == location
@@ -156,12 +180,15 @@ def test_unknown_event_types_and_filters_are_refused(http: httpx.Client) -> None
 def test_every_webhook_route_needs_an_admin_key(tmp_path: Path) -> None:
     with gateway(tmp_path, dev_mode=True) as (http, _, _settings):  # dev mode: reads keyless
         made = http.post("/v1/webhooks", headers=ADMIN, json={"url": PUBLIC_URL}).json()
-        routes = [("POST", "/v1/webhooks"), ("GET", "/v1/webhooks"),
-                  ("GET", f"/v1/webhooks/{made['subscription_id']}"),
-                  ("DELETE", f"/v1/webhooks/{made['subscription_id']}"),
-                  ("POST", f"/v1/webhooks/{made['subscription_id']}/test"),
-                  ("POST", f"/v1/webhooks/{made['subscription_id']}/rotate-secret"),
-                  ("GET", f"/v1/webhooks/{made['subscription_id']}/events")]  # fmt: skip
+        routes = [
+            ("POST", "/v1/webhooks"),
+            ("GET", "/v1/webhooks"),
+            ("GET", f"/v1/webhooks/{made['subscription_id']}"),
+            ("DELETE", f"/v1/webhooks/{made['subscription_id']}"),
+            ("POST", f"/v1/webhooks/{made['subscription_id']}/test"),
+            ("POST", f"/v1/webhooks/{made['subscription_id']}/rotate-secret"),
+            ("GET", f"/v1/webhooks/{made['subscription_id']}/events"),
+        ]
         for method, path in routes:
             body = {"url": PUBLIC_URL} if method == "POST" and path == "/v1/webhooks" else None
             missing = http.request(method, path, json=body)
@@ -170,29 +197,55 @@ def test_every_webhook_route_needs_an_admin_key(tmp_path: Path) -> None:
             read_only = http.request(method, path, json=body, headers=READ)
             assert read_only.status_code == 403, (method, path)
         assert [w["subscription_id"] for w in http.get("/v1/webhooks", headers=ADMIN).json()] == [
-            made["subscription_id"]]  # fmt: skip
+            made["subscription_id"]
+        ]
 
 
 def test_dev_mode_and_the_allowed_networks_let_local_receivers_in(tmp_path: Path) -> None:
     with gateway(tmp_path / "dev", dev_mode=True) as (http, _, _settings):
-        assert http.post("/v1/webhooks", headers=ADMIN,
-                         json={"url": "http://127.0.0.1:9000/hook"}).status_code == 201  # fmt: skip
-        assert http.post("/v1/webhooks", headers=ADMIN,
-                         json={"url": "http://10.0.0.5/hook"}).status_code == 422  # fmt: skip
+        assert (
+            http.post(
+                "/v1/webhooks", headers=ADMIN, json={"url": "http://127.0.0.1:9000/hook"}
+            ).status_code
+            == 201
+        )
+        assert (
+            http.post(
+                "/v1/webhooks", headers=ADMIN, json={"url": "http://10.0.0.5/hook"}
+            ).status_code
+            == 422
+        )
     with gateway(tmp_path / "lan", webhook_allowed_networks=["10.20.0.0/16"]) as (http, _, _s):
-        assert http.post("/v1/webhooks", headers=ADMIN,
-                         json={"url": "http://10.20.3.4:8080/hook"}).status_code == 201  # fmt: skip
-        assert http.post("/v1/webhooks", headers=ADMIN,
-                         json={"url": "http://10.21.3.4/hook"}).status_code == 422  # fmt: skip
+        assert (
+            http.post(
+                "/v1/webhooks", headers=ADMIN, json={"url": "http://10.20.3.4:8080/hook"}
+            ).status_code
+            == 201
+        )
+        assert (
+            http.post(
+                "/v1/webhooks", headers=ADMIN, json={"url": "http://10.21.3.4/hook"}
+            ).status_code
+            == 422
+        )
     with gateway(tmp_path / "closed", webhook_allow_private=True) as (http, _, _s):
-        assert http.post("/v1/webhooks", headers=ADMIN,
-                         json={"url": "http://192.168.7.7/hook"}).status_code == 201  # fmt: skip
+        assert (
+            http.post(
+                "/v1/webhooks", headers=ADMIN, json={"url": "http://192.168.7.7/hook"}
+            ).status_code
+            == 201
+        )
 
 
-def test_the_secret_shown_once_verifies_deliveries_and_a_rotation_keeps_both(tmp_path: Path) -> None:
-    with (Receiver() as receiver,
-          gateway(tmp_path, webhook_allowed_networks=["127.0.0.0/8"],
-                  webhook_poll_interval_s=0.1) as (http, storage, settings)):  # fmt: skip
+def test_the_secret_shown_once_verifies_deliveries_and_a_rotation_keeps_both(
+    tmp_path: Path,
+) -> None:
+    with (
+        Receiver() as receiver,
+        gateway(
+            tmp_path, webhook_allowed_networks=["127.0.0.0/8"], webhook_poll_interval_s=0.1
+        ) as (http, storage, settings),
+    ):
         made = http.post("/v1/webhooks", headers=ADMIN, json={"url": receiver.url}).json()
         subscription_id, first_secret = made["subscription_id"], made["secret"]
         deliverer = WebhookDeliverer(WebhookStore(storage.engine), settings)
@@ -201,8 +254,9 @@ def test_the_secret_shown_once_verifies_deliveries_and_a_rotation_keeps_both(tmp
             receiver.secrets = [first_secret]
             http.post(f"/v1/webhooks/{subscription_id}/test", headers=ADMIN)
             receiver.wait_until(lambda r: len(r.requests) == 1, "the test event")
-            second_secret = http.post(f"/v1/webhooks/{subscription_id}/rotate-secret",
-                                      headers=ADMIN).json()["secret"]  # fmt: skip
+            second_secret = http.post(
+                f"/v1/webhooks/{subscription_id}/rotate-secret", headers=ADMIN
+            ).json()["secret"]
             http.post(f"/v1/webhooks/{subscription_id}/test", headers=ADMIN)
             receiver.wait_until(lambda r: len(r.requests) == 2, "the second test event")
             events = http.get(f"/v1/webhooks/{subscription_id}/events", headers=ADMIN).json()
@@ -210,7 +264,8 @@ def test_the_secret_shown_once_verifies_deliveries_and_a_rotation_keeps_both(tmp
             deliverer.close()
         first, second = receiver.snapshot()
     assert [(e["state"], e["attempts"], e["last_status_code"]) for e in events] == [
-        ("delivered", 1, 204)] * 2  # fmt: skip
+        ("delivered", 1, 204)
+    ] * 2
     assert first.verified and json.loads(first.body)["type"] == "webhook.test"
     assert json.loads(first.body)["data"]["subscription_id"] == subscription_id
     assert len(first.headers["webhook-signature"].split(" ")) == 1

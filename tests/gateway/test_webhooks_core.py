@@ -38,8 +38,16 @@ POLICY = RetryPolicy(backoff_base_s=1.0, backoff_cap_s=60.0, event_ttl_s=900.0)
 
 
 def test_the_core_does_no_io() -> None:
-    assert not top_level_imports(webhooks) & {"httpx", "httpcore", "socket", "sqlalchemy",
-                                              "fastapi", "zenoh", "requests", "urllib3"}  # fmt: skip
+    assert not top_level_imports(webhooks) & {
+        "httpx",
+        "httpcore",
+        "socket",
+        "sqlalchemy",
+        "fastapi",
+        "zenoh",
+        "requests",
+        "urllib3",
+    }
 
 
 # --- signatures ---------------------------------------------------------------------------
@@ -47,9 +55,12 @@ def test_the_core_does_no_io() -> None:
 
 def test_signature_matches_the_specifications_example() -> None:
     # The example of the Standard Webhooks / Svix documentation and test suites.
-    signature = webhooks.sign("whsec_MfKQ9r8GKYqrTwjUPD8ILPZIo2LaLaSw",
-                              "msg_p5jXN8AQM9LWM0D4loKWxJek", 1614265330,
-                              '{"test": 2432232314}')  # fmt: skip
+    signature = webhooks.sign(
+        "whsec_MfKQ9r8GKYqrTwjUPD8ILPZIo2LaLaSw",
+        "msg_p5jXN8AQM9LWM0D4loKWxJek",
+        1614265330,
+        '{"test": 2432232314}',
+    )
     assert signature == "v1,g0hM9SsE+OTPJTGt/tmIKtSyZlE3uFJELVlNIOLJ1OE="
 
 
@@ -107,8 +118,9 @@ def test_an_alert_event_has_a_stable_id_and_the_alert_as_data() -> None:
 
 def test_filters_by_type_severity_and_phase() -> None:
     speeding = sample_alert("f1", 1.0)  # warning, start
-    queue = sample_alert("f2", 1.0, alert_type=AlertType.QUEUE, severity=AlertSeverity.INFO,
-                         phase="clear")  # fmt: skip
+    queue = sample_alert(
+        "f2", 1.0, alert_type=AlertType.QUEUE, severity=AlertSeverity.INFO, phase="clear"
+    )
     everything = SubscriptionFilter(("alert.*",))
     assert everything.matches(speeding) and everything.matches(queue)
     assert not SubscriptionFilter(("alert.queue",)).matches(speeding)
@@ -121,7 +133,9 @@ def test_filters_by_type_severity_and_phase() -> None:
 
 def test_event_types_are_checked() -> None:
     assert webhooks.normalize_event_types(["alert.queue", "alert.queue", "alert.*"]) == [
-        "alert.queue", "alert.*"]  # fmt: skip
+        "alert.queue",
+        "alert.*",
+    ]
     with pytest.raises(ValueError, match=r"unknown event type 'alert\.speed'"):
         webhooks.normalize_event_types(["alert.speed"])
     with pytest.raises(ValueError, match="at least one"):
@@ -153,8 +167,10 @@ def test_full_jitter_is_uniform_below_the_ceiling_and_seeded() -> None:
     [
         ("120", 120.0),
         (" 0 ", 0.0),
-        (format_datetime(datetime.datetime.fromtimestamp(NOW + 90.0, datetime.UTC), usegmt=True),
-         90.0),
+        (
+            format_datetime(datetime.datetime.fromtimestamp(NOW + 90.0, datetime.UTC), usegmt=True),
+            90.0,
+        ),
         ("Sun, 15 Jun 2025 15:04:10 GMT", 0.0),  # in the past: at once
         ("Sun, 15 Jun 2025 15:07:10 -0000", 30.0),
         ("-5", None),
@@ -163,16 +179,30 @@ def test_full_jitter_is_uniform_below_the_ceiling_and_seeded() -> None:
         ("", None),
         (None, None),
     ],
-)  # fmt: skip
-def test_retry_after_in_seconds_or_as_an_http_date(header: str | None,
-                                                   expected_s: float | None) -> None:  # fmt: skip
+)
+def test_retry_after_in_seconds_or_as_an_http_date(
+    header: str | None, expected_s: float | None
+) -> None:
     assert parse_retry_after(header, NOW) == expected_s
 
 
-def _decide(status: int | None, attempt: int = 1, retry_after: str | None = None,
-            created_at: float = NOW, now: float = NOW, seed: int = 3) -> webhooks.Outcome:  # fmt: skip
-    return decide(attempt=attempt, status_code=status, retry_after=retry_after,
-                  created_at=created_at, now=now, policy=POLICY, rng=random.Random(seed))  # fmt: skip
+def _decide(
+    status: int | None,
+    attempt: int = 1,
+    retry_after: str | None = None,
+    created_at: float = NOW,
+    now: float = NOW,
+    seed: int = 3,
+) -> webhooks.Outcome:
+    return decide(
+        attempt=attempt,
+        status_code=status,
+        retry_after=retry_after,
+        created_at=created_at,
+        now=now,
+        policy=POLICY,
+        rng=random.Random(seed),
+    )
 
 
 @pytest.mark.parametrize("status", [200, 201, 202, 204, 299])
@@ -250,7 +280,7 @@ def test_an_event_expires_rather_than_being_retried_after_its_time_to_live() -> 
         ("64:ff9b::808:808", None),  # NAT64 of 8.8.8.8 (DNS64 on an IPv6-only network)
         ("255.255.255.255", "reserved"),
     ],
-)  # fmt: skip
+)
 def test_address_classes(address: str, kind: str | None) -> None:
     assert address_class(ipaddress.ip_address(address)) == kind
 
@@ -299,6 +329,8 @@ def test_urls_other_than_plain_http_or_https_are_refused(url: str, message: str)
 
 def test_destinations_get_their_default_ports() -> None:
     assert parse_destination("https://Hooks.Example.com/a?b=1") == webhooks.Destination(
-        "https", "hooks.example.com", 443)  # fmt: skip
+        "https", "hooks.example.com", 443
+    )
     assert parse_destination("http://[2606:4700::1111]:8080/") == webhooks.Destination(
-        "http", "2606:4700::1111", 8080)  # fmt: skip
+        "http", "2606:4700::1111", 8080
+    )

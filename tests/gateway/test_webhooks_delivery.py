@@ -41,24 +41,42 @@ class Gateway:
         self.store = WebhookStore(storage.engine)
         self.metrics = GatewayMetrics()
 
-    def subscribe(self, url: str, *, event_types: tuple[str, ...] = ("alert.*",),
-                  min_severity: str | None = None,
-                  phases: list[str] | None = None) -> tuple[str, str]:  # fmt: skip
+    def subscribe(
+        self,
+        url: str,
+        *,
+        event_types: tuple[str, ...] = ("alert.*",),
+        min_severity: str | None = None,
+        phases: list[str] | None = None,
+    ) -> tuple[str, str]:
         """A subscription made straight in the store (the API's checks are tested apart)."""
         subscription_id, secret = f"wh_{secrets.token_hex(8)}", webhooks.new_secret()
-        self.store.create(subscription_id=subscription_id, url=url, secret=secret,
-                          event_types=list(event_types), min_severity=min_severity,
-                          phases=phases, description="test", now=time.time())  # fmt: skip
+        self.store.create(
+            subscription_id=subscription_id,
+            url=url,
+            secret=secret,
+            event_types=list(event_types),
+            min_severity=min_severity,
+            phases=phases,
+            description="test",
+            now=time.time(),
+        )
         return subscription_id, secret
 
     def ingest(self, *alerts: Alert) -> IngestResult:
         return self.storage.ingest(alerts, geo=SITE.geo_frame, received_at=time.time())
 
     @contextmanager
-    def delivering(self, *, resolve: Resolve = resolve_host,
-                   settings: GatewaySettings | None = None) -> Iterator[WebhookDeliverer]:  # fmt: skip
-        deliverer = WebhookDeliverer(self.store, settings or self.settings, self.metrics,
-                                     rng=random.Random(1), resolve=resolve)  # fmt: skip
+    def delivering(
+        self, *, resolve: Resolve = resolve_host, settings: GatewaySettings | None = None
+    ) -> Iterator[WebhookDeliverer]:
+        deliverer = WebhookDeliverer(
+            self.store,
+            settings or self.settings,
+            self.metrics,
+            rng=random.Random(1),
+            resolve=resolve,
+        )
         self.metrics.watch_webhooks(self.store.pending_count)
         deliverer.start()
         try:
@@ -79,8 +97,11 @@ def make_gateway(tmp_path: Path) -> Iterator[Any]:
     opened: list[Storage] = []
 
     def make(**overrides: Any) -> Gateway:
-        values: dict[str, Any] = {"webhook_allowed_networks": LOOPBACK,
-                                  "webhook_poll_interval_s": 0.1, **overrides}  # fmt: skip
+        values: dict[str, Any] = {
+            "webhook_allowed_networks": LOOPBACK,
+            "webhook_poll_interval_s": 0.1,
+            **overrides,
+        }
         settings = gateway_settings(tmp_path / str(len(opened)), **values)
         storage = open_storage(settings)
         opened.append(storage)
@@ -96,18 +117,26 @@ def test_alerts_arrive_signed_filtered_and_once(make_gateway: Any) -> None:
     with Receiver() as receiver:
         everything, secret_all = gateway.subscribe(receiver.url_for("/all"))
         critical, secret_critical = gateway.subscribe(
-            receiver.url_for("/critical-starts"), event_types=("alert.hard_braking",
-                                                               "alert.speeding"),
-            min_severity="critical", phases=["start"])  # fmt: skip
+            receiver.url_for("/critical-starts"),
+            event_types=("alert.hard_braking", "alert.speeding"),
+            min_severity="critical",
+            phases=["start"],
+        )
         receiver.secrets = [secret_all, secret_critical]
         alerts = [
             sample_alert("sig-1", 1.0),  # speeding, warning, start
-            sample_alert("sig-2", 1.5, alert_type=AlertType.HARD_BRAKING,
-                         severity=AlertSeverity.CRITICAL),
+            sample_alert(
+                "sig-2", 1.5, alert_type=AlertType.HARD_BRAKING, severity=AlertSeverity.CRITICAL
+            ),
             sample_alert("sig-3", 2.0, severity=AlertSeverity.CRITICAL, phase="clear"),
-            sample_alert("sig-4", 2.5, alert_type=AlertType.QUEUE,
-                         severity=AlertSeverity.CRITICAL, track_id=None),
-        ]  # fmt: skip
+            sample_alert(
+                "sig-4",
+                2.5,
+                alert_type=AlertType.QUEUE,
+                severity=AlertSeverity.CRITICAL,
+                track_id=None,
+            ),
+        ]
         with gateway.delivering():
             assert gateway.ingest(*alerts).webhook_events == 4 + 1
             again = gateway.ingest(alerts[0], alerts[1])  # the bus delivered them twice
@@ -138,8 +167,9 @@ def test_alerts_arrive_signed_filtered_and_once(make_gateway: Any) -> None:
 
 
 @pytest.mark.parametrize("status", [429, 503])
-def test_retry_after_is_honoured_and_the_retry_carries_the_same_id(make_gateway: Any,
-                                                                   status: int) -> None:  # fmt: skip
+def test_retry_after_is_honoured_and_the_retry_carries_the_same_id(
+    make_gateway: Any, status: int
+) -> None:
     gateway = make_gateway(webhook_backoff_base_s=0.05, webhook_backoff_cap_s=0.1)
 
     def answer(_id: str, seen: int) -> Answer:
@@ -174,8 +204,12 @@ def test_410_gone_disables_the_subscription_and_fails_its_events(make_gateway: A
         subscription_id, secret = gateway.subscribe(receiver.url)
         receiver.secrets = [secret]
         with gateway.delivering():
-            assert gateway.ingest(sample_alert("g-1", 1.0), sample_alert("g-2", 1.1),
-                                  sample_alert("g-3", 1.2)).webhook_events == 3  # fmt: skip
+            assert (
+                gateway.ingest(
+                    sample_alert("g-1", 1.0), sample_alert("g-2", 1.1), sample_alert("g-3", 1.2)
+                ).webhook_events
+                == 3
+            )
             eventually(lambda: gateway.states(subscription_id) == {"failed": 3}, "all failed")
             assert gateway.ingest(sample_alert("g-4", 2.0)).webhook_events == 0
         assert len(receiver.snapshot()) == 1  # one in flight at a time: the first said 410
@@ -188,16 +222,18 @@ def test_410_gone_disables_the_subscription_and_fails_its_events(make_gateway: A
 
 
 def test_an_event_not_delivered_within_its_time_to_live_expires(make_gateway: Any) -> None:
-    gateway = make_gateway(webhook_event_ttl_s=2.0, webhook_backoff_base_s=0.1,
-                           webhook_backoff_cap_s=0.3)  # fmt: skip
+    gateway = make_gateway(
+        webhook_event_ttl_s=2.0, webhook_backoff_base_s=0.1, webhook_backoff_cap_s=0.3
+    )
     with Receiver(always(500)) as receiver:
         subscription_id, secret = gateway.subscribe(receiver.url)
         receiver.secrets = [secret]
         with gateway.delivering():
             created = time.monotonic()
             gateway.ingest(sample_alert("ttl-1", 1.0))
-            eventually(lambda: gateway.states(subscription_id) == {"expired": 1}, "expiry",
-                       timeout_s=10.0)  # fmt: skip
+            eventually(
+                lambda: gateway.states(subscription_id) == {"expired": 1}, "expiry", timeout_s=10.0
+            )
             got = receiver.snapshot()
     assert len(got) >= 3 and all(r.verified for r in got)
     # None sent after its time to live (the last one may arrive a moment after sending).
@@ -227,8 +263,11 @@ def test_a_slow_receiver_does_not_hold_up_another(make_gateway: Any) -> None:
             slow.wait_until(lambda r: len(r.delivered_ids()) == 5, "the slow receiver's five")
             eventually(lambda: gateway.states(slow_id) == {"delivered": 5}, "all recorded")
     assert gateway.states(fast_id) == {"delivered": 5}
-    assert slow.delivered_ids() == fast.delivered_ids() == Counter(
-        webhooks.alert_event_id(a) for a in alerts)  # fmt: skip
+    assert (
+        slow.delivered_ids()
+        == fast.delivered_ids()
+        == Counter(webhooks.alert_event_id(a) for a in alerts)
+    )
 
 
 def test_a_name_that_now_resolves_to_a_refused_address_is_not_called(make_gateway: Any) -> None:
@@ -240,12 +279,15 @@ def test_a_name_that_now_resolves_to_a_refused_address_is_not_called(make_gatewa
 
     with Receiver() as receiver:
         subscription_id, secret = gateway.subscribe(
-            f"http://hooks.example.test:{receiver.port}/hooks/wz")
+            f"http://hooks.example.test:{receiver.port}/hooks/wz"
+        )
         receiver.secrets = [secret]
         with gateway.delivering(resolve=rebinding):
             gateway.ingest(sample_alert("dns-1", 1.0))
-            (event,) = eventually(lambda: [e for e in gateway.store.events(subscription_id)
-                                           if e.attempts >= 1], "a refused attempt")  # fmt: skip
+            (event,) = eventually(
+                lambda: [e for e in gateway.store.events(subscription_id) if e.attempts >= 1],
+                "a refused attempt",
+            )
         assert receiver.snapshot() == []
         assert event.state == "pending" and event.last_status_code is None
         assert "address refused" in str(event.last_error)
@@ -303,8 +345,7 @@ def test_a_receiver_down_for_30_s_gets_every_alert_exactly_once(make_gateway: An
         with receiver:
             up_at = time.monotonic()
             receiver.wait_until(lambda r: len(r.delivered_ids()) == 40, "all 40 delivered")
-            eventually(lambda: gateway.states(subscription_id) == {"delivered": 40},
-                       "all recorded")  # fmt: skip
+            eventually(lambda: gateway.states(subscription_id) == {"delivered": 40}, "all recorded")
             got = receiver.snapshot()
     assert up_at - down_at >= 30.0
     expected = {webhooks.alert_event_id(a) for a in alerts}
@@ -334,14 +375,25 @@ def test_a_claim_takes_each_subscriptions_oldest_due_event_one_in_flight(make_ga
     # Both have a request in flight: nothing more until an attempt is recorded.
     assert gateway.store.claim(now, lease_until=now + 30.0, limit=8) == []
     delivered = webhooks.Outcome("delivered")
-    gateway.store.record_attempt(first, attempt=1, attempted_at=now, status_code=204,
-                                 error=None, duration_ms=1.0, outcome=delivered, now=now)  # fmt: skip
+    gateway.store.record_attempt(
+        first,
+        attempt=1,
+        attempted_at=now,
+        status_code=204,
+        error=None,
+        duration_ms=1.0,
+        outcome=delivered,
+        now=now,
+    )
     (second,) = gateway.store.claim(now, lease_until=now + 30.0, limit=8)
     assert second.event_id == webhooks.alert_event_id(backlog[1])
-    assert gateway.store.claim(now, lease_until=now + 30.0, limit=8,
-                               busy={second.subscription_row}) == []  # fmt: skip
+    assert (
+        gateway.store.claim(now, lease_until=now + 30.0, limit=8, busy={second.subscription_row})
+        == []
+    )
     # A lease run out (its process died) frees the subscription and the row itself.
     later = now + 31.0
     again = gateway.store.claim(later, lease_until=later + 30.0, limit=8)
     assert sorted(c.event_id for c in again) == sorted(
-        [second.event_id, webhooks.alert_event_id(sample_alert("quiet-1", 200.0))])  # fmt: skip
+        [second.event_id, webhooks.alert_event_id(sample_alert("quiet-1", 200.0))]
+    )

@@ -34,9 +34,12 @@ TIMEOUT_S = 5.0
 LEASE_S = 6.0
 #: Short timeouts and backoff so that the test takes seconds.
 NODE_SETTINGS = {
-    "webhook_allowed_networks": "127.0.0.1/32", "webhook_timeout_s": str(TIMEOUT_S),
-    "webhook_lease_s": str(LEASE_S), "webhook_backoff_base_s": "0.2",
-    "webhook_backoff_cap_s": "1.0", "webhook_poll_interval_s": "0.2",
+    "webhook_allowed_networks": "127.0.0.1/32",
+    "webhook_timeout_s": str(TIMEOUT_S),
+    "webhook_lease_s": str(LEASE_S),
+    "webhook_backoff_base_s": "0.2",
+    "webhook_backoff_cap_s": "1.0",
+    "webhook_poll_interval_s": "0.2",
 }
 
 
@@ -45,13 +48,15 @@ def stored_alerts(http: httpx.Client) -> int:
 
 
 def delivered_events(http: httpx.Client, subscription_id: str) -> list[dict[str, Any]] | None:
-    events: list[dict[str, Any]] = http.get(f"/v1/webhooks/{subscription_id}/events",
-                                            headers=ADMIN).json()  # fmt: skip
+    events: list[dict[str, Any]] = http.get(
+        f"/v1/webhooks/{subscription_id}/events", headers=ADMIN
+    ).json()
     return events if len(events) == 5 and all(e["state"] == "delivered" for e in events) else None
 
 
-def test_a_node_killed_mid_delivery_delivers_everything_after_a_restart(port: int,
-                                                                        tmp_path: Path) -> None:  # fmt: skip
+def test_a_node_killed_mid_delivery_delivers_everything_after_a_restart(
+    port: int, tmp_path: Path
+) -> None:
     bus_settings = BusSettings(listen_endpoints=[f"tcp/127.0.0.1:{port}"], connect_endpoints=[])
     http_port = free_port()
     http = httpx.Client(base_url=f"http://127.0.0.1:{http_port}", timeout=5.0)
@@ -65,8 +70,10 @@ def test_a_node_killed_mid_delivery_delivers_everything_after_a_restart(port: in
             tracks = bus.publisher(bus.keys.tracks, TrackBatch)
             publish = bus.publisher(bus.keys.alerts(AlertType.SPEEDING.value), Alert)
             with gateway_process(port, http_port, tmp_path / "data", **NODE_SETTINGS) as node:
-                made = eventually(lambda: http.post("/v1/webhooks", headers=ADMIN,
-                                                    json={"url": receiver.url}), "the API")  # fmt: skip
+                made = eventually(
+                    lambda: http.post("/v1/webhooks", headers=ADMIN, json={"url": receiver.url}),
+                    "the API",
+                )
                 assert made.status_code == 201, made.text
                 receiver.secrets = [made.json()["secret"]]
                 assert tracks.wait_for_subscribers(30.0) and publish.wait_for_subscribers(10.0)
@@ -87,13 +94,18 @@ def test_a_node_killed_mid_delivery_delivers_everything_after_a_restart(port: in
                 receiver.release()  # its 503 goes to a dead connection
 
             with gateway_process(port, http_port, tmp_path / "data", **NODE_SETTINGS):
-                receiver.wait_until(lambda r: set(r.delivered_ids()) == expected,
-                                    "every alert delivered after the restart", timeout_s=40.0)  # fmt: skip
+                receiver.wait_until(
+                    lambda r: set(r.delivered_ids()) == expected,
+                    "every alert delivered after the restart",
+                    timeout_s=40.0,
+                )
                 assert points_count(http) == points_before == 30
                 assert stored_alerts(http) == alerts_before == 5
                 subscription_id = made.json()["subscription_id"]
-                events = eventually(lambda: delivered_events(http, subscription_id),
-                                    "all five recorded as delivered")  # fmt: skip
+                events = eventually(
+                    lambda: delivered_events(http, subscription_id),
+                    "all five recorded as delivered",
+                )
                 # The attempt the kill cut short was never recorded: at least once, not twice.
                 assert [e["attempts"] for e in events] == [1] * 5
                 metrics = http.get("/metrics").text

@@ -74,8 +74,9 @@ def traffic_day(storage: Storage) -> None:
     for k in range(10):
         messages += car_batches(100 + k, 900.0, 25.0, 30.0 * k, 40, first_cycle=1000 * k)
     for k in range(5):
-        messages += car_batches(200 + k, 910.0, 20.0, 30.0 * k + 10.0, 40, offset_m=1.83,
-                                first_cycle=1000 * k + 500)  # fmt: skip
+        messages += car_batches(
+            200 + k, 910.0, 20.0, 30.0 * k + 10.0, 40, offset_m=1.83, first_cycle=1000 * k + 500
+        )
     messages.sort(key=lambda m: m.stamp)
     for message in messages:
         store(storage, [message], T0_UNIX + message.stamp)
@@ -83,8 +84,15 @@ def traffic_day(storage: Storage) -> None:
 
 
 def feed_of(storage: Storage, now: float) -> dict[str, Any]:
-    return views.device_feed_of(storage, SITE, now=now, publisher="Test DOT", stale_after_s=10.0,
-                                traffic_interval_s=300.0, contact_email="ops@example.org")  # fmt: skip
+    return views.device_feed_of(
+        storage,
+        SITE,
+        now=now,
+        publisher="Test DOT",
+        stale_after_s=10.0,
+        traffic_interval_s=300.0,
+        contact_email="ops@example.org",
+    )
 
 
 def test_the_validator_resolves_refs_offline_and_checks_formats() -> None:
@@ -120,12 +128,17 @@ def test_feed_before_any_data_is_valid_and_unknown(storage: Storage) -> None:
 def test_feed_counts_traffic_per_lane_in_wzdx_units(storage: Storage) -> None:
     traffic_day(storage)
     now = T0_UNIX + 301.0
-    for service, hz in (("lidar-detector", {KEYS.raw_lidar("lidar-mast"): 20.0}),
-                        ("camera-detector", {KEYS.raw_camera("camera-mast"): 10.0}),
-                        ("alert-service", {KEYS.tracks: 20.0})):  # fmt: skip
+    for service, hz in (
+        ("lidar-detector", {KEYS.raw_lidar("lidar-mast"): 20.0}),
+        ("camera-detector", {KEYS.raw_camera("camera-mast"): 10.0}),
+        ("alert-service", {KEYS.tracks: 20.0}),
+    ):
         store(storage, [service_status(service, 300.0, hz)], now - 1.0)
-    store(storage, [devices_state(250.0, beacon_on=True, sign_text="SLOW DOWN",
-                                  cause=AlertType.SPEEDING)], now - 50.0)  # fmt: skip
+    store(
+        storage,
+        [devices_state(250.0, beacon_on=True, sign_text="SLOW DOWN", cause=AlertType.SPEEDING)],
+        now - 50.0,
+    )
     feed = feed_of(storage, now)
     assert_valid(feed)
     devices = features_by_type(feed)
@@ -137,17 +150,26 @@ def test_feed_counts_traffic_per_lane_in_wzdx_units(storage: Storage) -> None:
     sensor = devices["traffic-sensor"]["properties"]
     # The interval is the run's first 300 s of stamps, dated by the newest batch's arrival.
     assert sensor["collection_interval_start_date"] == "2025-06-15T15:06:40Z"
-    assert datetime.fromtimestamp(T0_UNIX, UTC).strftime("%Y-%m-%dT%H:%M:%SZ") == (
-        sensor["collection_interval_start_date"]
+    assert (
+        datetime.fromtimestamp(T0_UNIX, UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+        == (sensor["collection_interval_start_date"])
     )
     assert sensor["collection_interval_end_date"] == "2025-06-15T15:11:40Z"
     # Lane 1 (the left, WZDx lane_order 1): 5 cars at 20 m/s; lane 0 (order 2): 10 at 25 m/s.
     # volume = 3600 n / 300 s; occupancy = 100 n (4.5 m + 1.83 m) / v / 300 s.
     left, right = sensor["lane_data"]
-    assert left == {"lane_order": 1, "volume_vph": 60.0, "average_speed_kph": 72.0,
-                    "occupancy_percent": pytest.approx(round(100 * 5 * 6.33 / 20 / 300, 1))}  # fmt: skip
-    assert right == {"lane_order": 2, "volume_vph": 120.0, "average_speed_kph": 90.0,
-                     "occupancy_percent": pytest.approx(round(100 * 10 * 6.33 / 25 / 300, 1))}  # fmt: skip
+    assert left == {
+        "lane_order": 1,
+        "volume_vph": 60.0,
+        "average_speed_kph": 72.0,
+        "occupancy_percent": pytest.approx(round(100 * 5 * 6.33 / 20 / 300, 1)),
+    }
+    assert right == {
+        "lane_order": 2,
+        "volume_vph": 120.0,
+        "average_speed_kph": 90.0,
+        "occupancy_percent": pytest.approx(round(100 * 10 * 6.33 / 25 / 300, 1)),
+    }
     assert sensor["volume_vph"] == 180.0
     assert sensor["average_speed_kph"] == pytest.approx(round((10 * 90 + 5 * 72) / 15, 1))
     occupancy = (100 * 5 * 6.33 / 20 / 300 + 100 * 10 * 6.33 / 25 / 300) / 2
@@ -168,9 +190,10 @@ def test_feed_counts_traffic_per_lane_in_wzdx_units(storage: Storage) -> None:
 def test_a_restarted_simulation_counts_only_its_own_run(storage: Storage) -> None:
     traffic_day(storage)  # run 1: 15 vehicles over stamps 0-300 s
     second = T0_UNIX + 1000.0  # run 2 starts from stamp 0 again, later on the wall clock
-    for message in sorted((m for k in range(3)
-                           for m in car_batches(300 + k, 900.0, 25.0, 30.0 * k, 40)),
-                          key=lambda m: m.stamp):  # fmt: skip
+    for message in sorted(
+        (m for k in range(3) for m in car_batches(300 + k, 900.0, 25.0, 30.0 * k, 40)),
+        key=lambda m: m.stamp,
+    ):
         store(storage, [message], second + message.stamp)
     store(storage, [batch(120.0, [], 5000)], second + 120.0)
     run_start = storage.latest(SITE.site_id, "run_start")
@@ -185,9 +208,15 @@ def test_a_restarted_simulation_counts_only_its_own_run(storage: Storage) -> Non
 
 def test_stale_data_and_silent_services_are_errors(storage: Storage) -> None:
     traffic_day(storage)
-    store(storage, [service_status("lidar-detector", 300.0, {}),
-                    service_status("camera-detector", 300.0, {}),
-                    service_status("alert-service", 300.0, {})], T0_UNIX + 300.0)  # fmt: skip
+    store(
+        storage,
+        [
+            service_status("lidar-detector", 300.0, {}),
+            service_status("camera-detector", 300.0, {}),
+            service_status("alert-service", 300.0, {}),
+        ],
+        T0_UNIX + 300.0,
+    )
     # Alive but without frames: the camera is in error, the traffic sensor (tracks still
     # arriving) only warns about its LiDAR.
     feed = feed_of(storage, T0_UNIX + 302.0)
@@ -209,9 +238,16 @@ def test_stale_data_and_silent_services_are_errors(storage: Storage) -> None:
 
 
 def test_queue_sign_and_its_beacon(storage: Storage) -> None:
-    store(storage, [devices_state(5.0, beacon_on=True, sign_text="QUEUE AHEAD 0.3 MI",
-                                  cause=AlertType.QUEUE),
-                    service_status("alert-service", 5.0, {})], T0_UNIX)  # fmt: skip
+    store(
+        storage,
+        [
+            devices_state(
+                5.0, beacon_on=True, sign_text="QUEUE AHEAD 0.3 MI", cause=AlertType.QUEUE
+            ),
+            service_status("alert-service", 5.0, {}),
+        ],
+        T0_UNIX,
+    )
     feed = feed_of(storage, T0_UNIX + 1.0)
     assert_valid(feed)
     devices = features_by_type(feed)

@@ -106,8 +106,15 @@ class Receiver:
                 self._held.append(webhook_id)
                 self._changed.notify_all()
             self._released.wait()
-        received = Received(webhook_id, headers, body, arrived, answer.status,
-                            self.verifies(body, headers), handler.path)  # fmt: skip
+        received = Received(
+            webhook_id,
+            headers,
+            body,
+            arrived,
+            answer.status,
+            self.verifies(body, headers),
+            handler.path,
+        )
         payload = b"" if answer.status == 204 else b'{"ok": false}'
         try:
             handler.send_response(answer.status)
@@ -165,16 +172,19 @@ class Receiver:
         with self._changed:
             return list(self._held)
 
-    def wait_until(self, condition: Callable[[Receiver], bool], what: str,
-                   timeout_s: float = 20.0) -> None:  # fmt: skip
+    def wait_until(
+        self, condition: Callable[[Receiver], bool], what: str, timeout_s: float = 20.0
+    ) -> None:
         """Until ``condition(self)`` holds (checked at each request), or fail the test."""
         deadline = time.monotonic() + timeout_s
         with self._changed:
             while not condition(self):
                 left = deadline - time.monotonic()
                 if left <= 0:
-                    pytest.fail(f"timed out after {timeout_s:.0f} s waiting for {what}; "
-                                f"received {len(self.requests)} requests")  # fmt: skip
+                    pytest.fail(
+                        f"timed out after {timeout_s:.0f} s waiting for {what}; "
+                        f"received {len(self.requests)} requests"
+                    )
                 self._changed.wait(left)
 
     def delivered_ids(self) -> Counter[str]:

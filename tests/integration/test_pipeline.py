@@ -27,11 +27,17 @@ def test_wz_up_runs_the_pipeline_from_sensors_to_fused_tracks(tmp_path: Path) ->
     http_port = free_port()
     log = (tmp_path / "up.log").open("wb")
     up = subprocess.Popen(
-        wz_argv("up", "--listen", endpoint, "--seed", "3"), cwd=ROOT,
-        env=wz_env(WZ_SIM_WORK_DIR=str(tmp_path / "sim"), WZ_STATUS_PERIOD_S="1.0",
-                   WZ_GATEWAY_PORT=str(http_port), WZ_GATEWAY_DATA_DIR=str(tmp_path / "gw")),
-        stdout=log, stderr=subprocess.STDOUT,
-    )  # fmt: skip
+        wz_argv("up", "--listen", endpoint, "--seed", "3"),
+        cwd=ROOT,
+        env=wz_env(
+            WZ_SIM_WORK_DIR=str(tmp_path / "sim"),
+            WZ_STATUS_PERIOD_S="1.0",
+            WZ_GATEWAY_PORT=str(http_port),
+            WZ_GATEWAY_DATA_DIR=str(tmp_path / "gw"),
+        ),
+        stdout=log,
+        stderr=subprocess.STDOUT,
+    )
     settings = BusSettings(mode="client", connect_endpoints=[endpoint], listen_endpoints=[])
     with running(up):
         wait_for(lambda: port_open(port), 30.0, "the router to listen")
@@ -41,8 +47,11 @@ def test_wz_up_runs_the_pipeline_from_sensors_to_fused_tracks(tmp_path: Path) ->
             # (a sensor frame's, on the 0.05 s step grid). The newest truth would be a quarter
             # of a second ahead (the tracker's reorder window and output period): 7 m at 30 m/s.
             truths: dict[int, GroundTruth] = {}
-            bus.on(bus.keys.truth, GroundTruth,
-                   lambda _key, m: truths.__setitem__(round(m.stamp / 0.05), m))  # fmt: skip
+            bus.on(
+                bus.keys.truth,
+                GroundTruth,
+                lambda _key, m: truths.__setitem__(round(m.stamp / 0.05), m),
+            )
             sources: set[str] = set()
             errors: list[float] = []
             deadline = time.monotonic() + 240.0
@@ -55,12 +64,18 @@ def test_wz_up_runs_the_pipeline_from_sensors_to_fused_tracks(tmp_path: Path) ->
                     continue
                 for track in batch.tracks:
                     sources.update(track.sources)
-                    nearest = min((math.hypot(v.x_m - track.x_m, v.y_m - track.y_m)
-                                   for v in at_stamp.vehicles), default=math.inf)  # fmt: skip
+                    nearest = min(
+                        (
+                            math.hypot(v.x_m - track.x_m, v.y_m - track.y_m)
+                            for v in at_stamp.vehicles
+                        ),
+                        default=math.inf,
+                    )
                     errors.append(nearest)
             # The gateway stored the tracks and serves them (reads are open in `wz up`).
-            stored = httpx.get(f"http://127.0.0.1:{http_port}/v1/trajectories",
-                               params={"limit": 10}, timeout=10.0)  # fmt: skip
+            stored = httpx.get(
+                f"http://127.0.0.1:{http_port}/v1/trajectories", params={"limit": 10}, timeout=10.0
+            )
     text = (tmp_path / "up.log").read_text()
     assert sources >= {"lidar-mast", "camera-mast"}, (sources, text[-3000:])
     assert len(errors) >= 20
@@ -68,7 +83,13 @@ def test_wz_up_runs_the_pipeline_from_sensors_to_fused_tracks(tmp_path: Path) ->
     # start while `wz up` starts, the simulator's warm-up having filled the road).
     assert sorted(errors)[len(errors) // 2] < 1.0, errors
     assert stored.status_code == 200 and stored.json()["count"] == 10, stored.text
-    for service in ("simulator", "lidar-detector", "camera-detector", "fusion-tracker",
-                    "alert-service", "gateway"):  # fmt: skip
+    for service in (
+        "simulator",
+        "lidar-detector",
+        "camera-detector",
+        "fusion-tracker",
+        "alert-service",
+        "gateway",
+    ):
         assert f"{service} " in text or f"{service}|" in text.replace(" |", "|")
     assert "Traceback" not in text, text[-3000:]

@@ -46,8 +46,11 @@ def test_each_service_killed_comes_back_within_5_s_and_the_gateway_loses_nothing
         assert recovery.new_pid != recovery.killed_pid
         assert recovery.backoff_s == 0.5
         assert recovery.from_standby, table
-        assert re.search(rf"started {recovery.service} \(pid {recovery.new_pid}\) from its warm "
-                         r"standby, restart #1", log)  # fmt: skip
+        assert re.search(
+            rf"started {recovery.service} \(pid {recovery.new_pid}\) from its warm "
+            r"standby, restart #1",
+            log,
+        )
         # Back, and the pipeline through it to the gateway, within the target.
         assert recovery.recovered_s is not None and recovery.recovered_s <= TARGET_S, table
         assert recovery.restart_s < recovery.recovered_s

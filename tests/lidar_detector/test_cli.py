@@ -32,8 +32,12 @@ needs_real = pytest.mark.skipif(
 def wz(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         [sys.executable, "-m", "wz_cli.main", "detect-lidar", *args],
-        cwd=ROOT, capture_output=True, text=True, timeout=120, check=False,
-    )  # fmt: skip
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
 
 
 def lines(stdout: str) -> list[dict[str, Any]]:
@@ -54,8 +58,11 @@ def test_real_frame_reference_then_fast_path(tmp_path: Path) -> None:
     raw, bad, cut = lines(result.stdout)
     assert raw["file"] == str(REAL / "rawdata.pcd") and raw["stamp"] == 0.0
     assert (raw["path"], raw["frame"], raw["rows"], raw["columns"]) == (
-        "reference", "sensor", 80, 1800,
-    )  # fmt: skip
+        "reference",
+        "sensor",
+        80,
+        1800,
+    )
     vehicles = [d for d in raw["detections"] if on_road(d) and d["class"] != "unknown"]
     assert len(vehicles) >= 5  # "about a dozen vehicles in the carriageway"
     keys = {"x", "y", "z", "length", "width", "height", "heading", "class", "points", "score"}

@@ -12,8 +12,9 @@ from wz_shared.messages import VehicleClass
 
 
 def det(x: float, y: float) -> BoxDetection:
-    return BoxDetection((x, y, 0.0), (4.5, 1.8, 1.5), 0.0, VehicleClass.CAR, 50,
-                        ((0.1, 0.0), (0.0, 0.1)))  # fmt: skip
+    return BoxDetection(
+        (x, y, 0.0), (4.5, 1.8, 1.5), 0.0, VehicleClass.CAR, 50, ((0.1, 0.0), (0.0, 0.1))
+    )
 
 
 def truth(x: float, y: float, visibility: float = 1.0, vid: str = "v") -> TruthVehicle:
@@ -22,8 +23,11 @@ def truth(x: float, y: float, visibility: float = 1.0, vid: str = "v") -> TruthV
 
 def test_hits_misses_false_alarms_and_bins() -> None:
     scorer = Scorer()
-    truths = [truth(20.0, 0.0, vid="near"), truth(70.0, 3.0, vid="far"),
-              truth(100.0, 0.0, vid="missed")]  # fmt: skip
+    truths = [
+        truth(20.0, 0.0, vid="near"),
+        truth(70.0, 3.0, vid="far"),
+        truth(100.0, 0.0, vid="missed"),
+    ]
     detections = [det(21.5, 0.3), det(70.0, 3.0), det(45.0, -10.0)]
     scorer.add_frame(detections, truths)
     near, mid, far, farthest = scorer.bins

@@ -98,9 +98,15 @@ def frame_meta(
     source_id: str = "lidar-mast",
 ) -> LidarFrameMeta:
     return LidarFrameMeta(
-        site=SITE.site_id, source_id=source_id, stamp=index / RATE_HZ, frame_index=index,
-        rows=rows, columns=columns, num_points=num_points, organized=organized,
-    )  # fmt: skip
+        site=SITE.site_id,
+        source_id=source_id,
+        stamp=index / RATE_HZ,
+        frame_index=index,
+        rows=rows,
+        columns=columns,
+        num_points=num_points,
+        organized=organized,
+    )
 
 
 def site_of_sensor_xy(x_m: float, y_m: float) -> tuple[float, float]:
@@ -129,9 +135,14 @@ def box(
     covariance: tuple[tuple[float, float], tuple[float, float]] = ((0.04, 0.0), (0.0, 0.01)),
 ) -> BoxDetection:
     return BoxDetection(
-        center_xyz_m=center, size_lwh_m=CAR_LWH_M, heading_rad=heading_rad,
-        object_class=VehicleClass.CAR, num_points=100, covariance_xy_m2=covariance, score=0.9,
-    )  # fmt: skip
+        center_xyz_m=center,
+        size_lwh_m=CAR_LWH_M,
+        heading_rad=heading_rad,
+        object_class=VehicleClass.CAR,
+        num_points=100,
+        covariance_xy_m2=covariance,
+        score=0.9,
+    )
 
 
 def test_level_mount_closed_form() -> None:
@@ -156,9 +167,13 @@ def test_tilted_mount_uses_the_rotated_heading_vector() -> None:
     rng = np.random.default_rng(11)
     for _ in range(50):
         pose = Pose(
-            x_m=0.0, y_m=0.0, z_m=5.0, yaw_deg=float(rng.uniform(-180, 180)),
-            pitch_deg=float(rng.uniform(-20, 20)), roll_deg=float(rng.uniform(-10, 10)),
-        )  # fmt: skip
+            x_m=0.0,
+            y_m=0.0,
+            z_m=5.0,
+            yaw_deg=float(rng.uniform(-180, 180)),
+            pitch_deg=float(rng.uniform(-20, 20)),
+            roll_deg=float(rng.uniform(-10, 10)),
+        )
         heading = float(rng.uniform(-math.pi, math.pi))
         a, b = rng.normal(size=(2, 2))
         c = np.array([[a @ a, a @ b], [a @ b, b @ b]])  # symmetric positive definite
@@ -267,8 +282,13 @@ def test_bad_frames_are_reported_and_the_rest_goes_on() -> None:
     assert handle(node, 2, points, rows=7, columns=4, organized=False) is not None
     assert handle(node, 3, points, source_id="other-lidar") is None
     reasons = [reason for reason, _ in reports]
-    assert reasons == ["no_returns", "absurd_coordinates", "wrong_shape", "shape_change",
-                       "wrong_sensor"]  # fmt: skip
+    assert reasons == [
+        "no_returns",
+        "absurd_coordinates",
+        "wrong_shape",
+        "shape_change",
+        "wrong_sensor",
+    ]
     assert "51 points beyond 10000 m" in reports[1][1]
 
     class Failing:
@@ -312,10 +332,13 @@ def test_node_process_learns_detects_and_survives_bad_frames(port: int) -> None:
     settings = BusSettings(listen_endpoints=[f"tcp/127.0.0.1:{port}"], connect_endpoints=[])
     env = {k: v for k, v in os.environ.items() if not k.startswith("WZ_")}
     env.update(
-        WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{port}", WZ_BUS_LISTEN_ENDPOINTS="",
-        WZ_LIDAR_PATH="fast", WZ_LIDAR_LEARN_FRAMES="3", WZ_STATUS_PERIOD_S="0.2",
+        WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{port}",
+        WZ_BUS_LISTEN_ENDPOINTS="",
+        WZ_LIDAR_PATH="fast",
+        WZ_LIDAR_LEARN_FRAMES="3",
+        WZ_STATUS_PERIOD_S="0.2",
         WZ_LOG_FORMAT="json",
-    )  # fmt: skip
+    )
     with Bus.open(settings, site=SITE.site_id, service="node-test") as bus:
         raw_key = bus.keys.raw_lidar("lidar-mast")
         detections = bus.subscribe(bus.keys.detections("lidar-mast"), DetectionBatch)

@@ -194,9 +194,13 @@ def test_pcd_fields_in_any_order_with_others_ignored(tmp_path: Path, data: str) 
     points = cloud(25, seed=2)
     columns = {**xyzi(points), "ring": np.arange(25) % 4, "rgb": np.arange(25, dtype=np.float32)}
     fields: Fields = (
-        ("rgb", "F", 4), ("intensity", "U", 2), ("z", "F", 8), ("ring", "U", 1),
-        ("y", "F", 4), ("x", "F", 4),
-    )  # fmt: skip
+        ("rgb", "F", 4),
+        ("intensity", "U", 2),
+        ("z", "F", 8),
+        ("ring", "U", 1),
+        ("y", "F", 4),
+        ("x", "F", 4),
+    )
     points[:, 3] = np.floor(points[:, 3])
     frame = read_pcd(write_pcd(tmp_path / "any.pcd", columns, fields, data))
     assert (frame.rows, frame.columns) == (1, 25)
@@ -253,8 +257,9 @@ def test_ply_round_trip(tmp_path: Path, fmt: str) -> None:
 def test_npz_layouts(tmp_path: Path) -> None:
     points = cloud(6 * 8, seed=6)
     # The simulator's dataset export: (N, 4) points and a stamp; organized by the hint only.
-    np.savez_compressed(tmp_path / "sim.npz", points=points, labels=np.zeros(48, np.int32),
-                        stamp_s=np.array(12.35))  # fmt: skip
+    np.savez_compressed(
+        tmp_path / "sim.npz", points=points, labels=np.zeros(48, np.int32), stamp_s=np.array(12.35)
+    )
     frame = read_npz(tmp_path / "sim.npz")
     assert (frame.rows, frame.columns, frame.stamp_s) == (1, 48, pytest.approx(12.35))
     assert_same(frame.points, points)

@@ -75,14 +75,22 @@ def visible_points(vehicle: Vehicle, rng: np.random.Generator) -> F64:
     for sign in (1.0, -1.0):
         side = face_grid(length, side_height)
         faces.append(
-            ((0.0, sign, 0.0), np.column_stack([side[:, 0], np.full(len(side), sign * 0.5 * width),
-                                            side[:, 1] + mid_z]))
-        )  # fmt: skip
+            (
+                (0.0, sign, 0.0),
+                np.column_stack(
+                    [side[:, 0], np.full(len(side), sign * 0.5 * width), side[:, 1] + mid_z]
+                ),
+            )
+        )
         end = face_grid(width, side_height)
         faces.append(
-            ((sign, 0.0, 0.0), np.column_stack([np.full(len(end), sign * 0.5 * length), end[:, 0],
-                                            end[:, 1] + mid_z]))
-        )  # fmt: skip
+            (
+                (sign, 0.0, 0.0),
+                np.column_stack(
+                    [np.full(len(end), sign * 0.5 * length), end[:, 0], end[:, 1] + mid_z]
+                ),
+            )
+        )
     c, s = math.cos(vehicle.heading_rad), math.sin(vehicle.heading_rad)
     rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     offset = np.array([*vehicle.center_xy_m, GROUND_Z_M])
@@ -437,10 +445,23 @@ def test_class_from_size(size: tuple[float, float, float], expected: VehicleClas
 # Centroids [m] of the vehicles in that paper's own foreground (filtered.pcd) near the road:
 # DBSCAN (1.5 m, 5 points) clusters of it with 18 points or more.
 REAL_VEHICLES_XY_M = [
-    (-4.7, 6.7), (-2.2, 4.2), (8.6, 11.0), (41.7, 11.2), (74.1, 6.9), (64.3, 3.2), (124.6, 2.1),
-    (60.9, -4.7), (98.2, -8.5), (27.7, -3.9), (70.7, -8.5), (110.3, -11.8), (96.1, -12.7),
-    (73.1, -13.0), (1.1, -10.8), (0.0, -7.2),
-]  # fmt: skip
+    (-4.7, 6.7),
+    (-2.2, 4.2),
+    (8.6, 11.0),
+    (41.7, 11.2),
+    (74.1, 6.9),
+    (64.3, 3.2),
+    (124.6, 2.1),
+    (60.9, -4.7),
+    (98.2, -8.5),
+    (27.7, -3.9),
+    (70.7, -8.5),
+    (110.3, -11.8),
+    (96.1, -12.7),
+    (73.1, -13.0),
+    (1.1, -10.8),
+    (0.0, -7.2),
+]
 
 
 def read_ascii_pcd(path: Path) -> npt.NDArray[np.float32]:
@@ -488,9 +509,17 @@ def test_the_core_does_no_io() -> None:
     """A pure core: numpy, scipy, open3d, pydantic and the project's models; no bus, no files."""
     imported = top_level_imports(reference_module)
     assert imported <= {
-        "__future__", "math", "time", "typing", "numpy", "scipy", "open3d", "pydantic",
-        "wz_shared", "wz_lidar_detector",
-    }  # fmt: skip
+        "__future__",
+        "math",
+        "time",
+        "typing",
+        "numpy",
+        "scipy",
+        "open3d",
+        "pydantic",
+        "wz_shared",
+        "wz_lidar_detector",
+    }
     tree = ast.parse(inspect.getsource(reference_module))
     calls = {
         node.func.id

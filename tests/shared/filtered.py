@@ -22,10 +22,19 @@ class FilteredCar:
     P_filt: F64
 
 
-def filtered_car(*, seed: int, count: int = 200, period_s: float = 0.05, start_s: float = 0.0,
-                 station0_m: float = 800.0, speed_mps: float = 25.0, offset_m: float = -1.83,
-                 sigma_a_mps2: float = 1.0, sigma_across_mps2: float | None = None,
-                 noise_m: float = 0.3) -> FilteredCar:  # fmt: skip
+def filtered_car(
+    *,
+    seed: int,
+    count: int = 200,
+    period_s: float = 0.05,
+    start_s: float = 0.0,
+    station0_m: float = 800.0,
+    speed_mps: float = 25.0,
+    offset_m: float = -1.83,
+    sigma_a_mps2: float = 1.0,
+    sigma_across_mps2: float | None = None,
+    noise_m: float = 0.3,
+) -> FilteredCar:
     """A car driving north (the site's road runs along ``y`` here: ``x = -offset``) with white
     acceleration ``sigma_a`` along the road (``sigma_across``, default the same, across it),
     measured every ``period_s`` with ``noise_m`` position noise and followed by a

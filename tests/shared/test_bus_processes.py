@@ -194,16 +194,22 @@ def test_a_gap_zenoh_gave_up_on_is_filled_from_the_publishers_cache(bus: Bus, po
     assert peer.stdout is not None
     assert peer.stdout.readline().strip() == b"published"
     received: list[str] = []
-    subscription = bus.on(bus.keys.alerts_all, Alert,
-                          lambda _, a: received.append(a.alert_id), recover=True)  # fmt: skip
+    subscription = bus.on(
+        bus.keys.alerts_all, Alert, lambda _, a: received.append(a.alert_id), recover=True
+    )
     early = [f"early-{i}" for i in range(40)]
     deadline = time.monotonic() + 15.0
     wait_for(received, 40, deadline)
     assert received == early
     # the publisher as Zenoh names it in a miss: its session's id and its entity id, read
     # from the liveliness token it declares (zenoh-ext: <key>/@adv/pub/<zid>/<eid>/...)
-    (token,) = [str(reply.ok.key_expr) for reply in bus.session.liveliness().get(
-        f"{bus.keys.prefix}/alerts/*/@adv/pub/**", timeout=5.0) if reply.ok is not None]
+    (token,) = [
+        str(reply.ok.key_expr)
+        for reply in bus.session.liveliness().get(
+            f"{bus.keys.prefix}/alerts/*/@adv/pub/**", timeout=5.0
+        )
+        if reply.ok is not None
+    ]
     zid, eid = token.split("/@adv/pub/")[1].split("/")[:2]
     stranger = SimpleNamespace(zid="0" * 32, eid=int(eid))
     subscription._on_miss(SimpleNamespace(nb=3, source=stranger))  # no such publisher

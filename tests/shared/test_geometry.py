@@ -36,9 +36,7 @@ def arc_polyline(radius_m: float, spacing_m: float, angle_rad: float, turn: int)
     return np.column_stack([turn * radius_m * (np.cos(phi) - 1.0), radius_m * np.sin(phi)])
 
 
-def polar_about_arc_centre(
-    radius_m: float, turn: int, r_m: F64, phi: F64
-) -> tuple[F64, F64]:
+def polar_about_arc_centre(radius_m: float, turn: int, r_m: F64, phi: F64) -> tuple[F64, F64]:
     """Site position of the point at distance r and angle phi (from the start) about the centre."""
     return turn * (r_m * np.cos(phi) - radius_m), r_m * np.sin(phi)
 

@@ -20,8 +20,11 @@ def probe(path: Path, max_age_s: float = 10.0) -> subprocess.CompletedProcess[st
     """The probe exactly as docker-compose.yml runs it."""
     return subprocess.run(
         [sys.executable, "-m", "wz_shared.health", str(path), "--max-age-s", str(max_age_s)],
-        capture_output=True, text=True, timeout=30, check=False,
-    )  # fmt: skip
+        capture_output=True,
+        text=True,
+        timeout=30,
+        check=False,
+    )
 
 
 def test_fresh_stale_and_missing(tmp_path: Path) -> None:
@@ -41,8 +44,9 @@ def test_fresh_stale_and_missing(tmp_path: Path) -> None:
 def test_runtime_touches_the_file_while_it_runs_and_removes_it_on_stop(tmp_path: Path) -> None:
     beat = tmp_path / "health"
     bus_settings = BusSettings(mode="peer", listen_endpoints=[], connect_endpoints=[])
-    with ServiceRuntime("health-test", "test-site", bus_settings, status_period_s=0.05,
-                        health_file=beat):  # fmt: skip
+    with ServiceRuntime(
+        "health-test", "test-site", bus_settings, status_period_s=0.05, health_file=beat
+    ):
         deadline = time.monotonic() + 10.0
         while not beat.exists() and time.monotonic() < deadline:
             time.sleep(0.01)

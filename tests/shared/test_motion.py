@@ -162,9 +162,9 @@ ALONG, ACROSS = 3.5, 0.5
 ROAD_NOISE = ProcessNoise(ALONG, ACROSS)
 
 
-def random_states(seed: int, n: int, *, heading_rad: float | None = 0.7) -> tuple[
-    np.ndarray, np.ndarray, np.ndarray
-]:  # fmt: skip
+def random_states(
+    seed: int, n: int, *, heading_rad: float | None = 0.7
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Stamps at irregular 40-60 ms, states (moving along ``heading_rad`` when given, else in
     random directions and sometimes slow) and random SPD covariances."""
     rng = np.random.default_rng(seed)
@@ -181,8 +181,9 @@ def random_states(seed: int, n: int, *, heading_rad: float | None = 0.7) -> tupl
     return stamps, x, P
 
 
-def priors_at(stamps: np.ndarray, x: np.ndarray, P: np.ndarray,
-              heading_rad: float | None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def priors_at(
+    stamps: np.ndarray, x: np.ndarray, P: np.ndarray, heading_rad: float | None
+) -> tuple[np.ndarray, np.ndarray]:
     """The priors a filter with the filter's ``Q`` (:meth:`ProcessNoise.q`) would have stored:
     along ``heading_rad``, or along each state's velocity (isotropic when slow) when None."""
     x_pred, P_pred = x.copy(), P.copy()
@@ -190,8 +191,11 @@ def priors_at(stamps: np.ndarray, x: np.ndarray, P: np.ndarray,
         dt = stamps[k] - stamps[k - 1]
         speed = np.hypot(x[k - 1, 2], x[k - 1, 3])
         heading = np.arctan2(x[k - 1, 3], x[k - 1, 2]) if heading_rad is None else heading_rad
-        Q = (white_noise_q(dt, ALONG) if speed < ROAD_NOISE.heading_min_speed_mps else
-             road_aligned_q(dt, ALONG, ACROSS, heading))  # fmt: skip
+        Q = (
+            white_noise_q(dt, ALONG)
+            if speed < ROAD_NOISE.heading_min_speed_mps
+            else road_aligned_q(dt, ALONG, ACROSS, heading)
+        )
         F = cv_transition(dt)
         x_pred[k], P_pred[k] = F @ x[k - 1], F @ P[k - 1] @ F.T + Q
     return x_pred, P_pred
@@ -224,8 +228,9 @@ def test_agrees_with_filterpy_on_a_filtered_car() -> None:
     # filterpy's convention: Fs[k + 1] and Qs[k + 1] predict from step k to step k + 1
     Fs = np.concatenate([np.eye(4)[None], cv_transition(dts)])
     Qs = np.concatenate([np.zeros((1, 4, 4)), road_aligned_q(dts, 1.2, 1.2, 0.0)])
-    x_ref, P_ref, _, _ = FilterpyKalmanFilter(dim_x=4, dim_z=2).rts_smoother(car.x_filt, car.P_filt,
-                                                                     Fs=Fs, Qs=Qs)  # fmt: skip
+    x_ref, P_ref, _, _ = FilterpyKalmanFilter(dim_x=4, dim_z=2).rts_smoother(
+        car.x_filt, car.P_filt, Fs=Fs, Qs=Qs
+    )
     np.testing.assert_allclose(ours[0], x_ref, rtol=0.0, atol=1e-9)
     np.testing.assert_allclose(ours[1], P_ref, rtol=0.0, atol=1e-9)
 
@@ -247,8 +252,9 @@ def test_smoothing_brings_a_filtered_car_closer_to_the_truth() -> None:
     settled = slice(20, None)  # after the filter's start-up
 
     def rmse(estimate: np.ndarray) -> float:
-        return float(np.sqrt(np.mean(np.sum((estimate[settled, :2] -
-                                             car.truth[settled, :2]) ** 2, axis=1))))  # fmt: skip
+        return float(
+            np.sqrt(np.mean(np.sum((estimate[settled, :2] - car.truth[settled, :2]) ** 2, axis=1)))
+        )
 
     assert rmse(x_s) < 0.75 * rmse(car.x_filt)
 
@@ -275,11 +281,15 @@ def test_refuses_bad_shapes_and_stamps_that_go_back() -> None:
 
 
 @settings(max_examples=60, deadline=None, derandomize=True)
-@given(seed=st.integers(0, 2**32 - 1), n=st.integers(2, 40),
-       along=st.floats(0.1, 10.0), across=st.floats(0.1, 10.0))  # fmt: skip
-def test_smoothed_covariances_are_symmetric_positive_and_never_larger(seed: int, n: int,
-                                                                      along: float,
-                                                                      across: float) -> None:  # fmt: skip
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.integers(2, 40),
+    along=st.floats(0.1, 10.0),
+    across=st.floats(0.1, 10.0),
+)
+def test_smoothed_covariances_are_symmetric_positive_and_never_larger(
+    seed: int, n: int, along: float, across: float
+) -> None:
     """``P_k|n`` is symmetric positive semi-definite and ``P_k|k - P_k|n`` too (using every
     measurement never makes an estimate less certain); the last state is the stored one.
     The covariances are a filter's: predicted with the smoother's Q, updated with random

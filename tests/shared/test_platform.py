@@ -170,7 +170,11 @@ def test_run_watch_tells_a_new_run_from_a_stray_late_message() -> None:
     assert [watch.observe(t) for t in (3.0, 10.3)] == ["behind", "run"]
     # Stamps going back and on for three messages: a restarted stream.
     assert [watch.observe(t) for t in (0.05, 0.10, 0.15, 0.20)] == [
-        "behind", "behind", "new_run", "run"]  # fmt: skip
+        "behind",
+        "behind",
+        "new_run",
+        "run",
+    ]
     assert watch.newest_s == 0.20
     # Far back but not going on from there (not increasing): no new run.
     watch = RunWatch(step_back_s=1.0, confirm=3)

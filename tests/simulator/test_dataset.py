@@ -20,13 +20,22 @@ ROOT = Path(__file__).resolve().parents[2]
 def test_export_writes_yolo_labels_and_lidar_boxes(tmp_path: Path) -> None:
     site = load_site(DEFAULT_SITE_PATH)
     options = DatasetOptions(
-        out_dir=tmp_path / "ds", seed=3, weathers=("day", "fog"), duration_s=5.0, every_s=1.0,
-        warmup_s=40.0, val_share=0.2,
-    )  # fmt: skip
+        out_dir=tmp_path / "ds",
+        seed=3,
+        weathers=("day", "fog"),
+        duration_s=5.0,
+        every_s=1.0,
+        warmup_s=40.0,
+        val_share=0.2,
+    )
     manifest = export(site, options, work_dir=tmp_path / "work")
     out = options.out_dir
-    assert manifest["counts"] == {"images_train": 8, "images_val": 2, "lidar_train": 8,
-                                  "lidar_val": 2}  # fmt: skip
+    assert manifest["counts"] == {
+        "images_train": 8,
+        "images_val": 2,
+        "lidar_train": 8,
+        "lidar_val": 2,
+    }
     data = yaml.safe_load((out / "data.yaml").read_text())
     assert data["names"] == {i: cls.value for i, cls in enumerate(YOLO_CLASSES)}
     assert (Path(data["path"]) / data["train"]).is_dir()
@@ -68,10 +77,21 @@ def test_export_writes_yolo_labels_and_lidar_boxes(tmp_path: Path) -> None:
 
 def test_wz_pictures_writes_the_documentation_pictures(tmp_path: Path) -> None:
     result = subprocess.run(
-        [sys.executable, "-m", "wz_cli.main", "pictures", "--out", str(tmp_path),
-         "--warmup-s", "45"],
-        cwd=ROOT, capture_output=True, text=True, timeout=240,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "wz_cli.main",
+            "pictures",
+            "--out",
+            str(tmp_path),
+            "--warmup-s",
+            "45",
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=240,
+    )
     assert result.returncode == 0, result.stderr[-2000:]
     names = sorted(Path(line).name for line in result.stdout.split())
     assert names == ["camera-truth.jpg", "camera-weather.jpg", "lidar-top-view.png"]

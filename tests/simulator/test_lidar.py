@@ -74,10 +74,21 @@ def vehicle(
 ) -> VehicleTruth:
     length, width, height = size
     return VehicleTruth(
-        vehicle_id=vehicle_id, vehicle_class="truck" if length > 8 else "car", x_m=x, y_m=y,
-        heading_rad=heading, speed_mps=speed, accel_mps2=0.0, length_m=length, width_m=width,
-        height_m=height, lane_index=0, station_m=0.0, offset_m=0.0, driver_profile="normal",
-    )  # fmt: skip
+        vehicle_id=vehicle_id,
+        vehicle_class="truck" if length > 8 else "car",
+        x_m=x,
+        y_m=y,
+        heading_rad=heading,
+        speed_mps=speed,
+        accel_mps2=0.0,
+        length_m=length,
+        width_m=width,
+        height_m=height,
+        lane_index=0,
+        station_m=0.0,
+        offset_m=0.0,
+        driver_profile="normal",
+    )
 
 
 def lidar_mount(
@@ -95,13 +106,19 @@ def lidar_mount(
 ) -> SensorMount:
     return SensorMount(
         sensor_id="lidar-test",
-        pose=Pose(x_m=x_m, y_m=y_m, z_m=height_m, yaw_deg=yaw_deg, pitch_deg=pitch_deg,
-                  roll_deg=roll_deg),
-        intrinsics=LidarIntrinsics(beams=beams, vertical_min_deg=vertical_deg[0],
-                                   vertical_max_deg=vertical_deg[1], azimuth_steps=steps,
-                                   max_range_m=200.0, range_noise_std_m=noise_m),
+        pose=Pose(
+            x_m=x_m, y_m=y_m, z_m=height_m, yaw_deg=yaw_deg, pitch_deg=pitch_deg, roll_deg=roll_deg
+        ),
+        intrinsics=LidarIntrinsics(
+            beams=beams,
+            vertical_min_deg=vertical_deg[0],
+            vertical_max_deg=vertical_deg[1],
+            azimuth_steps=steps,
+            max_range_m=200.0,
+            range_noise_std_m=noise_m,
+        ),
         rate_hz=20.0,
-    )  # fmt: skip
+    )
 
 
 def model(
@@ -539,8 +556,9 @@ def test_rain_adds_spurious_near_returns() -> None:
 
 
 def test_dropouts_follow_their_probability() -> None:
-    physics = LidarPhysics(dropout_probability=0.1, grazing_dropout_probability=0.0,
-                           range_spec_reflectivity=0.0)  # fmt: skip
+    physics = LidarPhysics(
+        dropout_probability=0.1, grazing_dropout_probability=0.0, range_spec_reflectivity=0.0
+    )
     lidar = model(lidar_mount(5.0), physics=physics)
     ideal = model(lidar_mount(5.0)).scan([], 0.0, 0)
     scan = lidar.scan([], 0.0, 0)
@@ -550,8 +568,9 @@ def test_dropouts_follow_their_probability() -> None:
 
 
 def test_glass_drops_more_returns_than_paint() -> None:
-    physics = LidarPhysics(dropout_probability=0.0, grazing_dropout_probability=0.0,
-                           range_spec_reflectivity=0.0)  # fmt: skip
+    physics = LidarPhysics(
+        dropout_probability=0.0, grazing_dropout_probability=0.0, range_spec_reflectivity=0.0
+    )
     walls = [
         wall(10.0, 0.0, 10.0, 8.0, Material.GLASS),
         wall(-14.0, 0.0, 10.0, 8.0, Material.CAR_PAINT),
@@ -664,9 +683,17 @@ def test_the_core_does_no_io(module: ModuleType) -> None:
     """A pure core: numpy, open3d and the shared models only; no bus, web or files."""
     imported = top_level_imports(module)
     assert imported <= {
-        "__future__", "math", "collections", "dataclasses", "types", "typing",
-        "numpy", "open3d", "wz_shared", "wz_simulator",
-    }  # fmt: skip
+        "__future__",
+        "math",
+        "collections",
+        "dataclasses",
+        "types",
+        "typing",
+        "numpy",
+        "open3d",
+        "wz_shared",
+        "wz_simulator",
+    }
     tree = ast.parse(inspect.getsource(module))
     calls = {
         node.func.id

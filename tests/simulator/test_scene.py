@@ -21,10 +21,21 @@ def truth(
     speed: float = 25.0,
 ) -> VehicleTruth:
     return VehicleTruth(
-        vehicle_id="veh7", vehicle_class=vehicle_class, x_m=10.0, y_m=-4.0, heading_rad=heading,
-        speed_mps=speed, accel_mps2=0.0, length_m=length, width_m=width, height_m=height,
-        lane_index=0, station_m=0.0, offset_m=0.0, driver_profile="normal",
-    )  # fmt: skip
+        vehicle_id="veh7",
+        vehicle_class=vehicle_class,
+        x_m=10.0,
+        y_m=-4.0,
+        heading_rad=heading,
+        speed_mps=speed,
+        accel_mps2=0.0,
+        length_m=length,
+        width_m=width,
+        height_m=height,
+        lane_index=0,
+        station_m=0.0,
+        offset_m=0.0,
+        driver_profile="normal",
+    )
 
 
 def in_vehicle_frame(vehicle: VehicleTruth, points: np.ndarray, dt: float = 0.0) -> np.ndarray:

@@ -250,9 +250,15 @@ def _replay_field_log(args: argparse.Namespace) -> int:
     stop = stop_on_signals()
     try:
         with open_bus(args.connect, site=ANY_SITE, service="wz-replay") as bus:
-            return run_field_replay(bus, args.recording, rate=None if args.fast else args.rate,
-                                    loop=args.loop, wait_subscribers_s=args.wait_subscribers,
-                                    stop=stop, emit=emit)  # fmt: skip
+            return run_field_replay(
+                bus,
+                args.recording,
+                rate=None if args.fast else args.rate,
+                loop=args.loop,
+                wait_subscribers_s=args.wait_subscribers,
+                stop=stop,
+                emit=emit,
+            )
     except FieldDataError as exc:
         raise CliError(str(exc), 1) from exc
 
@@ -454,10 +460,14 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="Exit code: 3 if the recording was cut short (everything readable was replayed), "
         "1 if it cannot be read, else 0.",
     )
-    replay.add_argument("recording", type=Path, metavar="IN.mcap|LOG_DIR",
-                        help="a recording of the bus (wz record), or a field log folder (the "
-                        "devices' recordings and their log.yaml; run the pipeline with "
-                        "--site LOG_DIR/site.yaml)")  # fmt: skip
+    replay.add_argument(
+        "recording",
+        type=Path,
+        metavar="IN.mcap|LOG_DIR",
+        help="a recording of the bus (wz record), or a field log folder (the "
+        "devices' recordings and their log.yaml; run the pipeline with "
+        "--site LOG_DIR/site.yaml)",
+    )
     pace = replay.add_mutually_exclusive_group()
     pace.add_argument(
         "--rate",
@@ -480,9 +490,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     for name, (module, summary) in SERVICE_TOOLS.items():
         tool = commands.add_parser(
-            name, help=summary, description=f"{summary} (runs python -m {module}; "
-            f"see `wz {name} --help`)", add_help=False,
-        )  # fmt: skip
+            name,
+            help=summary,
+            description=f"{summary} (runs python -m {module}; see `wz {name} --help`)",
+            add_help=False,
+        )
         tool.add_argument("tool_args", nargs=argparse.REMAINDER, help="the tool's options")
         tool.set_defaults(handler=cmd_service_tool)
     return parser

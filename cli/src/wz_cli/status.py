@@ -103,8 +103,18 @@ def render_table(site: str, views: list[ServiceView]) -> list[str]:
     if not views:
         lines.append("no service answered (is the stack running? `wz up`)")
         return lines
-    header = ("SERVICE", "ALIVE", "STATE", "PID", "UPTIME", "KEY", "PUB HZ", "RECV HZ",
-              "INVALID", "DROPPED")  # fmt: skip
+    header = (
+        "SERVICE",
+        "ALIVE",
+        "STATE",
+        "PID",
+        "UPTIME",
+        "KEY",
+        "PUB HZ",
+        "RECV HZ",
+        "INVALID",
+        "DROPPED",
+    )
     rows: list[tuple[str, ...]] = []
     for view in views:
         status = view.status

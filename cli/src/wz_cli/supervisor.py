@@ -216,8 +216,7 @@ class Child:
             spare.stdin.write(b"run\n")
             spare.stdin.close()
         except OSError as exc:  # it died just now
-            log.warning("the standby of %s (pid %d) cannot be woken: %s", self.name, spare.pid,
-                        exc)  # fmt: skip
+            log.warning("the standby of %s (pid %d) cannot be woken: %s", self.name, spare.pid, exc)
             self._spare_failed = True
             return False
         self.process, self._readers = spare, self._spare_readers
@@ -237,8 +236,11 @@ class Child:
             return True
         log.warning(
             "the standby of %s (pid %d) %s; %s restarts without one from now on",
-            self.name, spare.pid, describe_exit(returncode), self.name,
-        )  # fmt: skip
+            self.name,
+            spare.pid,
+            describe_exit(returncode),
+            self.name,
+        )
         self._spare_failed = True
         return False
 
@@ -263,8 +265,12 @@ class Child:
             log.warning("cannot start a standby of %s: %s", self.name, exc)
             self._spare_failed = True
             return
-        log.info("standby of %s (pid %d) importing, for a restart", self.name, self.spare.pid,
-                 extra={"child": self.name, "pid": self.spare.pid})  # fmt: skip
+        log.info(
+            "standby of %s (pid %d) importing, for a restart",
+            self.name,
+            self.spare.pid,
+            extra={"child": self.name, "pid": self.spare.pid},
+        )
 
     def release_spare(self) -> subprocess.Popen[bytes] | None:
         """End the standby (SIGTERM: it holds nothing yet) and take no other; the standby, for
@@ -288,9 +294,11 @@ class Child:
                 if standby_pid is not None and line.startswith(STANDBY_READY):
                     log.info(
                         "standby of %s (pid %d) ready: its imports took %s s",
-                        self.name, standby_pid, line.removeprefix(STANDBY_READY).strip(),
+                        self.name,
+                        standby_pid,
+                        line.removeprefix(STANDBY_READY).strip(),
                         extra={"child": self.name, "pid": standby_pid},
-                    )  # fmt: skip
+                    )
                     self.spare_ready.set()
                     standby_pid = None
                     continue
@@ -429,8 +437,11 @@ class Supervisor:
                     child.supervise(now)
                 if now >= next_spare_at:
                     # The child that has waited longest first (not one just restarted).
-                    waiting = min((c for c in self.services if c.wants_spare(now)),
-                                  key=lambda c: c.started_at, default=None)  # fmt: skip
+                    waiting = min(
+                        (c for c in self.services if c.wants_spare(now)),
+                        key=lambda c: c.started_at,
+                        default=None,
+                    )
                     if waiting is not None:
                         waiting.start_spare()
                         next_spare_at = now + STANDBY_STAGGER_S

@@ -131,13 +131,29 @@ class _Event:
 
 def _as_event(event: AlertEvent | Alert) -> _Event:
     if isinstance(event, AlertEvent):
-        return _Event(event.episode_id, event.alert_type, event.phase, event.stamp,
-                      event.onset_stamp, event.finding.station_m, event.finding.offset_m,
-                      event.track_id is None, event.track_id)  # fmt: skip
+        return _Event(
+            event.episode_id,
+            event.alert_type,
+            event.phase,
+            event.stamp,
+            event.onset_stamp,
+            event.finding.station_m,
+            event.finding.offset_m,
+            event.track_id is None,
+            event.track_id,
+        )
     onset = event.stamp if event.onset_stamp is None else event.onset_stamp
-    return _Event(event.episode_id or event.alert_id, event.alert_type, event.phase,
-                  event.stamp, onset, event.station_m, event.offset_m,
-                  event.track_id is None, event.track_id)  # fmt: skip
+    return _Event(
+        event.episode_id or event.alert_id,
+        event.alert_type,
+        event.phase,
+        event.stamp,
+        onset,
+        event.station_m,
+        event.offset_m,
+        event.track_id is None,
+        event.track_id,
+    )
 
 
 def run_alert_engine(site: Site, track_batches: Iterable[TrackBatch]) -> list[AlertEvent]:
@@ -168,18 +184,39 @@ def truth_batches(site: Site, truth_frames: TruthFrames) -> tuple[list[TrackBatc
         for v in vehicles:
             track_id = track_of.setdefault(v.vehicle_id, len(track_of))
             age_s = stamp_s - first_seen_s.setdefault(v.vehicle_id, stamp_s)
-            tracks.append(Track(
-                track_id=track_id, x_m=v.x_m, y_m=v.y_m,
-                vx_mps=v.speed_mps * math.cos(v.heading_rad),
-                vy_mps=v.speed_mps * math.sin(v.heading_rad), covariance=[0.0] * 16,
-                station_m=v.station_m, offset_m=v.offset_m, speed_mps=v.speed_mps,
-                heading_rad=v.heading_rad, lane_index=v.lane_index, object_class=v.vehicle_class,
-                age_s=max(0.0, age_s), hits=1, confirmed=True, sources=[TRUTH_SOURCE],
-                status=TrackStatus.CONFIRMED, length_m=v.length_m, width_m=v.width_m,
-                last_update_s=stamp_s,
-            ))  # fmt: skip
-        batches.append(TrackBatch(site=site.site_id, source_id=TRUTH_SOURCE, stamp=stamp_s,
-                                  cycle_index=index, tracks=tracks))  # fmt: skip
+            tracks.append(
+                Track(
+                    track_id=track_id,
+                    x_m=v.x_m,
+                    y_m=v.y_m,
+                    vx_mps=v.speed_mps * math.cos(v.heading_rad),
+                    vy_mps=v.speed_mps * math.sin(v.heading_rad),
+                    covariance=[0.0] * 16,
+                    station_m=v.station_m,
+                    offset_m=v.offset_m,
+                    speed_mps=v.speed_mps,
+                    heading_rad=v.heading_rad,
+                    lane_index=v.lane_index,
+                    object_class=v.vehicle_class,
+                    age_s=max(0.0, age_s),
+                    hits=1,
+                    confirmed=True,
+                    sources=[TRUTH_SOURCE],
+                    status=TrackStatus.CONFIRMED,
+                    length_m=v.length_m,
+                    width_m=v.width_m,
+                    last_update_s=stamp_s,
+                )
+            )
+        batches.append(
+            TrackBatch(
+                site=site.site_id,
+                source_id=TRUTH_SOURCE,
+                stamp=stamp_s,
+                cycle_index=index,
+                tracks=tracks,
+            )
+        )
     return batches, {track_id: vehicle_id for vehicle_id, track_id in track_of.items()}
 
 
@@ -211,13 +248,17 @@ def truth_episodes(site: Site, truth_frames: TruthFrames) -> list[Episode]:
     """The episodes the engine finds on the true kinematics, each with its vehicle."""
     batches, vehicle_of = truth_batches(site, truth_frames)
     events = run_alert_engine(site, batches)
-    vehicles = {e.episode_id: None if e.track_id is None else vehicle_of[e.track_id]
-                for e in events if e.phase == "start"}  # fmt: skip
+    vehicles = {
+        e.episode_id: None if e.track_id is None else vehicle_of[e.track_id]
+        for e in events
+        if e.phase == "start"
+    }
     return _episodes(map(_as_event, events), vehicles)
 
 
-def tie_to_vehicle(truth: TruthIndex, stamp_s: float, station_m: float, offset_m: float,
-                   gate_m: float = TIE_GATE_M) -> str | None:  # fmt: skip
+def tie_to_vehicle(
+    truth: TruthIndex, stamp_s: float, station_m: float, offset_m: float, gate_m: float = TIE_GATE_M
+) -> str | None:
     """The truth vehicle nearest ``(station, offset)`` at ``stamp_s`` within ``gate_m``."""
     vehicles = truth.at(stamp_s, MAX_TRUTH_GAP_S)
     if not vehicles:
@@ -233,8 +274,9 @@ def tie_to_vehicle(truth: TruthIndex, stamp_s: float, station_m: float, offset_m
 TrackFollows = dict[int, list[tuple[float, str]]]
 
 
-def _matched(index: TruthIndex, stamp_s: float, estimates_xy: list[tuple[float, float]],
-             gate_m: float) -> list[tuple[int, VehicleTruth]]:  # fmt: skip
+def _matched(
+    index: TruthIndex, stamp_s: float, estimates_xy: list[tuple[float, float]], gate_m: float
+) -> list[tuple[int, VehicleTruth]]:
     """``(estimate index, vehicle)`` pairs: site positions matched one-to-one to the truth at
     ``stamp_s`` (least total distance, pairs within ``gate_m``)."""
     vehicles = index.at(stamp_s, MAX_TRUTH_GAP_S)
@@ -245,8 +287,9 @@ def _matched(index: TruthIndex, stamp_s: float, estimates_xy: list[tuple[float, 
     return [(e, vehicles[v]) for e, v in pairs]
 
 
-def track_follows(track_batches: Iterable[TrackBatch], truth_frames: TruthFrames,
-                  gate_m: float = TIE_GATE_M) -> TrackFollows:  # fmt: skip
+def track_follows(
+    track_batches: Iterable[TrackBatch], truth_frames: TruthFrames, gate_m: float = TIE_GATE_M
+) -> TrackFollows:
     """Which vehicle each track followed, cycle by cycle: the batch's tracks matched one-to-one
     to the truth at its stamp (least total distance, pairs within ``gate_m``)."""
     index = TruthIndex([(stamp, list(vehicles)) for stamp, vehicles in truth_frames])
@@ -265,9 +308,12 @@ def track_follows(track_batches: Iterable[TrackBatch], truth_frames: TruthFrames
 OBSERVED_HOLD_S = 1.0
 
 
-def observed_truth(truth_frames: TruthFrames, detection_batches: Iterable[DetectionBatch],
-                   gate_m: float = TIE_GATE_M,
-                   hold_s: float = OBSERVED_HOLD_S) -> list[tuple[float, list[VehicleTruth]]]:  # fmt: skip
+def observed_truth(
+    truth_frames: TruthFrames,
+    detection_batches: Iterable[DetectionBatch],
+    gate_m: float = TIE_GATE_M,
+    hold_s: float = OBSERVED_HOLD_S,
+) -> list[tuple[float, list[VehicleTruth]]]:
     """The truth frames cut to the vehicles some sensor saw: at each stamp, the vehicles with a
     detection (any sensor, matched one-to-one within ``gate_m``) in the last ``hold_s``."""
     index = TruthIndex([(stamp, list(vehicles)) for stamp, vehicles in truth_frames])
@@ -282,17 +328,21 @@ def observed_truth(truth_frames: TruthFrames, detection_batches: Iterable[Detect
         i = bisect.bisect_right(stamps, stamp_s + 1e-9)
         return i > 0 and stamp_s - stamps[i - 1] <= hold_s
 
-    return [(stamp, [v for v in vehicles if recently_seen(v.vehicle_id, stamp)])
-            for stamp, vehicles in truth_frames]  # fmt: skip
+    return [
+        (stamp, [v for v in vehicles if recently_seen(v.vehicle_id, stamp)])
+        for stamp, vehicles in truth_frames
+    ]
 
 
-def _followed(follows: TrackFollows, track_id: int | None, start_s: float,
-              end_s: float) -> str | None:  # fmt: skip
+def _followed(
+    follows: TrackFollows, track_id: int | None, start_s: float, end_s: float
+) -> str | None:
     """The vehicle ``track_id`` was matched to most often within ``[start_s, end_s]``."""
     if track_id is None:
         return None
-    counts = Counter(vehicle for stamp, vehicle in follows.get(track_id, ())
-                     if start_s <= stamp <= end_s)  # fmt: skip
+    counts = Counter(
+        vehicle for stamp, vehicle in follows.get(track_id, ()) if start_s <= stamp <= end_s
+    )
     return counts.most_common(1)[0][0] if counts else None
 
 
@@ -370,8 +420,9 @@ def score_alerts(
             return None
         end_s = clears.get(start.episode_id, math.inf)
         followed = _followed(follows or {}, start.track_id, start.stamp_s, end_s)
-        return followed or tie_to_vehicle(index, start.stamp_s, start.station_m,
-                                          start.offset_m, tie_gate_m)  # fmt: skip
+        return followed or tie_to_vehicle(
+            index, start.stamp_s, start.station_m, start.offset_m, tie_gate_m
+        )
 
     tied = {e.episode_id: tie(e) for e in reduced if e.phase == "start"}
     alert_episodes = _episodes(reduced, tied)
@@ -391,11 +442,14 @@ def score_alerts(
         false_positives = duplicates = 0
         for alert in (a for a in alert_episodes if a.alert_type is alert_type):
             overlapping = [
-                t for t in candidates
-                if (alert.site_level or (alert.vehicle_id is not None
-                                         and t.vehicle_id == alert.vehicle_id))
+                t
+                for t in candidates
+                if (
+                    alert.site_level
+                    or (alert.vehicle_id is not None and t.vehicle_id == alert.vehicle_id)
+                )
                 and alert.overlaps(t, slack_s)
-            ]  # fmt: skip
+            ]
             free = [t for t in overlapping if t.episode_id not in matched]
             if free:
                 matched.add(min(free, key=lambda t: t.onset_s).episode_id)
@@ -420,10 +474,12 @@ def score_alerts(
         }
         if alert_type is AlertType.SPEEDING:
             aggressive = [
-                x for a in true_positives
-                if a.vehicle_id is not None and profile.get(a.vehicle_id) is DriverProfile.AGGRESSIVE
+                x
+                for a in true_positives
+                if a.vehicle_id is not None
+                and profile.get(a.vehicle_id) is DriverProfile.AGGRESSIVE
                 and (x := lead(a)) is not None
-            ]  # fmt: skip
+            ]
             entry["lead_time_aggressive_s"] = _median(aggressive)
         report[alert_type.value] = entry
     return report

@@ -53,8 +53,12 @@ log = logging.getLogger("wz_eval.camera")
 
 METHODS = ("paper_eq12", "calibrated", "camera_radar")
 RANGE_BINS_M: tuple[tuple[float, float], ...] = (
-    (0, 25), (25, 50), (50, 75), (75, 100), (100, 150),
-)  # fmt: skip
+    (0, 25),
+    (25, 50),
+    (50, 75),
+    (75, 100),
+    (100, 150),
+)
 #: Least IoU between a track's box and a vehicle's visible truth box to score the track.
 MATCH_IOU = 0.5
 
@@ -104,8 +108,9 @@ def match_tracks(
     track_boxes: list[tuple[float, float, float, float]], labels: tuple[CameraTruthLabel, ...]
 ) -> list[str | None]:
     """The vehicle id each track box shows (greedy by IoU >= :data:`MATCH_IOU`), or None."""
-    candidates = [(label.vehicle_id, label.box_xyxy_px) for label in labels
-                  if label.box_xyxy_px is not None]  # fmt: skip
+    candidates = [
+        (label.vehicle_id, label.box_xyxy_px) for label in labels if label.box_xyxy_px is not None
+    ]
     if not candidates or not track_boxes:
         return [None] * len(track_boxes)
     truth = np.array([box for _, box in candidates], dtype=np.float64)
@@ -139,17 +144,21 @@ def evaluate(site: Site, options: CameraEvalOptions) -> dict[str, object]:
 
     detector = CameraDetector(site, camera, radar, settings, report)
     sim_kwargs: dict[str, object] = {
-        "seed": options.seed, "realtime_factor": 0.0, "sensors_enabled": False,
+        "seed": options.seed,
+        "realtime_factor": 0.0,
+        "sensors_enabled": False,
         "vehicles_per_hour": options.vehicles_per_hour,
         "duration_s": options.warmup_s + options.duration_s + 1.0,
-    }  # fmt: skip
+    }
     if options.work_dir is not None:
         sim_kwargs["work_dir"] = options.work_dir
-    rig = SensorRig(site, WEATHER_PRESETS[options.weather], options.seed,
-                    sensor_ids=[camera.sensor_id, radar.sensor_id])  # fmt: skip
-    errors: dict[str, dict[str, Errors]] = {
-        m: defaultdict(lambda: Errors([], [])) for m in METHODS
-    }
+    rig = SensorRig(
+        site,
+        WEATHER_PRESETS[options.weather],
+        options.seed,
+        sensor_ids=[camera.sensor_id, radar.sensor_id],
+    )
+    errors: dict[str, dict[str, Errors]] = {m: defaultdict(lambda: Errors([], [])) for m in METHODS}
     paired = tracked = matched = 0
     frames = 0
     detect_s: list[float] = []
@@ -169,8 +178,9 @@ def evaluate(site: Site, options: CameraEvalOptions) -> dict[str, object]:
                 stamp_s = output.meta.stamp
                 image = cv2.imdecode(np.frombuffer(output.jpeg, np.uint8), cv2.IMREAD_COLOR)
                 started = time.perf_counter()
-                result = detector.process_image(np.asarray(image, np.uint8), stamp_s,
-                                                output.meta.frame_index)  # fmt: skip
+                result = detector.process_image(
+                    np.asarray(image, np.uint8), stamp_s, output.meta.frame_index
+                )
                 detect_s.append(time.perf_counter() - started)
                 if result is None or stamp_s < options.warmup_s:
                     continue
@@ -178,13 +188,17 @@ def evaluate(site: Site, options: CameraEvalOptions) -> dict[str, object]:
                 truth = {v.vehicle_id: v for v in moved(vehicles, stamp_s - now_s)}
                 ids = match_tracks([t.box_xyxy_px for t in result.tracks], output.frame.labels)
                 objects = {o.local_id: o for o in result.camera_objects}
-                fused = {f.camera_local_id: f for f in result.fused if f.camera_local_id is not None}
+                fused = {
+                    f.camera_local_id: f for f in result.fused if f.camera_local_id is not None
+                }
                 for track, vehicle_id in zip(result.tracks, ids, strict=True):
                     tracked += 1
                     if vehicle_id is None or track.local_id not in objects:
                         continue
                     vehicle: VehicleTruth = truth[vehicle_id]
-                    bin_label = range_bin(math.hypot(vehicle.x_m - cam_xy[0], vehicle.y_m - cam_xy[1]))
+                    bin_label = range_bin(
+                        math.hypot(vehicle.x_m - cam_xy[0], vehicle.y_m - cam_xy[1])
+                    )
                     if bin_label is None:
                         continue
                     matched += 1
@@ -206,20 +220,30 @@ def evaluate(site: Site, options: CameraEvalOptions) -> dict[str, object]:
     bins = [f"{lo:g}-{hi:g}" for lo, hi in RANGE_BINS_M]
     table = {
         method: {b: errors[method][b].summary() for b in bins}
-        | {"all": Errors(
-            [e for b in bins for e in errors[method][b].longitudinal],
-            [e for b in bins for e in errors[method][b].lateral]).summary()}
+        | {
+            "all": Errors(
+                [e for b in bins for e in errors[method][b].longitudinal],
+                [e for b in bins for e in errors[method][b].lateral],
+            ).summary()
+        }
         for method in METHODS
-    }  # fmt: skip
+    }
     return {
-        "site": site.site_id, "camera": camera.sensor_id, "radar": radar.sensor_id,
-        "model": str(settings.model_path), "seed": options.seed, "weather": options.weather,
-        "duration_s": options.duration_s, "frames": frames, "tracks_published": tracked,
-        "tracks_scored": matched, "radar_paired": paired / matched if matched else math.nan,
+        "site": site.site_id,
+        "camera": camera.sensor_id,
+        "radar": radar.sensor_id,
+        "model": str(settings.model_path),
+        "seed": options.seed,
+        "weather": options.weather,
+        "duration_s": options.duration_s,
+        "frames": frames,
+        "tracks_published": tracked,
+        "tracks_scored": matched,
+        "radar_paired": paired / matched if matched else math.nan,
         "detector_problems": dict(problems),
         "process_image_ms_median": float(np.median(detect_s)) * 1e3 if detect_s else math.nan,
         "errors_by_range_m": table,
-    }  # fmt: skip
+    }
 
 
 def markdown(report: dict[str, object]) -> str:
@@ -239,14 +263,22 @@ def markdown(report: dict[str, object]) -> str:
         n = table["calibrated"][b].get("n", 0)
         for method in METHODS:
             row = table[method][b]
-            cells.append("-" if not row.get("n") else
-                         f"{row['rmse_longitudinal_m']:.2f} / {row['rmse_lateral_m']:.2f}")  # fmt: skip
+            cells.append(
+                "-"
+                if not row.get("n")
+                else f"{row['rmse_longitudinal_m']:.2f} / {row['rmse_lateral_m']:.2f}"
+            )
         lines.append(f"| {b} | {n} | " + " | ".join(cells) + " |")
-    lines += ["", "| range [m] | Eq. 1-2 lon bias | calibrated lon bias | camera+radar lon bias |",
-              "|---|---|---|---|"]  # fmt: skip
+    lines += [
+        "",
+        "| range [m] | Eq. 1-2 lon bias | calibrated lon bias | camera+radar lon bias |",
+        "|---|---|---|---|",
+    ]
     for b in [*[f"{lo:g}-{hi:g}" for lo, hi in RANGE_BINS_M], "all"]:
-        cells = ["-" if not table[m][b].get("n") else f"{table[m][b]['bias_longitudinal_m']:+.2f}"
-                 for m in METHODS]  # fmt: skip
+        cells = [
+            "-" if not table[m][b].get("n") else f"{table[m][b]['bias_longitudinal_m']:+.2f}"
+            for m in METHODS
+        ]
         lines.append(f"| {b} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
@@ -254,8 +286,12 @@ def markdown(report: dict[str, object]) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="wz eval-camera", description=__doc__.split("\n")[0])
     parser.add_argument("--site", type=Path, default=SimulatorSettings().site_file)
-    parser.add_argument("--model", type=Path, default=None,
-                        help="YOLOv8 .onnx (default: the camera detector's setting)")  # fmt: skip
+    parser.add_argument(
+        "--model",
+        type=Path,
+        default=None,
+        help="YOLOv8 .onnx (default: the camera detector's setting)",
+    )
     parser.add_argument("--seed", type=int, default=7)
     parser.add_argument("--duration-s", type=float, default=120.0)
     parser.add_argument("--warmup-s", type=float, default=60.0)
@@ -266,9 +302,14 @@ def main(argv: list[str] | None = None) -> int:
     site = load_site(args.site)
     configure_logging(service="eval-camera", site=site.site_id)
     options = CameraEvalOptions(
-        site_file=args.site, model_path=args.model, seed=args.seed, duration_s=args.duration_s,
-        warmup_s=args.warmup_s, weather=args.weather, vehicles_per_hour=args.vehicles_per_hour,
-    )  # fmt: skip
+        site_file=args.site,
+        model_path=args.model,
+        seed=args.seed,
+        duration_s=args.duration_s,
+        warmup_s=args.warmup_s,
+        weather=args.weather,
+        vehicles_per_hour=args.vehicles_per_hour,
+    )
     report = evaluate(site, options)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "camera-eval.json").write_text(json.dumps(report, indent=2) + "\n")

@@ -149,11 +149,15 @@ class Association:
 
     def subset(self, keep: npt.NDArray[np.bool_]) -> Association:
         return Association(
-            index=self.index[keep], t_s=self.t_s[keep], station_m=self.station_m[keep],
-            offset_m=self.offset_m[keep], truth_station_m=self.truth_station_m[keep],
+            index=self.index[keep],
+            t_s=self.t_s[keep],
+            station_m=self.station_m[keep],
+            offset_m=self.offset_m[keep],
+            truth_station_m=self.truth_station_m[keep],
             truth_offset_m=self.truth_offset_m[keep],
             truth_speed_mps=self.truth_speed_mps[keep],
-            ids=None if self.ids is None else self.ids[keep])  # fmt: skip
+            ids=None if self.ids is None else self.ids[keep],
+        )
 
 
 @dataclass(frozen=True)
@@ -172,9 +176,13 @@ class AxisStats:
         if errors_m.size == 0:
             return cls(0, None, None, None, None)
         magnitude = np.abs(errors_m)
-        return cls(count=int(errors_m.size), rmse_m=float(np.sqrt(np.mean(errors_m**2))),
-                   mean_m=float(np.mean(errors_m)), p95_abs_m=float(np.percentile(magnitude, 95)),
-                   max_abs_m=float(np.max(magnitude)))  # fmt: skip
+        return cls(
+            count=int(errors_m.size),
+            rmse_m=float(np.sqrt(np.mean(errors_m**2))),
+            mean_m=float(np.mean(errors_m)),
+            p95_abs_m=float(np.percentile(magnitude, 95)),
+            max_abs_m=float(np.max(magnitude)),
+        )
 
 
 @dataclass(frozen=True)
@@ -212,23 +220,29 @@ class SourceResult:
 
     def summary(self) -> dict[str, Any]:
         """JSON-able, with :meth:`wz_eval.metrics.AxisErrors.summary`'s names."""
-        out: dict[str, Any] = {"observations": self.observations,
-                               "samples": self.longitudinal.count,
-                               "rmse_distance_m": self.distance_rmse_m}  # fmt: skip
+        out: dict[str, Any] = {
+            "observations": self.observations,
+            "samples": self.longitudinal.count,
+            "rmse_distance_m": self.distance_rmse_m,
+        }
         for axis, stats in (("longitudinal", self.longitudinal), ("lateral", self.lateral)):
             out[f"rmse_{axis}_m"] = stats.rmse_m
             out[f"bias_{axis}_m"] = stats.mean_m
             out[f"p95_abs_{axis}_m"] = stats.p95_abs_m
             out[f"max_abs_{axis}_m"] = stats.max_abs_m
-        out.update({
-            "availability": self.availability, "longest_gap_s": self.longest_gap_s,
-            "clock_offset_s": self.clock.offset_s,
-            "clock_offset_estimated": self.clock.estimated,
-            "clock_offset_note": self.clock.note,
-            "clock_offset_speed_mps": self.clock.speed_mps,
-            "rmse_longitudinal_at_zero_offset_m": self.rmse_longitudinal_at_zero_offset_m,
-            "distinct_ids": self.distinct_ids, "id_changes": self.id_changes,
-        })  # fmt: skip
+        out.update(
+            {
+                "availability": self.availability,
+                "longest_gap_s": self.longest_gap_s,
+                "clock_offset_s": self.clock.offset_s,
+                "clock_offset_estimated": self.clock.estimated,
+                "clock_offset_note": self.clock.note,
+                "clock_offset_speed_mps": self.clock.speed_mps,
+                "rmse_longitudinal_at_zero_offset_m": self.rmse_longitudinal_at_zero_offset_m,
+                "distinct_ids": self.distinct_ids,
+                "id_changes": self.id_changes,
+            }
+        )
         return out
 
 
@@ -256,14 +270,16 @@ class FieldResult:
             "it applied (an observation stamped t against the GPS at t - offset)",
             "error_convention": "source - GPS in the road frame: longitudinal along the "
             "station (positive downstream), lateral in offset (positive left)",
-            "station_window_m": None if self.station_window_m is None
+            "station_window_m": None
+            if self.station_window_m is None
             else list(self.station_window_m),
             "window_s": self.window_duration_s,
             "window_intervals_s": [list(interval) for interval in self.window_s],
-            "settings": {k: list(v) if isinstance(v, tuple) else v
-                         for k, v in asdict(self.settings).items()},
+            "settings": {
+                k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self.settings).items()
+            },
             "sources": {name: result.summary() for name, result in self.sources.items()},
-        }  # fmt: skip
+        }
 
 
 # --- the GPS track --------------------------------------------------------------------------
@@ -276,8 +292,12 @@ class _Truth:
         self.t = np.asarray(truth.t, dtype=np.float64)
         self.x = np.asarray(truth.x_m, dtype=np.float64)
         self.y = np.asarray(truth.y_m, dtype=np.float64)
-        if self.t.ndim != 1 or self.t.size < 2 or self.x.shape != self.t.shape \
-                or self.y.shape != self.t.shape:  # fmt: skip
+        if (
+            self.t.ndim != 1
+            or self.t.size < 2
+            or self.x.shape != self.t.shape
+            or self.y.shape != self.t.shape
+        ):
             raise ValueError("the GPS track needs t, x_m, y_m of one shape (N,), N >= 2")
         if np.any(np.diff(self.t) <= 0.0):
             raise ValueError("the GPS track's stamps must increase strictly")
@@ -296,8 +316,14 @@ class _Truth:
             result: F64 = values[i] + u * (values[i + 1] - values[i])
             return result
 
-        return valid, lerp(self.x), lerp(self.y), lerp(self.station), lerp(self.offset), \
-            lerp(self.speed)  # fmt: skip
+        return (
+            valid,
+            lerp(self.x),
+            lerp(self.y),
+            lerp(self.station),
+            lerp(self.offset),
+            lerp(self.speed),
+        )
 
     def window(self, station_window_m: tuple[float, float]) -> Intervals:
         """The GPS time intervals when the van's station is within the window (station linear
@@ -330,8 +356,7 @@ class _Source:
 # --- association and clock offset ---------------------------------------------------------
 
 
-def _associate(truth: _Truth, source: _Source, clock_offset_s: float,
-               gate_m: float) -> Association:  # fmt: skip
+def _associate(truth: _Truth, source: _Source, clock_offset_s: float, gate_m: float) -> Association:
     obs = source.obs
     gps_time = obs.times_s - clock_offset_s
     valid, x, y, station, offset, speed = truth.at(gps_time)
@@ -343,15 +368,24 @@ def _associate(truth: _Truth, source: _Source, clock_offset_s: float,
     first[1:] = obs.times_s[order[1:]] != obs.times_s[order[:-1]]
     index = order[first]
     return Association(
-        index=index, t_s=gps_time[index], station_m=source.station[index],
-        offset_m=source.offset[index], truth_station_m=station[index],
-        truth_offset_m=offset[index], truth_speed_mps=speed[index],
-        ids=None if obs.ids is None else obs.ids[index])  # fmt: skip
+        index=index,
+        t_s=gps_time[index],
+        station_m=source.station[index],
+        offset_m=source.offset[index],
+        truth_station_m=station[index],
+        truth_offset_m=offset[index],
+        truth_speed_mps=speed[index],
+        ids=None if obs.ids is None else obs.ids[index],
+    )
 
 
-def associate(truth: TruthTrack, observations: SourceObservations, road: RoadFrame,
-              clock_offset_s: float = 0.0,
-              settings: FieldSettings | None = None) -> Association:  # fmt: skip
+def associate(
+    truth: TruthTrack,
+    observations: SourceObservations,
+    road: RoadFrame,
+    clock_offset_s: float = 0.0,
+    settings: FieldSettings | None = None,
+) -> Association:
     """The observations that are the GPS vehicle, with ``clock_offset_s`` applied.
 
     An observation stamped ``t`` is compared with the GPS position interpolated at
@@ -359,12 +393,17 @@ def associate(truth: TruthTrack, observations: SourceObservations, road: RoadFra
     the observations with its stamp.
     """
     settings = settings or FieldSettings()
-    return _associate(_Truth(truth, road, settings.max_gps_gap_s), _Source(observations, road),
-                      clock_offset_s, settings.gate_m)  # fmt: skip
+    return _associate(
+        _Truth(truth, road, settings.max_gps_gap_s),
+        _Source(observations, road),
+        clock_offset_s,
+        settings.gate_m,
+    )
 
 
-def _search(truth: _Truth, source: _Source, offsets_s: F64, settings: FieldSettings,
-            min_count: int | None) -> tuple[float, int, int] | None:  # fmt: skip
+def _search(
+    truth: _Truth, source: _Source, offsets_s: F64, settings: FieldSettings, min_count: int | None
+) -> tuple[float, int, int] | None:
     """Among ``offsets_s``, the candidate with the least median |longitudinal error| (ties:
     nearest 0); with its count and the largest count seen; None without a candidate."""
     counts = np.zeros(offsets_s.size, dtype=np.int64)
@@ -376,8 +415,9 @@ def _search(truth: _Truth, source: _Source, offsets_s: F64, settings: FieldSetti
             medians[k] = float(np.median(np.abs(association.longitudinal_error_m)))
     most = int(counts.max(initial=0))
     if min_count is None:
-        min_count = max(settings.min_offset_samples,
-                        math.ceil(settings.min_association_share * most))  # fmt: skip
+        min_count = max(
+            settings.min_offset_samples, math.ceil(settings.min_association_share * most)
+        )
     candidates = np.flatnonzero(counts >= min_count)
     if candidates.size == 0:
         return None
@@ -393,8 +433,12 @@ def _estimate(truth: _Truth, source: _Source, settings: FieldSettings) -> ClockO
     coarse = np.arange(first, last + 1, dtype=np.float64) * step
     found = _search(truth, source, coarse, settings, None)
     if found is None:
-        return ClockOffset(0.0, False, "not estimated: too few associations at any offset "
-                           f"(fewer than {settings.min_offset_samples})")  # fmt: skip
+        return ClockOffset(
+            0.0,
+            False,
+            "not estimated: too few associations at any offset "
+            f"(fewer than {settings.min_offset_samples})",
+        )
     best, min_count, _ = found
     reach = math.ceil(step / fine_step)
     fine = best + np.arange(-reach, reach + 1, dtype=np.float64) * fine_step
@@ -404,16 +448,30 @@ def _estimate(truth: _Truth, source: _Source, settings: FieldSettings) -> ClockO
     association = _associate(truth, source, best, settings.gate_m)
     speed = float(np.median(np.abs(association.truth_speed_mps)))
     if speed < settings.min_offset_speed_mps:
-        return ClockOffset(0.0, False, f"not estimated: the van's median speed {speed:.1f} m/s "
-                           f"is below {settings.min_offset_speed_mps:g} m/s, where an offset "
-                           "makes no error to see", speed)  # fmt: skip
-    return ClockOffset(best, True, f"estimated: the offset with the least median |longitudinal "
-                       f"error| in [{low:g}, {high:g}] s (steps of {step:g} s, then "
-                       f"{fine_step:g} s)", speed)  # fmt: skip
+        return ClockOffset(
+            0.0,
+            False,
+            f"not estimated: the van's median speed {speed:.1f} m/s "
+            f"is below {settings.min_offset_speed_mps:g} m/s, where an offset "
+            "makes no error to see",
+            speed,
+        )
+    return ClockOffset(
+        best,
+        True,
+        f"estimated: the offset with the least median |longitudinal "
+        f"error| in [{low:g}, {high:g}] s (steps of {step:g} s, then "
+        f"{fine_step:g} s)",
+        speed,
+    )
 
 
-def estimate_clock_offset(truth: TruthTrack, observations: SourceObservations, road: RoadFrame,
-                          settings: FieldSettings | None = None) -> ClockOffset:  # fmt: skip
+def estimate_clock_offset(
+    truth: TruthTrack,
+    observations: SourceObservations,
+    road: RoadFrame,
+    settings: FieldSettings | None = None,
+) -> ClockOffset:
     """The constant offset between a source's clock and the GPS's [s] (its stamps minus GPS
     time).
 
@@ -434,8 +492,9 @@ def estimate_clock_offset(truth: TruthTrack, observations: SourceObservations, r
     0 is returned, not estimated.
     """
     settings = settings or FieldSettings()
-    return _estimate(_Truth(truth, road, settings.max_gps_gap_s), _Source(observations, road),
-                     settings)  # fmt: skip
+    return _estimate(
+        _Truth(truth, road, settings.max_gps_gap_s), _Source(observations, road), settings
+    )
 
 
 # --- availability ----------------------------------------------------------------------------
@@ -466,8 +525,9 @@ def _overlap_s(first: Intervals, second: Intervals) -> float:
     return total
 
 
-def _availability(times_s: F64, window: Intervals,
-                  half_window_s: float) -> tuple[float | None, float | None]:  # fmt: skip
+def _availability(
+    times_s: F64, window: Intervals, half_window_s: float
+) -> tuple[float | None, float | None]:
     """Share of the window within ``half_window_s`` of an associated time, and the longest
     gap inside the window between associated times (or a window edge)."""
     duration = sum(end - start for start, end in window)
@@ -486,19 +546,26 @@ def _availability(times_s: F64, window: Intervals,
 # --- the evaluation --------------------------------------------------------------------------
 
 
-def _in_window(association: Association,
-               station_window_m: tuple[float, float] | None) -> Association:  # fmt: skip
+def _in_window(
+    association: Association, station_window_m: tuple[float, float] | None
+) -> Association:
     """The associations whose GPS station is within the window."""
     if station_window_m is None:
         return association
     low, high = station_window_m
-    return association.subset((association.truth_station_m >= low)
-                              & (association.truth_station_m <= high))  # fmt: skip
+    return association.subset(
+        (association.truth_station_m >= low) & (association.truth_station_m <= high)
+    )
 
 
-def evaluate_field(truth: TruthTrack, sources: Mapping[str, SourceObservations],
-                   road: RoadFrame, settings: FieldSettings | None = None, *,
-                   clock_offsets_s: Mapping[str, float] | None = None) -> FieldResult:  # fmt: skip
+def evaluate_field(
+    truth: TruthTrack,
+    sources: Mapping[str, SourceObservations],
+    road: RoadFrame,
+    settings: FieldSettings | None = None,
+    *,
+    clock_offsets_s: Mapping[str, float] | None = None,
+) -> FieldResult:
     """Score each source against the GPS track (see the module's docstring).
 
     Parameters
@@ -542,22 +609,33 @@ def evaluate_field(truth: TruthTrack, sources: Mapping[str, SourceObservations],
     results: dict[str, SourceResult] = {}
     for name, source in prepared.items():
         association = _in_window(associations[name], station_window)
-        availability, longest_gap = _availability(association.t_s, window,
-                                                  settings.availability_half_window_s)  # fmt: skip
+        availability, longest_gap = _availability(
+            association.t_s, window, settings.availability_half_window_s
+        )
         at_zero = _in_window(_associate(gps, source, 0.0, settings.gate_m), station_window)
         ids = association.ids
         results[name] = SourceResult(
-            name=name, observations=len(source.obs.times_s), clock=clocks[name],
+            name=name,
+            observations=len(source.obs.times_s),
+            clock=clocks[name],
             association=association,
             longitudinal=AxisStats.of(association.longitudinal_error_m),
             lateral=AxisStats.of(association.lateral_error_m),
-            availability=availability, longest_gap_s=longest_gap,
+            availability=availability,
+            longest_gap_s=longest_gap,
             rmse_longitudinal_at_zero_offset_m=AxisStats.of(at_zero.longitudinal_error_m).rmse_m,
             distinct_ids=None if ids is None else int(np.unique(ids).size),
-            id_changes=None if ids is None else int(np.count_nonzero(np.diff(ids))))  # fmt: skip
-    return FieldResult(sources=results, station_window_m=station_window,
-                       window_s=tuple(window), settings=settings, truth_t_s=gps.t,
-                       truth_station_m=gps.station, truth_offset_m=gps.offset)  # fmt: skip
+            id_changes=None if ids is None else int(np.count_nonzero(np.diff(ids))),
+        )
+    return FieldResult(
+        sources=results,
+        station_window_m=station_window,
+        window_s=tuple(window),
+        settings=settings,
+        truth_t_s=gps.t,
+        truth_station_m=gps.station,
+        truth_offset_m=gps.offset,
+    )
 
 
 # --- report ------------------------------------------------------------------------------------
@@ -579,19 +657,26 @@ def markdown_table(result: FieldResult) -> str:
     ]
     for name, row in result.sources.items():
         availability = None if row.availability is None else 100.0 * row.availability
-        offset = f"{row.clock.offset_s:+.3f}" + ("" if row.clock.estimated
-                                                 else f" ({row.clock.note.split(':')[0]})")  # fmt: skip
+        offset = f"{row.clock.offset_s:+.3f}" + (
+            "" if row.clock.estimated else f" ({row.clock.note.split(':')[0]})"
+        )
         lines.append(
             f"| {name} | {row.longitudinal.count} | {cell(row.distance_rmse_m)} | "
             f"{cell(row.longitudinal.rmse_m)} | "
             f"{cell(row.lateral.rmse_m)} | {cell(row.longitudinal.mean_m)} | "
             f"{cell(row.lateral.mean_m)} | {cell(row.longitudinal.p95_abs_m)} | "
             f"{cell(row.lateral.p95_abs_m)} | {cell(availability, 1)} | "
-            f"{cell(row.longest_gap_s, 1)} | {offset} |")  # fmt: skip
+            f"{cell(row.longest_gap_s, 1)} | {offset} |"
+        )
     window = result.station_window_m
-    where = "no window (no source saw the GPS vehicle)" if window is None else (
-        f"{result.window_duration_s:.1f} s of GPS time between stations {window[0]:.0f} and "
-        f"{window[1]:.0f} m")  # fmt: skip
+    where = (
+        "no window (no source saw the GPS vehicle)"
+        if window is None
+        else (
+            f"{result.window_duration_s:.1f} s of GPS time between stations {window[0]:.0f} and "
+            f"{window[1]:.0f} m"
+        )
+    )
     half = result.settings.availability_half_window_s
     lines += [
         "",
@@ -610,9 +695,14 @@ PLOT_STYLE: dict[str, dict[str, Any]] = {
     "radar-camera": {"marker": "o", "linestyle": "none", "markersize": 3, "color": "tab:blue"},
     "camera": {"marker": "o", "linestyle": "none", "markersize": 3, "color": "tab:blue"},
     "radar": {"marker": "s", "linestyle": "none", "markersize": 3, "color": "tab:red"},
-    "fused": {"marker": ".", "linestyle": "-", "linewidth": 1.2, "markersize": 3,
-              "color": "tab:green"},
-}  # fmt: skip
+    "fused": {
+        "marker": ".",
+        "linestyle": "-",
+        "linewidth": 1.2,
+        "markersize": 3,
+        "color": "tab:green",
+    },
+}
 _OTHER_COLOURS = ("tab:purple", "tab:brown", "tab:pink", "tab:olive", "tab:cyan")
 
 
@@ -632,18 +722,30 @@ def plot_field(result: FieldResult, path: Path, *, names: Sequence[str] | None =
         in_window |= (result.truth_t_s >= start) & (result.truth_t_s <= end)
     if not in_window.any():
         in_window[:] = True
-    track.plot(result.truth_station_m[in_window], result.truth_offset_m[in_window], "k--",
-               linewidth=0.9, label="GPS")  # fmt: skip
+    track.plot(
+        result.truth_station_m[in_window],
+        result.truth_offset_m[in_window],
+        "k--",
+        linewidth=0.9,
+        label="GPS",
+    )
     for k, name in enumerate(chosen):
         association = result.sources[name].association
-        style = PLOT_STYLE.get(name, {"marker": ".", "linestyle": "none", "markersize": 3,
-                                      "color": _OTHER_COLOURS[k % len(_OTHER_COLOURS)]})  # fmt: skip
+        style = PLOT_STYLE.get(
+            name,
+            {
+                "marker": ".",
+                "linestyle": "none",
+                "markersize": 3,
+                "color": _OTHER_COLOURS[k % len(_OTHER_COLOURS)],
+            },
+        )
         track.plot(association.station_m, association.offset_m, label=name, **style)
         error_style = {**style, "linestyle": "-", "linewidth": 0.7}
-        longitudinal.plot(association.t_s - t0, association.longitudinal_error_m, label=name,
-                          **error_style)  # fmt: skip
-        lateral.plot(association.t_s - t0, association.lateral_error_m, label=name,
-                     **error_style)  # fmt: skip
+        longitudinal.plot(
+            association.t_s - t0, association.longitudinal_error_m, label=name, **error_style
+        )
+        lateral.plot(association.t_s - t0, association.lateral_error_m, label=name, **error_style)
     track.set_xlabel("station along the road [m]")
     track.set_ylabel("offset [m]")
     track.set_title("GPS vehicle: GPS track and each source's associated positions", fontsize=9)

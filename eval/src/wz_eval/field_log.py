@@ -57,8 +57,12 @@ GPS_NOISE_M = 0.02
 ANTENNA_FORWARD_M = 1.2
 PROBE_START_UPSTREAM_M = 200.0
 LEAD_S = 2.0
-_CLASS_NAMES = {VehicleClass.CAR: "car", VehicleClass.TRUCK: "truck", VehicleClass.BUS: "bus",
-                VehicleClass.MOTORCYCLE: "motorcycle"}  # fmt: skip
+_CLASS_NAMES = {
+    VehicleClass.CAR: "car",
+    VehicleClass.TRUCK: "truck",
+    VehicleClass.BUS: "bus",
+    VehicleClass.MOTORCYCLE: "motorcycle",
+}
 
 
 @dataclass(frozen=True)
@@ -75,10 +79,17 @@ def log_site(site: Site) -> Site:
     for mount in site.sensors:
         if mount.sensor_id == LIDAR_ID:
             assert isinstance(mount.intrinsics, LidarIntrinsics)
-            intrinsics = mount.intrinsics.model_copy(update={
-                "beams": LIDAR_CHANNELS, "azimuth_steps": LIDAR_COLUMNS,
-                "vertical_min_deg": -30.0, "vertical_max_deg": 11.0})  # fmt: skip
-            mount = mount.model_copy(update={"intrinsics": intrinsics, "rate_hz": float(LIDAR_RATE_HZ)})
+            intrinsics = mount.intrinsics.model_copy(
+                update={
+                    "beams": LIDAR_CHANNELS,
+                    "azimuth_steps": LIDAR_COLUMNS,
+                    "vertical_min_deg": -30.0,
+                    "vertical_max_deg": 11.0,
+                }
+            )
+            mount = mount.model_copy(
+                update={"intrinsics": intrinsics, "rate_hz": float(LIDAR_RATE_HZ)}
+            )
         sensors.append(mount)
     return site.model_copy(update={"sensors": sensors})
 
@@ -99,8 +110,14 @@ def _nmea_angle(value_deg: float, positive: str, negative: str, degree_digits: i
     return f"{degrees:0{degree_digits}d}{minutes:010.7f},{hemisphere}"
 
 
-def nmea_epoch(stamp_unix_s: float, latitude_deg: float, longitude_deg: float,
-               altitude_m: float, speed_mps: float, course_deg: float) -> list[str]:  # fmt: skip
+def nmea_epoch(
+    stamp_unix_s: float,
+    latitude_deg: float,
+    longitude_deg: float,
+    altitude_m: float,
+    speed_mps: float,
+    course_deg: float,
+) -> list[str]:
     """GGA (RTK fixed, 14 satellites) and RMC sentences of one fix."""
     moment = dt.datetime.fromtimestamp(stamp_unix_s, tz=dt.UTC)
     hhmmss = moment.strftime("%H%M%S") + f".{moment.microsecond // 10000:02d}"
@@ -108,8 +125,10 @@ def nmea_epoch(stamp_unix_s: float, latitude_deg: float, longitude_deg: float,
     lon = _nmea_angle(longitude_deg, "E", "W", 3)
     gga = f"GPGGA,{hhmmss},{lat},{lon},4,14,0.7,{altitude_m:.3f},M,-26.0,M,1.0,0000"
     knots = speed_mps / 0.514444
-    rmc = (f"GPRMC,{hhmmss},A,{lat},{lon},{knots:.3f},{course_deg % 360.0:.2f},"
-           f"{moment.strftime('%d%m%y')},,,D")  # fmt: skip
+    rmc = (
+        f"GPRMC,{hhmmss},A,{lat},{lon},{knots:.3f},{course_deg % 360.0:.2f},"
+        f"{moment.strftime('%d%m%y')},,,D"
+    )
     return [nmea_sentence(gga), nmea_sentence(rmc)]
 
 
@@ -132,10 +151,15 @@ def write_sample_log(out: Path, options: SampleOptions | None = None) -> Path:
     unit_mount = next(m for m in site.sensors if m.sensor_id == UNIT_ID)
     mast_station = float(site.road_frame.to_road(lidar_mount.pose.x_m, lidar_mount.pose.y_m)[0])
     rig = SensorRig(site, WEATHER_PRESETS["day"], options.seed, sensor_ids=[LIDAR_ID])
-    sim = SimulatorSettings.model_validate({
-        "seed": options.seed, "realtime_factor": 0.0, "sensors_enabled": False,
-        "vehicles_per_hour": options.vehicles_per_hour,
-        "duration_s": options.warmup_s + 120.0 + options.max_log_s})  # fmt: skip
+    sim = SimulatorSettings.model_validate(
+        {
+            "seed": options.seed,
+            "realtime_factor": 0.0,
+            "sensors_enabled": False,
+            "vehicles_per_hour": options.vehicles_per_hour,
+            "duration_s": options.warmup_s + 120.0 + options.max_log_s,
+        }
+    )
     sweeps: list[LidarSweep] = []
     truth: list[tuple[float, list[VehicleTruth]]] = []
     probe_id: str | None = None
@@ -150,35 +174,58 @@ def write_sample_log(out: Path, options: SampleOptions | None = None) -> Path:
             for output in rig.fire(vehicles, now):
                 if isinstance(output, LidarOutput):
                     scan = output.scan
-                    sweeps.append(LidarSweep(
-                        stamp=T0_UNIX_S + scan.meta.stamp, points=scan.points,
-                        rows=scan.meta.rows, columns=scan.meta.columns, organized=True,
-                        where=f"simulation frame {scan.meta.frame_index}",
-                        sweep_duration_s=scan.meta.sweep_duration_s))  # fmt: skip
+                    sweeps.append(
+                        LidarSweep(
+                            stamp=T0_UNIX_S + scan.meta.stamp,
+                            points=scan.points,
+                            rows=scan.meta.rows,
+                            columns=scan.meta.columns,
+                            organized=True,
+                            where=f"simulation frame {scan.meta.frame_index}",
+                            sweep_duration_s=scan.meta.sweep_duration_s,
+                        )
+                    )
             if probe_id is None:  # keep the last 2 s until the probe shows up
                 truth = [(t, vs) for t, vs in truth if t >= now - LEAD_S - 1e-6]
                 sweeps = [w for w in sweeps if w.stamp >= T0_UNIX_S + now - LEAD_S - 1e-6]
                 if now < options.warmup_s:
                     continue
-                crossing = [v for v in vehicles if v.vehicle_class is VehicleClass.CAR
-                            and abs(v.station_m - (mast_station - PROBE_START_UPSTREAM_M)) < 2.0]  # fmt: skip
+                crossing = [
+                    v
+                    for v in vehicles
+                    if v.vehicle_class is VehicleClass.CAR
+                    and abs(v.station_m - (mast_station - PROBE_START_UPSTREAM_M)) < 2.0
+                ]
                 if not crossing:
                     continue
                 probe_id = crossing[0].vehicle_id
                 start_s = now - LEAD_S
             assert start_s is not None
             probe = next((v for v in vehicles if v.vehicle_id == probe_id), None)
-            if probe is None or probe.station_m > mast_station + 10.0 \
-                    or now - start_s > options.max_log_s:  # fmt: skip
+            if (
+                probe is None
+                or probe.station_m > mast_station + 10.0
+                or now - start_s > options.max_log_s
+            ):
                 break
     if probe_id is None or start_s is None:
         raise RuntimeError("no car crossed the probe's start station; simulate longer")
     pcap = out / "lidar" / "os1-64.pcap"
-    write_ouster_pcap(sweeps, pcap, out / "lidar" / "os1-64.json", channels=LIDAR_CHANNELS,
-                      columns_per_frame=LIDAR_COLUMNS, vertical_min_deg=-30.0,
-                      vertical_max_deg=11.0, rate_hz=LIDAR_RATE_HZ,
-                      azimuth_window_deg=LIDAR_WINDOW_DEG)  # fmt: skip
-    with pcap.open("rb") as raw, gzip.GzipFile(pcap.with_suffix(".pcap.gz"), "wb", mtime=0) as packed:
+    write_ouster_pcap(
+        sweeps,
+        pcap,
+        out / "lidar" / "os1-64.json",
+        channels=LIDAR_CHANNELS,
+        columns_per_frame=LIDAR_COLUMNS,
+        vertical_min_deg=-30.0,
+        vertical_max_deg=11.0,
+        rate_hz=LIDAR_RATE_HZ,
+        azimuth_window_deg=LIDAR_WINDOW_DEG,
+    )
+    with (
+        pcap.open("rb") as raw,
+        gzip.GzipFile(pcap.with_suffix(".pcap.gz"), "wb", mtime=0) as packed,
+    ):
         shutil.copyfileobj(raw, packed)
     pcap.unlink()
     _write_unit(out / "radar-camera" / "objects.csv", truth, unit_mount, start_s, rng)
@@ -189,24 +236,42 @@ def write_sample_log(out: Path, options: SampleOptions | None = None) -> Path:
     manifest = {
         "format": "wz-field-log/1",
         "description": f"Simulated field log (seed {options.seed}): probe {probe_id} through "
-                       "the default work zone; made by `wz field-log` (wz_eval.field_log).",
+        "the default work zone; made by `wz field-log` (wz_eval.field_log).",
         "site": "site.yaml",
         "sources": [
-            {"sensor_id": LIDAR_ID, "kind": "lidar", "format": "ouster",
-             "path": "lidar/os1-64.pcap.gz", "metadata": "lidar/os1-64.json"},
-            {"sensor_id": UNIT_ID, "kind": "objects", "format": "csv",
-             "path": "radar-camera/objects.csv"},
+            {
+                "sensor_id": LIDAR_ID,
+                "kind": "lidar",
+                "format": "ouster",
+                "path": "lidar/os1-64.pcap.gz",
+                "metadata": "lidar/os1-64.json",
+            },
+            {
+                "sensor_id": UNIT_ID,
+                "kind": "objects",
+                "format": "csv",
+                "path": "radar-camera/objects.csv",
+            },
         ],
-        "truth": {"path": "gps/probe.nmea", "antenna_forward_m": ANTENNA_FORWARD_M,
-                  "antenna_left_m": 0.0, "vehicle_id": probe_id},
-    }  # fmt: skip
+        "truth": {
+            "path": "gps/probe.nmea",
+            "antenna_forward_m": ANTENNA_FORWARD_M,
+            "antenna_left_m": 0.0,
+            "vehicle_id": probe_id,
+        },
+    }
     manifest_path = out / "log.yaml"
     manifest_path.write_text(yaml.safe_dump(manifest, sort_keys=False))
     return manifest_path
 
 
-def _in_unit_view(vehicle: VehicleTruth, mount_xy: tuple[float, float], heading: float,
-                  max_range_m: float, half_fov_rad: float) -> tuple[float, float] | None:  # fmt: skip
+def _in_unit_view(
+    vehicle: VehicleTruth,
+    mount_xy: tuple[float, float],
+    heading: float,
+    max_range_m: float,
+    half_fov_rad: float,
+) -> tuple[float, float] | None:
     dx, dy = vehicle.x_m - mount_xy[0], vehicle.y_m - mount_xy[1]
     c, s = math.cos(heading), math.sin(heading)
     forward, left = c * dx + s * dy, -s * dx + c * dy
@@ -216,8 +281,13 @@ def _in_unit_view(vehicle: VehicleTruth, mount_xy: tuple[float, float], heading:
     return rng, azimuth
 
 
-def _write_unit(path: Path, truth: list[tuple[float, list[VehicleTruth]]], mount: object,
-                start_s: float, rng: np.random.Generator) -> None:  # fmt: skip
+def _write_unit(
+    path: Path,
+    truth: list[tuple[float, list[VehicleTruth]]],
+    mount: object,
+    start_s: float,
+    rng: np.random.Generator,
+) -> None:
     from wz_shared.site import RadarIntrinsics, SensorMount
 
     assert isinstance(mount, SensorMount) and isinstance(mount.intrinsics, RadarIntrinsics)
@@ -229,8 +299,9 @@ def _write_unit(path: Path, truth: list[tuple[float, list[VehicleTruth]]], mount
     next_t = truth[0][0]
     with path.open("w", newline="") as stream:
         writer = csv.writer(stream)
-        writer.writerow(["time_unix_s", "object_id", "range_m", "azimuth_deg", "speed_mps",
-                         "class"])  # fmt: skip
+        writer.writerow(
+            ["time_unix_s", "object_id", "range_m", "azimuth_deg", "speed_mps", "class"]
+        )
         for t, vehicles in truth:
             if t + 1e-9 < next_t:
                 continue
@@ -239,21 +310,33 @@ def _write_unit(path: Path, truth: list[tuple[float, list[VehicleTruth]]], mount
             if any(a <= since < a + d for a, d in UNIT_OUTAGES_S) or rng.random() < UNIT_LOSS:
                 continue
             for v in vehicles:
-                seen = _in_unit_view(v, (mount.pose.x_m, mount.pose.y_m), heading,
-                                     intrinsics.max_range_m, half_fov)  # fmt: skip
+                seen = _in_unit_view(
+                    v, (mount.pose.x_m, mount.pose.y_m), heading, intrinsics.max_range_m, half_fov
+                )
                 if seen is None:
                     continue
                 object_id = ids.setdefault(v.vehicle_id, len(ids) + 1)
                 rng_m = seen[0] + rng.normal(0.0, intrinsics.range_noise_std_m)
                 azimuth = seen[1] + math.radians(rng.normal(0.0, intrinsics.azimuth_noise_std_deg))
-                writer.writerow([f"{T0_UNIX_S + t + UNIT_CLOCK_AHEAD_S:.3f}", object_id,
-                                 f"{rng_m:.2f}", f"{math.degrees(azimuth):.3f}",
-                                 f"{v.speed_mps + rng.normal(0.0, 0.2):.2f}",
-                                 _CLASS_NAMES.get(v.vehicle_class, "unknown")])  # fmt: skip
+                writer.writerow(
+                    [
+                        f"{T0_UNIX_S + t + UNIT_CLOCK_AHEAD_S:.3f}",
+                        object_id,
+                        f"{rng_m:.2f}",
+                        f"{math.degrees(azimuth):.3f}",
+                        f"{v.speed_mps + rng.normal(0.0, 0.2):.2f}",
+                        _CLASS_NAMES.get(v.vehicle_class, "unknown"),
+                    ]
+                )
 
 
-def _write_gps(path: Path, truth: list[tuple[float, list[VehicleTruth]]], probe_id: str,
-               site: Site, rng: np.random.Generator) -> None:  # fmt: skip
+def _write_gps(
+    path: Path,
+    truth: list[tuple[float, list[VehicleTruth]]],
+    probe_id: str,
+    site: Site,
+    rng: np.random.Generator,
+) -> None:
     period = 1.0 / GPS_RATE_HZ
     next_t = truth[0][0]
     lines: list[str] = []
@@ -264,25 +347,44 @@ def _write_gps(path: Path, truth: list[tuple[float, list[VehicleTruth]]], probe_
         probe = next((v for v in vehicles if v.vehicle_id == probe_id), None)
         if probe is None:
             continue
-        ax = probe.x_m + ANTENNA_FORWARD_M * math.cos(probe.heading_rad) + rng.normal(0, GPS_NOISE_M)
-        ay = probe.y_m + ANTENNA_FORWARD_M * math.sin(probe.heading_rad) + rng.normal(0, GPS_NOISE_M)
+        ax = (
+            probe.x_m + ANTENNA_FORWARD_M * math.cos(probe.heading_rad) + rng.normal(0, GPS_NOISE_M)
+        )
+        ay = (
+            probe.y_m + ANTENNA_FORWARD_M * math.sin(probe.heading_rad) + rng.normal(0, GPS_NOISE_M)
+        )
         latitude, longitude, altitude = site.geo_frame.to_wgs84(ax, ay)
         course = (90.0 - math.degrees(probe.heading_rad)) % 360.0  # clockwise from north
-        lines += nmea_epoch(T0_UNIX_S + t, float(latitude), float(longitude),
-                            float(altitude) + 1.8, probe.speed_mps, course)  # fmt: skip
+        lines += nmea_epoch(
+            T0_UNIX_S + t,
+            float(latitude),
+            float(longitude),
+            float(altitude) + 1.8,
+            probe.speed_mps,
+            course,
+        )
     path.write_text("\r\n".join(lines) + "\r\n")
 
 
 def _write_truth(path: Path, truth: list[tuple[float, list[VehicleTruth]]]) -> None:
     with path.open("w", newline="") as stream:
         writer = csv.writer(stream)
-        writer.writerow(["time_unix_s", "vehicle_id", "x_m", "y_m", "speed_mps", "heading_rad",
-                         "class"])  # fmt: skip
+        writer.writerow(
+            ["time_unix_s", "vehicle_id", "x_m", "y_m", "speed_mps", "heading_rad", "class"]
+        )
         for t, vehicles in truth:
             for v in vehicles:
-                writer.writerow([f"{T0_UNIX_S + t:.3f}", v.vehicle_id, f"{v.x_m:.3f}",
-                                 f"{v.y_m:.3f}", f"{v.speed_mps:.3f}", f"{v.heading_rad:.5f}",
-                                 v.vehicle_class.value])  # fmt: skip
+                writer.writerow(
+                    [
+                        f"{T0_UNIX_S + t:.3f}",
+                        v.vehicle_id,
+                        f"{v.x_m:.3f}",
+                        f"{v.y_m:.3f}",
+                        f"{v.speed_mps:.3f}",
+                        f"{v.heading_rad:.5f}",
+                        v.vehicle_class.value,
+                    ]
+                )
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -89,8 +89,11 @@ class FieldRun:
     def observations(self, sensor_id: str) -> list[Observation]:
         """Every detection of one source, flattened, each at its own capture time (a spinning
         LiDAR's objects are seen up to a sweep after the frame's stamp)."""
-        return [Observation(b.stamp + (d.time_offset_s or 0.0), d.x_m, d.y_m, d.local_track_id)
-                for b in self.detections.get(sensor_id, []) for d in b.detections]  # fmt: skip
+        return [
+            Observation(b.stamp + (d.time_offset_s or 0.0), d.x_m, d.y_m, d.local_track_id)
+            for b in self.detections.get(sensor_id, [])
+            for d in b.detections
+        ]
 
 
 def detect(field_log: FieldLog, *, learn_frames: int = 20) -> FieldRun:
@@ -107,19 +110,23 @@ def detect(field_log: FieldLog, *, learn_frames: int = 20) -> FieldRun:
         run.detections[source.sensor_id] = []
         if source.kind == "lidar":
             mount = next(m for m in field_log.site.sensors if m.sensor_id == source.sensor_id)
-            detectors[source.sensor_id] = LidarDetector(field_log.site.site_id, mount, settings,
-                                                        report)  # fmt: skip
+            detectors[source.sensor_id] = LidarDetector(
+                field_log.site.site_id, mount, settings, report
+            )
         elif source.kind == "camera":
             raise FieldDataError(
-                field_log.folder / "log.yaml", f"source {source.sensor_id} is a camera video: "
+                field_log.folder / "log.yaml",
+                f"source {source.sensor_id} is a camera video: "
                 "the in-process evaluation reads LiDAR and object lists; replay a video on the "
-                "bus through the camera detector (wz replay)")
+                "bus through the camera detector (wz replay)",
+            )
     site = field_log.site
     for item in merged_records(field_log, run.problems):  # the records: no envelope round trip
         sensor = item.source.sensor_id
         if isinstance(item.record, ObjectList):
             run.detections[sensor].append(
-                objects_to_detections(item.record, item.mount, site, item.index))
+                objects_to_detections(item.record, item.mount, site, item.index)
+            )
             continue
         assert isinstance(item.record, LidarSweep)
         meta = lidar_meta(item.record, sensor, site, item.index)
@@ -130,9 +137,13 @@ def detect(field_log: FieldLog, *, learn_frames: int = 20) -> FieldRun:
     return run
 
 
-def fuse(field_log: FieldLog, run: FieldRun, offsets_s: Mapping[str, float] | None = None,
-         tracker_settings: TrackerSettings | None = None,
-         bias_map: BiasMap | None = None) -> list[Observation]:  # fmt: skip
+def fuse(
+    field_log: FieldLog,
+    run: FieldRun,
+    offsets_s: Mapping[str, float] | None = None,
+    tracker_settings: TrackerSettings | None = None,
+    bias_map: BiasMap | None = None,
+) -> list[Observation]:
     """The production tracker over every source's detections, stamps corrected by
     ``offsets_s`` and, with a ``bias_map``, each sensor's lateral bias removed; the confirmed
     tracks every 1/``SAMPLE_HZ`` s (reference clock)."""
@@ -140,15 +151,21 @@ def fuse(field_log: FieldLog, run: FieldRun, offsets_s: Mapping[str, float] | No
     bias = None if bias_map is None else LateralBiasCorrector(site, bias_map)
     offsets = dict(offsets_s or {})
     batches = sorted(
-        (b.model_copy(update={"stamp": b.stamp - offsets.get(sensor, 0.0)})
-         for sensor, sensor_batches in run.detections.items() for b in sensor_batches),
-        key=lambda b: (b.stamp, b.source_id))  # fmt: skip
+        (
+            b.model_copy(update={"stamp": b.stamp - offsets.get(sensor, 0.0)})
+            for sensor, sensor_batches in run.detections.items()
+            for b in sensor_batches
+        ),
+        key=lambda b: (b.stamp, b.source_id),
+    )
     if not batches:
         return []
-    tracker = MultiTargetTracker(tracker_settings or TrackerSettings(),
-                                 heading_at=road_heading_hook(site),
-                                 sensor_positions=sensor_positions(site),
-                                 headings_at=road_headings_hook(site))  # fmt: skip
+    tracker = MultiTargetTracker(
+        tracker_settings or TrackerSettings(),
+        heading_at=road_heading_hook(site),
+        sensor_positions=sensor_positions(site),
+        headings_at=road_headings_hook(site),
+    )
     fused: list[Observation] = []
     position = 0
     first, last = batches[0].stamp, batches[-1].stamp
@@ -156,13 +173,17 @@ def fuse(field_log: FieldLog, run: FieldRun, offsets_s: Mapping[str, float] | No
         sample_s = first + k / SAMPLE_HZ
         while position < len(batches) and batches[position].stamp <= sample_s + 1e-9:
             batch = batches[position]
-            tracker.add(batch.source_id, batch.stamp,
-                        to_measurements(batch, lambda r, d: None, bias))  # fmt: skip
+            tracker.add(
+                batch.source_id, batch.stamp, to_measurements(batch, lambda r, d: None, bias)
+            )
             position += 1
         tracker.flush()
         tracker.advance_to(sample_s)
-        fused += [Observation(sample_s, s.x_m, s.y_m, s.track_id)
-                  for s in tracker.tracks(sample_s) if s.status != "tentative"]  # fmt: skip
+        fused += [
+            Observation(sample_s, s.x_m, s.y_m, s.track_id)
+            for s in tracker.tracks(sample_s)
+            if s.status != "tentative"
+        ]
     return fused
 
 
@@ -175,10 +196,15 @@ def _observations(items: list[Observation]) -> SourceObservations:
     )
 
 
-def evaluate_log(field_log: FieldLog, truth_path: Path | None = None, *,
-                 out_dir: Path | None = None, settings: FieldSettings | None = None,
-                 bias_map: BiasMap | None = None,
-                 bias_min_samples: int = 30) -> dict[str, Any]:  # fmt: skip
+def evaluate_log(
+    field_log: FieldLog,
+    truth_path: Path | None = None,
+    *,
+    out_dir: Path | None = None,
+    settings: FieldSettings | None = None,
+    bias_map: BiasMap | None = None,
+    bias_min_samples: int = 30,
+) -> dict[str, Any]:
     """The paper's field validation on a log: each source and the fused tracks against the
     GPS track; the report as a dict (``table``: markdown), the plot under ``out_dir``.
 
@@ -194,44 +220,66 @@ def evaluate_log(field_log: FieldLog, truth_path: Path | None = None, *,
         raise FieldDataError(field_log.folder / "log.yaml", "no truth: give --truth GPS_FILE")
     truth_spec = field_log.manifest.truth
     gps_problems = Problems()
-    track = gps_track(list(read_gps(truth_path, gps_problems)), field_log.site,
-                      antenna_forward_m=truth_spec.antenna_forward_m if truth_spec else 0.0,
-                      antenna_left_m=truth_spec.antenna_left_m if truth_spec else 0.0)  # fmt: skip
+    track = gps_track(
+        list(read_gps(truth_path, gps_problems)),
+        field_log.site,
+        antenna_forward_m=truth_spec.antenna_forward_m if truth_spec else 0.0,
+        antenna_left_m=truth_spec.antenna_left_m if truth_spec else 0.0,
+    )
     run = detect(field_log)
     road = field_log.site.road_frame
-    per_source = {source.sensor_id: _observations(run.observations(source.sensor_id))
-                  for source in field_log.sources}  # fmt: skip
-    offsets = {name: estimate_clock_offset(track, observations, road, settings).offset_s
-               for name, observations in per_source.items() if len(observations.times_s)}  # fmt: skip
+    per_source = {
+        source.sensor_id: _observations(run.observations(source.sensor_id))
+        for source in field_log.sources
+    }
+    offsets = {
+        name: estimate_clock_offset(track, observations, road, settings).offset_s
+        for name, observations in per_source.items()
+        if len(observations.times_s)
+    }
     run.fused = fuse(field_log, run, offsets, bias_map=bias_map)
     sources = {**per_source, FUSED: _observations(run.fused)}
-    result = evaluate_field(track, sources, road, settings,
-                            clock_offsets_s={FUSED: 0.0})  # fmt: skip
-    measured = fit_bias_map(field_log.site, [
-        (name, float(station), float(offset), float(error))
-        for name, source in result.sources.items() if name != FUSED
-        for station, offset, error in zip(source.association.truth_station_m,
-                                          source.association.truth_offset_m,
-                                          source.association.lateral_error_m, strict=True)
-    ], min_samples=bias_min_samples, source=f"field log {field_log.folder}")  # fmt: skip
+    result = evaluate_field(track, sources, road, settings, clock_offsets_s={FUSED: 0.0})
+    measured = fit_bias_map(
+        field_log.site,
+        [
+            (name, float(station), float(offset), float(error))
+            for name, source in result.sources.items()
+            if name != FUSED
+            for station, offset, error in zip(
+                source.association.truth_station_m,
+                source.association.truth_offset_m,
+                source.association.lateral_error_m,
+                strict=True,
+            )
+        ],
+        min_samples=bias_min_samples,
+        source=f"field log {field_log.folder}",
+    )
     # The same, on the stretch every source saw the probe on: each on the same ground.
     spans = []
     for name, observations in sources.items():
         association = associate(track, observations, road, offsets.get(name, 0.0), settings)
         if len(association):
-            spans.append((float(association.truth_station_m.min()),
-                          float(association.truth_station_m.max())))  # fmt: skip
+            spans.append(
+                (float(association.truth_station_m.min()), float(association.truth_station_m.max()))
+            )
     common = None
     if len(spans) == len(sources) and max(a for a, _ in spans) < min(b for _, b in spans):
         window = (max(a for a, _ in spans), min(b for _, b in spans))
-        common = evaluate_field(track, sources, road,
-                                replace(settings or FieldSettings(), station_window_m=window),
-                                clock_offsets_s={FUSED: 0.0})  # fmt: skip
+        common = evaluate_field(
+            track,
+            sources,
+            road,
+            replace(settings or FieldSettings(), station_window_m=window),
+            clock_offsets_s={FUSED: 0.0},
+        )
     report: dict[str, Any] = {
-        "log": str(field_log.folder), "site": field_log.site.site_id,
-        "truth": str(truth_path), "gps_fixes": len(track),
-        "sources": {s.sensor_id: {"kind": s.kind, "format": s.format}
-                    for s in field_log.sources},
+        "log": str(field_log.folder),
+        "site": field_log.site.site_id,
+        "truth": str(truth_path),
+        "gps_fixes": len(track),
+        "sources": {s.sensor_id: {"kind": s.kind, "format": s.format} for s in field_log.sources},
         "detections": {name: len(batches) for name, batches in run.detections.items()},
         "skipped_records": {**run.problems.summary(), **gps_problems.summary()},
         "detector_problems": run.detector_problems,
@@ -242,7 +290,7 @@ def evaluate_log(field_log: FieldLog, truth_path: Path | None = None, *,
         "wall_s": run.wall_s,
         "bias_map": None if bias_map is None else bias_map.source,
         "measured_bias_map": measured.model_dump(mode="json"),
-    }  # fmt: skip
+    }
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
         plot = plot_field(result, out_dir / "field.png")
@@ -252,55 +300,96 @@ def evaluate_log(field_log: FieldLog, truth_path: Path | None = None, *,
 
 def markdown(report: dict[str, Any]) -> str:
     fused = report["result"]["sources"][FUSED]
-    lines = [f"# Field validation: `{report['log']}` against `{report['truth']}`", "",
-             f"Site `{report['site']}`; {report['gps_fixes']} GPS fixes; detections per source: "
-             + ", ".join(f"{k} {v}" for k, v in report["detections"].items()) + ".", "",
-             "Each source over all it saw of the probe:", "", report["table"], "",
-             f"Fused track: {fused['distinct_ids']} track id(s), {fused['id_changes']} change(s) "
-             f"on the probe; longest gap {fused['longest_gap_s']:.2f} s.", ""]  # fmt: skip
+    lines = [
+        f"# Field validation: `{report['log']}` against `{report['truth']}`",
+        "",
+        f"Site `{report['site']}`; {report['gps_fixes']} GPS fixes; detections per source: "
+        + ", ".join(f"{k} {v}" for k, v in report["detections"].items())
+        + ".",
+        "",
+        "Each source over all it saw of the probe:",
+        "",
+        report["table"],
+        "",
+        f"Fused track: {fused['distinct_ids']} track id(s), {fused['id_changes']} change(s) "
+        f"on the probe; longest gap {fused['longest_gap_s']:.2f} s.",
+        "",
+    ]
     if report["common_table"]:
         window = report["common"]["station_window_m"]
-        lines += [f"On the stretch every source saw the probe on (stations {window[0]:.0f} to "
-                  f"{window[1]:.0f} m):", "", report["common_table"], ""]
+        lines += [
+            f"On the stretch every source saw the probe on (stations {window[0]:.0f} to "
+            f"{window[1]:.0f} m):",
+            "",
+            report["common_table"],
+            "",
+        ]
     if report["skipped_records"]:
-        lines += ["Records skipped: " + ", ".join(f"{k}: {v}" for k, v in
-                                                  report["skipped_records"].items()), ""]  # fmt: skip
+        lines += [
+            "Records skipped: "
+            + ", ".join(f"{k}: {v}" for k, v in report["skipped_records"].items()),
+            "",
+        ]
     lines += [f"![{plot}]({plot})" for plot in report.get("plots", [])]
     return "\n".join(lines) + "\n"
 
 
 def main(argv: list[str] | None = None) -> int:
     """``wz eval --log LOG_DIR [--truth GPS_FILE]`` (from :func:`wz_eval.fusion.main`)."""
-    parser = argparse.ArgumentParser(prog="wz eval --log",
-                                     description="the paper's field validation on a field log")
+    parser = argparse.ArgumentParser(
+        prog="wz eval --log", description="the paper's field validation on a field log"
+    )
     parser.add_argument("--log", type=Path, required=True, metavar="LOG_DIR")
-    parser.add_argument("--truth", type=Path, default=None, metavar="GPS_FILE",
-                        help="NMEA or CSV (default: the log's truth)")
+    parser.add_argument(
+        "--truth",
+        type=Path,
+        default=None,
+        metavar="GPS_FILE",
+        help="NMEA or CSV (default: the log's truth)",
+    )
     parser.add_argument("--out", type=Path, default=Path("runs/field-eval"))
     parser.add_argument("--json", type=Path, default=None)
-    parser.add_argument("--bias-map", type=Path, default=None, metavar="FILE",
-                        help="remove each sensor's lateral bias (a map of this site) before "
-                        "the tracker")  # fmt: skip
-    parser.add_argument("--write-bias-map", type=Path, default=None, metavar="FILE",
-                        help="write each sensor's lateral bias against the probe: a "
-                        "calibration drive's map")  # fmt: skip
-    parser.add_argument("--bias-min-samples", type=int, default=30, metavar="N",
-                        help="a map's cell needs at least N errors (default 30)")
+    parser.add_argument(
+        "--bias-map",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="remove each sensor's lateral bias (a map of this site) before the tracker",
+    )
+    parser.add_argument(
+        "--write-bias-map",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="write each sensor's lateral bias against the probe: a calibration drive's map",
+    )
+    parser.add_argument(
+        "--bias-min-samples",
+        type=int,
+        default=30,
+        metavar="N",
+        help="a map's cell needs at least N errors (default 30)",
+    )
     args = parser.parse_args(argv)
     configure_logging(service="eval", site="-", level="WARNING")
     try:
         field_log = load_log(args.log)
-        bias_map = (None if args.bias_map is None
-                    else load_bias_map(args.bias_map, field_log.site))  # fmt: skip
-        report = evaluate_log(field_log, args.truth, out_dir=args.out, bias_map=bias_map,
-                              bias_min_samples=args.bias_min_samples)  # fmt: skip
+        bias_map = None if args.bias_map is None else load_bias_map(args.bias_map, field_log.site)
+        report = evaluate_log(
+            field_log,
+            args.truth,
+            out_dir=args.out,
+            bias_map=bias_map,
+            bias_min_samples=args.bias_min_samples,
+        )
     except (FieldDataError, BiasMapError) as exc:
         sys.stderr.write(f"wz eval: {exc}\n")
         return 1
     if args.write_bias_map is not None:
         write_bias_map(args.write_bias_map, BiasMap.model_validate(report["measured_bias_map"]))
     (args.json or args.out / "field-eval.json").write_text(
-        json.dumps(report, indent=2, default=str) + "\n")
+        json.dumps(report, indent=2, default=str) + "\n"
+    )
     text = markdown(report)
     (args.out / "field-eval.md").write_text(text)
     sys.stdout.write(text)

@@ -119,8 +119,17 @@ from wz_simulator.settings import SimulatorSettings
 
 log = logging.getLogger("wz_eval.fusion")
 
-SOURCES = ("camera", "lidar", "radar", "camera_radar", "average", "paper_kf", "fused",
-           "fused_smoothed", "fused_stored")
+SOURCES = (
+    "camera",
+    "lidar",
+    "radar",
+    "camera_radar",
+    "average",
+    "paper_kf",
+    "fused",
+    "fused_smoothed",
+    "fused_stored",
+)
 #: Gate for matching a source's estimate to a vehicle [m] (the MOT metrics use 3 m).
 SOURCE_GATE_M = 5.0
 MOT_GATE_M = 3.0
@@ -167,8 +176,10 @@ def _progress(sim_s: float, total_s: float) -> None:
     done = min(1.0, sim_s / total_s) if total_s > 0 else 1.0
     if sys.stderr.isatty():
         bar = "#" * int(30 * done)
-        sys.stderr.write(f"\r  simulating [{bar:<30}] {100 * done:5.1f} % "
-                         f"({sim_s:.0f}/{total_s:.0f} s)" + ("\n" if done >= 1.0 else ""))  # fmt: skip
+        sys.stderr.write(
+            f"\r  simulating [{bar:<30}] {100 * done:5.1f} % "
+            f"({sim_s:.0f}/{total_s:.0f} s)" + ("\n" if done >= 1.0 else "")
+        )
     elif int(10 * done) != int(10 * min(1.0, (sim_s - 1.0) / total_s)):
         sys.stderr.write(f"simulating: {100 * done:.0f} % ({sim_s:.0f}/{total_s:.0f} s)\n")
     sys.stderr.flush()
@@ -176,9 +187,11 @@ def _progress(sim_s: float, total_s: float) -> None:
 
 def _silent(sensor_id: str, stamp_s: float, dropouts: Sequence[Dropout], warmup_s: float) -> bool:
     """Whether ``sensor_id`` is in one of the dropouts at ``stamp_s``."""
-    return any(sensor_id == d.sensor_id
-               and warmup_s + d.start_s <= stamp_s < warmup_s + d.start_s + d.duration_s
-               for d in dropouts)  # fmt: skip
+    return any(
+        sensor_id == d.sensor_id
+        and warmup_s + d.start_s <= stamp_s < warmup_s + d.start_s + d.duration_s
+        for d in dropouts
+    )
 
 
 def _dropped(batch: DetectionBatch, dropouts: Sequence[Dropout], warmup_s: float) -> bool:
@@ -189,29 +202,45 @@ def _dropped(batch: DetectionBatch, dropouts: Sequence[Dropout], warmup_s: float
 class Scores:
     """Per-source errors, per-vehicle samples for the paper table, MOT events."""
 
-    errors: dict[str, AxisErrors] = field(default_factory=lambda: {s: AxisErrors() for s in SOURCES})
+    errors: dict[str, AxisErrors] = field(
+        default_factory=lambda: {s: AxisErrors() for s in SOURCES}
+    )
     # vehicle id -> source -> stamp -> (lon error, lat error, true station, true offset)
     per_vehicle: dict[str, dict[str, dict[float, tuple[float, float, float, float]]]] = field(
-        default_factory=lambda: defaultdict(lambda: defaultdict(dict)))  # fmt: skip
+        default_factory=lambda: defaultdict(lambda: defaultdict(dict))
+    )
 
-    def add(self, site: Site, source: str, stamp_s: float,
-            estimates: Sequence[tuple[float, float, float | None]],
-            vehicles: Sequence[VehicleTruth],
-            time_offsets_s: Sequence[float | None] | None = None,
-            ) -> list[tuple[int, VehicleTruth, float, float]]:  # fmt: skip
-        matched = score_instant(site, self.errors[source], estimates, vehicles, SOURCE_GATE_M,
-                                time_offsets_s)  # fmt: skip
+    def add(
+        self,
+        site: Site,
+        source: str,
+        stamp_s: float,
+        estimates: Sequence[tuple[float, float, float | None]],
+        vehicles: Sequence[VehicleTruth],
+        time_offsets_s: Sequence[float | None] | None = None,
+    ) -> list[tuple[int, VehicleTruth, float, float]]:
+        matched = score_instant(
+            site, self.errors[source], estimates, vehicles, SOURCE_GATE_M, time_offsets_s
+        )
         for _, vehicle, lon, lat in matched:
             station, offset = site.road_frame.to_road(vehicle.x_m, vehicle.y_m)
             self.per_vehicle[vehicle.vehicle_id][source][round(stamp_s, 4)] = (
-                lon, lat, float(station), float(offset))
+                lon,
+                lat,
+                float(station),
+                float(offset),
+            )
         return matched
 
 
 def _oracle_observations(
-    frames: Sequence[tuple[float, Sequence[tuple[float, float]]]], truth: TruthIndex, site: Site,
-    centre: tuple[float, float], max_range_m: float, ids: dict[str, int],
-) -> list[Observation]:  # fmt: skip
+    frames: Sequence[tuple[float, Sequence[tuple[float, float]]]],
+    truth: TruthIndex,
+    site: Site,
+    centre: tuple[float, float],
+    max_range_m: float,
+    ids: dict[str, int],
+) -> list[Observation]:
     """A sensor's positions with the id of the vehicle each is nearest to (see the docstring)."""
     observations = []
     for stamp, points in frames:
@@ -231,14 +260,25 @@ def camera_id(record: PipelineRecord) -> str:
     return camera_mount(record.site, None).sensor_id
 
 
-def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = None,
-             plots_dir: Path | None = None) -> dict[str, Any]:  # fmt: skip
+def evaluate(
+    site: Site,
+    options: EvalOptions,
+    record: PipelineRecord | None = None,
+    plots_dir: Path | None = None,
+) -> dict[str, Any]:
     """Run (or take) the pipeline record and score every source (module docstring)."""
     if record is None:
-        record = run_pipeline(site, PipelineOptions(
-            seed=options.seed, duration_s=options.duration_s, warmup_s=options.warmup_s,
-            camera_model=options.camera_model, vehicles_per_hour=options.vehicles_per_hour,
-        ), progress=_progress)  # fmt: skip
+        record = run_pipeline(
+            site,
+            PipelineOptions(
+                seed=options.seed,
+                duration_s=options.duration_s,
+                warmup_s=options.warmup_s,
+                camera_model=options.camera_model,
+                vehicles_per_hour=options.vehicles_per_hour,
+            ),
+            progress=_progress,
+        )
     started = time.perf_counter()
     truth = TruthIndex(record.truth)
     mast = lidar_mount(site, None).pose
@@ -259,9 +299,15 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
         if vehicles is None:
             continue
         source = "lidar" if batch.source_id == lidar_id else "camera_radar"
-        scores.add(site, source, batch.stamp,
-                   [(d.x_m, d.y_m, d.speed_mps) for d in batch.detections], vehicles,
-                   [d.time_offset_s for d in batch.detections])  # fmt: skip
+        scores.add(
+            site,
+            source,
+            batch.stamp,
+            [(d.x_m, d.y_m, d.speed_mps) for d in batch.detections],
+            vehicles,
+            [d.time_offset_s for d in batch.detections],
+        )
+
     def _silenced(stamp_s: float) -> bool:
         """The camera is in a dropout at ``stamp_s`` (its camera-only positions go too)."""
         return _silent(cam_id, stamp_s, options.dropouts, options.warmup_s)
@@ -274,9 +320,12 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
             scores.add(site, "radar", stamp, [(p.x_m, p.y_m, None) for p in points], vehicles)
 
     # --- the production tracker, sampled at every camera frame time
-    tracker = MultiTargetTracker(options.tracker, heading_at=road_heading_hook(site),
-                                 sensor_positions=sensor_positions(site),
-                                 headings_at=road_headings_hook(site))  # fmt: skip
+    tracker = MultiTargetTracker(
+        options.tracker,
+        heading_at=road_heading_hook(site),
+        sensor_positions=sensor_positions(site),
+        headings_at=road_headings_hook(site),
+    )
     bias = None if options.bias_map is None else LateralBiasCorrector(site, options.bias_map)
     mot = _MotAccumulator()
     sample_times = [stamp for stamp, _ in record.camera_only]
@@ -294,8 +343,9 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
         t0 = time.perf_counter()
         while position < len(batches) and batches[position].stamp <= sample_s + 1e-9:
             batch = batches[position]
-            tracker.add(batch.source_id, batch.stamp,
-                        to_measurements(batch, lambda r, d: None, bias))  # fmt: skip
+            tracker.add(
+                batch.source_id, batch.stamp, to_measurements(batch, lambda r, d: None, bias)
+            )
             position += 1
         tracker.flush()
         tracker.advance_to(sample_s)
@@ -304,19 +354,30 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
             stored[state.track_id].append(state)
         tracker_s += time.perf_counter() - t0
         # what the node would publish, for the alert service
-        alert_batches.append(TrackBatch(
-            site=site.site_id, source_id="fusion-tracker", stamp=sample_s,
-            cycle_index=len(alert_batches), tracks=[to_track(site, s) for s in published],
-            process_noise=process_noise(options.tracker)))  # fmt: skip
-        states = [s for s in published if math.hypot(s.x_m - centre[0], s.y_m - centre[1])
-                  <= options.max_range_m + EDGE_MARGIN_M]  # fmt: skip
+        alert_batches.append(
+            TrackBatch(
+                site=site.site_id,
+                source_id="fusion-tracker",
+                stamp=sample_s,
+                cycle_index=len(alert_batches),
+                tracks=[to_track(site, s) for s in published],
+                process_noise=process_noise(options.tracker),
+            )
+        )
+        states = [
+            s
+            for s in published
+            if math.hypot(s.x_m - centre[0], s.y_m - centre[1])
+            <= options.max_range_m + EDGE_MARGIN_M
+        ]
         found = truth.at(sample_s)
         if found is None:
             continue
         nearby = in_range(site, found, centre, options.max_range_m + EDGE_MARGIN_M)
         vehicles, states = scored_region(nearby, states, centre, options.max_range_m)
-        matched = scores.add(site, "fused", sample_s,
-                             [(s.x_m, s.y_m, s.speed_mps) for s in states], vehicles)  # fmt: skip
+        matched = scores.add(
+            site, "fused", sample_s, [(s.x_m, s.y_m, s.speed_mps) for s in states], vehicles
+        )
         fused_samples.extend((sample_s, lon, lat) for _, _, lon, lat in matched)
         mot.update(vehicles, states)
         mot_times.append(sample_s)
@@ -328,28 +389,42 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
     histories.extend(tracker.unfinished_histories())
     smoothed = smoothed_positions(histories)
     for sample_s, track_ids, scored_vehicles in scored_ids:
-        smoothed_estimates = [xy for track_id in track_ids
-                              if (xy := smoothed_at(smoothed, track_id, sample_s)) is not None]  # fmt: skip
+        smoothed_estimates = [
+            xy
+            for track_id in track_ids
+            if (xy := smoothed_at(smoothed, track_id, sample_s)) is not None
+        ]
         scores.add(site, "fused_smoothed", sample_s, smoothed_estimates, scored_vehicles)
     # --- the published states as the gateway smooths them when a track ends
     stored_smoothed = gateway_smoothed(stored, options.tracker)
     for sample_s, track_ids, scored_vehicles in scored_ids:
-        stored_estimates = [xy for track_id in track_ids
-                            if (xy := smoothed_at(stored_smoothed, track_id, sample_s)) is not None]  # fmt: skip
+        stored_estimates = [
+            xy
+            for track_id in track_ids
+            if (xy := smoothed_at(stored_smoothed, track_id, sample_s)) is not None
+        ]
         scores.add(site, "fused_stored", sample_s, stored_estimates, scored_vehicles)
 
     # --- the paper's method, with oracle per-sensor identities
     ids: dict[str, int] = {}
-    camera_frames = [(stamp, [(p.x_m, p.y_m) for p in points])
-                     for stamp, points in record.camera_only if not _silenced(stamp)]
-    lidar_frames = [(b.stamp, [(d.x_m, d.y_m) for d in b.detections]) for b in batches
-                    if b.source_id == lidar_id]
+    camera_frames = [
+        (stamp, [(p.x_m, p.y_m) for p in points])
+        for stamp, points in record.camera_only
+        if not _silenced(stamp)
+    ]
+    lidar_frames = [
+        (b.stamp, [(d.x_m, d.y_m) for d in b.detections])
+        for b in batches
+        if b.source_id == lidar_id
+    ]
     observations = {
         options.paper.camera_sensor_id: _oracle_observations(
-            camera_frames, truth, site, centre, options.max_range_m, ids),
+            camera_frames, truth, site, centre, options.max_range_m, ids
+        ),
         options.paper.lidar_sensor_id: _oracle_observations(
-            lidar_frames, truth, site, centre, options.max_range_m, ids),
-    }  # fmt: skip
+            lidar_frames, truth, site, centre, options.max_range_m, ids
+        ),
+    }
     estimates = run_paper_pipeline(observations, options.paper)
     by_stamp: dict[float, list[FusedEstimate]] = defaultdict(list)
     for estimate in estimates:
@@ -359,48 +434,72 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
         vehicles = vehicles_at(stamp)
         if vehicles is None or not frame:
             continue
-        scores.add(site, "paper_kf", stamp,
-                   [(e.x_m, e.y_m, math.hypot(e.vx_mps, e.vy_mps)) for e in frame], vehicles)  # fmt: skip
-        averages = [(e.average_xy_m[0], e.average_xy_m[1], None) for e in frame
-                    if e.average_xy_m is not None]  # fmt: skip
+        scores.add(
+            site,
+            "paper_kf",
+            stamp,
+            [(e.x_m, e.y_m, math.hypot(e.vx_mps, e.vy_mps)) for e in frame],
+            vehicles,
+        )
+        averages = [
+            (e.average_xy_m[0], e.average_xy_m[1], None)
+            for e in frame
+            if e.average_xy_m is not None
+        ]
         scores.add(site, "average", stamp, averages, vehicles)
 
     # --- the alert service on the fused tracks, scored against the same rules on the truth
-    alert_truth = [(stamp, in_range(site, vehicles, centre, ALERT_TRUTH_RANGE_M))
-                   for stamp, vehicles in record.truth]  # fmt: skip
+    alert_truth = [
+        (stamp, in_range(site, vehicles, centre, ALERT_TRUTH_RANGE_M))
+        for stamp, vehicles in record.truth
+    ]
     alert_events = run_alert_engine(site, alert_batches)
     follows = track_follows(alert_batches, alert_truth)
-    alerts = score_alerts(site, observed_truth(alert_truth, batches), alert_events,
-                          follows=follows)  # fmt: skip
+    alerts = score_alerts(site, observed_truth(alert_truth, batches), alert_events, follows=follows)
     alerts_all_in_range = score_alerts(site, alert_truth, alert_events, follows=follows)
 
     report = {
-        "site": site.site_id, "seed": options.seed, "duration_s": options.duration_s,
-        "warmup_s": options.warmup_s, "max_range_m": options.max_range_m,
-        "vehicles": len({v.vehicle_id for _, vs in record.truth for v in vs
-                         if math.hypot(v.x_m - centre[0], v.y_m - centre[1])
-                         <= options.max_range_m}),
-        **{f"rmse_{axis}": {s: scores.errors[s].summary()[f"rmse_{axis}"] for s in SOURCES}
-           for axis in ("longitudinal_m", "lateral_m", "speed_mps")},
+        "site": site.site_id,
+        "seed": options.seed,
+        "duration_s": options.duration_s,
+        "warmup_s": options.warmup_s,
+        "max_range_m": options.max_range_m,
+        "vehicles": len(
+            {
+                v.vehicle_id
+                for _, vs in record.truth
+                for v in vs
+                if math.hypot(v.x_m - centre[0], v.y_m - centre[1]) <= options.max_range_m
+            }
+        ),
+        **{
+            f"rmse_{axis}": {s: scores.errors[s].summary()[f"rmse_{axis}"] for s in SOURCES}
+            for axis in ("longitudinal_m", "lateral_m", "speed_mps")
+        },
         "sources": {s: scores.errors[s].summary() for s in SOURCES},
         **mot.summary(len(record.truth)),
         "paper_table": paper_table(site, scores, centre, options.window_upstream_m),
         "alerts": alerts,
         "alerts_all_in_range": alerts_all_in_range,
-        "dropouts": [_dropout_report(d, options.warmup_s, fused_samples, mot, mot_times)
-                     for d in options.dropouts],
+        "dropouts": [
+            _dropout_report(d, options.warmup_s, fused_samples, mot, mot_times)
+            for d in options.dropouts
+        ],
         "pipeline_problems": record.problems,
-        "timing": {"pipeline_wall_s": round(record.wall_s, 1),
-                   "tracker_s": round(tracker_s, 2),
-                   "scoring_wall_s": round(time.perf_counter() - started, 1)},
-    }  # fmt: skip
+        "timing": {
+            "pipeline_wall_s": round(record.wall_s, 1),
+            "tracker_s": round(tracker_s, 2),
+            "scoring_wall_s": round(time.perf_counter() - started, 1),
+        },
+    }
     report["paper_table_summary"] = table_summary(report["paper_table"])
     report["must_show"] = must_show(report)
     report["bias_map"] = None if options.bias_map is None else options.bias_map.source
     report["measured_bias_map"] = fit_bias_map(
-        site, _sensor_errors(scores, {"lidar": lidar_id, "camera_radar": cam_id}),
+        site,
+        _sensor_errors(scores, {"lidar": lidar_id, "camera_radar": cam_id}),
         source=f"wz eval seed {options.seed}, {options.duration_s:g} s",
-    ).model_dump(mode="json")  # fmt: skip
+    ).model_dump(mode="json")
     if plots_dir is not None:
         from wz_eval.plots import write_plots
 
@@ -408,14 +507,18 @@ def evaluate(site: Site, options: EvalOptions, record: PipelineRecord | None = N
     return report
 
 
-def _sensor_errors(scores: Scores, sensor_of_source: dict[str, str]
-                   ) -> list[tuple[str, float, float, float]]:  # fmt: skip
+def _sensor_errors(
+    scores: Scores, sensor_of_source: dict[str, str]
+) -> list[tuple[str, float, float, float]]:
     """``(sensor id, true station, true offset, lateral error)`` of every matched detection of
     the given sources (as scored, uncorrected), for :func:`fit_bias_map`."""
-    return [(sensor_of_source[source], station, offset, lateral)
-            for by_source in scores.per_vehicle.values()
-            for source, samples in by_source.items() if source in sensor_of_source
-            for _, lateral, station, offset in samples.values()]  # fmt: skip
+    return [
+        (sensor_of_source[source], station, offset, lateral)
+        for by_source in scores.per_vehicle.values()
+        for source, samples in by_source.items()
+        if source in sensor_of_source
+        for _, lateral, station, offset in samples.values()
+    ]
 
 
 def smoothed_positions(histories: Sequence[TrackHistory]) -> dict[int, tuple[F64, F64]]:
@@ -430,8 +533,9 @@ def smoothed_positions(histories: Sequence[TrackHistory]) -> dict[int, tuple[F64
     return out
 
 
-def gateway_smoothed(stored: dict[int, list[TrackState]],
-                     settings: TrackerSettings) -> dict[int, tuple[F64, F64]]:  # fmt: skip
+def gateway_smoothed(
+    stored: dict[int, list[TrackState]], settings: TrackerSettings
+) -> dict[int, tuple[F64, F64]]:
     """Per track id: the stamps and states of its published snapshots smoothed as the gateway
     smooths a stored trajectory (:func:`wz_shared.motion.rts_smooth`, the priors recomputed
     with the tracker's process noise): what a researcher gets from
@@ -448,8 +552,9 @@ def gateway_smoothed(stored: dict[int, list[TrackState]],
     return out
 
 
-def smoothed_at(smoothed: dict[int, tuple[F64, F64]], track_id: int,
-                stamp_s: float) -> tuple[float, float, float | None] | None:  # fmt: skip
+def smoothed_at(
+    smoothed: dict[int, tuple[F64, F64]], track_id: int, stamp_s: float
+) -> tuple[float, float, float | None] | None:
     """Track ``track_id``'s smoothed position at ``stamp_s`` (its latest smoothed state
     before, carried at constant velocity) and speed, or None."""
     found = smoothed.get(track_id)
@@ -464,9 +569,12 @@ def smoothed_at(smoothed: dict[int, tuple[F64, F64]], track_id: int,
     return (float(x[0] + x[2] * dt), float(x[1] + x[3] * dt), float(math.hypot(x[2], x[3])))
 
 
-def scored_region(vehicles: Sequence[VehicleTruth], states: Sequence[TrackState],
-                  centre: tuple[float, float], max_range_m: float,
-                  ) -> tuple[list[VehicleTruth], list[TrackState]]:  # fmt: skip
+def scored_region(
+    vehicles: Sequence[VehicleTruth],
+    states: Sequence[TrackState],
+    centre: tuple[float, float],
+    max_range_m: float,
+) -> tuple[list[VehicleTruth], list[TrackState]]:
     """The vehicles and tracks scored at one instant: those within ``max_range_m``.
 
     The region's edge is a "don't care" band, as in KITTI's and MOTChallenge's ignore regions:
@@ -484,16 +592,24 @@ def scored_region(vehicles: Sequence[VehicleTruth], states: Sequence[TrackState]
     tru = np.array([(v.x_m, v.y_m) for v in vehicles], dtype=np.float64).reshape(-1, 2)
     partner = {e: t for e, t in match(est, tru, MOT_GATE_M)}
     kept_states = [
-        s for e, s in enumerate(states)
-        if (inside(vehicles[partner[e]].x_m, vehicles[partner[e]].y_m) if e in partner
-            else inside(s.x_m, s.y_m))
-    ]  # fmt: skip
+        s
+        for e, s in enumerate(states)
+        if (
+            inside(vehicles[partner[e]].x_m, vehicles[partner[e]].y_m)
+            if e in partner
+            else inside(s.x_m, s.y_m)
+        )
+    ]
     return [v for v in vehicles if inside(v.x_m, v.y_m)], kept_states
 
 
-def _dropout_report(dropout: Dropout, warmup_s: float,
-                    fused_samples: Sequence[tuple[float, float, float]],
-                    mot: _MotAccumulator, mot_times: Sequence[float]) -> dict[str, Any]:  # fmt: skip
+def _dropout_report(
+    dropout: Dropout,
+    warmup_s: float,
+    fused_samples: Sequence[tuple[float, float, float]],
+    mot: _MotAccumulator,
+    mot_times: Sequence[float],
+) -> dict[str, Any]:
     """The fused track during a dropout: its errors, and identity switches from its start to
     2 s after its end (a track lost in the gap would show as a switch when taken up again)."""
     start = warmup_s + dropout.start_s
@@ -521,8 +637,7 @@ class _MotAccumulator:
         self.acc = motmetrics.MOTAccumulator(auto_id=True)
         self._numbers: dict[str, int] = {}  # motmetrics wants numeric object ids
 
-    def switches_between(self, frame_times: Sequence[float], start_s: float,
-                         end_s: float) -> int:  # fmt: skip
+    def switches_between(self, frame_times: Sequence[float], start_s: float, end_s: float) -> int:
         """Identity switches in frames stamped within ``[start_s, end_s]``."""
         events = self.acc.mot_events
         switches = events[events.Type == "SWITCH"]
@@ -533,38 +648,52 @@ class _MotAccumulator:
         gt = np.array([(v.x_m, v.y_m) for v in vehicles], dtype=np.float64).reshape(-1, 2)
         hyp = np.array([(s.x_m, s.y_m) for s in states], dtype=np.float64).reshape(-1, 2)
         distances = self._mm.distances.norm2squared_matrix(gt, hyp, max_d2=MOT_GATE_M**2)
-        objects = [self._numbers.setdefault(v.vehicle_id, len(self._numbers) + 1)
-                   for v in vehicles]  # fmt: skip
+        objects = [self._numbers.setdefault(v.vehicle_id, len(self._numbers) + 1) for v in vehicles]
         self.acc.update(objects, [s.track_id for s in states], distances)
 
     def summary(self, _: int) -> dict[str, Any]:
         metrics = self._mm.metrics.create()
-        frame = metrics.compute(self.acc, metrics=[
-            "mota", "motp", "idf1", "num_switches", "num_unique_objects", "num_false_positives",
-            "num_misses", "num_objects", "mostly_tracked"], name="fused")  # fmt: skip
+        frame = metrics.compute(
+            self.acc,
+            metrics=[
+                "mota",
+                "motp",
+                "idf1",
+                "num_switches",
+                "num_unique_objects",
+                "num_false_positives",
+                "num_misses",
+                "num_objects",
+                "mostly_tracked",
+            ],
+            name="fused",
+        )
         row = frame.loc["fused"]
         vehicles = int(row["num_unique_objects"])
         switches = int(row["num_switches"])
         return {
-            "mota": float(row["mota"]), "idf1": float(row["idf1"]),
+            "mota": float(row["mota"]),
+            "idf1": float(row["idf1"]),
             "id_switches": switches,
             "id_switches_per_100_vehicles": 100.0 * switches / vehicles if vehicles else 0.0,
-            "mot_detail": {"motp_m": math.sqrt(float(row["motp"])) if row["motp"] == row["motp"]
-                           else None,
-                           "objects": int(row["num_objects"]),
-                           "false_positives": int(row["num_false_positives"]),
-                           "misses": int(row["num_misses"]), "vehicles_scored": vehicles,
-                           "mostly_tracked": int(row["mostly_tracked"])},
-        }  # fmt: skip
+            "mot_detail": {
+                "motp_m": math.sqrt(float(row["motp"])) if row["motp"] == row["motp"] else None,
+                "objects": int(row["num_objects"]),
+                "false_positives": int(row["num_false_positives"]),
+                "misses": int(row["num_misses"]),
+                "vehicles_scored": vehicles,
+                "mostly_tracked": int(row["mostly_tracked"]),
+            },
+        }
 
 
-def paper_table(site: Site, scores: Scores, centre: tuple[float, float],
-                window_upstream_m: tuple[float, float]) -> list[dict[str, Any]]:  # fmt: skip
+def paper_table(
+    site: Site, scores: Scores, centre: tuple[float, float], window_upstream_m: tuple[float, float]
+) -> list[dict[str, Any]]:
     """Per vehicle: cumulative |error| over the window's common times, per source (Tables 1-2)."""
     mast_station = float(site.road_frame.to_road(*centre)[0])
     lo, hi = mast_station - window_upstream_m[1], mast_station - window_upstream_m[0]
-    compared = ("camera", "lidar", "average", "paper_kf", "fused", "fused_smoothed",
-                "fused_stored")
+    compared = ("camera", "lidar", "average", "paper_kf", "fused", "fused_smoothed", "fused_stored")
     rows = []
     for vehicle_id, by_source in sorted(scores.per_vehicle.items()):
         common: set[float] | None = None
@@ -590,22 +719,40 @@ def main(argv: list[str] | None = None) -> int:
         from wz_eval.field_run import main as field_main
 
         return field_main(arguments)
-    parser = argparse.ArgumentParser(prog="wz eval", description=__doc__.split("\n")[0],
-                                     epilog="With --log LOG_DIR [--truth GPS_FILE]: the paper's "
-                                     "field validation on a field log instead (its own options).")
+    parser = argparse.ArgumentParser(
+        prog="wz eval",
+        description=__doc__.split("\n")[0],
+        epilog="With --log LOG_DIR [--truth GPS_FILE]: the paper's "
+        "field validation on a field log instead (its own options).",
+    )
     parser.add_argument("--site", type=Path, default=SimulatorSettings().site_file)
     parser.add_argument("--duration-s", type=float, default=600.0)
     parser.add_argument("--warmup-s", type=float, default=60.0)
     parser.add_argument("--seed", type=int, default=7)
     parser.add_argument("--max-range-m", type=float, default=150.0)
-    parser.add_argument("--drop", action="append", default=[], metavar="SENSOR@START+SECONDS",
-                        help="silence a sensor (repeatable)")  # fmt: skip
+    parser.add_argument(
+        "--drop",
+        action="append",
+        default=[],
+        metavar="SENSOR@START+SECONDS",
+        help="silence a sensor (repeatable)",
+    )
     parser.add_argument("--model", type=Path, default=None, help="camera model (.onnx)")
-    parser.add_argument("--bias-map", type=Path, default=None, metavar="FILE",
-                        help="remove each sensor's calibrated lateral bias (a map written by "
-                        "--write-bias-map from a run of another seed) before the tracker")
-    parser.add_argument("--write-bias-map", type=Path, default=None, metavar="FILE",
-                        help="write the lateral bias map this run measured")
+    parser.add_argument(
+        "--bias-map",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="remove each sensor's calibrated lateral bias (a map written by "
+        "--write-bias-map from a run of another seed) before the tracker",
+    )
+    parser.add_argument(
+        "--write-bias-map",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="write the lateral bias map this run measured",
+    )
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--out", type=Path, default=Path("runs/eval"))
     args = parser.parse_args(argv)
@@ -621,9 +768,15 @@ def main(argv: list[str] | None = None) -> int:
         except BiasMapError as exc:
             parser.error(str(exc))
     configure_logging(service="eval", site=site.site_id, level="WARNING")
-    options = EvalOptions(seed=args.seed, duration_s=args.duration_s, warmup_s=args.warmup_s,
-                          max_range_m=args.max_range_m, dropouts=dropouts,
-                          camera_model=args.model, bias_map=bias_map)  # fmt: skip
+    options = EvalOptions(
+        seed=args.seed,
+        duration_s=args.duration_s,
+        warmup_s=args.warmup_s,
+        max_range_m=args.max_range_m,
+        dropouts=dropouts,
+        camera_model=args.model,
+        bias_map=bias_map,
+    )
     args.out.mkdir(parents=True, exist_ok=True)
     report = evaluate(site, options, plots_dir=args.out)
     if args.write_bias_map is not None:

@@ -16,11 +16,16 @@ TIE_M_PER_SAMPLE = 0.01
 #: dropout's "bounded error": these bounds are this project's reading (about 30 % above what
 #: seed 7 measured: 0.78 / 0.23 m with the LiDAR silent, 0.75 / 0.09 m with the camera).
 TARGETS: dict[str, float] = {
-    "rmse_longitudinal_m": 0.5, "rmse_lateral_m": 0.3, "rmse_speed_mps": 0.5, "mota": 0.95,
-    "id_switches_per_100_vehicles": 1.0, "paper_table_vehicles": 10, "paper_table_share": 0.9,
-    "dropout_rmse_longitudinal_m": 1.0, "dropout_rmse_lateral_m": 0.3,
+    "rmse_longitudinal_m": 0.5,
+    "rmse_lateral_m": 0.3,
+    "rmse_speed_mps": 0.5,
+    "mota": 0.95,
+    "id_switches_per_100_vehicles": 1.0,
+    "paper_table_vehicles": 10,
+    "paper_table_share": 0.9,
+    "dropout_rmse_longitudinal_m": 1.0,
+    "dropout_rmse_lateral_m": 0.3,
 }
-
 
 
 def table_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
@@ -33,13 +38,21 @@ def table_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
             out[f"fused_below_{other}_{axis}"] = wins
     for fused in ("fused", "fused_smoothed", "fused_stored"):
         out[f"{fused}_below_camera_lidar_average_both_axes"] = sum(
-            1 for r in rows
-            if all(r[fused][a] < r[o][a] for o in ("camera", "lidar", "average")
-                   for a in ("longitudinal_m", "lateral_m")))  # fmt: skip
+            1
+            for r in rows
+            if all(
+                r[fused][a] < r[o][a]
+                for o in ("camera", "lidar", "average")
+                for a in ("longitudinal_m", "lateral_m")
+            )
+        )
         out[f"{fused}_lateral_losses_to_average_within_1cm"] = sum(
-            1 for r in rows
-            if 0.0 <= r[fused]["lateral_m"] - r["average"]["lateral_m"]
-            < TIE_M_PER_SAMPLE * r["samples"])  # fmt: skip
+            1
+            for r in rows
+            if 0.0
+            <= r[fused]["lateral_m"] - r["average"]["lateral_m"]
+            < TIE_M_PER_SAMPLE * r["samples"]
+        )
     return out
 
 
@@ -57,34 +70,55 @@ def must_show(report: dict[str, Any]) -> list[dict[str, Any]]:
     fused = report["sources"]["fused"]
     for axis in ("longitudinal_m", "lateral_m", "speed_mps"):
         value, limit = fused[f"rmse_{axis}"], TARGETS[f"rmse_{axis}"]
-        add(f"fused RMSE {axis.split('_')[0]} within 150 m", value, f"<= {limit:g}",
-            None if not at_150 or value is None else value <= limit)
+        add(
+            f"fused RMSE {axis.split('_')[0]} within 150 m",
+            value,
+            f"<= {limit:g}",
+            None if not at_150 or value is None else value <= limit,
+        )
     add("MOTA", report["mota"], f">= {TARGETS['mota']:g}", report["mota"] >= TARGETS["mota"])
     per_100 = report["id_switches_per_100_vehicles"]
-    add("identity switches per 100 vehicles", per_100,
+    add(
+        "identity switches per 100 vehicles",
+        per_100,
         f"<= {TARGETS['id_switches_per_100_vehicles']:g}",
-        per_100 <= TARGETS["id_switches_per_100_vehicles"])  # fmt: skip
+        per_100 <= TARGETS["id_switches_per_100_vehicles"],
+    )
     summary = report["paper_table_summary"]
     vehicles = summary["vehicles"]
-    for fused_source, label in (("fused", "live"), ("fused_stored", "stored"),
-                                ("fused_smoothed", "smoothed")):  # fmt: skip
+    for fused_source, label in (
+        ("fused", "live"),
+        ("fused_stored", "stored"),
+        ("fused_smoothed", "smoothed"),
+    ):
         wins = summary[f"{fused_source}_below_camera_lidar_average_both_axes"]
         share = wins / vehicles if vehicles else None
-        add(f"paper table, {label} track below camera, LiDAR and average on both axes "
-            f"({wins} of {vehicles} vehicles)", share,
+        add(
+            f"paper table, {label} track below camera, LiDAR and average on both axes "
+            f"({wins} of {vehicles} vehicles)",
+            share,
             f">= {TARGETS['paper_table_share']:g} of >= {TARGETS['paper_table_vehicles']}",
-            None if share is None
+            None
+            if share is None
             else vehicles >= TARGETS["paper_table_vehicles"]
-            and share >= TARGETS["paper_table_share"])  # fmt: skip
+            and share >= TARGETS["paper_table_share"],
+        )
     for dropout in report["dropouts"]:
         name = f"{dropout['sensor_id']} silent {dropout['duration_s']:g} s"
         lon, lat = dropout["fused_rmse_longitudinal_m"], dropout["fused_rmse_lateral_m"]
-        bounded = (lon is not None and lat is not None
-                   and lon <= TARGETS["dropout_rmse_longitudinal_m"]
-                   and lat <= TARGETS["dropout_rmse_lateral_m"])  # fmt: skip
-        add(f"{name}: fused RMSE lon / lat inside it", None if lon is None else max(lon, lat),
+        bounded = (
+            lon is not None
+            and lat is not None
+            and lon <= TARGETS["dropout_rmse_longitudinal_m"]
+            and lat <= TARGETS["dropout_rmse_lateral_m"]
+        )
+        add(
+            f"{name}: fused RMSE lon / lat inside it",
+            None if lon is None else max(lon, lat),
             f"<= {TARGETS['dropout_rmse_longitudinal_m']:g} / "
-            f"{TARGETS['dropout_rmse_lateral_m']:g}", bounded)
+            f"{TARGETS['dropout_rmse_lateral_m']:g}",
+            bounded,
+        )
         switches = dropout["id_switches_from_start_to_2s_after"]
         add(f"{name}: identity switches to 2 s after", switches, "0", switches == 0)
     return rows
@@ -111,43 +145,74 @@ def markdown(report: dict[str, Any]) -> str:
         "|---|---|---|---|---|---|",
     ]
     for source, row in report["sources"].items():
-        lines.append(f"| {source} | {cell(row['rmse_longitudinal_m'])} | "
-                     f"{cell(row['rmse_lateral_m'])} | {cell(row['rmse_speed_mps'])} | "
-                     f"{row['matched']} | {row['missed_vehicles']} |")  # fmt: skip
+        lines.append(
+            f"| {source} | {cell(row['rmse_longitudinal_m'])} | "
+            f"{cell(row['rmse_lateral_m'])} | {cell(row['rmse_speed_mps'])} | "
+            f"{row['matched']} | {row['missed_vehicles']} |"
+        )
     summary = report["paper_table_summary"]
-    lines += ["", f"Paper-style table ({summary['vehicles']} vehicles through the window; "
-              "cumulative absolute error [m] over the common samples; lon / lat):", "",
-              "| vehicle | samples | camera | LiDAR | average | paper KF | fused | fused, smoothed "
-              "| fused, stored |",
-              "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    lines += [
+        "",
+        f"Paper-style table ({summary['vehicles']} vehicles through the window; "
+        "cumulative absolute error [m] over the common samples; lon / lat):",
+        "",
+        "| vehicle | samples | camera | LiDAR | average | paper KF | fused | fused, smoothed "
+        "| fused, stored |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     for row in report["paper_table"][:25]:
-        cells = [f"{row[s]['longitudinal_m']:.1f} / {row[s]['lateral_m']:.1f}"
-                 for s in ("camera", "lidar", "average", "paper_kf", "fused", "fused_smoothed",
-                           "fused_stored")]  # fmt: skip
+        cells = [
+            f"{row[s]['longitudinal_m']:.1f} / {row[s]['lateral_m']:.1f}"
+            for s in (
+                "camera",
+                "lidar",
+                "average",
+                "paper_kf",
+                "fused",
+                "fused_smoothed",
+                "fused_stored",
+            )
+        ]
         lines.append(f"| {row['vehicle_id']} | {row['samples']} | " + " | ".join(cells) + " |")
-    lines += ["", "Fused below the other sources (vehicles): " + ", ".join(
-        f"{k.removeprefix('fused_below_')} {v}" for k, v in summary.items() if k != "vehicles"),
-        ""]  # fmt: skip
-    lines += ["", "Issue 6's targets on this run (`must_show`; - : this run cannot tell):", "",
-              "| check | value | target | holds |", "|---|---|---|---|"]
+    lines += [
+        "",
+        "Fused below the other sources (vehicles): "
+        + ", ".join(
+            f"{k.removeprefix('fused_below_')} {v}" for k, v in summary.items() if k != "vehicles"
+        ),
+        "",
+    ]
+    lines += [
+        "",
+        "Issue 6's targets on this run (`must_show`; - : this run cannot tell):",
+        "",
+        "| check | value | target | holds |",
+        "|---|---|---|---|",
+    ]
     for row in report.get("must_show", []):
         holds = {True: "yes", False: "**no**", None: "-"}[row["holds"]]
         value = row["value"]
         shown = str(value) if isinstance(value, int) else ratio(value)
         lines.append(f"| {row['check']} | {shown} | {row['target']} | {holds} |")
-    lines += ["", "Alerts (the alert service on the fused tracks against the same rules on the "
-              "truth of the vehicles a sensor saw; in brackets, on every vehicle within "
-              f"{ALERT_TRUTH_RANGE_M:.0f} m, hidden ones included):", "",
-              "| alert | precision | recall | TP | FP | FN | median lead time [s] |",
-              "|---|---|---|---|---|---|---|"]  # fmt: skip
+    lines += [
+        "",
+        "Alerts (the alert service on the fused tracks against the same rules on the "
+        "truth of the vehicles a sensor saw; in brackets, on every vehicle within "
+        f"{ALERT_TRUTH_RANGE_M:.0f} m, hidden ones included):",
+        "",
+        "| alert | precision | recall | TP | FP | FN | median lead time [s] |",
+        "|---|---|---|---|---|---|---|",
+    ]
     everything = report.get("alerts_all_in_range", {})
     for alert_type, row in report.get("alerts", {}).items():
         other = everything.get(alert_type, {})
-        lines.append(f"| {alert_type} | {ratio(row.get('precision'))} "
-                     f"({ratio(other.get('precision'))}) | {ratio(row.get('recall'))} "
-                     f"({ratio(other.get('recall'))}) | {row.get('true_positives')} | "
-                     f"{row.get('false_positives')} | {row.get('false_negatives')} "
-                     f"({other.get('false_negatives')}) | {cell(row.get('lead_time_s'))} |")  # fmt: skip
+        lines.append(
+            f"| {alert_type} | {ratio(row.get('precision'))} "
+            f"({ratio(other.get('precision'))}) | {ratio(row.get('recall'))} "
+            f"({ratio(other.get('recall'))}) | {row.get('true_positives')} | "
+            f"{row.get('false_positives')} | {row.get('false_negatives')} "
+            f"({other.get('false_negatives')}) | {cell(row.get('lead_time_s'))} |"
+        )
     lines.append("")
     for plot in report.get("plots", []):
         lines.append(f"![{plot}]({plot})")

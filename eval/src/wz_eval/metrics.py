@@ -51,14 +51,14 @@ class TruthIndex:
         return moved(self._vehicles[j], dt)
 
 
-def match(
-    estimates_xy: F64, truth_xy: F64, gate_m: float
-) -> list[tuple[int, int]]:
+def match(estimates_xy: F64, truth_xy: F64, gate_m: float) -> list[tuple[int, int]]:
     """Pairs ``(estimate index, truth index)`` minimising total distance, each within ``gate_m``."""
     if len(estimates_xy) == 0 or len(truth_xy) == 0:
         return []
-    distance = np.hypot(estimates_xy[:, None, 0] - truth_xy[None, :, 0],
-                        estimates_xy[:, None, 1] - truth_xy[None, :, 1])  # fmt: skip
+    distance = np.hypot(
+        estimates_xy[:, None, 0] - truth_xy[None, :, 0],
+        estimates_xy[:, None, 1] - truth_xy[None, :, 1],
+    )
     cost = np.where(distance <= gate_m, distance, 1e6)
     rows, cols = linear_sum_assignment(cost)
     return [(int(r), int(c)) for r, c in zip(rows, cols, strict=True) if distance[r, c] <= gate_m]
@@ -90,11 +90,13 @@ class AxisErrors:
         }
 
 
-def in_range(site: Site, vehicles: Sequence[VehicleTruth], centre_xy: tuple[float, float],
-             max_range_m: float) -> list[VehicleTruth]:  # fmt: skip
+def in_range(
+    site: Site, vehicles: Sequence[VehicleTruth], centre_xy: tuple[float, float], max_range_m: float
+) -> list[VehicleTruth]:
     """The vehicles within ``max_range_m`` (ground distance) of ``centre_xy``."""
-    return [v for v in vehicles
-            if math.hypot(v.x_m - centre_xy[0], v.y_m - centre_xy[1]) <= max_range_m]  # fmt: skip
+    return [
+        v for v in vehicles if math.hypot(v.x_m - centre_xy[0], v.y_m - centre_xy[1]) <= max_range_m
+    ]
 
 
 def score_instant(

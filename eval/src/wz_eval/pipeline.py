@@ -107,7 +107,9 @@ def run_pipeline(
     lidar_settings = LidarDetectorSettings.model_validate({"path": "fast", "learn_frames": 40})
     lidar_detector = LidarDetector(site.site_id, lidar, lidar_settings, report)
     camera_kwargs: dict[str, object] = {
-        "backend": "yolo", "radar_id": radar.sensor_id if radar is not None else "none"}
+        "backend": "yolo",
+        "radar_id": radar.sensor_id if radar is not None else "none",
+    }
     if options.camera_model is not None:
         camera_kwargs["model_path"] = options.camera_model
     camera_settings = CameraDetectorSettings.model_validate(camera_kwargs)
@@ -117,10 +119,14 @@ def run_pipeline(
     rig = SensorRig(site, WEATHER_PRESETS[options.weather], options.seed, sensor_ids=sensor_ids)
     total_s = options.warmup_s + options.duration_s
     sim_settings: dict[str, object] = {
-        "seed": options.seed, "realtime_factor": 0.0, "sensors_enabled": False,
-        "vehicles_per_hour": options.vehicles_per_hour, "truck_share": options.truck_share,
-        "aggressive_share": options.aggressive_share, "duration_s": total_s,
-    }  # fmt: skip
+        "seed": options.seed,
+        "realtime_factor": 0.0,
+        "sensors_enabled": False,
+        "vehicles_per_hour": options.vehicles_per_hour,
+        "truck_share": options.truck_share,
+        "aggressive_share": options.aggressive_share,
+        "duration_s": total_s,
+    }
     if options.work_dir is not None:
         sim_settings["work_dir"] = options.work_dir
     # The LiDAR learns from frames in the last part of the warm-up (traffic on the road).
@@ -139,8 +145,9 @@ def run_pipeline(
                 if isinstance(output, LidarOutput):
                     if output.scan.meta.stamp < learn_from_s:
                         continue
-                    batch = lidar_detector.handle(output.scan.meta, output.scan.points,
-                                                  time.monotonic())  # fmt: skip
+                    batch = lidar_detector.handle(
+                        output.scan.meta, output.scan.points, time.monotonic()
+                    )
                     if batch is not None and batch.stamp >= options.warmup_s:
                         record.batches.append(batch)
                 elif isinstance(output, RadarOutput):
@@ -148,8 +155,9 @@ def run_pipeline(
                     camera_detector.radar_scan(scan)
                     if scan.stamp >= options.warmup_s and radar is not None:
                         points = radar_targets_to_site(scan.targets, radar, association)
-                        record.radar_only.append((scan.stamp, [
-                            SourcePoint(p.x_m, p.y_m) for p in points]))  # fmt: skip
+                        record.radar_only.append(
+                            (scan.stamp, [SourcePoint(p.x_m, p.y_m) for p in points])
+                        )
                 elif isinstance(output, CameraOutput):
                     stamp_s = output.meta.stamp
                     if stamp_s < options.warmup_s - 3.0:  # image tracks confirm before scoring
@@ -160,17 +168,24 @@ def run_pipeline(
                     )
                     if result is None or stamp_s < options.warmup_s:
                         continue
-                    record.camera_only.append((stamp_s, [
-                        SourcePoint(o.x_m, o.y_m) for o in result.camera_objects]))  # fmt: skip
+                    record.camera_only.append(
+                        (stamp_s, [SourcePoint(o.x_m, o.y_m) for o in result.camera_objects])
+                    )
                     detections: list[Detection] = []
                     for fused in result.fused:
                         try:
                             detections.append(to_detection(fused))
                         except ValueError:
                             report("bad_detection", str(fused))
-                    record.batches.append(DetectionBatch(
-                        site=site.site_id, source_id=camera.sensor_id, stamp=stamp_s,
-                        frame_index=output.meta.frame_index, detections=detections))  # fmt: skip
+                    record.batches.append(
+                        DetectionBatch(
+                            site=site.site_id,
+                            source_id=camera.sensor_id,
+                            stamp=stamp_s,
+                            frame_index=output.meta.frame_index,
+                            detections=detections,
+                        )
+                    )
     record.batches.sort(key=lambda b: (b.stamp, b.source_id))
     record.wall_s = time.perf_counter() - started
     return record

@@ -32,8 +32,9 @@ STYLE: dict[str, dict[str, Any]] = {
 }
 
 
-def write_plots(out_dir: Path, site: Site, record: PipelineRecord, scores: Scores,
-                report: dict[str, Any]) -> list[str]:  # fmt: skip
+def write_plots(
+    out_dir: Path, site: Site, record: PipelineRecord, scores: Scores, report: dict[str, Any]
+) -> list[str]:
     """Write the PNGs; their file names (relative to ``out_dir``)."""
     rows = sorted(report["paper_table"], key=lambda r: -r["samples"])
     if not rows:
@@ -45,15 +46,19 @@ def write_plots(out_dir: Path, site: Site, record: PipelineRecord, scores: Score
     figure, axes = plt.subplots(len(chosen), 1, figsize=(9, 2.4 * len(chosen)), squeeze=False)
     for axis, vehicle_id in zip(axes[:, 0], chosen, strict=True):
         by_source = scores.per_vehicle[vehicle_id]
-        truth = sorted({(s, d) for samples in by_source.values()
-                        for (_, _, s, d) in samples.values()})  # fmt: skip
-        axis.plot([s for s, _ in truth], [d for _, d in truth], "k--", linewidth=0.8,
-                  label="truth")  # fmt: skip
+        truth = sorted(
+            {(s, d) for samples in by_source.values() for (_, _, s, d) in samples.values()}
+        )
+        axis.plot([s for s, _ in truth], [d for _, d in truth], "k--", linewidth=0.8, label="truth")
         for source, style in STYLE.items():
             samples = sorted(by_source.get(source, {}).values(), key=lambda v: v[2])
             if samples:
-                axis.plot([s + lon for lon, _, s, _ in samples],
-                          [d + lat for _, lat, _, d in samples], label=source, **style)  # fmt: skip
+                axis.plot(
+                    [s + lon for lon, _, s, _ in samples],
+                    [d + lat for _, lat, _, d in samples],
+                    label=source,
+                    **style,
+                )
         axis.set_title(f"vehicle {vehicle_id}", fontsize=9)
         axis.set_ylabel("offset [m]")
     axes[-1, 0].set_xlabel("station along the road [m]")
@@ -66,15 +71,20 @@ def write_plots(out_dir: Path, site: Site, record: PipelineRecord, scores: Score
     vehicle_id = chosen[0]
     figure, axis = plt.subplots(figsize=(8, 3.5))
     for source, style in STYLE.items():
-        samples = sorted(scores.per_vehicle[vehicle_id].get(source, {}).values(),
-                         key=lambda v: v[2])  # fmt: skip
+        samples = sorted(
+            scores.per_vehicle[vehicle_id].get(source, {}).values(), key=lambda v: v[2]
+        )
         if samples:
             line_style: dict[str, Any] = {**style, "linestyle": style.get("linestyle", "-")}
             if line_style["linestyle"] == "none":
                 line_style["linestyle"] = "-"
                 line_style["linewidth"] = 0.6
-            axis.plot([s for _, _, s, _ in samples], [lon for lon, _, _, _ in samples],
-                      label=source, **line_style)  # fmt: skip
+            axis.plot(
+                [s for _, _, s, _ in samples],
+                [lon for lon, _, _, _ in samples],
+                label=source,
+                **line_style,
+            )
     axis.axhline(0.0, color="k", linewidth=0.6)
     axis.set_xlabel("true station [m]")
     axis.set_ylabel("longitudinal error [m]")

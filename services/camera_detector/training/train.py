@@ -47,8 +47,13 @@ def _offline(config_dir: Path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--data", type=Path, nargs="+", required=True,
-                        help="wz dataset folders (train and val splits)")  # fmt: skip
+    parser.add_argument(
+        "--data",
+        type=Path,
+        nargs="+",
+        required=True,
+        help="wz dataset folders (train and val splits)",
+    )
     parser.add_argument("--out", type=Path, required=True, help="work folder")
     parser.add_argument("--roi", default="480,440,1200,1160", help="x0,y0,x1,y1 [px]")
     parser.add_argument("--imgsz", type=int, default=480)
@@ -58,18 +63,35 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--model", type=Path, default=HERE / "wz-yolov8-pico.yaml")
     parser.add_argument("--name", default="wz-vehicles-pico")
-    parser.add_argument("--time-h", type=float, default=None,
-                        help="stop training after this many hours (ultralytics' time=)")  # fmt: skip
-    parser.add_argument("--weights", type=Path, default=None,
-                        help="start from these weights (.pt of an earlier run): a fine-tune")  # fmt: skip
+    parser.add_argument(
+        "--time-h",
+        type=float,
+        default=None,
+        help="stop training after this many hours (ultralytics' time=)",
+    )
+    parser.add_argument(
+        "--weights",
+        type=Path,
+        default=None,
+        help="start from these weights (.pt of an earlier run): a fine-tune",
+    )
     parser.add_argument("--lr0", type=float, default=None, help="initial learning rate")
-    parser.add_argument("--train-tiles", action="store_true",
-                        help="also train on the far-field tile crops of every frame")  # fmt: skip
-    parser.add_argument("--close-mosaic", type=int, default=None,
-                        help="epochs at the end without mosaic (default: a fifth)")  # fmt: skip
-    parser.add_argument("--tiles", default="540,440,780,560",
-                        help="far-field tiles x0,y0,x1,y1;... written to the model's metadata "
-                        "('' for none)")  # fmt: skip
+    parser.add_argument(
+        "--train-tiles",
+        action="store_true",
+        help="also train on the far-field tile crops of every frame",
+    )
+    parser.add_argument(
+        "--close-mosaic",
+        type=int,
+        default=None,
+        help="epochs at the end without mosaic (default: a fifth)",
+    )
+    parser.add_argument(
+        "--tiles",
+        default="540,440,780,560",
+        help="far-field tiles x0,y0,x1,y1;... written to the model's metadata ('' for none)",
+    )
     args = parser.parse_args(argv)
 
     from wz_camera_detector.train_data import Roi, prepare_roi_dataset
@@ -81,8 +103,7 @@ def main(argv: list[str] | None = None) -> int:
     if roi_data.exists():
         shutil.rmtree(roi_data)
     tiles = tuple(Roi.parse(t) for t in args.tiles.split(";") if t.strip())
-    counts = prepare_roi_dataset(list(args.data), roi_data, roi,
-                                 tiles if args.train_tiles else ())  # fmt: skip
+    counts = prepare_roi_dataset(list(args.data), roi_data, roi, tiles if args.train_tiles else ())
     sys.stdout.write(f"ROI dataset {roi.as_tuple()}: {counts}\n")
 
     from ultralytics import YOLO
@@ -90,14 +111,26 @@ def main(argv: list[str] | None = None) -> int:
     started = time.time()
     model = YOLO(str(args.weights if args.weights is not None else args.model))
     train_args = {
-        "data": str(roi_data / "data.yaml"), "epochs": args.epochs, "imgsz": args.imgsz,
-        "batch": args.batch, "workers": args.workers, "device": "cpu", "seed": args.seed,
-        "deterministic": True, "pretrained": False, "amp": False, "cache": "ram",
-        "project": str(args.out / "runs"), "name": args.name, "exist_ok": True,
-        "close_mosaic": (args.close_mosaic if args.close_mosaic is not None
-                         else max(1, args.epochs // 5)),
-        "patience": args.epochs, "plots": True,
-    }  # fmt: skip
+        "data": str(roi_data / "data.yaml"),
+        "epochs": args.epochs,
+        "imgsz": args.imgsz,
+        "batch": args.batch,
+        "workers": args.workers,
+        "device": "cpu",
+        "seed": args.seed,
+        "deterministic": True,
+        "pretrained": False,
+        "amp": False,
+        "cache": "ram",
+        "project": str(args.out / "runs"),
+        "name": args.name,
+        "exist_ok": True,
+        "close_mosaic": (
+            args.close_mosaic if args.close_mosaic is not None else max(1, args.epochs // 5)
+        ),
+        "patience": args.epochs,
+        "plots": True,
+    }
     if args.weights is not None:
         train_args["pretrained"] = True
         train_args["warmup_epochs"] = 1
@@ -111,11 +144,21 @@ def main(argv: list[str] | None = None) -> int:
     run_dir = args.out / "runs" / args.name
     best = run_dir / "weights" / "best.pt"
     trained = YOLO(str(best))
-    metrics = trained.val(data=str(roi_data / "data.yaml"), imgsz=args.imgsz, batch=args.batch,
-                          device="cpu", plots=False, project=str(args.out / "runs"),
-                          name=f"{args.name}-val", exist_ok=True)  # fmt: skip
-    exported = Path(trained.export(format="onnx", imgsz=args.imgsz, opset=17, simplify=True,
-                                   dynamic=False, device="cpu"))  # fmt: skip
+    metrics = trained.val(
+        data=str(roi_data / "data.yaml"),
+        imgsz=args.imgsz,
+        batch=args.batch,
+        device="cpu",
+        plots=False,
+        project=str(args.out / "runs"),
+        name=f"{args.name}-val",
+        exist_ok=True,
+    )
+    exported = Path(
+        trained.export(
+            format="onnx", imgsz=args.imgsz, opset=17, simplify=True, dynamic=False, device="cpu"
+        )
+    )
 
     import onnx
 
@@ -149,8 +192,10 @@ def main(argv: list[str] | None = None) -> int:
         "train_args": train_args | {"data": "roi-dataset/data.yaml", "project": "runs"},
         "train_seconds": round(train_s, 1),
         "ultralytics_val_all_labels": {
-            "precision": float(box.mp), "recall": float(box.mr),
-            "map50": float(box.map50), "map50_95": float(box.map),
+            "precision": float(box.mp),
+            "recall": float(box.mr),
+            "map50": float(box.map50),
+            "map50_95": float(box.map),
         },
         "datasets": json.loads((roi_data / "manifest.json").read_text()),
     }

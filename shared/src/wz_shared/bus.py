@@ -111,8 +111,7 @@ class BusStats:
     def count_gap(self, key: str, detail: str) -> None:
         with self._lock:
             self.gaps[key] += 1
-        log.info("gap on %s (%s): fetching the publishers' caches", key, detail,
-                 extra={"key": key})  # fmt: skip
+        log.info("gap on %s (%s): fetching the publishers' caches", key, detail, extra={"key": key})
 
     def count_invalid(self, key: str, reason: str, detail: str) -> None:
         """Count a rejected message; log the first of each (key, reason) only."""
@@ -176,13 +175,16 @@ class Publisher(Generic[M]):
             if history < 1:
                 raise ValueError("a publisher's history holds at least one sample")
             self._publisher = zenoh.ext.declare_advanced_publisher(
-                bus.session, key, congestion_control=congestion,
+                bus.session,
+                key,
+                congestion_control=congestion,
                 reliability=zenoh.Reliability.RELIABLE,
                 cache=zenoh.ext.CacheConfig(history),
                 sample_miss_detection=zenoh.ext.MissDetectionConfig(
-                    heartbeat=HEARTBEAT_S, sporadic_heartbeat=None),
+                    heartbeat=HEARTBEAT_S, sporadic_heartbeat=None
+                ),
                 publisher_detection=True,
-            )  # fmt: skip
+            )
 
     def put(self, message: M) -> None:
         """Publish a JSON message."""
@@ -395,11 +397,13 @@ class CallbackSubscription(Generic[T]):
             self._subscriber = bus.session.declare_subscriber(key, self._on_sample)
             return
         self._subscriber = zenoh.ext.declare_advanced_subscriber(
-            bus.session, key, self._on_sample,
+            bus.session,
+            key,
+            self._on_sample,
             history=zenoh.ext.HistoryConfig(detect_late_publishers=True),
             recovery=zenoh.ext.RecoveryConfig(periodic_queries=None, heartbeat=True),
             subscriber_detection=True,
-        )  # fmt: skip
+        )
         self._refetch = _CacheRefetch(bus.session, key, self._on_sample)
         self._miss_listener = self._subscriber.sample_miss_listener(self._on_miss)
 
@@ -441,8 +445,9 @@ class _CacheRefetch:
     asked (a gap): the publisher named ``"<zid>/<eid>"``, or all of them (None). Requests that
     come while a fetch runs are served by the next one."""
 
-    def __init__(self, session: zenoh.Session, key: str,
-                 on_sample: Callable[[zenoh.Sample], None]) -> None:  # fmt: skip
+    def __init__(
+        self, session: zenoh.Session, key: str, on_sample: Callable[[zenoh.Sample], None]
+    ) -> None:
         self._session = session
         self._key = key
         self._on_sample = on_sample
@@ -458,8 +463,9 @@ class _CacheRefetch:
             self._wanted.add(publisher)
             self._cond.notify()
             if self._thread is None:
-                self._thread = threading.Thread(target=self._run, daemon=True,
-                                                name=f"refetch {self._key}")  # fmt: skip
+                self._thread = threading.Thread(
+                    target=self._run, daemon=True, name=f"refetch {self._key}"
+                )
                 self._thread.start()
 
     def _run(self) -> None:
@@ -477,10 +483,11 @@ class _CacheRefetch:
     def _fetch(self, selector: str) -> None:
         try:
             replies = self._session.get(
-                selector, timeout=REFETCH_TIMEOUT_S,
+                selector,
+                timeout=REFETCH_TIMEOUT_S,
                 accept_replies=zenoh.ReplyKeyExpr.ANY,  # a cache answers with the key itself
                 consolidation=zenoh.ConsolidationMode.NONE,  # every sample, not the newest
-            )  # fmt: skip
+            )
             for reply in replies:
                 if self._closed:
                     return

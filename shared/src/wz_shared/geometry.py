@@ -57,8 +57,12 @@ _GRID_MAX_CELLS = 1 << 18
 _GRID_CHUNK_POINTS = 2048
 
 
-def polar_covariance(bearing_rad: float, range_variance_m2: float, lateral_variance_m2: float,
-                     min_variance_m2: float = 1e-6) -> F64:  # fmt: skip
+def polar_covariance(
+    bearing_rad: float,
+    range_variance_m2: float,
+    lateral_variance_m2: float,
+    min_variance_m2: float = 1e-6,
+) -> F64:
     """A position seen along a line of sight at ``bearing_rad`` (CCW from the site x axis):
     ``sigma_rho^2 u u^T + sigma_lat^2 n n^T`` [m^2], shape (2, 2), with ``u`` the line of sight,
     ``n`` its left normal, and each variance at least ``min_variance_m2``."""
@@ -249,9 +253,7 @@ class RoadFrame:
         heading: F64 = np.arctan2(tangent[..., 1], tangent[..., 0])
         return heading
 
-    def to_site(
-        self, station_m: npt.ArrayLike, offset_m: npt.ArrayLike
-    ) -> tuple[F64, F64]:
+    def to_site(self, station_m: npt.ArrayLike, offset_m: npt.ArrayLike) -> tuple[F64, F64]:
         """Road frame to site frame.
 
         Parameters
@@ -369,9 +371,7 @@ class RoadFrame:
         distance: F64 = np.hypot(wx - t * dx, wy - t * dy)
         return distance
 
-    def _to_road_grid(
-        self, qx: F64, qy: F64
-    ) -> tuple[F64, F64, npt.NDArray[np.bool_]]:
+    def _to_road_grid(self, qx: F64, qy: F64) -> tuple[F64, F64, npt.NDArray[np.bool_]]:
         """Fast search among each point's cell's segments; ``resolved`` is False where unsure."""
         station = np.full(qx.size, np.nan)
         offset = np.full(qx.size, np.nan)
@@ -517,9 +517,7 @@ class RoadFrame:
             d = np.where(better, end_d, d)
         return segment, u, d
 
-    def _solve(
-        self, qx: F64, qy: F64, segment: npt.NDArray[np.intp]
-    ) -> tuple[F64, F64]:
+    def _solve(self, qx: F64, qy: F64, segment: npt.NDArray[np.intp]) -> tuple[F64, F64]:
         """Best root u in [0, 1] on ``segment`` and its offset d; d = inf where there is none.
 
         ``qx``, ``qy`` and ``segment`` broadcast together; the outputs have their shape.

@@ -256,7 +256,8 @@ class Track(BaseModel):
 def _positive_process_noise(noise: ProcessNoise) -> ProcessNoise:
     stds = (noise.sigma_along_mps2, noise.sigma_across_mps2)
     if not all(math.isfinite(v) and v > 0.0 for v in stds) or not (
-            math.isfinite(noise.heading_min_speed_mps) and noise.heading_min_speed_mps >= 0.0):  # fmt: skip
+        math.isfinite(noise.heading_min_speed_mps) and noise.heading_min_speed_mps >= 0.0
+    ):
         raise ValueError("process noise: stds must be finite and > 0, the speed finite and >= 0")
     return noise
 
@@ -269,8 +270,7 @@ class TrackBatch(Message):
     kind: Literal["track_batch"] = "track_batch"
     cycle_index: Annotated[int, Field(ge=0)]
     tracks: list[Track]
-    process_noise: Annotated[ProcessNoise, AfterValidator(_positive_process_noise)] = (
-        ProcessNoise())  # fmt: skip
+    process_noise: Annotated[ProcessNoise, AfterValidator(_positive_process_noise)] = ProcessNoise()
 
 
 # --- alerts ---------------------------------------------------------------------------------

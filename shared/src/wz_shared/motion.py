@@ -162,10 +162,12 @@ def _q_from_acceleration_covariance(dt_s: npt.ArrayLike, sigma_a: F64) -> F64:
     dt = np.asarray(dt_s, dtype=np.float64)
     dt2 = dt * dt
     T = np.stack(
-        [np.stack([dt2 * dt2 / 4.0, dt2 * dt / 2.0], axis=-1),
-         np.stack([dt2 * dt / 2.0, dt2], axis=-1)],
+        [
+            np.stack([dt2 * dt2 / 4.0, dt2 * dt / 2.0], axis=-1),
+            np.stack([dt2 * dt / 2.0, dt2], axis=-1),
+        ],
         axis=-2,
-    )  # fmt: skip
+    )
     return _kron_q(T, sigma_a)
 
 
@@ -279,20 +281,24 @@ def predict_cv(
     return x_p, P_p
 
 
-def recomputed_priors(stamps_s: F64, x_filt: F64, P_filt: F64,
-                      noise: ProcessNoise) -> tuple[F64, F64]:  # fmt: skip
+def recomputed_priors(
+    stamps_s: F64, x_filt: F64, P_filt: F64, noise: ProcessNoise
+) -> tuple[F64, F64]:
     """The priors ``x_{k+1|k}`` (n - 1, 4) and ``P_{k+1|k}`` (n - 1, 4, 4) of filtered states
     (n, 4), (n, 4, 4) at ``stamps_s`` (n,): ``Q_k`` along the velocity of ``x_k|k``, isotropic
     below ``noise.heading_min_speed_mps`` (module docstring)."""
     dt = np.diff(stamps_s)
     x = x_filt[:-1]
     heading = np.arctan2(x[:, 3], x[:, 2])
-    sigma_a = acceleration_covariance(noise.sigma_along_mps2,
-                                      noise.sigma_across_at(np.hypot(x[:, 2], x[:, 3])), heading)  # fmt: skip
+    sigma_a = acceleration_covariance(
+        noise.sigma_along_mps2, noise.sigma_across_at(np.hypot(x[:, 2], x[:, 3])), heading
+    )
     # T(dt) written with powers (dt**4 where predict_cv has dt2 * dt2): the rounding stored
     # trajectories have always been smoothed with, equal to the filter's within an ulp.
-    T = np.stack([np.stack([dt**4 / 4.0, dt**3 / 2.0], axis=-1),
-                  np.stack([dt**3 / 2.0, dt**2], axis=-1)], axis=-2)  # fmt: skip
+    T = np.stack(
+        [np.stack([dt**4 / 4.0, dt**3 / 2.0], axis=-1), np.stack([dt**3 / 2.0, dt**2], axis=-1)],
+        axis=-2,
+    )
     F = cv_transition(dt)
     # x_{k+1|k} = F x_k|k,  P_{k+1|k} = F P_k|k F^T + Q
     x_prior = np.einsum("kij,kj->ki", F, x)

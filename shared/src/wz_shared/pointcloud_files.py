@@ -190,11 +190,30 @@ def _header_lines(path: Path, data: bytes, last: re.Pattern[bytes]) -> tuple[lis
 # --- PCD ------------------------------------------------------------------------------------
 
 _PCD_KEYWORDS = (
-    "VERSION", "FIELDS", "COLUMNS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT",
-    "POINTS", "DATA",
-)  # fmt: skip
-_PCD_TYPES = {("F", 4): "f4", ("F", 8): "f8", ("I", 1): "i1", ("I", 2): "i2", ("I", 4): "i4",
-              ("I", 8): "i8", ("U", 1): "u1", ("U", 2): "u2", ("U", 4): "u4", ("U", 8): "u8"}  # fmt: skip
+    "VERSION",
+    "FIELDS",
+    "COLUMNS",
+    "SIZE",
+    "TYPE",
+    "COUNT",
+    "WIDTH",
+    "HEIGHT",
+    "VIEWPOINT",
+    "POINTS",
+    "DATA",
+)
+_PCD_TYPES = {
+    ("F", 4): "f4",
+    ("F", 8): "f8",
+    ("I", 1): "i1",
+    ("I", 2): "i2",
+    ("I", 4): "i4",
+    ("I", 8): "i8",
+    ("U", 1): "u1",
+    ("U", 2): "u2",
+    ("U", 4): "u4",
+    ("U", 8): "u8",
+}
 
 
 @dataclass(frozen=True)
@@ -457,10 +476,23 @@ def lzf_decompress(data: bytes, size: int) -> bytes:
 # --- PLY ------------------------------------------------------------------------------------
 
 _PLY_TYPES = {
-    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
-    "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
-    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
-}  # fmt: skip
+    "char": "i1",
+    "int8": "i1",
+    "uchar": "u1",
+    "uint8": "u1",
+    "short": "i2",
+    "int16": "i2",
+    "ushort": "u2",
+    "uint16": "u2",
+    "int": "i4",
+    "int32": "i4",
+    "uint": "u4",
+    "uint32": "u4",
+    "float": "f4",
+    "float32": "f4",
+    "double": "f8",
+    "float64": "f8",
+}
 
 
 @dataclass(frozen=True)
@@ -562,8 +594,12 @@ def _ply_binary(
             raise PointCloudFileError(
                 path, f"element {element.name} with list properties comes before vertex"
             )
-        offset += element.count * np.dtype([(f"p{i}", order + t) for i, (_, t) in
-                                            enumerate(element.properties)]).itemsize  # fmt: skip
+        offset += (
+            element.count
+            * np.dtype(
+                [(f"p{i}", order + t) for i, (_, t) in enumerate(element.properties)]
+            ).itemsize
+        )
     dtype = np.dtype([(f"p{i}", order + t) for i, (_, t) in enumerate(vertex.properties)])
     available = max(0, len(body) - offset)
     if available < vertex.count * dtype.itemsize:

@@ -211,8 +211,9 @@ class NodeApp(Generic[SettingsT]):
     def start_logging(self, site_id: str, sensor: str | None = None) -> None:
         """Structured logs with site, service (and sensor) on every line; the site is the one
         :meth:`serve` reports under."""
-        configure_logging(service=self.service, site=site_id, sensor=sensor,
-                          level=self.settings.log_level)  # fmt: skip
+        configure_logging(
+            service=self.service, site=site_id, sensor=sensor, level=self.settings.log_level
+        )
         self.site_id = site_id
 
     def serve(

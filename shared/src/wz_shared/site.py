@@ -431,9 +431,15 @@ class AlertRules(_Strict):
 #: The direction of traffic as the road is signed (WZDx ``Direction``), not a compass heading:
 #: a northbound route stays northbound through its curves.
 RoadDirection = Literal[
-    "northbound", "eastbound", "southbound", "westbound", "inner-loop", "outer-loop",
-    "undefined", "unknown",
-]  # fmt: skip
+    "northbound",
+    "eastbound",
+    "southbound",
+    "westbound",
+    "inner-loop",
+    "outer-loop",
+    "undefined",
+    "unknown",
+]
 
 
 class Site(_Strict):

@@ -102,8 +102,12 @@ class AlertCore:
         self.engine.episode_count = count
         self._newest.clear()
         self.runs += 1
-        log.warning("track stamps went back to %.3f s (from %.3f s): a new run; the alert "
-                    "engine starts again", batch.stamp, self._stamp_s)  # fmt: skip
+        log.warning(
+            "track stamps went back to %.3f s (from %.3f s): a new run; the alert "
+            "engine starts again",
+            batch.stamp,
+            self._stamp_s,
+        )
 
     def add(self, batch: TrackBatch) -> AlertOutputs:
         """Evaluate one track batch."""
@@ -115,8 +119,10 @@ class AlertCore:
         out_of_order = self.engine.counters.batches_out_of_order
         events = self.engine.update(batch)
         if self.engine.counters.batches_out_of_order > out_of_order:
-            self.report("out_of_order", f"track batch at {batch.stamp:.3f} s after "
-                        f"{self._stamp_s:.3f} s: ignored")  # fmt: skip
+            self.report(
+                "out_of_order",
+                f"track batch at {batch.stamp:.3f} s after {self._stamp_s:.3f} s: ignored",
+            )
             return AlertOutputs(accepted=False)
         self._stamp_s = batch.stamp
         alerts = [event.to_message(self.site.site_id, self.source_id) for event in events]
@@ -142,8 +148,13 @@ class AlertCore:
         alerts = [
             self._newest[a.episode_id] for a in self.engine.active() if a.episode_id in self._newest
         ]
-        return ActiveAlerts(site=self.site.site_id, source_id=self.source_id,
-                            stamp=self._stamp_s, alerts=alerts, devices=devices)  # fmt: skip
+        return ActiveAlerts(
+            site=self.site.site_id,
+            source_id=self.source_id,
+            stamp=self._stamp_s,
+            alerts=alerts,
+            devices=devices,
+        )
 
 
 def _log_alert(alert: Alert) -> None:
@@ -155,13 +166,22 @@ def _log_alert(alert: Alert) -> None:
         subject,
         alert.severity.value,
         alert.description,
-        extra={"alert_type": alert.alert_type.value, "phase": alert.phase,
-               "episode_id": alert.episode_id, "stamp": alert.stamp},
-    )  # fmt: skip
+        extra={
+            "alert_type": alert.alert_type.value,
+            "phase": alert.phase,
+            "episode_id": alert.episode_id,
+            "stamp": alert.stamp,
+        },
+    )
 
 
-def run(runtime: ServiceRuntime, site: Site, settings: AlertServiceSettings,
-        clock: SimClock, id_prefix: str) -> int:  # fmt: skip
+def run(
+    runtime: ServiceRuntime,
+    site: Site,
+    settings: AlertServiceSettings,
+    clock: SimClock,
+    id_prefix: str,
+) -> int:
     """Evaluate track batches until ``runtime.stop``; the number of alerts published."""
     bus = runtime.bus
     tracks_key = bus.keys.tracks
@@ -170,8 +190,10 @@ def run(runtime: ServiceRuntime, site: Site, settings: AlertServiceSettings,
         bus.stats.count_invalid(tracks_key, reason, detail)
 
     core = AlertCore(site, report, id_prefix=id_prefix)
-    publishers = {t: bus.publisher(bus.keys.alerts(t.value), Alert,
-                                   history=settings.history_per_type) for t in AlertType}  # fmt: skip
+    publishers = {
+        t: bus.publisher(bus.keys.alerts(t.value), Alert, history=settings.history_per_type)
+        for t in AlertType
+    }
     # The newest device state, for a gateway that starts (or reconnects) after it changed.
     devices_publisher = bus.publisher(bus.keys.devices_state, RoadsideDeviceState, history=1)
     snapshot = [encode_json(core.active())]
@@ -194,8 +216,11 @@ def run(runtime: ServiceRuntime, site: Site, settings: AlertServiceSettings,
             _log_alert(alert)
         if outputs.devices is not None:
             devices_publisher.put(outputs.devices)
-            log.info("devices: beacon %s, sign %r", "on" if outputs.devices.beacon_on else "off",
-                     outputs.devices.sign_text)  # fmt: skip
+            log.info(
+                "devices: beacon %s, sign %r",
+                "on" if outputs.devices.beacon_on else "off",
+                outputs.devices.sign_text,
+            )
         snapshot[:] = [encode_json(core.active())]
         if core.runs != runs:  # a new run: its time starts again
             runs = core.runs

@@ -258,9 +258,7 @@ class FusedObject:
 
 
 def _radar_intrinsics(mount: SensorMount) -> RadarIntrinsics:
-    return intrinsics_of(
-        mount, RadarIntrinsics, "camera-radar association needs the radar's mount"
-    )
+    return intrinsics_of(mount, RadarIntrinsics, "camera-radar association needs the radar's mount")
 
 
 def _unit(bearing_rad: float) -> tuple[F64, F64]:
@@ -578,8 +576,9 @@ def _radar_only(
     # truck's centre is 8 m behind its face, a car's 2.3 m).
     x_m, y_m, covariance = radar.x_m, radar.y_m, radar.covariance_m2
     if road_heading_rad is not None:
-        setback = setback_m(radar.bearing_rad, road_heading_rad, RADAR_ONLY_LENGTH_M,
-                            RADAR_ONLY_WIDTH_M)  # fmt: skip
+        setback = setback_m(
+            radar.bearing_rad, road_heading_rad, RADAR_ONLY_LENGTH_M, RADAR_ONLY_WIDTH_M
+        )
         along, _ = _unit(radar.bearing_rad)
         x_m, y_m = x_m + setback * along[0], y_m + setback * along[1]
         covariance = covariance + settings.radar_only_size_std_m**2 * np.outer(along, along)
@@ -640,8 +639,9 @@ def fuse_camera_radar(
     radar_points = radar_targets_to_site(scan.targets, mount, settings)
     radar_xy = (mount.pose.x_m, mount.pose.y_m)
     echoes = [expected_echo(camera, radar_xy) for camera in camera_objects]
-    distances_sq = gate_distances(echoes, radar_points, settings.reflection_extent_std_m,
-                                  settings.reflection_width_std_m)  # fmt: skip
+    distances_sq = gate_distances(
+        echoes, radar_points, settings.reflection_extent_std_m, settings.reflection_width_std_m
+    )
     pairs = associate(distances_sq, settings.gate_chi2, settings.ambiguity_margin_chi2)
     fused = [
         fuse_pair(camera_objects[c], radar_points[r], mount, settings, road_heading_rad, dt_s)

@@ -262,9 +262,10 @@ class BackgroundSubtractionDetector:
         detections = self._blobs_to_detections(foreground)
         done = time.perf_counter()
         return detections, BackgroundTimings(
-            subtract_s=subtracted - start, morphology_s=cleaned - subtracted,
+            subtract_s=subtracted - start,
+            morphology_s=cleaned - subtracted,
             components_s=done - cleaned,
-        )  # fmt: skip
+        )
 
     def _clean(self, foreground: U8) -> U8:
         """Opening, closing, then the region of interest."""

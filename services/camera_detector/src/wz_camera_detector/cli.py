@@ -147,9 +147,13 @@ class FrameProcessor:
     """Detect, track and range frames of one camera (the node's steps, without radar)."""
 
     def __init__(
-        self, site: Site, mount: SensorMount, backend: ImageBackend, settings: CameraDetectorSettings,
+        self,
+        site: Site,
+        mount: SensorMount,
+        backend: ImageBackend,
+        settings: CameraDetectorSettings,
         track: bool,
-    ) -> None:  # fmt: skip
+    ) -> None:
         self.site = site
         self.mount = mount
         self.backend = backend
@@ -160,7 +164,8 @@ class FrameProcessor:
         camera = self._cameras.get((width_px, height_px))
         if camera is None:
             camera = self._cameras[(width_px, height_px)] = camera_at_size(
-                self.mount, width_px, height_px)  # fmt: skip
+                self.mount, width_px, height_px
+            )
         return camera
 
     def process(self, image: U8, stamp_s: float) -> tuple[list[dict[str, Any]], float]:
@@ -173,8 +178,9 @@ class FrameProcessor:
         rows: list[tuple[ImageDetection, int | None]]
         if self.tracker is not None:
             tracks = self.tracker.update(found, stamp_s)
-            rows = [(ImageDetection(t.box_xyxy_px, t.score, t.class_name), t.local_id)
-                    for t in tracks]  # fmt: skip
+            rows = [
+                (ImageDetection(t.box_xyxy_px, t.score, t.class_name), t.local_id) for t in tracks
+            ]
         else:
             rows = [(d, None) for d in found]
         camera = self.camera(width, height)
@@ -182,30 +188,44 @@ class FrameProcessor:
         return [self._record(camera, mount, d, track_id) for d, track_id in rows], detect_s
 
     def _record(
-        self, camera: PinholeCamera, mount: SensorMount, detection: ImageDetection,
+        self,
+        camera: PinholeCamera,
+        mount: SensorMount,
+        detection: ImageDetection,
         track_id: int | None,
-    ) -> dict[str, Any]:  # fmt: skip
+    ) -> dict[str, Any]:
         _, shape = CLASS_SHAPES[detection.class_name]
         record: dict[str, Any] = {
             "box": [round(v, 1) for v in detection.box_xyxy_px],
-            "class": detection.class_name, "score": round(detection.score, 4),
+            "class": detection.class_name,
+            "score": round(detection.score, 4),
             "track_id": track_id,
-        }  # fmt: skip
+        }
         contact = box_to_ground(camera, detection.box_xyxy_px, 0.0, 0.0, 0.0)
         keys = ("x", "y", "station", "offset", "range", "paper_x", "paper_y")
         intrinsics = camera_intrinsics(camera.mount)
-        record["cut"] = cut_by_view(detection.box_xyxy_px, self.backend, intrinsics.width_px,
-                                    intrinsics.height_px)  # fmt: skip
+        record["cut"] = cut_by_view(
+            detection.box_xyxy_px, self.backend, intrinsics.width_px, intrinsics.height_px
+        )
         if record["cut"] or not all(math.isfinite(v) for v in contact):
             return record | dict.fromkeys(keys)
         heading = road_heading_at(self.site, *contact)
         x_m, y_m = fit_box_to_ground(camera, detection.box_xyxy_px, heading, shape)
         station, offset = self.site.road_frame.to_road(x_m, y_m)
         paper_x, paper_y = paper_box_to_ground(mount, detection.box_xyxy_px)
-        values = (x_m, y_m, float(station), float(offset),
-                  math.hypot(x_m - mount.pose.x_m, y_m - mount.pose.y_m), paper_x, paper_y)  # fmt: skip
-        return record | {k: (round(v, 3) if math.isfinite(v) else None)
-                         for k, v in zip(keys, values, strict=True)}  # fmt: skip
+        values = (
+            x_m,
+            y_m,
+            float(station),
+            float(offset),
+            math.hypot(x_m - mount.pose.x_m, y_m - mount.pose.y_m),
+            paper_x,
+            paper_y,
+        )
+        return record | {
+            k: (round(v, 3) if math.isfinite(v) else None)
+            for k, v in zip(keys, values, strict=True)
+        }
 
 
 def run(files: Sequence[Path], processor: FrameProcessor, rate_hz: float) -> int:
@@ -218,10 +238,14 @@ def run(files: Sequence[Path], processor: FrameProcessor, rate_hz: float) -> int
             for index, stamp_s, image in read_frames(path, rate_hz, image_index):
                 detections, detect_s = processor.process(image, stamp_s)
                 line = {
-                    "file": str(path), "frame": index, "stamp": round(stamp_s, 6),
-                    "width": int(image.shape[1]), "height": int(image.shape[0]),
-                    "detections": detections, "timings_ms": {"detect": round(detect_s * 1e3, 2)},
-                }  # fmt: skip
+                    "file": str(path),
+                    "frame": index,
+                    "stamp": round(stamp_s, 6),
+                    "width": int(image.shape[1]),
+                    "height": int(image.shape[0]),
+                    "detections": detections,
+                    "timings_ms": {"detect": round(detect_s * 1e3, 2)},
+                }
                 sys.stdout.write(json.dumps(line) + "\n")
                 sys.stdout.flush()
                 if is_image:

@@ -155,13 +155,22 @@ def camera_at_size(mount: SensorMount, width_px: int, height_px: int) -> Pinhole
     """The mount's pinhole model for frames of another size (same pose and field of view)."""
     intrinsics = camera_intrinsics(mount)
     if (intrinsics.width_px, intrinsics.height_px) != (width_px, height_px):
-        mount = mount.model_copy(update={"intrinsics": intrinsics.model_copy(
-            update={"width_px": width_px, "height_px": height_px})})  # fmt: skip
+        mount = mount.model_copy(
+            update={
+                "intrinsics": intrinsics.model_copy(
+                    update={"width_px": width_px, "height_px": height_px}
+                )
+            }
+        )
     return PinholeCamera(mount)
 
 
-def cut_by_view(box_xyxy_px: tuple[float, float, float, float], backend: ImageBackend,
-                width_px: int, height_px: int) -> bool:  # fmt: skip
+def cut_by_view(
+    box_xyxy_px: tuple[float, float, float, float],
+    backend: ImageBackend,
+    width_px: int,
+    height_px: int,
+) -> bool:
     """Whether a box touches the left, right or bottom edge of what the detector sees (its
     ROI, else the frame), within :data:`TRUNCATION_MARGIN_PX`: a vehicle cut by the view."""
     roi = getattr(backend, "roi_xyxy_px", None) or (0, 0, width_px, height_px)
@@ -177,17 +186,21 @@ def road_heading_at(site: Site, x_m: float, y_m: float) -> float:
 
 
 def camera_covariance(
-    camera_xy_m: tuple[float, float], object_xy_m: tuple[float, float],
+    camera_xy_m: tuple[float, float],
+    object_xy_m: tuple[float, float],
     settings: CameraDetectorSettings,
-) -> F64:  # fmt: skip
+) -> F64:
     """``sigma_los^2 u u^T + sigma_lat^2 n n^T`` [m^2], shape (2, 2) (module docstring)."""
     dx, dy = object_xy_m[0] - camera_xy_m[0], object_xy_m[1] - camera_xy_m[1]
     range_m = math.hypot(dx, dy)
     bearing = math.atan2(dy, dx)
     u = np.array([math.cos(bearing), math.sin(bearing)])
     n = np.array([-u[1], u[0]])
-    lateral = (settings.lateral_std_m + settings.lateral_std_per_m * range_m
-               + settings.near_lateral_std_m * max(0.0, 1.0 - range_m / settings.near_range_m))  # fmt: skip
+    lateral = (
+        settings.lateral_std_m
+        + settings.lateral_std_per_m * range_m
+        + settings.near_lateral_std_m * max(0.0, 1.0 - range_m / settings.near_range_m)
+    )
     along = settings.range_std_m + settings.range_std_per_m * range_m
     covariance: F64 = along**2 * np.outer(u, u) + lateral**2 * np.outer(n, n)
     return covariance
@@ -263,7 +276,8 @@ class CameraDetector:
         camera = self._cameras.get((width_px, height_px))
         if camera is None:
             camera = self._cameras[(width_px, height_px)] = camera_at_size(
-                self.camera_mount, width_px, height_px)  # fmt: skip
+                self.camera_mount, width_px, height_px
+            )
         return camera
 
     def handle(
@@ -335,8 +349,9 @@ class CameraDetector:
         log.warning(
             "frame stamps went back from %.3f s to %.3f s: a new run (a restarted simulation); "
             "the image tracker and the radar scan start again",
-            self.last_stamp_s, stamp_s,
-        )  # fmt: skip
+            self.last_stamp_s,
+            stamp_s,
+        )
         self.tracker.restart()
         self._scan = None
         self.runs += 1
@@ -374,8 +389,12 @@ class CameraDetector:
         """
         limit_m = self.settings.max_range_m
         camera_x, camera_y = self.camera_mount.pose.x_m, self.camera_mount.pose.y_m
-        return [obj for obj in fused if obj.source != "camera"
-                or math.hypot(obj.x_m - camera_x, obj.y_m - camera_y) <= limit_m]  # fmt: skip
+        return [
+            obj
+            for obj in fused
+            if obj.source != "camera"
+            or math.hypot(obj.x_m - camera_x, obj.y_m - camera_y) <= limit_m
+        ]
 
     def _camera_objects(
         self, tracks: list[ImageTrack], width_px: int, height_px: int, frame_index: int
@@ -414,7 +433,6 @@ class CameraDetector:
             )
         return objects
 
-
     def _fuse(self, objects: list[CameraObject], stamp_s: float) -> list[FusedObject]:
         scan = self._scan
         if (
@@ -424,9 +442,13 @@ class CameraDetector:
         ):
             return [camera_only(camera) for camera in objects]
         return fuse_camera_radar(
-            objects, scan, self.radar_mount, self.settings.association, self._radar_heading,
+            objects,
+            scan,
+            self.radar_mount,
+            self.settings.association,
+            self._radar_heading,
             dt_s=stamp_s - scan.stamp,
-        )  # fmt: skip
+        )
 
     def _detections(self, fused: list[FusedObject]) -> list[Detection]:
         detections = []
@@ -483,9 +505,10 @@ def run(
     camera_id = camera_mount(site, settings.camera_id).sensor_id
     raw_key = bus.keys.raw_camera(camera_id)
     detector = build_detector(
-        site, settings,
+        site,
+        settings,
         report=lambda reason, detail: bus.stats.count_invalid(raw_key, reason, detail),
-    )  # fmt: skip
+    )
     frames = bus.subscribe_frames(raw_key, CameraFrameMeta)  # a ring of one: latest wins
     scans = (
         bus.subscribe(

@@ -64,9 +64,7 @@ class Roi:
         return self.x1 <= width_px and self.y1 <= height_px
 
 
-def crop_label_lines(
-    lines: list[str], image_size: tuple[int, int], roi: Roi
-) -> list[str]:
+def crop_label_lines(lines: list[str], image_size: tuple[int, int], roi: Roi) -> list[str]:
     """YOLO label lines of a full image re-expressed in the ROI crop.
 
     Parameters
@@ -148,13 +146,16 @@ def prepare_roi_dataset(
             lines = label_path.read_text().splitlines() if label_path.exists() else []
             for suffix, region in [("", roi)] + [(f"-tile{i}", t) for i, t in enumerate(tiles)]:
                 if not region.fits(width, height):
-                    raise ValueError(f"{image_path}: region {region.as_tuple()} exceeds "
-                                     f"{width}x{height}")  # fmt: skip
-                crop = np.ascontiguousarray(
-                    image[region.y0 : region.y1, region.x0 : region.x1])  # fmt: skip
+                    raise ValueError(
+                        f"{image_path}: region {region.as_tuple()} exceeds {width}x{height}"
+                    )
+                crop = np.ascontiguousarray(image[region.y0 : region.y1, region.x0 : region.x1])
                 stem = f"{image_path.stem}{suffix}"
-                cv2.imwrite(str(dest / "images" / split / f"{stem}.jpg"), crop,
-                            [cv2.IMWRITE_JPEG_QUALITY, 95])  # fmt: skip
+                cv2.imwrite(
+                    str(dest / "images" / split / f"{stem}.jpg"),
+                    crop,
+                    [cv2.IMWRITE_JPEG_QUALITY, 95],
+                )
                 cropped = crop_label_lines(lines, (width, height), region)
                 n_labels += len(cropped)
                 (dest / "labels" / split / f"{stem}.txt").write_text(
@@ -175,9 +176,12 @@ def prepare_roi_dataset(
         for s in sources
         if (s / "manifest.json").exists()
     ]
-    manifest = {"roi_xyxy_px": list(roi.as_tuple()),
-                "tiles_xyxy_px": [list(t.as_tuple()) for t in tiles],
-                "counts": counts, "sources": manifests}  # fmt: skip
+    manifest = {
+        "roi_xyxy_px": list(roi.as_tuple()),
+        "tiles_xyxy_px": [list(t.as_tuple()) for t in tiles],
+        "counts": counts,
+        "sources": manifests,
+    }
     (dest / "manifest.json").write_text(json.dumps(manifest, indent=2))
     return counts
 
@@ -188,8 +192,6 @@ def _names_block(data_yaml: str) -> str:
     for index, line in enumerate(lines):
         if line.startswith("names:"):
             block = [line]
-            block += [
-                following for following in lines[index + 1 :] if following.startswith("  ")
-            ]
+            block += [following for following in lines[index + 1 :] if following.startswith("  ")]
             return "\n".join(block) + "\n"
     raise ValueError("data.yaml has no names block")

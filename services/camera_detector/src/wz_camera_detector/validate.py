@@ -152,9 +152,13 @@ def match_frame(
             outcome.true.append(True)
             continue
         ignored = np.array([not s for s in scored], dtype=bool)
-        if len(ious) and np.any(ignored & ((ious >= iou_threshold)
-                                           | (_overlap_of_smaller(pred.box_xyxy_px, truth_boxes)
-                                              >= IGNORE_OVERLAP))):  # fmt: skip
+        if len(ious) and np.any(
+            ignored
+            & (
+                (ious >= iou_threshold)
+                | (_overlap_of_smaller(pred.box_xyxy_px, truth_boxes) >= IGNORE_OVERLAP)
+            )
+        ):
             continue  # a "don't care" vehicle: neither true nor false
         outcome.scores.append(pred.score)
         outcome.true.append(False)
@@ -226,8 +230,10 @@ def read_truth(path: Path) -> list[TruthBox]:
     return [
         TruthBox(
             box_xyxy_px=(
-                float(v["box_xyxy_px"][0]), float(v["box_xyxy_px"][1]),
-                float(v["box_xyxy_px"][2]), float(v["box_xyxy_px"][3]),
+                float(v["box_xyxy_px"][0]),
+                float(v["box_xyxy_px"][1]),
+                float(v["box_xyxy_px"][2]),
+                float(v["box_xyxy_px"][3]),
             ),
             class_name=str(v["class"]),
             range_m=float(v["range_m"]),
@@ -277,16 +283,21 @@ def validate(
         agnostic.extend(frame_outcome)
         per_weather[image_path.name.split("-")[0]].extend(frame_outcome)
         for class_name in {t.class_name for t in truths} | {p.class_name for p in preds}:
-            class_scored = [s and t.class_name == class_name for s, t in zip(scored, truths,
-                                                                             strict=True)]
+            class_scored = [
+                s and t.class_name == class_name for s, t in zip(scored, truths, strict=True)
+            ]
             class_preds = [p for p in preds if p.class_name == class_name]
             per_class[class_name].extend(
                 match_frame(truths, class_preds, class_scored, iou_threshold, by_class=True)
             )
     report: dict[str, object] = {
         "frames": len(pairs),
-        "criteria": {"max_range_m": max_range_m, "min_visibility": min_visibility,
-                     "iou": iou_threshold, "conf": conf},
+        "criteria": {
+            "max_range_m": max_range_m,
+            "min_visibility": min_visibility,
+            "iou": iou_threshold,
+            "conf": conf,
+        },
         "vehicles": {
             "scored": agnostic.n_truth,
             "map50": average_precision(agnostic.scores, agnostic.true, agnostic.n_truth),
@@ -320,8 +331,13 @@ def main(argv: list[str] | None = None) -> int:
         prog="python -m wz_camera_detector.validate", description=__doc__.split("\n")[0]
     )
     parser.add_argument("--model", type=Path, required=True)
-    parser.add_argument("--data", type=Path, nargs="+", required=True,
-                        help="wz dataset folders (their truth sidecars)")  # fmt: skip
+    parser.add_argument(
+        "--data",
+        type=Path,
+        nargs="+",
+        required=True,
+        help="wz dataset folders (their truth sidecars)",
+    )
     parser.add_argument("--split", default="val")
     parser.add_argument("--max-range-m", type=float, default=100.0)
     parser.add_argument("--min-visibility", type=float, default=0.5)

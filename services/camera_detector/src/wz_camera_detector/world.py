@@ -173,8 +173,10 @@ class VehicleShape:
     wheel_inset_m: float = 0.0
 
     def __post_init__(self) -> None:
-        if min(self.length_m, self.width_m, self.height_m, self.clearance_m,
-               self.wheel_inset_m) < 0.0:  # fmt: skip
+        if (
+            min(self.length_m, self.width_m, self.height_m, self.clearance_m, self.wheel_inset_m)
+            < 0.0
+        ):
             raise ValueError(f"vehicle shape {self} must not have negative dimensions")
         if self.clearance_m >= self.height_m or 2.0 * self.wheel_inset_m >= self.length_m:
             raise ValueError(f"vehicle shape {self}: the body and wheels do not fit")
@@ -183,10 +185,17 @@ class VehicleShape:
         """The outline's corners in the vehicle frame (along, across, up), shape (12, 3): the
         body's eight and the four points where the outer wheels meet the road."""
         half_l, half_w = 0.5 * self.length_m, 0.5 * self.width_m
-        body = [(a * half_l, b * half_w, z) for a in (-1.0, 1.0) for b in (-1.0, 1.0)
-                for z in (self.clearance_m, self.height_m)]  # fmt: skip
-        wheels = [(a * (half_l - self.wheel_inset_m), b * half_w, 0.0)
-                  for a in (-1.0, 1.0) for b in (-1.0, 1.0)]  # fmt: skip
+        body = [
+            (a * half_l, b * half_w, z)
+            for a in (-1.0, 1.0)
+            for b in (-1.0, 1.0)
+            for z in (self.clearance_m, self.height_m)
+        ]
+        wheels = [
+            (a * (half_l - self.wheel_inset_m), b * half_w, 0.0)
+            for a in (-1.0, 1.0)
+            for b in (-1.0, 1.0)
+        ]
         return np.array(body + wheels, dtype=np.float64)
 
 
@@ -206,16 +215,25 @@ def vehicle_image_boxes(
     local = shape.outline_points()
     cos_h, sin_h = math.cos(heading_rad), math.sin(heading_rad)
     offsets = np.stack(
-        [local[:, 0] * cos_h - local[:, 1] * sin_h, local[:, 0] * sin_h + local[:, 1] * cos_h,
-         local[:, 2]], axis=1,
-    )  # fmt: skip
+        [
+            local[:, 0] * cos_h - local[:, 1] * sin_h,
+            local[:, 0] * sin_h + local[:, 1] * cos_h,
+            local[:, 2],
+        ],
+        axis=1,
+    )
     ground = np.concatenate([centres, np.zeros((centres.shape[0], 1))], axis=1)[:, None, :]
     uv, _ = camera.project((ground + offsets[None, :, :]).reshape(-1, 3))
     uv = uv.reshape(centres.shape[0], local.shape[0], 2)
     return np.stack(
-        [uv[:, :, 0].min(axis=1), uv[:, :, 1].min(axis=1),
-         uv[:, :, 0].max(axis=1), uv[:, :, 1].max(axis=1)], axis=1,
-    )  # fmt: skip
+        [
+            uv[:, :, 0].min(axis=1),
+            uv[:, :, 1].min(axis=1),
+            uv[:, :, 0].max(axis=1),
+            uv[:, :, 1].max(axis=1),
+        ],
+        axis=1,
+    )
 
 
 def fit_box_to_ground(

@@ -603,8 +603,12 @@ class YoloOnnxDetector:
                 # A box touching the tile's edge is a cut vehicle: the ROI sees it whole.
                 margin = TILE_EDGE_MARGIN_PX
                 tile_h, tile_w = pixels.shape[:2]
-                inside = ((boxes[:, 0] > margin) & (boxes[:, 1] > margin)
-                          & (boxes[:, 2] < tile_w - margin) & (boxes[:, 3] < tile_h - margin))  # fmt: skip
+                inside = (
+                    (boxes[:, 0] > margin)
+                    & (boxes[:, 1] > margin)
+                    & (boxes[:, 2] < tile_w - margin)
+                    & (boxes[:, 3] < tile_h - margin)
+                )
                 boxes, scores, class_ids = boxes[inside], scores[inside], class_ids[inside]
             all_boxes.append(boxes + np.array([x0, y0, x0, y0], dtype=np.float64))
             all_scores.append(scores)

@@ -22,8 +22,14 @@ TIME_COLUMN_NAMES = ("time_unix_s", "time")
 K = TypeVar("K")
 
 
-def read_frame_times(path: Path, problems: Problems, *, key: str, parse_key: Callable[[str], K],
-                     describe: Callable[[K], str]) -> tuple[dict[K, tuple[float, int]], set[K]]:  # fmt: skip
+def read_frame_times(
+    path: Path,
+    problems: Problems,
+    *,
+    key: str,
+    parse_key: Callable[[str], K],
+    describe: Callable[[K], str],
+) -> tuple[dict[K, tuple[float, int]], set[K]]:
     """``key -> (time [Unix s], CSV line)``, and the keys whose row had a bad time (reported;
     their frames are to be skipped, not reported again).
 
@@ -47,9 +53,14 @@ def read_frame_times(path: Path, problems: Problems, *, key: str, parse_key: Cal
     key_column = header.index(key) if key in header else None
     time_column = next((header.index(n) for n in TIME_COLUMN_NAMES if n in header), None)
     if key_column is None or time_column is None:
-        missing = [f"{what} ({' or '.join(names)})" for what, names, column in (
-            (key, (key,), key_column), ("time", TIME_COLUMN_NAMES, time_column))
-            if column is None]  # fmt: skip
+        missing = [
+            f"{what} ({' or '.join(names)})"
+            for what, names, column in (
+                (key, (key,), key_column),
+                ("time", TIME_COLUMN_NAMES, time_column),
+            )
+            if column is None
+        ]
         raise FieldDataError(
             path, f"missing columns: {', '.join(missing)}; header: {','.join(header)}", line=1
         )
@@ -60,8 +71,9 @@ def read_frame_times(path: Path, problems: Problems, *, key: str, parse_key: Cal
         if not any(cell.strip() for cell in row):
             continue
         if len(row) <= max(key_column, time_column):
-            problems.add(FieldDataError(path, f"{len(row)} cells, expected {len(header)}",
-                                        line=number))  # fmt: skip
+            problems.add(
+                FieldDataError(path, f"{len(row)} cells, expected {len(header)}", line=number)
+            )
             continue
         try:
             frame = parse_key(row[key_column])
@@ -73,15 +85,24 @@ def read_frame_times(path: Path, problems: Problems, *, key: str, parse_key: Cal
         except ValueError:
             stamp = math.nan
         if not (math.isfinite(stamp) and stamp >= 0.0):
-            problems.add(FieldDataError(
-                path, f"time {row[time_column].strip()!r} of {describe(frame)} is not a Unix "
-                "time [s]: frame skipped", line=number))  # fmt: skip
+            problems.add(
+                FieldDataError(
+                    path,
+                    f"time {row[time_column].strip()!r} of {describe(frame)} is not a Unix "
+                    "time [s]: frame skipped",
+                    line=number,
+                )
+            )
             rejected.add(frame)
             continue
         if frame in table:
-            problems.add(FieldDataError(
-                path, f"{describe(frame)} again (first at line {table[frame][1]}): row ignored",
-                line=number))  # fmt: skip
+            problems.add(
+                FieldDataError(
+                    path,
+                    f"{describe(frame)} again (first at line {table[frame][1]}): row ignored",
+                    line=number,
+                )
+            )
             continue
         table[frame] = (stamp, number)
     return table, rejected - table.keys()

@@ -179,8 +179,9 @@ class _Epoch:
             if len(date) != 6 or not date.isdigit():
                 raise ValueError(f"date {date!r} is not ddmmyy")
             year = int(date[4:6])
-            self.date = dt.date(year + (2000 if year < 80 else 1900), int(date[2:4]),
-                                int(date[0:2]))  # fmt: skip
+            self.date = dt.date(
+                year + (2000 if year < 80 else 1900), int(date[2:4]), int(date[0:2])
+            )
         self.rmc_valid = _field(fields, 2) == "A"
         self.rmc_latitude_deg, self.rmc_longitude_deg = latitude, longitude
         self.rmc_speed_mps = None if speed_kn is None else speed_kn * KNOT_MPS
@@ -222,9 +223,15 @@ class _Epoch:
             return None
         speed = self.rmc_speed_mps if self.rmc_speed_mps is not None else self.vtg_speed_mps
         course = self.rmc_course_deg if self.rmc_course_deg is not None else self.vtg_course_deg
-        return GpsFix(stamp=stamp, latitude_deg=position[0], longitude_deg=position[1],
-                      altitude_m=self.altitude_m, speed_mps=speed, heading_deg=course,
-                      quality=self.quality)  # fmt: skip
+        return GpsFix(
+            stamp=stamp,
+            latitude_deg=position[0],
+            longitude_deg=position[1],
+            altitude_m=self.altitude_m,
+            speed_mps=speed,
+            heading_deg=course,
+            quality=self.quality,
+        )
 
 
 def _unix_s(date: dt.date, time_of_day_s: float) -> float:
@@ -286,8 +293,10 @@ class _NmeaEpochs:
         problem = epoch.problem()
         stamp = _unix_s(date, epoch.time_of_day_s)
         if problem is None and stamp <= self.last_stamp:
-            back = (f"time goes back: {_clock(epoch.time_of_day_s)} UTC is not after the "
-                    f"previous fix ({self.last_stamp - stamp:.3f} s earlier)")  # fmt: skip
+            back = (
+                f"time goes back: {_clock(epoch.time_of_day_s)} UTC is not after the "
+                f"previous fix ({self.last_stamp - stamp:.3f} s earlier)"
+            )
             problem = back, epoch.line
         if problem is not None:
             self.problems.add(FieldDataError(self.path, problem[0], line=problem[1]))
@@ -298,15 +307,18 @@ class _NmeaEpochs:
     def finish(self) -> None:
         """Report the epochs that never got a date."""
         for epoch in self.undated:
-            self.problems.add(FieldDataError(
-                self.path, "no date for this fix: no RMC sentence in the log gives one (GGA "
-                "has only the time of day); pass the day of the drive (date=...)",
-                line=epoch.line))  # fmt: skip
+            self.problems.add(
+                FieldDataError(
+                    self.path,
+                    "no date for this fix: no RMC sentence in the log gives one (GGA "
+                    "has only the time of day); pass the day of the drive (date=...)",
+                    line=epoch.line,
+                )
+            )
         self.undated.clear()
 
 
-def read_nmea(path: Path, problems: Problems, *, date: dt.date | None = None
-              ) -> Iterator[GpsFix]:  # fmt: skip
+def read_nmea(path: Path, problems: Problems, *, date: dt.date | None = None) -> Iterator[GpsFix]:
     """The fixes of an NMEA 0183 log, one per epoch, in time order.
 
     Parameters
@@ -378,8 +390,9 @@ def _read_nmea(path: Path, problems: Problems, date: dt.date | None) -> Iterator
                 if current is not None and current.time_key_ms != time_key_ms:
                     yield from epochs.close(current)
                     current = None
-                target = current if current is not None \
-                    else _Epoch(time_key_ms, time_of_day_s, number)  # fmt: skip
+                target = (
+                    current if current is not None else _Epoch(time_key_ms, time_of_day_s, number)
+                )
             else:
                 continue
             try:
@@ -421,8 +434,9 @@ CSV_OPTIONAL = ("altitude_m", "speed_mps", "heading_deg", "quality")
 
 
 def _accepted_names() -> str:
-    required = ", ".join(f"{names[0]} (or {', '.join(names[1:])})"
-                         for names in CSV_REQUIRED.values())  # fmt: skip
+    required = ", ".join(
+        f"{names[0]} (or {', '.join(names[1:])})" for names in CSV_REQUIRED.values()
+    )
     return f"a GPS CSV needs {required}, and may have {', '.join(CSV_OPTIONAL)}"
 
 
@@ -436,14 +450,18 @@ def _csv_columns(path: Path, header: list[str]) -> dict[str, int]:
         if not found:
             missing.append(canonical)
         elif len(found) > 1:
-            raise FieldDataError(path, f"columns {' and '.join(found)} both give "
-                                 f"{canonical}: keep one", line=1)  # fmt: skip
+            raise FieldDataError(
+                path, f"columns {' and '.join(found)} both give {canonical}: keep one", line=1
+            )
         else:
             columns[canonical] = names.index(found[0])
     if missing:
         raise FieldDataError(
-            path, f"missing column(s) {', '.join(missing)}; {_accepted_names()}; the header has "
-            f"{', '.join(repr(n) for n in header) or 'no columns'}", line=1)  # fmt: skip
+            path,
+            f"missing column(s) {', '.join(missing)}; {_accepted_names()}; the header has "
+            f"{', '.join(repr(n) for n in header) or 'no columns'}",
+            line=1,
+        )
     for name in CSV_OPTIONAL:
         if name in names:
             columns[name] = names.index(name)
@@ -465,8 +483,10 @@ def _csv_time(text: str) -> float:
     if not math.isfinite(value):
         raise ValueError(f"time {text!r} is not a finite number")
     if value < _YEAR_2000_S:
-        raise ValueError(f"time {text!r} is before 2000: not Unix seconds (a relative time, or "
-                         "GPS seconds of the week?)")  # fmt: skip
+        raise ValueError(
+            f"time {text!r} is before 2000: not Unix seconds (a relative time, or "
+            "GPS seconds of the week?)"
+        )
     return value
 
 
@@ -500,8 +520,9 @@ def read_gps_csv(path: Path, problems: Problems) -> Iterator[GpsFix]:
     return _read_gps_csv(path, problems, columns, len(header))
 
 
-def _read_gps_csv(path: Path, problems: Problems, columns: dict[str, int],
-                  width: int) -> Iterator[GpsFix]:  # fmt: skip
+def _read_gps_csv(
+    path: Path, problems: Problems, columns: dict[str, int], width: int
+) -> Iterator[GpsFix]:
     last_stamp = -math.inf
     with path.open("r", encoding="utf-8-sig", newline="") as stream:
         reader = csv.reader(stream)
@@ -529,17 +550,23 @@ def _read_gps_csv(path: Path, problems: Problems, columns: dict[str, int],
                 if speed is not None and speed < 0.0:
                     raise ValueError(f"speed_mps {speed} is negative")
                 if stamp <= last_stamp:
-                    raise ValueError(f"time goes back: {stamp:.3f} is not after the previous "
-                                     f"fix {last_stamp:.3f}")  # fmt: skip
+                    raise ValueError(
+                        f"time goes back: {stamp:.3f} is not after the previous "
+                        f"fix {last_stamp:.3f}"
+                    )
             except ValueError as exc:
                 problems.add(FieldDataError(path, str(exc), line=number))
                 continue
             last_stamp = stamp
-            yield GpsFix(stamp=stamp, latitude_deg=latitude, longitude_deg=longitude,
-                         altitude_m=_optional_float(cell.get("altitude_m", ""), "altitude_m"),
-                         speed_mps=speed,
-                         heading_deg=_optional_float(cell.get("heading_deg", ""), "heading_deg"),
-                         quality=quality)  # fmt: skip
+            yield GpsFix(
+                stamp=stamp,
+                latitude_deg=latitude,
+                longitude_deg=longitude,
+                altitude_m=_optional_float(cell.get("altitude_m", ""), "altitude_m"),
+                speed_mps=speed,
+                heading_deg=_optional_float(cell.get("heading_deg", ""), "heading_deg"),
+                quality=quality,
+            )
 
 
 def read_gps(path: Path, problems: Problems, *, date: dt.date | None = None) -> Iterator[GpsFix]:
@@ -609,9 +636,15 @@ def _track_headings(x_m: F64, y_m: F64, baseline_m: float) -> F64:
     return result
 
 
-def gps_track(fixes: Iterable[GpsFix], site: Site, *, antenna_forward_m: float = 0.0,
-              antenna_left_m: float = 0.0, moving_speed_mps: float = 1.0,
-              heading_baseline_m: float = 1.0) -> GpsTrack:  # fmt: skip
+def gps_track(
+    fixes: Iterable[GpsFix],
+    site: Site,
+    *,
+    antenna_forward_m: float = 0.0,
+    antenna_left_m: float = 0.0,
+    moving_speed_mps: float = 1.0,
+    heading_baseline_m: float = 1.0,
+) -> GpsTrack:
     """The fixes in the site and road frames, moved from the antenna to the reference point.
 
     Parameters
@@ -656,26 +689,33 @@ def gps_track(fixes: Iterable[GpsFix], site: Site, *, antenna_forward_m: float =
     t = np.array([fix.stamp for fix in listed], dtype=np.float64)
     if np.any(np.diff(t) <= 0.0):
         i = int(np.flatnonzero(np.diff(t) <= 0.0)[0])
-        raise ValueError(f"GPS fix stamps must increase: fix {i + 1} at {t[i + 1]:.3f} s is not "
-                         f"after fix {i} at {t[i]:.3f} s")  # fmt: skip
+        raise ValueError(
+            f"GPS fix stamps must increase: fix {i + 1} at {t[i + 1]:.3f} s is not "
+            f"after fix {i} at {t[i]:.3f} s"
+        )
     geo = site.geo_frame
     latitude = np.array([fix.latitude_deg for fix in listed], dtype=np.float64)
     longitude = np.array([fix.longitude_deg for fix in listed], dtype=np.float64)
-    altitude = np.array([geo.altitude_m if fix.altitude_m is None else fix.altitude_m
-                         for fix in listed], dtype=np.float64)  # fmt: skip
+    altitude = np.array(
+        [geo.altitude_m if fix.altitude_m is None else fix.altitude_m for fix in listed],
+        dtype=np.float64,
+    )
     antenna_x, antenna_y, _ = geo.to_site(latitude, longitude, altitude)
 
-    speed = np.array([np.nan if fix.speed_mps is None else fix.speed_mps for fix in listed],
-                     dtype=np.float64)  # fmt: skip
+    speed = np.array(
+        [np.nan if fix.speed_mps is None else fix.speed_mps for fix in listed], dtype=np.float64
+    )
     if t.size >= 2:
         differentiated = np.hypot(np.gradient(antenna_x, t), np.gradient(antenna_y, t))
         speed = np.where(np.isnan(speed), differentiated, speed)
 
-    course_deg = np.array([np.nan if fix.heading_deg is None else fix.heading_deg
-                           for fix in listed], dtype=np.float64)  # fmt: skip
+    course_deg = np.array(
+        [np.nan if fix.heading_deg is None else fix.heading_deg for fix in listed], dtype=np.float64
+    )
     heading = np.where(speed >= moving_speed_mps, np.radians(90.0 - course_deg), np.nan)
-    heading = np.where(np.isnan(heading), _track_headings(antenna_x, antenna_y,
-                                                          heading_baseline_m), heading)  # fmt: skip
+    heading = np.where(
+        np.isnan(heading), _track_headings(antenna_x, antenna_y, heading_baseline_m), heading
+    )
     if np.any(np.isnan(heading)):
         road = site.road_frame
         station, _ = road.to_road(antenna_x, antenna_y)
@@ -687,5 +727,12 @@ def gps_track(fixes: Iterable[GpsFix], site: Site, *, antenna_forward_m: float =
     x = antenna_x - (antenna_forward_m * cos_h - antenna_left_m * sin_h)
     y = antenna_y - (antenna_forward_m * sin_h + antenna_left_m * cos_h)
     station_m, offset_m = site.road_frame.to_road(x, y)
-    return GpsTrack(t=t, x_m=x, y_m=y, station_m=station_m, offset_m=offset_m, speed_mps=speed,
-                    heading_rad=heading)  # fmt: skip
+    return GpsTrack(
+        t=t,
+        x_m=x,
+        y_m=y,
+        station_m=station_m,
+        offset_m=offset_m,
+        speed_mps=speed,
+        heading_rad=heading,
+    )

@@ -215,8 +215,14 @@ def _sweep(frame: PointFrame, stamp: float, where: str) -> LidarSweep:
     no_return = ~np.isfinite(xyz).all(axis=1) | ~xyz.any(axis=1)
     if frame.organized:
         points[no_return, :3] = np.nan
-        return LidarSweep(stamp=stamp, points=points, rows=frame.rows, columns=frame.columns,
-                          organized=True, where=where)  # fmt: skip
+        return LidarSweep(
+            stamp=stamp,
+            points=points,
+            rows=frame.rows,
+            columns=frame.columns,
+            organized=True,
+            where=where,
+        )
     kept: F32 = np.ascontiguousarray(points[~no_return])
     return LidarSweep(stamp=stamp, points=kept, rows=1, columns=0, organized=False, where=where)
 
@@ -229,12 +235,15 @@ def _read_timestamps(
 ) -> tuple[dict[str, tuple[float, int]], set[str]]:
     """``file name -> (time [Unix s], CSV line)`` of the folder's frames, and the names of
     frames whose row was bad (reported and left out)."""
-    table, rejected = read_frame_times(path, problems, key="file",
-                                       parse_key=lambda cell: Path(cell.strip()).name,
-                                       describe=lambda name: name)  # fmt: skip
+    table, rejected = read_frame_times(
+        path,
+        problems,
+        key="file",
+        parse_key=lambda cell: Path(cell.strip()).name,
+        describe=lambda name: name,
+    )
     for name, (_, number) in list(table.items()):
         if name not in frame_names:
-            problems.add(FieldDataError(path, f"no frame file {name!r} in the folder",
-                                        line=number))  # fmt: skip
+            problems.add(FieldDataError(path, f"no frame file {name!r} in the folder", line=number))
             del table[name]
     return table, rejected

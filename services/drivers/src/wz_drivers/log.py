@@ -73,17 +73,20 @@ class LogSource(_Strict):
 
     @model_validator(mode="after")
     def _format_fits_kind(self) -> LogSource:
-        allowed = {"lidar": {"ouster", "frames"}, "camera": {"video"},
-                   "objects": {"csv", "jsonl", "udp"}}[self.kind]  # fmt: skip
+        allowed = {
+            "lidar": {"ouster", "frames"},
+            "camera": {"video"},
+            "objects": {"csv", "jsonl", "udp"},
+        }[self.kind]
         if self.format not in allowed:
-            raise ValueError(f"a {self.kind} source is one of {sorted(allowed)}, not "
-                             f"{self.format!r}")  # fmt: skip
+            raise ValueError(
+                f"a {self.kind} source is one of {sorted(allowed)}, not {self.format!r}"
+            )
         if self.format == "udp" and not self.path.startswith("udp://"):
             raise ValueError("a udp source's path is udp://<host>:<port> to listen on")
         if self.format == "ouster" and self.metadata is None and not self.live:
             raise ValueError("an Ouster recording needs its metadata JSON (metadata: ...)")
         return self
-
 
     @property
     def live(self) -> bool:
@@ -138,13 +141,17 @@ def load_log(folder: str | Path) -> FieldLog:
         raise FieldDataError(manifest_path, f"cannot read the manifest: {exc.strerror}") from exc
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
-        raise FieldDataError(manifest_path, f"not YAML: {getattr(exc, 'problem', exc)}",
-                             line=None if mark is None else mark.line + 1) from exc  # fmt: skip
+        raise FieldDataError(
+            manifest_path,
+            f"not YAML: {getattr(exc, 'problem', exc)}",
+            line=None if mark is None else mark.line + 1,
+        ) from exc
     try:
         manifest = LogManifest.model_validate(raw)
     except ValidationError as exc:
-        problems = "; ".join(f"{'.'.join(str(p) for p in e['loc']) or 'manifest'}: {e['msg']}"
-                             for e in exc.errors())  # fmt: skip
+        problems = "; ".join(
+            f"{'.'.join(str(p) for p in e['loc']) or 'manifest'}: {e['msg']}" for e in exc.errors()
+        )
         raise FieldDataError(manifest_path, problems) from exc
     try:
         site = load_site(folder / manifest.site)
@@ -154,17 +161,27 @@ def load_log(folder: str | Path) -> FieldLog:
     for source in manifest.sources:
         mount = mounts.get(source.sensor_id)
         if mount is None:
-            raise FieldDataError(manifest_path, f"source {source.sensor_id}: the site "
-                                 f"{site.site_id} has no such sensor (it has "
-                                 f"{', '.join(mounts)})")  # fmt: skip
+            raise FieldDataError(
+                manifest_path,
+                f"source {source.sensor_id}: the site "
+                f"{site.site_id} has no such sensor (it has "
+                f"{', '.join(mounts)})",
+            )
         if mount.kind != SITE_KIND[source.kind]:
-            raise FieldDataError(manifest_path, f"source {source.sensor_id} is {source.kind} "
-                                 f"data but the site's sensor is a {mount.kind}")  # fmt: skip
+            raise FieldDataError(
+                manifest_path,
+                f"source {source.sensor_id} is {source.kind} "
+                f"data but the site's sensor is a {mount.kind}",
+            )
         for relative in (source.path, source.metadata, source.timestamps):
-            if relative is not None and not (source.live and relative == source.path) \
-                    and not (folder / relative).exists():  # fmt: skip
-                raise FieldDataError(manifest_path, f"source {source.sensor_id}: {relative} "
-                                     "is missing")  # fmt: skip
+            if (
+                relative is not None
+                and not (source.live and relative == source.path)
+                and not (folder / relative).exists()
+            ):
+                raise FieldDataError(
+                    manifest_path, f"source {source.sensor_id}: {relative} is missing"
+                )
     if manifest.truth is not None and not (folder / manifest.truth.path).is_file():
         raise FieldDataError(manifest_path, f"truth: {manifest.truth.path} is missing")
     return FieldLog(folder, manifest, site)

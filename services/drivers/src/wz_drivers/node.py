@@ -43,12 +43,18 @@ class _Reporter(Problems):
         self._bus.stats.count_invalid(self._key, "bad_record", str(error))
 
 
-def _run_live(bus: Bus, field_log: FieldLog, source: LogSource, settings: DriversSettings,
-              stop: threading.Event) -> None:  # fmt: skip
+def _run_live(
+    bus: Bus,
+    field_log: FieldLog,
+    source: LogSource,
+    settings: DriversSettings,
+    stop: threading.Event,
+) -> None:
     key = key_of(field_log.site, source)
     # Frames are dropped under congestion (a stale frame is worthless), object lists are not.
-    publisher: Publisher[Any] = bus.publisher(key, MESSAGE_CLASS[source.kind],
-                                              block=source.kind == "objects")  # fmt: skip
+    publisher: Publisher[Any] = bus.publisher(
+        key, MESSAGE_CLASS[source.kind], block=source.kind == "objects"
+    )
     problems = _Reporter(bus, key)
     while not stop.is_set():
         try:
@@ -56,28 +62,39 @@ def _run_live(bus: Bus, field_log: FieldLog, source: LogSource, settings: Driver
                 publisher.put_bytes(out.payload)
                 if stop.is_set():
                     return
-            log.warning("%s: %s ended; reading it again in %.0f s", source.sensor_id,
-                        source.path, settings.retry_s)  # fmt: skip
+            log.warning(
+                "%s: %s ended; reading it again in %.0f s",
+                source.sensor_id,
+                source.path,
+                settings.retry_s,
+            )
         except FieldDataError as exc:
             log.warning("%s: %s; trying again in %.0f s", source.sensor_id, exc, settings.retry_s)
         except Exception:  # a driver bug must not take the other sensors down
-            log.exception("%s: the driver failed; trying again in %.0f s", source.sensor_id,
-                          settings.retry_s)  # fmt: skip
+            log.exception(
+                "%s: the driver failed; trying again in %.0f s", source.sensor_id, settings.retry_s
+            )
         stop.wait(settings.retry_s)
 
 
 def run(runtime: ServiceRuntime, field_log: FieldLog, settings: DriversSettings) -> None:
     if not any(source.live for source in field_log.sources):
         rate = None if settings.rate == 0.0 else settings.rate
-        sent, problems = replay_log(runtime.bus, field_log, rate=rate, stop=runtime.stop,
-                                    loop=settings.loop)  # fmt: skip
-        log.info("replayed %s: %s; %d records skipped", field_log.folder, dict(sent),
-                 len(problems))  # fmt: skip
+        sent, problems = replay_log(
+            runtime.bus, field_log, rate=rate, stop=runtime.stop, loop=settings.loop
+        )
+        log.info("replayed %s: %s; %d records skipped", field_log.folder, dict(sent), len(problems))
         runtime.stop.wait()  # stay alive (and healthy) until stopped
         return
-    threads = [threading.Thread(target=_run_live, name=source.sensor_id, daemon=True,
-                                args=(runtime.bus, field_log, source, settings, runtime.stop))
-               for source in field_log.sources]  # fmt: skip
+    threads = [
+        threading.Thread(
+            target=_run_live,
+            name=source.sensor_id,
+            daemon=True,
+            args=(runtime.bus, field_log, source, settings, runtime.stop),
+        )
+        for source in field_log.sources
+    ]
     for thread in threads:
         thread.start()
     log.info("reading %s", ", ".join(f"{s.sensor_id} ({s.path})" for s in field_log.sources))

@@ -286,15 +286,21 @@ def _read_pcap(path: Path, info: SensorInfo, problems: Problems) -> Iterator[Lid
                 lidar_packets += 1
                 dropped = source.size_error_count + source.id_error_count
                 if dropped > rejected:
-                    problems.add(FieldDataError(
-                        path, f"{dropped - rejected} packet(s) before this one have the wrong "
-                        "size or another sensor's id for this metadata; left out",
-                        line=lidar_packets, unit="lidar packet"))  # fmt: skip
+                    problems.add(
+                        FieldDataError(
+                            path,
+                            f"{dropped - rejected} packet(s) before this one have the wrong "
+                            "size or another sensor's id for this metadata; left out",
+                            line=lidar_packets,
+                            unit="lidar packet",
+                        )
+                    )
                     rejected, explained = dropped, True
                 fault = _packet_fault(packet, info, packet_format)
                 if fault is not None:
-                    problems.add(FieldDataError(path, fault, line=lidar_packets,
-                                                unit="lidar packet"))  # fmt: skip
+                    problems.add(
+                        FieldDataError(path, fault, line=lidar_packets, unit="lidar packet")
+                    )
                     explained = True
                     continue
                 pending += 1
@@ -311,8 +317,9 @@ def _read_pcap(path: Path, info: SensorInfo, problems: Problems) -> Iterator[Lid
                 # lost, when the next scan's first packet does (and batches that one).
                 pending = 0 if converter.complete(frame) else 1
                 if scans == 1 and converter.starts_mid_rotation(frame):
-                    log.info("%s: partial first scan (recording started mid-rotation) skipped",
-                             path)  # fmt: skip
+                    log.info(
+                        "%s: partial first scan (recording started mid-rotation) skipped", path
+                    )
                 elif explained and not converter.complete(frame):
                     log.debug("%s: scan %d skipped (bad packet reported)", path, scans)
                 else:
@@ -322,14 +329,21 @@ def _read_pcap(path: Path, info: SensorInfo, problems: Problems) -> Iterator[Lid
                 explained = False
                 frame = LidarFrame(info)
         except RuntimeError as exc:
-            problems.add(FieldDataError(path, f"ouster-sdk stopped reading: {exc}",
-                                        line=lidar_packets, unit="lidar packet"))  # fmt: skip
+            problems.add(
+                FieldDataError(
+                    path,
+                    f"ouster-sdk stopped reading: {exc}",
+                    line=lidar_packets,
+                    unit="lidar packet",
+                )
+            )
     stale.report(problems)
     dropped = source.size_error_count + source.id_error_count
     damage = _pcap_damage(path)
     if lidar_packets == 0 and damage is not None:
-        raise FieldDataError(path, f"{damage[1]}, before any whole lidar packet",
-                             line=damage[0], unit="pcap record")  # fmt: skip
+        raise FieldDataError(
+            path, f"{damage[1]}, before any whole lidar packet", line=damage[0], unit="pcap record"
+        )
     if lidar_packets == 0:
         raise FieldDataError(
             path,
@@ -338,13 +352,20 @@ def _read_pcap(path: Path, info: SensorInfo, problems: Problems) -> Iterator[Lid
             + ": is the metadata file the one recorded with this pcap?",
         )
     if dropped > rejected:
-        problems.add(FieldDataError(
-            path, f"{dropped - rejected} packet(s) at the end have the wrong size or another "
-            "sensor's id for this metadata; left out"))  # fmt: skip
+        problems.add(
+            FieldDataError(
+                path,
+                f"{dropped - rejected} packet(s) at the end have the wrong size or another "
+                "sensor's id for this metadata; left out",
+            )
+        )
     if damage is not None:
         record, what = damage
-        problems.add(FieldDataError(path, f"{what}; the scan it cut is skipped", line=record,
-                                    unit="pcap record"))  # fmt: skip
+        problems.add(
+            FieldDataError(
+                path, f"{what}; the scan it cut is skipped", line=record, unit="pcap record"
+            )
+        )
     elif pending:
         log.info("%s: partial last scan (recording stopped mid-rotation) skipped", path)
 
@@ -366,10 +387,16 @@ class _StalePackets:
     def report(self, problems: Problems) -> None:
         if self._first is None:
             return
-        problems.add(FieldDataError(
-            self.path, f"lidar packets {self._first}..{self._last} dropped by ouster-sdk's "
-            "scan batcher: their frame id or time goes back (sensor restarted, or packets out "
-            "of order)", line=self._first, unit="lidar packet"))  # fmt: skip
+        problems.add(
+            FieldDataError(
+                self.path,
+                f"lidar packets {self._first}..{self._last} dropped by ouster-sdk's "
+                "scan batcher: their frame id or time goes back (sensor restarted, or packets out "
+                "of order)",
+                line=self._first,
+                unit="lidar packet",
+            )
+        )
         self._first = None
 
 
@@ -410,11 +437,15 @@ def _pcap_damage(path: Path) -> tuple[int, str] | None:
                 return record, f"file ends inside the header of pcap record {record}"
             captured = struct.unpack(order + "IIII", header)[2]
             if captured > max(snap_length, 1 << 18):
-                return record, (f"pcap record header claims {captured} bytes (garbage): the "
-                                "rest of the file cannot be read")  # fmt: skip
+                return record, (
+                    f"pcap record header claims {captured} bytes (garbage): the "
+                    "rest of the file cannot be read"
+                )
             if offset + 16 + captured > size:
-                return record, (f"file ends inside a packet: {size - offset - 16} of "
-                                f"{captured} bytes (truncated recording)")  # fmt: skip
+                return record, (
+                    f"file ends inside a packet: {size - offset - 16} of "
+                    f"{captured} bytes (truncated recording)"
+                )
             offset += 16 + captured
             stream.seek(offset)
     return None
@@ -436,8 +467,9 @@ def _pcapng_damage(stream: BinaryIO, head: bytes, size: int) -> tuple[int, str] 
         if length < 12 or length % 4:
             return packets + 1, f"pcapng block length {length} (garbage): the rest is unreadable"
         if offset + length > size:
-            return packets + 1, (f"file ends inside a block: {size - offset} of {length} bytes "
-                                 "(truncated recording)")  # fmt: skip
+            return packets + 1, (
+                f"file ends inside a block: {size - offset} of {length} bytes (truncated recording)"
+            )
         packets += block_type in _PCAPNG_PACKET_BLOCKS
         offset += length
     return None
@@ -485,8 +517,14 @@ class _ScanConverter:
             what = f"time goes back: {sweep.stamp:.6f} s after {self._last_stamp_s:.6f} s"
             sweep = None
         if sweep is None:
-            problems.add(FieldDataError(self.where, f"scan (frame id {frame.frame_id}) {what}; "
-                                        "skipped", line=scan_number, unit="scan"))  # fmt: skip
+            problems.add(
+                FieldDataError(
+                    self.where,
+                    f"scan (frame id {frame.frame_id}) {what}; skipped",
+                    line=scan_number,
+                    unit="scan",
+                )
+            )
             return None
         self._last_stamp_s = sweep.stamp
         return sweep
@@ -542,10 +580,14 @@ class _ScanConverter:
         known = capture_ns >= _UNIX_2000_NS
         if not self._clock_noted:
             self._clock_noted = True
-            log.log(logging.INFO if known else logging.WARNING,
-                    "%s: the sensor's clock is not Unix time (internal oscillator?): stamps %s",
-                    self.where, "from packet capture times" if known
-                    else "left in sensor time (no capture times either)")  # fmt: skip
+            log.log(
+                logging.INFO if known else logging.WARNING,
+                "%s: the sensor's clock is not Unix time (internal oscillator?): stamps %s",
+                self.where,
+                "from packet capture times"
+                if known
+                else "left in sensor time (no capture times either)",
+            )
         if not known:
             return 0
         last_column = min((packet + 1) * self.columns_per_packet, self.columns) - 1
@@ -633,8 +675,11 @@ def synthetic_sensor_info(
     # Whole packets: the window's columns rounded out to packet boundaries.
     data_format.column_window = (
         math.floor(first / 360.0 * columns_per_frame / per_packet) * per_packet,
-        min(columns_per_frame, math.ceil(last / 360.0 * columns_per_frame / per_packet)
-            * per_packet) - 1)  # fmt: skip
+        min(
+            columns_per_frame, math.ceil(last / 360.0 * columns_per_frame / per_packet) * per_packet
+        )
+        - 1,
+    )
     info.format = data_format
     info.beam_altitude_angles = np.linspace(vertical_max_deg, vertical_min_deg, channels).tolist()
     info.beam_azimuth_angles = [0.0] * channels
@@ -795,8 +840,13 @@ def write_ouster_pcap(
     temporary = out_metadata.with_name(out_metadata.name + ".tmp")
     temporary.write_text(text, encoding="utf-8")
     os.replace(temporary, out_metadata)
-    log.info("wrote %s (%d scans, %d packets) and %s", out_pcap, counts["scans"],
-             counts["packets"], out_metadata)  # fmt: skip
+    log.info(
+        "wrote %s (%d scans, %d packets) and %s",
+        out_pcap,
+        counts["scans"],
+        counts["packets"],
+        out_metadata,
+    )
     return OusterRecording(**counts)
 
 

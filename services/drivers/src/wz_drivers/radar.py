@@ -60,27 +60,52 @@ log = logging.getLogger(__name__)
 
 #: Accepted column / key names -> the canonical key used below.
 ALIASES: Mapping[str, str] = {
-    "time_unix_s": "time", "time": "time",
-    "id": "id", "object_id": "id",
-    "x_m": "x", "y_m": "y",
-    "range_m": "range", "azimuth_deg": "azimuth",
+    "time_unix_s": "time",
+    "time": "time",
+    "id": "id",
+    "object_id": "id",
+    "x_m": "x",
+    "y_m": "y",
+    "range_m": "range",
+    "azimuth_deg": "azimuth",
     "speed_mps": "speed",
-    "class": "class", "object_class": "class",
-    "length_m": "length", "width_m": "width",
-}  # fmt: skip
+    "class": "class",
+    "object_class": "class",
+    "length_m": "length",
+    "width_m": "width",
+}
 #: Canonical key -> the name error messages show.
-SHOWN: Mapping[str, str] = {"x": "x_m", "y": "y_m", "range": "range_m", "azimuth": "azimuth_deg",
-                            "speed": "speed_mps", "length": "length_m", "width": "width_m"}  # fmt: skip
+SHOWN: Mapping[str, str] = {
+    "x": "x_m",
+    "y": "y_m",
+    "range": "range_m",
+    "azimuth": "azimuth_deg",
+    "speed": "speed_mps",
+    "length": "length_m",
+    "width": "width_m",
+}
 #: Class names (lower-case; spaces and hyphens read as underscores) -> vehicle class.
 CLASS_NAMES: Mapping[str, VehicleClass] = {
-    **{name: VehicleClass.CAR for name in (
-        "car", "passenger_car", "sedan", "suv", "van", "pickup", "light_vehicle")},
-    **{name: VehicleClass.TRUCK for name in (
-        "truck", "lorry", "hgv", "heavy_vehicle", "semi", "semi_truck", "tractor_trailer",
-        "trailer")},
+    **{
+        name: VehicleClass.CAR
+        for name in ("car", "passenger_car", "sedan", "suv", "van", "pickup", "light_vehicle")
+    },
+    **{
+        name: VehicleClass.TRUCK
+        for name in (
+            "truck",
+            "lorry",
+            "hgv",
+            "heavy_vehicle",
+            "semi",
+            "semi_truck",
+            "tractor_trailer",
+            "trailer",
+        )
+    },
     **{name: VehicleClass.BUS for name in ("bus", "coach")},
     **{name: VehicleClass.MOTORCYCLE for name in ("motorcycle", "motorbike", "moto")},
-}  # fmt: skip
+}
 #: What the required columns are called, for error messages.
 TIME_HELP = "time (time_unix_s or time)"
 POSITION_HELP = "position (x_m and y_m, or range_m and azimuth_deg)"
@@ -232,9 +257,15 @@ def _object(values: Mapping[str, object]) -> RadarObject:
     for key, size in sizes.items():
         if size is not None and size < 0.0:
             raise _BadValueError(f"{SHOWN[key]} {size} is negative")
-    return RadarObject(x_m=x_m, y_m=y_m, object_id=object_id, speed_mps=_number(values, "speed"),
-                       object_class=_vehicle_class(values.get("class")),
-                       length_m=sizes["length"], width_m=sizes["width"])  # fmt: skip
+    return RadarObject(
+        x_m=x_m,
+        y_m=y_m,
+        object_id=object_id,
+        speed_mps=_number(values, "speed"),
+        object_class=_vehicle_class(values.get("class")),
+        length_m=sizes["length"],
+        width_m=sizes["width"],
+    )
 
 
 def _time(values: Mapping[str, object]) -> float:
@@ -350,9 +381,13 @@ def _grouped(path: Path, reports: Iterator[_Report], problems: Problems) -> Iter
     first_line = 0
     for stamp, found, line in reports:
         if current is not None and stamp < current:
-            problems.add(FieldDataError(
-                path, f"time {stamp:.6f} goes back from {current:.6f} (line {first_line}): "
-                "skipped", line=line))  # fmt: skip
+            problems.add(
+                FieldDataError(
+                    path,
+                    f"time {stamp:.6f} goes back from {current:.6f} (line {first_line}): skipped",
+                    line=line,
+                )
+            )
             continue
         if current is not None and stamp > current:
             yield ObjectList(stamp=current, objects=tuple(objects), where=f"{path}:{first_line}")
@@ -385,14 +420,20 @@ def _receive(
             try:
                 stamp, objects, reasons = _json_report(data)
             except _BadValueError as bad:
-                problems.add(FieldDataError(source, f"{bad}: datagram skipped", line=count,
-                                            unit="datagram"))  # fmt: skip
+                problems.add(
+                    FieldDataError(source, f"{bad}: datagram skipped", line=count, unit="datagram")
+                )
                 continue
             stamp = arrival if stamp is None else stamp
             if previous is not None and stamp < previous:
-                problems.add(FieldDataError(
-                    source, f"time {stamp:.6f} goes back from {previous:.6f}: datagram skipped",
-                    line=count, unit="datagram"))  # fmt: skip
+                problems.add(
+                    FieldDataError(
+                        source,
+                        f"time {stamp:.6f} goes back from {previous:.6f}: datagram skipped",
+                        line=count,
+                        unit="datagram",
+                    )
+                )
                 continue
             for reason in reasons:
                 problems.add(FieldDataError(source, reason, line=count, unit="datagram"))

@@ -34,13 +34,19 @@ class FieldDataError(ValueError):
     """Bad field data, with where it is: ``<path>:<line>: <what>`` (line may be a packet or
     frame number, or absent)."""
 
-    def __init__(self, path: str | Path, message: str, *, line: int | None = None,
-                 unit: str = "line") -> None:  # fmt: skip
+    def __init__(
+        self, path: str | Path, message: str, *, line: int | None = None, unit: str = "line"
+    ) -> None:
         self.path = str(path)
         self.line = line
         self.reason = message
-        where = self.path if line is None else f"{self.path}:{line}" if unit == "line" \
-            else f"{self.path} ({unit} {line})"  # fmt: skip
+        where = (
+            self.path
+            if line is None
+            else f"{self.path}:{line}"
+            if unit == "line"
+            else f"{self.path} ({unit} {line})"
+        )
         super().__init__(f"{where}: {message}")
 
 

@@ -58,9 +58,16 @@ class _Publishers:
         return publisher
 
 
-def replay_log(bus: Bus, field_log: FieldLog, *, rate: float | None, stop: threading.Event,
-               wait_subscribers_s: float = 2.0, loop: bool = False,
-               only: set[str] | None = None) -> tuple[Counter[str], Problems]:  # fmt: skip
+def replay_log(
+    bus: Bus,
+    field_log: FieldLog,
+    *,
+    rate: float | None,
+    stop: threading.Event,
+    wait_subscribers_s: float = 2.0,
+    loop: bool = False,
+    only: set[str] | None = None,
+) -> tuple[Counter[str], Problems]:
     """Publish the log; the messages sent per sensor, and the records skipped."""
     problems = Problems()
     sent: Counter[str] = Counter()
@@ -83,20 +90,30 @@ def replay_log(bus: Bus, field_log: FieldLog, *, rate: float | None, stop: threa
             return sent, problems
 
 
-def run_field_replay(bus: Bus, folder: Path, *, rate: float | None, loop: bool,
-                     wait_subscribers_s: float, stop: threading.Event,
-                     emit: Any = print) -> int:  # fmt: skip
+def run_field_replay(
+    bus: Bus,
+    folder: Path,
+    *,
+    rate: float | None,
+    loop: bool,
+    wait_subscribers_s: float,
+    stop: threading.Event,
+    emit: Any = print,
+) -> int:
     """``wz replay LOG_DIR``: replay, print a summary, return the exit code."""
     field_log = load_log(folder)
     log.info("replaying field log %s of site %s", folder, field_log.site.site_id)
     started = time.monotonic()
-    sent, problems = replay_log(bus, field_log, rate=rate, stop=stop, loop=loop,
-                                wait_subscribers_s=wait_subscribers_s)  # fmt: skip
+    sent, problems = replay_log(
+        bus, field_log, rate=rate, stop=stop, loop=loop, wait_subscribers_s=wait_subscribers_s
+    )
     elapsed = time.monotonic() - started
     emit(f"replayed {folder} (site {field_log.site.site_id}) in {elapsed:.1f} s:")
     for source in field_log.sources:
-        emit(f"  {source.sensor_id:<16} {source.kind:<8} {source.format:<7} "
-             f"{sent.get(source.sensor_id, 0):>6} messages")  # fmt: skip
+        emit(
+            f"  {source.sensor_id:<16} {source.kind:<8} {source.format:<7} "
+            f"{sent.get(source.sensor_id, 0):>6} messages"
+        )
     if problems:
         emit(f"skipped {len(problems)} records that could not be read:")
         for path, count in problems.summary().items():

@@ -59,8 +59,9 @@ class Outgoing:
     message: Message | None = None
 
 
-def read_source(log: FieldLog, source: LogSource, problems: Problems,
-                stop: threading.Event | None = None) -> Iterator[Any]:  # fmt: skip
+def read_source(
+    log: FieldLog, source: LogSource, problems: Problems, stop: threading.Event | None = None
+) -> Iterator[Any]:
     """The records of one source, with its format's reader (imported here: a log without an
     Ouster recording does not need ouster-sdk loaded); a live source's until ``stop``."""
     path = source.path if source.live else log.path(source.path)
@@ -104,8 +105,11 @@ def _read_ouster(path: Path, metadata: Path, problems: Problems) -> Iterator[Lid
             with gzip.open(path, "rb") as packed, unpacked.open("wb") as raw:
                 shutil.copyfileobj(packed, raw)
         except (OSError, EOFError) as exc:  # a cut archive: what came out is still read
-            problems.add(FieldDataError(path, f"the gzip archive is damaged ({exc}); reading "
-                                        "what could be unpacked"))  # fmt: skip
+            problems.add(
+                FieldDataError(
+                    path, f"the gzip archive is damaged ({exc}); reading what could be unpacked"
+                )
+            )
         yield from read_ouster(unpacked, metadata, _Renamed(problems, unpacked, path))
 
 
@@ -119,13 +123,14 @@ class _Renamed(Problems):
     def add(self, error: FieldDataError) -> None:
         text = str(error)
         if text.startswith(self._prefix):
-            where, _, message = text[len(self._prefix):].partition(": ")
+            where, _, message = text[len(self._prefix) :].partition(": ")
             error = FieldDataError(self._archive, f"unpacked{where}: {message}", line=None)
         self._target.add(error)
 
 
-def objects_to_detections(objects: ObjectList, mount: SensorMount, site: Site,
-                          index: int) -> DetectionBatch:  # fmt: skip
+def objects_to_detections(
+    objects: ObjectList, mount: SensorMount, site: Site, index: int
+) -> DetectionBatch:
     """An object list in the unit's frame as a site-frame :class:`DetectionBatch`."""
     intrinsics = mount.intrinsics
     if not isinstance(intrinsics, RadarIntrinsics):
@@ -140,15 +145,28 @@ def objects_to_detections(objects: ObjectList, mount: SensorMount, site: Site,
         y = mount.pose.y_m + s * obj.x_m + c * obj.y_m
         rho = max(math.hypot(obj.x_m, obj.y_m), 1.0)
         bearing = heading + math.atan2(obj.y_m, obj.x_m)
-        covariance = polar_covariance(bearing, range_var, (rho * azimuth_std) ** 2,
-                                      min_variance_m2=_MIN_VARIANCE_M2)  # fmt: skip
-        detections.append(Detection(
-            x_m=x, y_m=y, covariance_m2=covariance.ravel().tolist(), object_class=obj.object_class,
-            speed_mps=obj.speed_mps, local_track_id=obj.object_id, length_m=obj.length_m,
-            width_m=obj.width_m,
-        ))  # fmt: skip
-    return DetectionBatch(site=site.site_id, source_id=mount.sensor_id, stamp=objects.stamp,
-                          frame_index=index, detections=detections)  # fmt: skip
+        covariance = polar_covariance(
+            bearing, range_var, (rho * azimuth_std) ** 2, min_variance_m2=_MIN_VARIANCE_M2
+        )
+        detections.append(
+            Detection(
+                x_m=x,
+                y_m=y,
+                covariance_m2=covariance.ravel().tolist(),
+                object_class=obj.object_class,
+                speed_mps=obj.speed_mps,
+                local_track_id=obj.object_id,
+                length_m=obj.length_m,
+                width_m=obj.width_m,
+            )
+        )
+    return DetectionBatch(
+        site=site.site_id,
+        source_id=mount.sensor_id,
+        stamp=objects.stamp,
+        frame_index=index,
+        detections=detections,
+    )
 
 
 def key_of(site: Site, source: LogSource) -> str:
@@ -179,37 +197,58 @@ class SourceRecord:
 def lidar_meta(sweep: LidarSweep, sensor_id: str, site: Site, index: int) -> LidarFrameMeta:
     """The frame metadata of a sweep, as the simulator would publish it."""
     return LidarFrameMeta(
-        site=site.site_id, source_id=sensor_id, stamp=sweep.stamp, frame_index=index,
-        rows=max(1, sweep.rows), columns=sweep.columns if sweep.organized else 0,
-        num_points=len(sweep.points), sweep_duration_s=sweep.sweep_duration_s,
+        site=site.site_id,
+        source_id=sensor_id,
+        stamp=sweep.stamp,
+        frame_index=index,
+        rows=max(1, sweep.rows),
+        columns=sweep.columns if sweep.organized else 0,
+        num_points=len(sweep.points),
+        sweep_duration_s=sweep.sweep_duration_s,
         organized=sweep.organized,
-    )  # fmt: skip
+    )
 
 
-def to_outgoing(record: Any, source: LogSource, mount: SensorMount, site: Site,
-                index: int) -> Outgoing:  # fmt: skip
+def to_outgoing(
+    record: Any, source: LogSource, mount: SensorMount, site: Site, index: int
+) -> Outgoing:
     """One record of ``source`` as its bus message."""
     keys = Keys(site.site_id)
     sensor = source.sensor_id
     if isinstance(record, LidarSweep):
         meta = lidar_meta(record, sensor, site, index)
-        return Outgoing(record.stamp, sensor, keys.raw_lidar(sensor),
-                        codec.encode_lidar_frame(meta, record.points))  # fmt: skip
+        return Outgoing(
+            record.stamp,
+            sensor,
+            keys.raw_lidar(sensor),
+            codec.encode_lidar_frame(meta, record.points),
+        )
     if isinstance(record, CameraImage):
-        camera_meta = CameraFrameMeta(site=site.site_id, source_id=sensor, stamp=record.stamp,
-                                      frame_index=index, width_px=record.width_px,
-                                      height_px=record.height_px)  # fmt: skip
-        return Outgoing(record.stamp, sensor, keys.raw_camera(sensor),
-                        codec.encode_camera_frame(camera_meta, record.jpeg))  # fmt: skip
+        camera_meta = CameraFrameMeta(
+            site=site.site_id,
+            source_id=sensor,
+            stamp=record.stamp,
+            frame_index=index,
+            width_px=record.width_px,
+            height_px=record.height_px,
+        )
+        return Outgoing(
+            record.stamp,
+            sensor,
+            keys.raw_camera(sensor),
+            codec.encode_camera_frame(camera_meta, record.jpeg),
+        )
     if isinstance(record, ObjectList):
         batch = objects_to_detections(record, mount, site, index)
-        return Outgoing(record.stamp, sensor, keys.detections(sensor),
-                        codec.encode_json(batch), batch)  # fmt: skip
+        return Outgoing(
+            record.stamp, sensor, keys.detections(sensor), codec.encode_json(batch), batch
+        )
     raise TypeError(f"no bus message for a {type(record).__name__}")
 
 
-def source_records(log: FieldLog, source: LogSource, problems: Problems,
-                   stop: threading.Event | None = None) -> Iterator[SourceRecord]:  # fmt: skip
+def source_records(
+    log: FieldLog, source: LogSource, problems: Problems, stop: threading.Event | None = None
+) -> Iterator[SourceRecord]:
     """One source's records in its order (a live source's as they come, until ``stop``)."""
     mount = next(m for m in log.site.sensors if m.sensor_id == source.sensor_id)
     for index, record in enumerate(read_source(log, source, problems, stop)):
@@ -218,12 +257,16 @@ def source_records(log: FieldLog, source: LogSource, problems: Problems,
         yield SourceRecord(source, mount, index, record)
 
 
-def merged_records(log: FieldLog, problems: Problems,
-                   only: set[str] | None = None) -> Iterator[SourceRecord]:  # fmt: skip
+def merged_records(
+    log: FieldLog, problems: Problems, only: set[str] | None = None
+) -> Iterator[SourceRecord]:
     """Every source's records in stamp order (each source is in order already: its reader
     drops what goes back); ``only``: these sensor ids."""
-    streams = [source_records(log, source, problems) for source in log.sources
-               if only is None or source.sensor_id in only]  # fmt: skip
+    streams = [
+        source_records(log, source, problems)
+        for source in log.sources
+        if only is None or source.sensor_id in only
+    ]
     return heapq.merge(*streams, key=lambda item: item.stamp)
 
 
@@ -231,13 +274,13 @@ def _outgoing(log: FieldLog, item: SourceRecord) -> Outgoing:
     return to_outgoing(item.record, item.source, item.mount, log.site, item.index)
 
 
-def source_messages(log: FieldLog, source: LogSource, problems: Problems,
-                    stop: threading.Event | None = None) -> Iterator[Outgoing]:  # fmt: skip
+def source_messages(
+    log: FieldLog, source: LogSource, problems: Problems, stop: threading.Event | None = None
+) -> Iterator[Outgoing]:
     """One source's messages in its order (a live source's as they come, until ``stop``)."""
     return (_outgoing(log, item) for item in source_records(log, source, problems, stop))
 
 
-def merged(log: FieldLog, problems: Problems,
-           only: set[str] | None = None) -> Iterator[Outgoing]:  # fmt: skip
+def merged(log: FieldLog, problems: Problems, only: set[str] | None = None) -> Iterator[Outgoing]:
     """Every source's messages in stamp order (see :func:`merged_records`)."""
     return (_outgoing(log, item) for item in merged_records(log, problems, only))

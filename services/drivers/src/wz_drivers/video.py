@@ -107,8 +107,9 @@ def read_video(
                 "a live stream is stamped with the wall clock at grab: timestamps and "
                 "start_unix_s apply to files only"
             )
-        yield from _read_stream(str(source), problems, encode_params, open_timeout_s,
-                                read_timeout_s)  # fmt: skip
+        yield from _read_stream(
+            str(source), problems, encode_params, open_timeout_s, read_timeout_s
+        )
         return
     path = Path(source)
     if not path.is_file():
@@ -119,14 +120,16 @@ def read_video(
         table, rejected = _read_timestamps(Path(timestamps), problems)
     elif start_unix_s is None or not math.isfinite(start_unix_s):
         raise FieldDataError(
-            path, "no time for the frames: give a timestamps CSV (frame,time_unix_s) or the "
+            path,
+            "no time for the frames: give a timestamps CSV (frame,time_unix_s) or the "
             "Unix time of the video's start (start_unix_s)",
-        )  # fmt: skip
+        )
     capture = cv2.VideoCapture(str(path))
     try:
         if not capture.isOpened():
-            raise FieldDataError(path, "OpenCV cannot open it as a video (not a video, or a "
-                                 "codec its FFmpeg lacks)")  # fmt: skip
+            raise FieldDataError(
+                path, "OpenCV cannot open it as a video (not a video, or a codec its FFmpeg lacks)"
+            )
         index = -1
         previous: tuple[float, int] | None = None  # (time, frame)
         while capture.grab():
@@ -135,9 +138,14 @@ def read_video(
                 row = table.get(index)
                 if row is None:
                     if index not in rejected:
-                        problems.add(FieldDataError(
-                            path, f"no row in {timestamps}: frame skipped", line=index,
-                            unit="frame"))  # fmt: skip
+                        problems.add(
+                            FieldDataError(
+                                path,
+                                f"no row in {timestamps}: frame skipped",
+                                line=index,
+                                unit="frame",
+                            )
+                        )
                     continue
                 stamp, csv_line = row
                 # A time that goes back is the CSV's fault: name its line.
@@ -148,14 +156,23 @@ def read_video(
                 source_of_time = (path, index, "frame")
             if previous is not None and stamp <= previous[0]:
                 where, line, unit = source_of_time
-                problems.add(FieldDataError(
-                    where, f"time {stamp:.6f} of frame {index} is not after {previous[0]:.6f} "
-                    f"(frame {previous[1]}): frame skipped", line=line, unit=unit))  # fmt: skip
+                problems.add(
+                    FieldDataError(
+                        where,
+                        f"time {stamp:.6f} of frame {index} is not after {previous[0]:.6f} "
+                        f"(frame {previous[1]}): frame skipped",
+                        line=line,
+                        unit=unit,
+                    )
+                )
                 continue
             image = _retrieve(capture, encode_params, stamp, f"{path} (frame {index})")
             if image is None:
-                problems.add(FieldDataError(path, "cannot decode or encode the frame: skipped",
-                                            line=index, unit="frame"))  # fmt: skip
+                problems.add(
+                    FieldDataError(
+                        path, "cannot decode or encode the frame: skipped", line=index, unit="frame"
+                    )
+                )
                 continue
             previous = (stamp, index)
             yield image
@@ -164,47 +181,76 @@ def read_video(
         if table is not None and timestamps is not None:
             beyond = sorted(frame for frame in table if frame > index)
             if beyond:
-                problems.add(FieldDataError(
-                    timestamps, f"rows for frames {beyond[0]}-{beyond[-1]}, the video ends at "
-                    f"frame {index}", line=table[beyond[0]][1]))  # fmt: skip
+                problems.add(
+                    FieldDataError(
+                        timestamps,
+                        f"rows for frames {beyond[0]}-{beyond[-1]}, the video ends at "
+                        f"frame {index}",
+                        line=table[beyond[0]][1],
+                    )
+                )
     finally:
         capture.release()
 
 
 def _read_stream(
-    url: str, problems: Problems, encode_params: list[int], open_timeout_s: float,
+    url: str,
+    problems: Problems,
+    encode_params: list[int],
+    open_timeout_s: float,
     read_timeout_s: float,
-) -> Iterator[CameraImage]:  # fmt: skip
+) -> Iterator[CameraImage]:
     shown = redact_url(url)
-    params = [int(cv2.CAP_PROP_OPEN_TIMEOUT_MSEC), int(open_timeout_s * 1e3),
-              int(cv2.CAP_PROP_READ_TIMEOUT_MSEC), int(read_timeout_s * 1e3)]  # fmt: skip
+    params = [
+        int(cv2.CAP_PROP_OPEN_TIMEOUT_MSEC),
+        int(open_timeout_s * 1e3),
+        int(cv2.CAP_PROP_READ_TIMEOUT_MSEC),
+        int(read_timeout_s * 1e3),
+    ]
     log.info("opening stream %s", shown)
     capture = cv2.VideoCapture(url, cv2.CAP_FFMPEG, params)
     try:
         if not capture.isOpened():
             raise FieldDataError(
-                shown, f"cannot open the stream: nothing answered within {open_timeout_s:g} s, "
+                shown,
+                f"cannot open the stream: nothing answered within {open_timeout_s:g} s, "
                 "refused, or not a stream OpenCV's FFmpeg reads",
-            )  # fmt: skip
+            )
         index = -1
         previous: float | None = None
         while True:
             if not capture.grab():
-                problems.add(FieldDataError(
-                    shown, f"the stream stopped after {index + 1} frames (no frame within "
-                    f"{read_timeout_s:g} s, or the sender closed it)"))  # fmt: skip
+                problems.add(
+                    FieldDataError(
+                        shown,
+                        f"the stream stopped after {index + 1} frames (no frame within "
+                        f"{read_timeout_s:g} s, or the sender closed it)",
+                    )
+                )
                 return
             stamp = time.time()  # at grab: before decoding, as close to arrival as we can
             index += 1
             if previous is not None and stamp <= previous:
-                problems.add(FieldDataError(
-                    shown, f"the wall clock went back ({stamp:.6f} after {previous:.6f}): "
-                    "frame skipped", line=index, unit="frame"))  # fmt: skip
+                problems.add(
+                    FieldDataError(
+                        shown,
+                        f"the wall clock went back ({stamp:.6f} after {previous:.6f}): "
+                        "frame skipped",
+                        line=index,
+                        unit="frame",
+                    )
+                )
                 continue
             image = _retrieve(capture, encode_params, stamp, f"{shown} (frame {index})")
             if image is None:
-                problems.add(FieldDataError(shown, "cannot decode or encode the frame: skipped",
-                                            line=index, unit="frame"))  # fmt: skip
+                problems.add(
+                    FieldDataError(
+                        shown,
+                        "cannot decode or encode the frame: skipped",
+                        line=index,
+                        unit="frame",
+                    )
+                )
                 continue
             previous = stamp
             yield image
@@ -212,8 +258,9 @@ def _read_stream(
         capture.release()
 
 
-def _retrieve(capture: cv2.VideoCapture, encode_params: list[int], stamp: float, where: str
-              ) -> CameraImage | None:  # fmt: skip
+def _retrieve(
+    capture: cv2.VideoCapture, encode_params: list[int], stamp: float, where: str
+) -> CameraImage | None:
     """Decode the grabbed frame and encode it as JPEG; None when either fails."""
     ok, frame = capture.retrieve()
     if not ok or frame is None:
@@ -223,8 +270,9 @@ def _retrieve(capture: cv2.VideoCapture, encode_params: list[int], stamp: float,
     if not encoded:
         return None
     height, width = pixels.shape[:2]
-    return CameraImage(stamp=stamp, jpeg=jpeg.tobytes(), width_px=int(width),
-                       height_px=int(height), where=where)  # fmt: skip
+    return CameraImage(
+        stamp=stamp, jpeg=jpeg.tobytes(), width_px=int(width), height_px=int(height), where=where
+    )
 
 
 def _frame_number(cell: str) -> int:
@@ -241,5 +289,10 @@ def _read_timestamps(
     path: Path, problems: Problems
 ) -> tuple[dict[int, tuple[float, int]], set[int]]:
     """``frame -> (time [Unix s], CSV line)``, and the frames whose row was bad (reported)."""
-    return read_frame_times(path, problems, key="frame", parse_key=_frame_number,
-                            describe=lambda frame: f"frame {frame}")  # fmt: skip
+    return read_frame_times(
+        path,
+        problems,
+        key="frame",
+        parse_key=_frame_number,
+        describe=lambda frame: f"frame {frame}",
+    )

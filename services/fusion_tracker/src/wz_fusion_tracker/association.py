@@ -44,9 +44,13 @@ _FAR_D2 = 1e12
 
 
 def innovation_statistics(
-    x_pred: F64, P_pred: F64, z: F64, R: F64, time_offset_s: F64 | None = None,
+    x_pred: F64,
+    P_pred: F64,
+    z: F64,
+    R: F64,
+    time_offset_s: F64 | None = None,
     max_d2: float = 1e3,
-) -> tuple[F64, F64]:  # fmt: skip
+) -> tuple[F64, F64]:
     """Squared Mahalanobis distance and ``ln det S`` of every (track, measurement) pair.
 
     ::
@@ -100,14 +104,14 @@ def innovation_statistics(
     return d2, np.log(det)
 
 
-
 def _sparse_innovation_statistics(
     x_pred: F64, P_pred: F64, z: F64, R: F64, time_offset_s: F64 | None, max_d2: float
 ) -> tuple[F64, F64]:
     """:func:`innovation_statistics` on the pairs that can be near (:func:`_candidate_pairs`):
     the rest get ``_FAR_D2``."""
-    rows, cols, pair_d2, pair_log_det = _candidate_statistics(x_pred, P_pred, z, R,
-                                                              time_offset_s, max_d2)  # fmt: skip
+    rows, cols, pair_d2, pair_log_det = _candidate_statistics(
+        x_pred, P_pred, z, R, time_offset_s, max_d2
+    )
     d2 = np.full((len(x_pred), len(z)), _FAR_D2)
     log_det = np.zeros((len(x_pred), len(z)))
     d2[rows, cols] = pair_d2
@@ -142,8 +146,7 @@ def gated_pairs(
         (K,) each, by increasing row.
     """
     if len(x_pred) * len(z) > _SPARSE_GATE_MIN_PAIRS:
-        rows, cols, d2, log_det = _candidate_statistics(x_pred, P_pred, z, R, time_offset_s,
-                                                        max_d2)  # fmt: skip
+        rows, cols, d2, log_det = _candidate_statistics(x_pred, P_pred, z, R, time_offset_s, max_d2)
     else:
         d2_all, log_det_all = innovation_statistics(x_pred, P_pred, z, R, time_offset_s)
         rows, cols = _allowed_pairs(d2_all <= max_d2)
@@ -192,14 +195,13 @@ def _candidate_pairs(
         dy = z[cols, 1] - x_pred[rows, 1]
         distance = np.sqrt(dx * dx + dy * dy) - reach[rows]
         near = (distance <= 0.0) | (
-            distance * distance <= max_d2 * (track_trace[rows] + meas_trace[cols]))
+            distance * distance <= max_d2 * (track_trace[rows] + meas_trace[cols])
+        )
         rows, cols = rows[near], cols[near]
     return rows, cols
 
 
-def _pair_statistics(
-    x: F64, P: F64, z: F64, R: F64, offsets: F64 | None
-) -> tuple[F64, F64]:
+def _pair_statistics(x: F64, P: F64, z: F64, R: F64, offsets: F64 | None) -> tuple[F64, F64]:
     """d2 and ln det S of K given pairs (row k: track state k with measurement k)."""
     y0 = z[:, 0] - x[:, 0]
     y1 = z[:, 1] - x[:, 1]
@@ -356,8 +358,12 @@ def _cascade_assign_arrays(
     return rows[picked], columns[picked]
 
 
-def cascade_assign_pairs(cost: F64, rows: IntP, columns: IntP, first_rows: npt.NDArray[np.bool_],
-                          ) -> IntP:  # fmt: skip
+def cascade_assign_pairs(
+    cost: F64,
+    rows: IntP,
+    columns: IntP,
+    first_rows: npt.NDArray[np.bool_],
+) -> IntP:
     """:func:`cascade_assign` on allowed pairs given as arrays (as :func:`_gnn_assign_pairs`):
     the indices of the pairs chosen, by increasing row."""
     if not len(rows):
@@ -370,8 +376,9 @@ def cascade_assign_pairs(cost: F64, rows: IntP, columns: IntP, first_rows: npt.N
             continue  # e.g. no tentative track: nothing to assign
         # the stage's allowed pairs whose measurement no earlier stage took
         candidates = np.flatnonzero(stage & free_columns[columns])
-        chosen = candidates[_gnn_assign_pairs(cost[candidates], rows[candidates],
-                                              columns[candidates])]  # fmt: skip
+        chosen = candidates[
+            _gnn_assign_pairs(cost[candidates], rows[candidates], columns[candidates])
+        ]
         free_columns[columns[chosen]] = False
         picked.append(chosen)
     chosen = np.concatenate(picked)
@@ -412,9 +419,15 @@ def huber_inflated(R: F64, columns: IntP, d2: F64, huber_k: float) -> F64:
 
 
 def speed_gated(
-    d2: F64, pair_rows: IntP, pair_columns: IntP, x_pred: F64, P_pred: F64, road_heading_rad: F64,
-    speeds: F64, settings: TrackerSettings,
-) -> F64:  # fmt: skip
+    d2: F64,
+    pair_rows: IntP,
+    pair_columns: IntP,
+    x_pred: F64,
+    P_pred: F64,
+    road_heading_rad: F64,
+    speeds: F64,
+    settings: TrackerSettings,
+) -> F64:
     """``d2`` of the pairs (``pair_rows``, ``pair_columns``) with those whose radar speed
     misses the track's speed gate set to inf (Doppler-aided gating).
 
@@ -439,16 +452,23 @@ def speed_gated(
     # Only pairs within a gate are ever looked at again (association, spawn suppression).
     rows, columns = pair_rows, pair_columns
     road = road_heading_rad[rows]
-    known = np.flatnonzero(np.isfinite(road) & np.isfinite(speeds[columns])
-                           & (d2 <= max(settings.gate_chi2, settings.spawn_gate_chi2)))  # fmt: skip
+    known = np.flatnonzero(
+        np.isfinite(road)
+        & np.isfinite(speeds[columns])
+        & (d2 <= max(settings.gate_chi2, settings.spawn_gate_chi2))
+    )
     rows, columns, road = rows[known], columns[known], road[known]
     if not len(rows):
         return d2
     cos, sin = np.cos(road), np.sin(road)
     predicted = x_pred[rows, 2] * cos + x_pred[rows, 3] * sin
     P_v = P_pred[rows]
-    variance = (cos * cos * P_v[:, 2, 2] + cos * sin * (P_v[:, 2, 3] + P_v[:, 3, 2])
-                + sin * sin * P_v[:, 3, 3] + settings.speed_std_mps**2)  # fmt: skip
+    variance = (
+        cos * cos * P_v[:, 2, 2]
+        + cos * sin * (P_v[:, 2, 3] + P_v[:, 3, 2])
+        + sin * sin * P_v[:, 3, 3]
+        + settings.speed_std_mps**2
+    )
     y = speeds[columns] - predicted
     bad = y * y > settings.speed_association_chi2 * variance
     if not bad.any():
@@ -459,9 +479,14 @@ def speed_gated(
 
 
 def local_id_bonus(
-    bonus_value: float, track_ids: Iterable[int], local_ids: Mapping[tuple[str, int], int],
-    sensor_id: str, measurements: Sequence[Measurement], pair_rows: IntP, pair_columns: IntP,
-) -> F64 | None:  # fmt: skip
+    bonus_value: float,
+    track_ids: Iterable[int],
+    local_ids: Mapping[tuple[str, int], int],
+    sensor_id: str,
+    measurements: Sequence[Measurement],
+    pair_rows: IntP,
+    pair_columns: IntP,
+) -> F64 | None:
     """The cost reduction of each pair: ``bonus_value`` where the measurement's
     ``(sensor_id, local_track_id)`` last updated the pair's track (``local_ids``: that key ->
     track id; ``track_ids``: the id of each track row), else 0; None when no pair has one."""

@@ -136,10 +136,14 @@ def fit_bias_map(
     for (sensor_id, lane, index), values in sorted(grouped.items()):
         if len(values) < min_samples:
             continue
-        sensors[sensor_id].append(BiasCell(
-            lane_index=lane, relative_station_m=index * bin_m,
-            lateral_bias_m=float(np.clip(np.median(values), -2.0, 2.0)), samples=len(values),
-        ))  # fmt: skip
+        sensors[sensor_id].append(
+            BiasCell(
+                lane_index=lane,
+                relative_station_m=index * bin_m,
+                lateral_bias_m=float(np.clip(np.median(values), -2.0, 2.0)),
+                samples=len(values),
+            )
+        )
     return BiasMap(site_id=site.site_id, bin_m=bin_m, source=source, sensors=dict(sensors))
 
 
@@ -157,9 +161,13 @@ class LateralBiasCorrector:
         for sensor_id, cells in bias_map.sensors.items():
             if sensor_id not in stations:
                 continue  # a sensor this site does not have: nothing of it arrives
-            self._cells[sensor_id] = (stations[sensor_id], {
-                (c.lane_index, round(c.relative_station_m / bias_map.bin_m)): c.lateral_bias_m
-                for c in cells})  # fmt: skip
+            self._cells[sensor_id] = (
+                stations[sensor_id],
+                {
+                    (c.lane_index, round(c.relative_station_m / bias_map.bin_m)): c.lateral_bias_m
+                    for c in cells
+                },
+            )
 
     def sensors(self) -> list[str]:
         """The sensors this corrector has cells for."""
@@ -177,8 +185,9 @@ class LateralBiasCorrector:
         station, offset = self._frame.to_road(x, y)
         lanes = self._site.lane_index_at(offset)
         bins = np.floor((station - sensor_station) / self._bin_m).astype(np.intp)
-        bias = np.array([cells.get((int(lane), int(b)), 0.0)
-                         for lane, b in zip(lanes, bins, strict=True)])  # fmt: skip
+        bias = np.array(
+            [cells.get((int(lane), int(b)), 0.0) for lane, b in zip(lanes, bins, strict=True)]
+        )
         moved = np.flatnonzero(bias != 0.0)  # no cell has lane -1 (off every lane)
         if len(moved) == 0:
             return list(measurements)

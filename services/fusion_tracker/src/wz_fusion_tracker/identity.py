@@ -34,9 +34,16 @@ _PUBLISHED_AFTER_S = 0.1
 
 
 def reacquisitions(
-    store: TrackStore, settings: TrackerSettings, slots: IntP, x_pred: F64, P_pred: F64, z: F64,
-    pairs: Sequence[tuple[int, int]], stamp_s: float, time_offset_s: F64 | None,
-) -> tuple[list[tuple[int, int]], F64]:  # fmt: skip
+    store: TrackStore,
+    settings: TrackerSettings,
+    slots: IntP,
+    x_pred: F64,
+    P_pred: F64,
+    z: F64,
+    pairs: Sequence[tuple[int, int]],
+    stamp_s: float,
+    time_offset_s: F64 | None,
+) -> tuple[list[tuple[int, int]], F64]:
     """Re-acquisition: a confirmed track that has missed updates takes up a measurement near
     it on the road, outside its (by then overconfident) gate.
 
@@ -66,7 +73,8 @@ def reacquisitions(
     """
     table = store.table
     waiting = table.confirmed[slots] & (
-        stamp_s - table.updated_s[slots] >= settings.reacquire_after_s)  # fmt: skip
+        stamp_s - table.updated_s[slots] >= settings.reacquire_after_s
+    )
     free = np.ones(len(z), dtype=bool)
     if pairs:
         matched_rows, matched_columns = zip(*pairs, strict=True)
@@ -81,13 +89,15 @@ def reacquisitions(
     speed = np.hypot(xr[:, 2], xr[:, 3])
     heading = table.heading_rad[slots[rows]]
     own = np.arctan2(xr[:, 3], xr[:, 2])
-    heading = np.where(np.isfinite(heading) & (speed <= settings.heading_min_speed_mps),
-                       heading, own)  # fmt: skip
+    heading = np.where(
+        np.isfinite(heading) & (speed <= settings.heading_min_speed_mps), heading, own
+    )
     u = np.stack([np.cos(heading), np.sin(heading)], axis=1)
     along = np.einsum("tmi,ti->tm", y, u)
     across = y[..., 1] * u[:, None, 0] - y[..., 0] * u[:, None, 1]
     allowed = (np.abs(along) <= settings.reacquire_along_m) & (
-        np.abs(across) <= settings.reacquire_across_m)  # fmt: skip
+        np.abs(across) <= settings.reacquire_across_m
+    )
     if not allowed.any():
         return [], P_pred
     found = gnn_assign(np.hypot(along, across), allowed)
@@ -102,7 +112,6 @@ def reacquisitions(
         P_wide[row, 2:, 2:] += outer / gap_s**2
     store.counters.tracks_reacquired += len(new_pairs)
     return new_pairs, P_wide
-
 
 
 def hand_over(store: TrackStore, settings: TrackerSettings, stamp_s: float) -> None:
@@ -166,14 +175,21 @@ def hand_over(store: TrackStore, settings: TrackerSettings, stamp_s: float) -> N
     alike = dv < settings.merge_velocity_difference_mps
     if settings.hand_over_max_accel_mps2 > 0.0:
         alike |= _speed_change_explains(
-            settings, along, np.einsum("onk,ok->on", x_new[None, :, 2:] - x_old[:, None, 2:], u),
+            settings,
+            along,
+            np.einsum("onk,ok->on", x_new[None, :, 2:] - x_old[:, None, 2:], u),
             stamp_s - table.updated_s[old_slots],
-            table.born_s[new_slots][None, :] > table.updated_s[old_slots][:, None])  # fmt: skip
+            table.born_s[new_slots][None, :] > table.updated_s[old_slots][:, None],
+        )
     sliding = np.abs(x_old[:, 3] * u[:, 0] - x_old[:, 2] * u[:, 1]) > (
-        settings.hand_over_max_lateral_speed_mps)  # fmt: skip
-    allowed = ((np.abs(along) <= settings.hand_over_along_m)
-               & (np.abs(across) <= settings.hand_over_across_m)
-               & alike & took_up)  # fmt: skip
+        settings.hand_over_max_lateral_speed_mps
+    )
+    allowed = (
+        (np.abs(along) <= settings.hand_over_along_m)
+        & (np.abs(across) <= settings.hand_over_across_m)
+        & alike
+        & took_up
+    )
     if not allowed.any():
         return
     resumed = False
@@ -203,12 +219,12 @@ def hand_over(store: TrackStore, settings: TrackerSettings, stamp_s: float) -> N
         store.bank.remove(new.slot)
         store.counters.tracks_deleted += 1
         store.counters.tracks_handed_over += 1
-        store.local_ids = {k: (old.track_id if v == new.track_id else v)
-                           for k, v in store.local_ids.items()}  # fmt: skip
+        store.local_ids = {
+            k: (old.track_id if v == new.track_id else v) for k, v in store.local_ids.items()
+        }
     if resumed:  # back in id order
         store.tracks = dict(sorted(store.tracks.items()))
         store.changed()
-
 
 
 def retire(store: TrackStore, track: Track, successor_id: int) -> bool:
@@ -230,14 +246,19 @@ def retire(store: TrackStore, track: Track, successor_id: int) -> bool:
     store.bank.remove(track.slot)
     if store.table.confirmed[track.slot]:
         store.finished.append(track.to_history())
-    store.local_ids = {k: (successor_id if v == track.track_id else v)
-                       for k, v in store.local_ids.items()}  # fmt: skip
+    store.local_ids = {
+        k: (successor_id if v == track.track_id else v) for k, v in store.local_ids.items()
+    }
     return True
 
 
-
-def _speed_change_explains(settings: TrackerSettings, along: F64, dv_along: F64, unseen_s: F64,
-                           started_after: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:  # fmt: skip
+def _speed_change_explains(
+    settings: TrackerSettings,
+    along: F64,
+    dv_along: F64,
+    unseen_s: F64,
+    started_after: npt.NDArray[np.bool_],
+) -> npt.NDArray[np.bool_]:
     """Which (old, new) pairs a change of speed while unseen explains, shape (O, N).
 
     ``along``: the young track ahead of the old one's constant-velocity prediction [m];
@@ -251,9 +272,12 @@ def _speed_change_explains(settings: TrackerSettings, along: F64, dv_along: F64,
     shift = np.sign(dv_along) * along  # displacement in the direction of the change
     least = change**2 / (2.0 * a)
     most = change * unseen_s[:, None] - least
-    return (started_after & (change <= a * unseen_s[:, None])
-            & (shift >= least - slack) & (shift <= most + slack))  # fmt: skip
-
+    return (
+        started_after
+        & (change <= a * unseen_s[:, None])
+        & (shift >= least - slack)
+        & (shift <= most + slack)
+    )
 
 
 def merge_duplicates(store: TrackStore, settings: TrackerSettings, stamp_s: float) -> None:
@@ -285,7 +309,8 @@ def merge_duplicates(store: TrackStore, settings: TrackerSettings, stamp_s: floa
     near = np.hypot(x[a, 0] - x[b, 0], x[a, 1] - x[b, 1]) < settings.merge_distance_m
     pairs_i, pairs_j = a[near], b[near]
     slow = np.hypot(x[pairs_i, 2] - x[pairs_j, 2], x[pairs_i, 3] - x[pairs_j, 3]) >= (
-        settings.merge_velocity_difference_mps)  # fmt: skip
+        settings.merge_velocity_difference_mps
+    )
     pairs_i, pairs_j = pairs_i[~slow], pairs_j[~slow]
     if not len(pairs_i):
         return

@@ -197,16 +197,18 @@ class IMMStateBank(SlotBank):
         self._xm = np.concatenate([self._xm, np.zeros((added, m, STATE_DIM))])
         eyes = np.broadcast_to(np.eye(STATE_DIM), (added, m, STATE_DIM, STATE_DIM))
         self._Pm = np.concatenate([self._Pm, eyes])
-        self._mu = np.concatenate([self._mu,
-                                   np.broadcast_to(self.initial_probabilities, (added, m))])  # fmt: skip
+        self._mu = np.concatenate(
+            [self._mu, np.broadcast_to(self.initial_probabilities, (added, m))]
+        )
 
     # --- reading ---
 
     def states(self, slots: npt.ArrayLike) -> F64:
         """Mixture means of ``slots`` [m, m/s], shape (K, 4)."""
         index = np.asarray(slots, dtype=np.intp)
-        return np.asarray(np.einsum("km,kma->ka", self._mu[index], self._xm[index]),
-                          dtype=np.float64)  # fmt: skip
+        return np.asarray(
+            np.einsum("km,kma->ka", self._mu[index], self._xm[index]), dtype=np.float64
+        )
 
     def covariances(self, slots: npt.ArrayLike) -> F64:
         """Mixture covariances of ``slots``, shape (K, 4, 4)."""
@@ -229,8 +231,9 @@ class IMMStateBank(SlotBank):
     ) -> tuple[F64, F64, F64]:
         """Mix and predict each mode of ``index`` to ``stamp_s``: ``x_j``, ``P_j``, ``c_j``."""
         k, m = len(index), self.modes
-        dt = np.broadcast_to(np.asarray(stamp_s, dtype=np.float64), index.shape) - (
-            self._stamp_s[index]
+        dt = (
+            np.broadcast_to(np.asarray(stamp_s, dtype=np.float64), index.shape)
+            - (self._stamp_s[index])
         )
         mu, xm, Pm = self._mu[index], self._xm[index], self._Pm[index]
         pi = two_mode_transition(dt, *self.sojourn_s)  # (K, i, j)
@@ -331,8 +334,9 @@ class IMMStateBank(SlotBank):
         mu = self._mu[index]
         if self._last is not None and self._last_row:
             last_stamps, last_xm, last_Pm, last_c, last_x, last_P = self._last
-            rows = np.array([self._last_row.get(slot, -1) for slot in index.tolist()],
-                            dtype=np.intp)  # fmt: skip
+            rows = np.array(
+                [self._last_row.get(slot, -1) for slot in index.tolist()], dtype=np.intp
+            )
             ok = rows >= 0
             ok[ok] = last_stamps[rows[ok]] == stamp_s
             if ok.any():

@@ -85,26 +85,39 @@ def sensor_positions(site: Site) -> dict[str, tuple[float, float]]:
     return {mount.sensor_id: (mount.pose.x_m, mount.pose.y_m) for mount in site.sensors}
 
 
-def to_measurements(batch: DetectionBatch, report: Report,
-                    bias: LateralBiasCorrector | None = None) -> list[Measurement]:  # fmt: skip
+def to_measurements(
+    batch: DetectionBatch, report: Report, bias: LateralBiasCorrector | None = None
+) -> list[Measurement]:
     """The batch's detections as tracker measurements; bad covariances reported and dropped;
     with ``bias``, each sensor's calibrated lateral bias removed."""
     out = []
     for index, detection in enumerate(batch.detections):
         covariance = np.asarray(detection.covariance_m2, dtype=np.float64).reshape(2, 2)
-        symmetric = abs(covariance[0, 1] - covariance[1, 0]) <= 1e-9 * max(1.0, abs(covariance[0, 1]))
+        symmetric = abs(covariance[0, 1] - covariance[1, 0]) <= 1e-9 * max(
+            1.0, abs(covariance[0, 1])
+        )
         if not symmetric or covariance[0, 0] <= 0 or np.linalg.det(covariance) <= 0:
-            report("bad_detection",
-                   f"{batch.source_id} frame {batch.frame_index} detection {index}: covariance "
-                   f"{detection.covariance_m2} is not symmetric positive definite")  # fmt: skip
+            report(
+                "bad_detection",
+                f"{batch.source_id} frame {batch.frame_index} detection {index}: covariance "
+                f"{detection.covariance_m2} is not symmetric positive definite",
+            )
             continue
-        out.append(Measurement(
-            x_m=detection.x_m, y_m=detection.y_m, covariance_m2=covariance,
-            sensor_id=batch.source_id, object_class=detection.object_class.value,
-            score=detection.score, length_m=detection.length_m, width_m=detection.width_m,
-            speed_mps=detection.speed_mps, local_track_id=detection.local_track_id,
-            time_offset_s=detection.time_offset_s or 0.0,
-        ))  # fmt: skip
+        out.append(
+            Measurement(
+                x_m=detection.x_m,
+                y_m=detection.y_m,
+                covariance_m2=covariance,
+                sensor_id=batch.source_id,
+                object_class=detection.object_class.value,
+                score=detection.score,
+                length_m=detection.length_m,
+                width_m=detection.width_m,
+                speed_mps=detection.speed_mps,
+                local_track_id=detection.local_track_id,
+                time_offset_s=detection.time_offset_s or 0.0,
+            )
+        )
     return out if bias is None else bias.correct(batch.source_id, out)
 
 
@@ -114,16 +127,20 @@ def bias_corrector(site: Site, settings: FusionTrackerSettings) -> LateralBiasCo
     if settings.bias_map is None:
         return None
     bias = LateralBiasCorrector(site, load_bias_map(settings.bias_map, site))
-    log.info("lateral bias map %s: corrects %s", settings.bias_map,
-             ", ".join(bias.sensors()) or "no sensor of this site")  # fmt: skip
+    log.info(
+        "lateral bias map %s: corrects %s",
+        settings.bias_map,
+        ", ".join(bias.sensors()) or "no sensor of this site",
+    )
     return bias
 
 
 def process_noise(settings: TrackerSettings) -> ProcessNoise:
     """The process noise the tracker predicts with (its manoeuvre mode's, with the IMM), as its
     track batches carry it to whoever smooths them."""
-    return ProcessNoise(settings.sigma_along_mps2, settings.sigma_across_mps2,
-                        settings.heading_min_speed_mps)  # fmt: skip
+    return ProcessNoise(
+        settings.sigma_along_mps2, settings.sigma_across_mps2, settings.heading_min_speed_mps
+    )
 
 
 def to_track(site: Site, state: TrackState) -> Track:
@@ -136,23 +153,39 @@ def to_track(site: Site, state: TrackState) -> Track:
         object_class = VehicleClass.UNKNOWN
     covariance = 0.5 * (state.P + state.P.T)
     return Track(
-        track_id=state.track_id, x_m=state.x_m, y_m=state.y_m, vx_mps=state.vx_mps,
-        vy_mps=state.vy_mps, covariance=[float(v) for v in covariance.reshape(-1)],
-        station_m=float(station), offset_m=float(offset), speed_mps=state.speed_mps,
-        heading_rad=state.heading_rad, lane_index=max(lane, -1), object_class=object_class,
-        age_s=max(0.0, state.age_s), hits=state.hits,
-        confirmed=state.status != "tentative", sources=list(state.sources),
-        status=TrackStatus(state.status), length_m=state.length_m or None,
+        track_id=state.track_id,
+        x_m=state.x_m,
+        y_m=state.y_m,
+        vx_mps=state.vx_mps,
+        vy_mps=state.vy_mps,
+        covariance=[float(v) for v in covariance.reshape(-1)],
+        station_m=float(station),
+        offset_m=float(offset),
+        speed_mps=state.speed_mps,
+        heading_rad=state.heading_rad,
+        lane_index=max(lane, -1),
+        object_class=object_class,
+        age_s=max(0.0, state.age_s),
+        hits=state.hits,
+        confirmed=state.status != "tentative",
+        sources=list(state.sources),
+        status=TrackStatus(state.status),
+        length_m=state.length_m or None,
         width_m=state.width_m or None,
         last_update_s=state.stamp_s - state.time_since_update_s,
-    )  # fmt: skip
+    )
 
 
 class FusionCore:
     """What the node does without the bus: batches in, a track batch per output cycle out."""
 
-    def __init__(self, site: Site, settings: FusionTrackerSettings, report: Report,
-                 bias: LateralBiasCorrector | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        site: Site,
+        settings: FusionTrackerSettings,
+        report: Report,
+        bias: LateralBiasCorrector | None = None,
+    ) -> None:
         self.site = site
         self.settings = settings
         self.report = report
@@ -169,17 +202,22 @@ class FusionCore:
 
     def _new_tracker(self, first_track_id: int) -> MultiTargetTracker:
         site = self.site
-        return MultiTargetTracker(self.settings.tracker, heading_at=road_heading_hook(site),
-                                  sensor_positions=sensor_positions(site),
-                                  headings_at=road_headings_hook(site),
-                                  first_track_id=first_track_id)  # fmt: skip
+        return MultiTargetTracker(
+            self.settings.tracker,
+            heading_at=road_heading_hook(site),
+            sensor_positions=sensor_positions(site),
+            headings_at=road_headings_hook(site),
+            first_track_id=first_track_id,
+        )
 
     def _start_new_run(self, batch: DetectionBatch) -> None:
         log.warning(
             "%s's stamps went back to %.3f s: a new run (a restarted simulation); the tracker "
             "starts again, track ids from %d",
-            batch.source_id, batch.stamp, self.tracker.next_track_id,
-        )  # fmt: skip
+            batch.source_id,
+            batch.stamp,
+            self.tracker.next_track_id,
+        )
         self.tracker = self._new_tracker(first_track_id=self.tracker.next_track_id)
         self._next_output_s = None
         # The other sensors' stamps are the old run's until they go back too.
@@ -195,8 +233,9 @@ class FusionCore:
         if watch.observe(batch.stamp) == "new_run":
             self._start_new_run(batch)
         late_before = self.tracker.counters.batches_late
-        self.tracker.add(batch.source_id, batch.stamp,
-                         to_measurements(batch, self.report, self.bias))  # fmt: skip
+        self.tracker.add(
+            batch.source_id, batch.stamp, to_measurements(batch, self.report, self.bias)
+        )
         if self.tracker.counters.batches_late > late_before:
             self.report("late", f"{batch.source_id} batch at {batch.stamp:.3f} s is too late")
         return self._outputs()
@@ -225,16 +264,24 @@ class FusionCore:
         if not self.settings.publish_tentative:
             states = [s for s in states if s.status != "tentative"]
         batch = TrackBatch(
-            site=self.site.site_id, source_id=SERVICE, stamp=stamp_s, cycle_index=self._cycle,
+            site=self.site.site_id,
+            source_id=SERVICE,
+            stamp=stamp_s,
+            cycle_index=self._cycle,
             tracks=[to_track(self.site, s) for s in states],
             process_noise=self._process_noise,
-        )  # fmt: skip
+        )
         self._cycle += 1
         return batch
 
 
-def run(runtime: ServiceRuntime, site: Site, settings: FusionTrackerSettings,
-        clock: SimClock, bias: LateralBiasCorrector | None = None) -> int:  # fmt: skip
+def run(
+    runtime: ServiceRuntime,
+    site: Site,
+    settings: FusionTrackerSettings,
+    clock: SimClock,
+    bias: LateralBiasCorrector | None = None,
+) -> int:
     """Track until ``runtime.stop``; the number of track batches published."""
     bus = runtime.bus
     detections_key = bus.keys.detections_all

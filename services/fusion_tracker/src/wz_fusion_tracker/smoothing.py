@@ -35,7 +35,8 @@ def history_segments(history: TrackHistory) -> list[slice]:
     """
     n = len(history.stamps_s)
     fresh = np.all(history.x_pred == history.x_filt, axis=1) & np.all(
-        history.P_pred == history.P_filt, axis=(1, 2))  # fmt: skip
+        history.P_pred == history.P_filt, axis=(1, 2)
+    )
     starts = [0, *(np.flatnonzero(fresh[1:]) + 1).tolist(), n]
     return [slice(a, b) for a, b in pairwise(starts) if b > a]
 
@@ -54,6 +55,10 @@ def smooth_history(history: TrackHistory) -> tuple[F64, F64]:
     P_smooth = np.empty_like(history.P_filt)
     for run in history_segments(history):
         x_smooth[run], P_smooth[run] = rts_smooth(
-            history.stamps_s[run], history.x_filt[run], history.P_filt[run],
-            x_pred=history.x_pred[run], P_pred=history.P_pred[run])  # fmt: skip
+            history.stamps_s[run],
+            history.x_filt[run],
+            history.P_filt[run],
+            x_pred=history.x_pred[run],
+            P_pred=history.P_pred[run],
+        )
     return x_smooth, P_smooth

@@ -140,9 +140,23 @@ class TrackTable:
 
     def _grow(self) -> None:
         """Double the rows (new rows are reset when their slot is taken)."""
-        for name in ("born_s", "updated_s", "confirmed", "confirmed_s", "hits", "heading_rad",
-                     "sensor_updated_s", "class_weight", "class_last_vote", "lengths_m",
-                     "widths_m", "length_count", "width_count", "_sizes", "_sizes_stale"):  # fmt: skip
+        for name in (
+            "born_s",
+            "updated_s",
+            "confirmed",
+            "confirmed_s",
+            "hits",
+            "heading_rad",
+            "sensor_updated_s",
+            "class_weight",
+            "class_last_vote",
+            "lengths_m",
+            "widths_m",
+            "length_count",
+            "width_count",
+            "_sizes",
+            "_sizes_stale",
+        ):
             array = getattr(self, name)
             setattr(self, name, np.concatenate([array, np.zeros_like(array)]))
 
@@ -165,7 +179,8 @@ class TrackTable:
             rows = len(self.updated_s)
             self.class_weight = np.concatenate([self.class_weight, np.zeros((rows, 1))], axis=1)
             self.class_last_vote = np.concatenate(
-                [self.class_last_vote, np.zeros((rows, 1), dtype=np.int64)], axis=1)  # fmt: skip
+                [self.class_last_vote, np.zeros((rows, 1), dtype=np.int64)], axis=1
+            )
         return column
 
     def class_columns(self, names: Sequence[str]) -> IntP:
@@ -178,8 +193,16 @@ class TrackTable:
 
     # --- hits ---
 
-    def record_hits(self, slots: IntP, stamp_s: float, sensor_column: int, class_columns: IntP,
-                    scores: F64, lengths_m: F64, widths_m: F64) -> None:  # fmt: skip
+    def record_hits(
+        self,
+        slots: IntP,
+        stamp_s: float,
+        sensor_column: int,
+        class_columns: IntP,
+        scores: F64,
+        lengths_m: F64,
+        widths_m: F64,
+    ) -> None:
         """Count an update of each of ``slots`` (distinct) at ``stamp_s`` by one sensor: the
         hit, the class vote (``class_columns``, weighted by ``scores``), the measured sizes
         (NaN or <= 0: not measured); all shape (K,)."""
@@ -188,8 +211,10 @@ class TrackTable:
         self.sensor_updated_s[slots, sensor_column] = stamp_s
         self.class_weight[slots, class_columns] += scores
         self.class_last_vote[slots, class_columns] = self.hits[slots]
-        for values, ring, count in ((lengths_m, self.lengths_m, self.length_count),
-                                    (widths_m, self.widths_m, self.width_count)):  # fmt: skip
+        for values, ring, count in (
+            (lengths_m, self.lengths_m, self.length_count),
+            (widths_m, self.widths_m, self.width_count),
+        ):
             measured = values > 0.0  # False for NaN
             if not measured.any():
                 continue
@@ -220,8 +245,10 @@ class TrackTable:
         if len(stale):
             self._sizes_stale[stale] = False
             window = self.size_window
-            for column, ring, count in ((0, self.lengths_m, self.length_count),
-                                        (1, self.widths_m, self.width_count)):  # fmt: skip
+            for column, ring, count in (
+                (0, self.lengths_m, self.length_count),
+                (1, self.widths_m, self.width_count),
+            ):
                 ordered = np.sort(ring[stale], axis=1)  # NaN (unfilled) last
                 n = np.minimum(count[stale], window)
                 has = n > 0
@@ -230,7 +257,8 @@ class TrackTable:
                 self._sizes[stale, column] = np.where(has, (low + high) / 2.0, math.nan)
                 if column == 0:
                     quartile = np.take_along_axis(
-                        ordered, np.maximum((3 * (n - 1)) // 4, 0)[:, None], axis=1)[:, 0]  # fmt: skip
+                        ordered, np.maximum((3 * (n - 1)) // 4, 0)[:, None], axis=1
+                    )[:, 0]
                     self._sizes[stale, 2] = np.where(n >= 3, quartile, math.nan)
         return self._sizes[slots]
 
@@ -249,14 +277,17 @@ class TrackTable:
         winner = np.argmax(np.where(best, votes, -1), axis=1)
         names = self.class_names
         any_known: list[bool] = np.any(voted, axis=1).tolist()
-        return [names[c] if ok else UNKNOWN_CLASS
-                for c, ok in zip(winner.tolist(), any_known, strict=True)]  # fmt: skip
+        return [
+            names[c] if ok else UNKNOWN_CLASS
+            for c, ok in zip(winner.tolist(), any_known, strict=True)
+        ]
 
     def last_update_by_sensor(self, slot: int) -> dict[str, float]:
         """Latest update stamp per sensor that updated row ``slot`` [s]."""
         stamps = self.sensor_updated_s[slot].tolist()
-        return {sensor: s for sensor, s in zip(self.sensor_ids, stamps, strict=True)
-                if s != -math.inf}  # fmt: skip
+        return {
+            sensor: s for sensor, s in zip(self.sensor_ids, stamps, strict=True) if s != -math.inf
+        }
 
 
 class TrackStore:
@@ -280,8 +311,13 @@ class TrackStore:
         What the tracker has done (shared with it).
     """
 
-    def __init__(self, bank: TrackStateBank | IMMStateBank, size_window: int,
-                 max_finished_histories: int, counters: TrackerCounters) -> None:  # fmt: skip
+    def __init__(
+        self,
+        bank: TrackStateBank | IMMStateBank,
+        size_window: int,
+        max_finished_histories: int,
+        counters: TrackerCounters,
+    ) -> None:
         self.bank = bank
         self.table = TrackTable(size_window)
         self.tracks: dict[int, Track] = {}

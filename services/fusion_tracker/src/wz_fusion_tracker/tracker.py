@@ -151,16 +151,29 @@ class _Batch:
     def of(cls, sensor_id: str, stamp_s: float, measurements: Sequence[Measurement]) -> _Batch:
         n = len(measurements)
         # column by column: faster than a list of [x, y] lists
-        z = np.stack([np.fromiter([m.x_m for m in measurements], np.float64, n),
-                      np.fromiter([m.y_m for m in measurements], np.float64, n)],
-                     axis=1)  # fmt: skip
+        z = np.stack(
+            [
+                np.fromiter([m.x_m for m in measurements], np.float64, n),
+                np.fromiter([m.y_m for m in measurements], np.float64, n),
+            ],
+            axis=1,
+        )
         R = np.concatenate([m.covariance_m2 for m in measurements], dtype=np.float64).reshape(
-            -1, 2, 2)  # fmt: skip
+            -1, 2, 2
+        )
         offsets = np.fromiter([m.time_offset_s for m in measurements], np.float64, n)
-        speeds = np.fromiter([math.nan if m.speed_mps is None else m.speed_mps
-                              for m in measurements], np.float64, n)  # fmt: skip
-        return cls(sensor_id, stamp_s, measurements, z, R,
-                   offsets if np.any(offsets != 0.0) else None, speeds)  # fmt: skip
+        speeds = np.fromiter(
+            [math.nan if m.speed_mps is None else m.speed_mps for m in measurements], np.float64, n
+        )
+        return cls(
+            sensor_id,
+            stamp_s,
+            measurements,
+            z,
+            R,
+            offsets if np.any(offsets != 0.0) else None,
+            speeds,
+        )
 
 
 # ----------------------------------------------------------------------------- the tracker
@@ -207,8 +220,9 @@ class MultiTargetTracker:
             else TrackStateBank()
         )
         # the live and lost tracks, their states, bookkeeping and sensor local ids
-        self._store = TrackStore(bank, settings.size_window, settings.max_finished_histories,
-                                 TrackerCounters())  # fmt: skip
+        self._store = TrackStore(
+            bank, settings.size_window, settings.max_finished_histories, TrackerCounters()
+        )
         # d2 is compared with these gates only: beyond the widest, pairs need not be computed
         # (a little over it, for rounding)
         self._widest_gate_chi2 = 1.01 * max(settings.gate_chi2, settings.spawn_gate_chi2)
@@ -373,8 +387,10 @@ class MultiTargetTracker:
         since_update = status_s - table.updated_s[slots]
         confirmed = table.confirmed[slots].tolist()
         coasting = (since_update > settings.coasting_after_s).tolist()
-        status: list[TrackStatus] = ["tentative" if not c else "coasting" if late else "confirmed"
-                                     for c, late in zip(confirmed, coasting, strict=True)]  # fmt: skip
+        status: list[TrackStatus] = [
+            "tentative" if not c else "coasting" if late else "confirmed"
+            for c, late in zip(confirmed, coasting, strict=True)
+        ]
         classes = table.object_classes(slots)
         sizes = table.sizes(slots)[:, :2]
         sizes_list = np.where(np.isfinite(sizes), sizes, -1.0).tolist()  # -1: not measured
@@ -401,7 +417,9 @@ class MultiTargetTracker:
                     object_class=classes[row],
                     length_m=None if length < 0.0 else length,
                     width_m=None if width < 0.0 else width,
-                    sources=tuple(sorted(sensor_ids[c] for c in np.flatnonzero(sources[row]).tolist())),
+                    sources=tuple(
+                        sorted(sensor_ids[c] for c in np.flatnonzero(sources[row]).tolist())
+                    ),
                     hits=hits[row],
                     age_s=age[row],
                     time_since_update_s=since_list[row],
@@ -469,54 +487,116 @@ class MultiTargetTracker:
         Mahalanobis distances (inf where the radar speed forbids the pair) and ``ln det S``."""
         settings = self.settings
         pair_rows, pair_columns, d2, log_det_S = gated_pairs(
-            x_pred, P_pred, batch.z, batch.R, batch.time_offset_s, self._widest_gate_chi2)  # fmt: skip
+            x_pred, P_pred, batch.z, batch.R, batch.time_offset_s, self._widest_gate_chi2
+        )
         if settings.speed_association_chi2 > 0.0 and self._heading_at is not None:
-            d2 = speed_gated(d2, pair_rows, pair_columns, x_pred, P_pred,
-                             self._store.table.heading_rad[slots], batch.speeds, settings)  # fmt: skip
+            d2 = speed_gated(
+                d2,
+                pair_rows,
+                pair_columns,
+                x_pred,
+                P_pred,
+                self._store.table.heading_rad[slots],
+                batch.speeds,
+                settings,
+            )
         return pair_rows, pair_columns, d2, log_det_S
 
-    def _associate(self, live: Sequence[Track], slots: IntP, gated: _Gated,
-                   batch: _Batch) -> tuple[IntP, IntP, F64]:  # fmt: skip
+    def _associate(
+        self, live: Sequence[Track], slots: IntP, gated: _Gated, batch: _Batch
+    ) -> tuple[IntP, IntP, F64]:
         """The matched track rows, measurement columns and their d2: confirmed tracks first,
         each stage a global nearest neighbour on ``d^2 + ln det S - local id bonus``."""
         pair_rows, pair_columns, d2, log_det_S = gated
         bonus = local_id_bonus(
-            self.settings.local_track_id_bonus, (track.track_id for track in live),
-            self._store.local_ids, batch.sensor_id, batch.measurements, pair_rows, pair_columns)  # fmt: skip
+            self.settings.local_track_id_bonus,
+            (track.track_id for track in live),
+            self._store.local_ids,
+            batch.sensor_id,
+            batch.measurements,
+            pair_rows,
+            pair_columns,
+        )
         cost = association_cost(d2, log_det_S, bonus)
         allowed = np.flatnonzero(d2 <= self.settings.gate_chi2)
-        picked = allowed[cascade_assign_pairs(
-            cost[allowed], pair_rows[allowed], pair_columns[allowed],
-            self._store.table.confirmed[slots])]  # fmt: skip
+        picked = allowed[
+            cascade_assign_pairs(
+                cost[allowed],
+                pair_rows[allowed],
+                pair_columns[allowed],
+                self._store.table.confirmed[slots],
+            )
+        ]
         return pair_rows[picked], pair_columns[picked], d2[picked]
 
-    def _update_associated(self, live: Sequence[Track], slots: IntP, x_pred: F64, P_pred: F64,
-                           rows: IntP, columns: IntP, d2: F64, batch: _Batch) -> None:  # fmt: skip
+    def _update_associated(
+        self,
+        live: Sequence[Track],
+        slots: IntP,
+        x_pred: F64,
+        P_pred: F64,
+        rows: IntP,
+        columns: IntP,
+        d2: F64,
+        batch: _Batch,
+    ) -> None:
         """Update the associated tracks: outliers' covariances widened (Huber), boxes seen from
         one end re-centred with the track's length (:meth:`_reference_point`)."""
         R_used = huber_inflated(batch.R, columns, d2, self.settings.huber_k)
-        z_used = self._reference_point(slots, rows, columns, batch.z, batch.sensor_id,
-                                       batch.measurements)  # fmt: skip
-        self._update_matched([live[row] for row in rows.tolist()], rows, columns, slots,
-                             x_pred, P_pred, z_used, R_used, batch)  # fmt: skip
+        z_used = self._reference_point(
+            slots, rows, columns, batch.z, batch.sensor_id, batch.measurements
+        )
+        self._update_matched(
+            [live[row] for row in rows.tolist()],
+            rows,
+            columns,
+            slots,
+            x_pred,
+            P_pred,
+            z_used,
+            R_used,
+            batch,
+        )
 
-    def _reacquire(self, live: Sequence[Track], slots: IntP, x_pred: F64, P_pred: F64,
-                   pairs: Sequence[tuple[int, int]], batch: _Batch) -> list[tuple[int, int]]:  # fmt: skip
+    def _reacquire(
+        self,
+        live: Sequence[Track],
+        slots: IntP,
+        x_pred: F64,
+        P_pred: F64,
+        pairs: Sequence[tuple[int, int]],
+        batch: _Batch,
+    ) -> list[tuple[int, int]]:
         """Re-acquisition (:func:`~wz_fusion_tracker.identity.reacquisitions`) and the update of
         the tracks it takes up; the pairs it made."""
-        new_pairs, P_wide = reacquisitions(self._store, self.settings, slots, x_pred, P_pred,
-                                           batch.z, pairs, batch.stamp_s, batch.time_offset_s)  # fmt: skip
+        new_pairs, P_wide = reacquisitions(
+            self._store,
+            self.settings,
+            slots,
+            x_pred,
+            P_pred,
+            batch.z,
+            pairs,
+            batch.stamp_s,
+            batch.time_offset_s,
+        )
         if new_pairs:
             self._update_matched(
                 [live[row] for row, _ in new_pairs],
                 np.array([row for row, _ in new_pairs], dtype=np.intp),
                 np.array([column for _, column in new_pairs], dtype=np.intp),
-                slots, x_pred, P_wide, batch.z, batch.R, batch,
-            )  # fmt: skip
+                slots,
+                x_pred,
+                P_wide,
+                batch.z,
+                batch.R,
+                batch,
+            )
         return new_pairs
 
-    def _spawn_unmatched(self, batch: _Batch, pairs: Sequence[tuple[int, int]], slots: IntP,
-                         gated: _Gated | None) -> None:  # fmt: skip
+    def _spawn_unmatched(
+        self, batch: _Batch, pairs: Sequence[tuple[int, int]], slots: IntP, gated: _Gated | None
+    ) -> None:
         """Start a tentative track from each measurement no track took, unless it lies within
         ``spawn_gate_chi2`` of a confirmed track (that vehicle's outlier) or is too uncertain
         to locate a vehicle (``spawn_max_std_m``)."""
@@ -554,9 +634,14 @@ class MultiTargetTracker:
         merge_duplicates(store, self.settings, stamp_s)
 
     def _reference_point(
-        self, slots: IntP, rows: IntP, columns: IntP, z: F64, sensor_id: str,
+        self,
+        slots: IntP,
+        rows: IntP,
+        columns: IntP,
+        z: F64,
+        sensor_id: str,
         measurements: Sequence[Measurement],
-    ) -> F64:  # fmt: skip
+    ) -> F64:
         """Matched positions re-centred with the track's length where a sensor saw one end.
 
         A LiDAR sees the face of a vehicle turned to it and completes the box away from the
@@ -572,8 +657,13 @@ class MultiTargetTracker:
         if sensor is None or threshold <= 0.0:
             return z
         measured = np.fromiter(
-            [math.nan if (length := measurements[c].length_m) is None else length
-             for c in columns.tolist()], np.float64, len(columns))  # fmt: skip
+            [
+                math.nan if (length := measurements[c].length_m) is None else length
+                for c in columns.tolist()
+            ],
+            np.float64,
+            len(columns),
+        )
         matched_slots = slots[rows]
         difference = self._store.table.sizes(matched_slots)[:, 2] - measured  # NaN: either unknown
         heading = self._store.table.heading_rad[matched_slots]
@@ -586,7 +676,6 @@ class MultiTargetTracker:
         z_used = z.copy()
         z_used[at] = z[at] + (0.5 * difference[moved] * away)[:, None] * axis
         return z_used
-
 
     def _predicted(self, slots: IntP, stamp_s: float) -> tuple[F64, F64]:
         """The states of ``slots`` predicted to ``stamp_s`` with each track's process noise.
@@ -616,7 +705,6 @@ class MultiTargetTracker:
             along,
         )
         return self._store.bank.predicted(slots, stamp_s, along, across, heading)
-
 
     def _update_matched(
         self,
@@ -658,13 +746,18 @@ class MultiTargetTracker:
             if self._headings_at is not None:
                 road = np.asarray(self._headings_at(x_post[:, 0], x_post[:, 1]), dtype=np.float64)
             else:
-                road = np.array([self._heading_at(x_m, y_m) for x_m, y_m in x_post[:, :2].tolist()],
-                                dtype=np.float64)  # fmt: skip
+                road = np.array(
+                    [self._heading_at(x_m, y_m) for x_m, y_m in x_post[:, :2].tolist()],
+                    dtype=np.float64,
+                )
             road = np.where(np.isfinite(road), road, math.nan)  # no road: NaN
             table.heading_rad[matched_slots] = road
             # radar speed along the road: z = s, H = [0, 0, cos h, sin h], R = sigma_s^2
-            speed_rows = np.flatnonzero(np.isfinite(speeds[columns]) & np.isfinite(road)) if (
-                settings.use_speed_measurements) else NO_INDEX  # fmt: skip
+            speed_rows = (
+                np.flatnonzero(np.isfinite(speeds[columns]) & np.isfinite(road))
+                if (settings.use_speed_measurements)
+                else NO_INDEX
+            )
             if len(speed_rows):
                 h = road[speed_rows]
                 H = np.zeros((len(speed_rows), 1, STATE_DIM))
@@ -688,18 +781,27 @@ class MultiTargetTracker:
         matched = [measurements[column] for column in columns_list]
         k = len(matched)
         table.record_hits(
-            matched_slots, stamp_s, table.sensor_column(sensor_id),
+            matched_slots,
+            stamp_s,
+            table.sensor_column(sensor_id),
             table.class_columns([m.object_class for m in matched]),
             np.fromiter([m.score for m in matched], np.float64, k),
-            np.fromiter([math.nan if m.length_m is None else m.length_m for m in matched],
-                        np.float64, k),
-            np.fromiter([math.nan if m.width_m is None else m.width_m for m in matched],
-                        np.float64, k),
-        )  # fmt: skip
+            np.fromiter(
+                [math.nan if m.length_m is None else m.length_m for m in matched], np.float64, k
+            ),
+            np.fromiter(
+                [math.nan if m.width_m is None else m.width_m for m in matched], np.float64, k
+            ),
+        )
         # The batch's priors and posteriors, copied once (fancy indexing copies); each track's
         # history entry is this record and its row (not four views and an object per track).
-        record: UpdateRecord = (stamp_s, x_prior, P_prior, bank.states(matched_slots),
-                                bank.covariances(matched_slots))  # fmt: skip
+        record: UpdateRecord = (
+            stamp_s,
+            x_prior,
+            P_prior,
+            bank.states(matched_slots),
+            bank.covariances(matched_slots),
+        )
         for i, track in enumerate(tracks):
             track.history.append((record, i))
         for measurement, track in zip(matched, tracks, strict=True):
@@ -750,9 +852,10 @@ class MultiTargetTracker:
             P[:2, 2:] = -delta * P[2:, 2:]
             P[2:, :2] = P[:2, 2:].T
         track = Track(
-            track_id=self._next_id, slot=self._store.bank.add(x, P, stamp_s),
+            track_id=self._next_id,
+            slot=self._store.bank.add(x, P, stamp_s),
             max_history=settings.max_history,
-        )  # fmt: skip
+        )
         table = self._store.table
         table.reset(track.slot, stamp_s, heading)
         self._next_id += 1
@@ -761,12 +864,14 @@ class MultiTargetTracker:
         self._store.counters.tracks_started += 1
         length, width = measurement.length_m, measurement.width_m
         table.record_hits(
-            np.array([track.slot]), stamp_s, table.sensor_column(sensor_id),
+            np.array([track.slot]),
+            stamp_s,
+            table.sensor_column(sensor_id),
             np.array([table.class_column(measurement.object_class)]),
             np.array([measurement.score], dtype=np.float64),
             np.array([math.nan if length is None else length], dtype=np.float64),
             np.array([math.nan if width is None else width], dtype=np.float64),
-        )  # fmt: skip
+        )
         track.hit_stamps_s.append(stamp_s)
         track.history.append(((stamp_s, x[None], P[None], x[None], P[None]), 0))
         if measurement.local_track_id is not None:
@@ -803,19 +908,20 @@ class MultiTargetTracker:
         updated_s = table.updated_s[slots]
         age_s = stamp_s - updated_s
         confirmed = table.confirmed[slots]
-        expired = np.where(confirmed, age_s > settings.max_coast_s,
-                           age_s > settings.tentative_max_age_s)  # fmt: skip
+        expired = np.where(
+            confirmed, age_s > settings.max_coast_s, age_s > settings.tentative_max_age_s
+        )
         outage = np.flatnonzero(expired & confirmed & (age_s <= settings.max_outage_coast_s))
         if len(outage):
             # the sensors that saw it shortly before its last update, and the silent ones
             seen = table.sensor_updated_s[slots[outage]]
             recent = seen >= (updated_s[outage] - settings.max_coast_s)[:, None]
-            last_batch_s = np.array([self._last_batch_s.get(sensor, -math.inf)
-                                     for sensor in table.sensor_ids])  # fmt: skip
+            last_batch_s = np.array(
+                [self._last_batch_s.get(sensor, -math.inf) for sensor in table.sensor_ids]
+            )
             silent = last_batch_s < stamp_s - settings.sensor_silent_after_s
             expired[outage] = ~(recent & silent[None, :]).any(axis=1)
         return expired
-
 
     def _prune(self, stamp_s: float) -> None:
         live, slots = self._store.live()

@@ -92,12 +92,17 @@ def create_app(
     )
     key_store = KeyStore(storage.engine)
     app.state.gateway = GatewayContext(
-        settings=settings, storage=storage, sites=served, metrics=metrics, key_store=key_store,
-        keys=KeyCache(key_store), limiter=auth.TokenBuckets(settings.rate_limit_per_s,
-                                                            settings.rate_limit_burst),
+        settings=settings,
+        storage=storage,
+        sites=served,
+        metrics=metrics,
+        key_store=key_store,
+        keys=KeyCache(key_store),
+        limiter=auth.TokenBuckets(settings.rate_limit_per_s, settings.rate_limit_burst),
         live=live if live is not None else broadcaster_for(settings, metrics.registry),
-        readiness=readiness, clock=clock,
-    )  # fmt: skip
+        readiness=readiness,
+        clock=clock,
+    )
     add_exception_handlers(app)
     app.include_router(api_router)
     app.mount("/static", static_files(), name="static")

@@ -65,9 +65,13 @@ def fingerprint(secret: str) -> str:
 def hash_secret(secret: str, salt_hex: str) -> str:
     """scrypt of the key with its salt, hex."""
     digest = hashlib.scrypt(
-        secret.encode(), salt=bytes.fromhex(salt_hex), n=_SCRYPT_N, r=_SCRYPT_R, p=_SCRYPT_P,
+        secret.encode(),
+        salt=bytes.fromhex(salt_hex),
+        n=_SCRYPT_N,
+        r=_SCRYPT_R,
+        p=_SCRYPT_P,
         dklen=32,
-    )  # fmt: skip
+    )
     return digest.hex()
 
 

@@ -64,9 +64,10 @@ def address_policy(settings: GatewaySettings) -> webhooks.AddressPolicy:
     return webhooks.AddressPolicy(
         allow_private=settings.webhook_allow_private,
         allow_loopback=settings.dev_mode,
-        allowed_networks=tuple(ipaddress.ip_network(n, strict=False)
-                               for n in settings.webhook_allowed_networks),
-    )  # fmt: skip
+        allowed_networks=tuple(
+            ipaddress.ip_network(n, strict=False) for n in settings.webhook_allowed_networks
+        ),
+    )
 
 
 def check_url(url: str, policy: webhooks.AddressPolicy, resolve: Resolve = resolve_host) -> None:
@@ -95,9 +96,14 @@ class _VettedBackend(httpcore.NetworkBackend):
         self._resolve = resolve
         self._inner = httpcore.SyncBackend()
 
-    def connect_tcp(self, host: str, port: int, timeout: float | None = None,
-                    local_address: str | None = None,
-                    socket_options: Iterable[Any] | None = None) -> httpcore.NetworkStream:  # fmt: skip
+    def connect_tcp(
+        self,
+        host: str,
+        port: int,
+        timeout: float | None = None,
+        local_address: str | None = None,
+        socket_options: Iterable[Any] | None = None,
+    ) -> httpcore.NetworkStream:
         try:
             addresses = self._resolve(host, port)
         except OSError as exc:
@@ -109,15 +115,17 @@ class _VettedBackend(httpcore.NetworkBackend):
         failure: Exception | None = None
         for address in addresses:  # the checked addresses, never the name again
             try:
-                return self._inner.connect_tcp(address, port, timeout, local_address,
-                                               socket_options)  # fmt: skip
+                return self._inner.connect_tcp(
+                    address, port, timeout, local_address, socket_options
+                )
             except httpcore.ConnectError as exc:
                 failure = exc
         assert failure is not None
         raise failure
 
-    def connect_unix_socket(self, path: str, timeout: float | None = None,
-                            socket_options: Iterable[Any] | None = None) -> httpcore.NetworkStream:  # fmt: skip
+    def connect_unix_socket(
+        self, path: str, timeout: float | None = None, socket_options: Iterable[Any] | None = None
+    ) -> httpcore.NetworkStream:
         raise httpcore.ConnectError("webhooks are not sent to Unix sockets")
 
     def sleep(self, seconds: float) -> None:
@@ -138,13 +146,21 @@ class _VettedTransport(httpx.HTTPTransport):
         )
 
 
-def vetted_client(policy: webhooks.AddressPolicy, *, timeout_s: float, connections: int = 16,
-                  resolve: Resolve = resolve_host) -> httpx.Client:  # fmt: skip
+def vetted_client(
+    policy: webhooks.AddressPolicy,
+    *,
+    timeout_s: float,
+    connections: int = 16,
+    resolve: Resolve = resolve_host,
+) -> httpx.Client:
     """An HTTP client for webhooks: checked addresses, no redirects, no proxies from the
     environment, ``timeout_s`` for the connection, the sending and each read."""
-    return httpx.Client(transport=_VettedTransport(policy, resolve, connections),
-                        timeout=httpx.Timeout(timeout_s), follow_redirects=False,
-                        trust_env=False)  # fmt: skip
+    return httpx.Client(
+        transport=_VettedTransport(policy, resolve, connections),
+        timeout=httpx.Timeout(timeout_s),
+        follow_redirects=False,
+        trust_env=False,
+    )
 
 
 def _result_label(status_code: int | None) -> str:
@@ -169,22 +185,35 @@ class WebhookDeliverer:
         Host name to addresses; ``getaddrinfo`` by default.
     """
 
-    def __init__(self, store: WebhookStore, settings: GatewaySettings,
-                 metrics: GatewayMetrics | None = None, *, clock: Callable[[], float] = time.time,
-                 rng: random.Random | None = None, resolve: Resolve = resolve_host) -> None:  # fmt: skip
+    def __init__(
+        self,
+        store: WebhookStore,
+        settings: GatewaySettings,
+        metrics: GatewayMetrics | None = None,
+        *,
+        clock: Callable[[], float] = time.time,
+        rng: random.Random | None = None,
+        resolve: Resolve = resolve_host,
+    ) -> None:
         # httpx logs each request at INFO; the line per attempt below says more.
         logging.getLogger("httpx").setLevel(logging.WARNING)
         self.store = store
         self.settings = settings
         self.metrics = metrics
         self.clock = clock
-        self.policy = webhooks.RetryPolicy(backoff_base_s=settings.webhook_backoff_base_s,
-                                           backoff_cap_s=settings.webhook_backoff_cap_s,
-                                           event_ttl_s=settings.webhook_event_ttl_s)  # fmt: skip
+        self.policy = webhooks.RetryPolicy(
+            backoff_base_s=settings.webhook_backoff_base_s,
+            backoff_cap_s=settings.webhook_backoff_cap_s,
+            event_ttl_s=settings.webhook_event_ttl_s,
+        )
         self._rng = rng if rng is not None else random.Random()
         self._rng_lock = threading.Lock()
-        self._client = vetted_client(address_policy(settings), timeout_s=settings.webhook_timeout_s,
-                                     connections=2 * settings.webhook_workers, resolve=resolve)  # fmt: skip
+        self._client = vetted_client(
+            address_policy(settings),
+            timeout_s=settings.webhook_timeout_s,
+            connections=2 * settings.webhook_workers,
+            resolve=resolve,
+        )
         self._pool = ThreadPoolExecutor(settings.webhook_workers, thread_name_prefix="webhook")
         self._busy: set[int] = set()  # subscription rows with an attempt in flight
         self._lock = threading.Lock()
@@ -213,9 +242,12 @@ class WebhookDeliverer:
         self._client.close()
 
     def _run(self) -> None:
-        log.info("webhook delivery: %d workers, time to live %.0f s, lease %.0f s",
-                 self.settings.webhook_workers, self.policy.event_ttl_s,
-                 self.settings.webhook_lease_s)  # fmt: skip
+        log.info(
+            "webhook delivery: %d workers, time to live %.0f s, lease %.0f s",
+            self.settings.webhook_workers,
+            self.policy.event_ttl_s,
+            self.settings.webhook_lease_s,
+        )
         while not self._stop.is_set():
             self._wake.clear()  # before looking: a wake during the look is not lost
             try:
@@ -232,13 +264,20 @@ class WebhookDeliverer:
             self._next_sweep = now + _EXPIRY_SWEEP_S
             expired = self.store.expire_overdue(now, self.policy.event_ttl_s)
             if expired:
-                log.warning("%d webhook events expired undelivered (time to live %.0f s)",
-                            expired, self.policy.event_ttl_s)  # fmt: skip
+                log.warning(
+                    "%d webhook events expired undelivered (time to live %.0f s)",
+                    expired,
+                    self.policy.event_ttl_s,
+                )
                 self._count_final({"expired": expired})
         with self._lock:
             busy = set(self._busy)
-        claimed = self.store.claim(now, lease_until=now + self.settings.webhook_lease_s,
-                                   limit=self.settings.webhook_workers - len(busy), busy=busy)  # fmt: skip
+        claimed = self.store.claim(
+            now,
+            lease_until=now + self.settings.webhook_lease_s,
+            limit=self.settings.webhook_workers - len(busy),
+            busy=busy,
+        )
         for event in claimed:
             with self._lock:
                 self._busy.add(event.subscription_row)
@@ -249,8 +288,9 @@ class WebhookDeliverer:
         try:
             self.attempt(event)
         except Exception:  # its lease runs out and it is tried again
-            log.exception("webhook attempt for %s (%s) failed", event.event_id,
-                          event.subscription_id)  # fmt: skip
+            log.exception(
+                "webhook attempt for %s (%s) failed", event.event_id, event.subscription_id
+            )
         finally:
             with self._lock:
                 self._busy.discard(event.subscription_row)
@@ -266,15 +306,17 @@ class WebhookDeliverer:
             if self.store.expire(event.outbox_id, started_at, reason):
                 self._count_final({"expired": 1})
             return webhooks.Outcome("expired", reason=reason)
-        headers = webhooks.delivery_headers(event.signing_secrets, event.event_id,
-                                            int(started_at), event.body)  # fmt: skip
+        headers = webhooks.delivery_headers(
+            event.signing_secrets, event.event_id, int(started_at), event.body
+        )
         status_code: int | None = None
         retry_after: str | None = None
         error: str | None = None
         started = time.perf_counter()
         try:
-            with self._client.stream("POST", event.url, content=event.body.encode("utf-8"),
-                                     headers=headers) as response:  # fmt: skip
+            with self._client.stream(
+                "POST", event.url, content=event.body.encode("utf-8"), headers=headers
+            ) as response:
                 status_code = response.status_code
                 retry_after = response.headers.get("retry-after")
                 excerpt = bytearray()
@@ -290,14 +332,25 @@ class WebhookDeliverer:
         duration_s = time.perf_counter() - started
         now = self.clock()
         with self._rng_lock:
-            outcome = webhooks.decide(attempt=event.attempts + 1, status_code=status_code,
-                                      retry_after=retry_after, created_at=event.created_at,
-                                      now=now, policy=self.policy, rng=self._rng)  # fmt: skip
+            outcome = webhooks.decide(
+                attempt=event.attempts + 1,
+                status_code=status_code,
+                retry_after=retry_after,
+                created_at=event.created_at,
+                now=now,
+                policy=self.policy,
+                rng=self._rng,
+            )
         finished = self.store.record_attempt(
-            event, attempt=event.attempts + 1, attempted_at=started_at, status_code=status_code,
-            error=None if error is None else error[:_ERROR_CHARS], duration_ms=1e3 * duration_s,
-            outcome=outcome, now=now,
-        )  # fmt: skip
+            event,
+            attempt=event.attempts + 1,
+            attempted_at=started_at,
+            status_code=status_code,
+            error=None if error is None else error[:_ERROR_CHARS],
+            duration_ms=1e3 * duration_s,
+            outcome=outcome,
+            now=now,
+        )
         if self.metrics is not None:
             self.metrics.webhook_attempts.labels(_result_label(status_code)).inc()
             self.metrics.webhook_attempt_seconds.observe(duration_s)
@@ -310,17 +363,23 @@ class WebhookDeliverer:
             for state, n in finished.items():
                 self.metrics.webhook_events.labels(state).inc(n)
 
-    def _log(self, event: ClaimedEvent, outcome: webhooks.Outcome, error: str | None,
-             duration_s: float) -> None:  # fmt: skip
+    def _log(
+        self, event: ClaimedEvent, outcome: webhooks.Outcome, error: str | None, duration_s: float
+    ) -> None:
         where = f"{event.event_type} {event.event_id} to {event.subscription_id}"
         attempt = event.attempts + 1
         if outcome.state == "delivered":
-            log.info("webhook %s delivered (attempt %d, %.1f ms)", where, attempt,
-                     1e3 * duration_s)  # fmt: skip
+            log.info("webhook %s delivered (attempt %d, %.1f ms)", where, attempt, 1e3 * duration_s)
         elif outcome.state == "pending":
             assert outcome.next_attempt_at is not None
-            log.info("webhook %s attempt %d failed (%s); next in %.1f s", where, attempt, error,
-                     outcome.next_attempt_at - self.clock())  # fmt: skip
+            log.info(
+                "webhook %s attempt %d failed (%s); next in %.1f s",
+                where,
+                attempt,
+                error,
+                outcome.next_attempt_at - self.clock(),
+            )
         else:
-            log.warning("webhook %s %s after %d attempts: %s", where, outcome.state, attempt,
-                        outcome.reason)  # fmt: skip
+            log.warning(
+                "webhook %s %s after %d attempts: %s", where, outcome.state, attempt, outcome.reason
+            )

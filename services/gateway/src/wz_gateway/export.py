@@ -21,7 +21,9 @@ import pyarrow.parquet as pq
 
 from wz_gateway.models import TRACK_POINT_FIELDS, TrackPoint
 
-_PROPERTY_FIELDS = tuple(f for f in TRACK_POINT_FIELDS if f not in ("latitude_deg", "longitude_deg"))
+_PROPERTY_FIELDS = tuple(
+    f for f in TRACK_POINT_FIELDS if f not in ("latitude_deg", "longitude_deg")
+)
 
 
 def points_csv(points: Sequence[TrackPoint]) -> str:
@@ -37,12 +39,22 @@ def points_csv(points: Sequence[TrackPoint]) -> str:
 
 #: The Parquet columns: those of the CSV, in its order, with their types; only the size may be
 #: missing (null).
-PARQUET_SCHEMA = pa.schema([
-    pa.field(name, {"track_id": pa.int64(), "lane_index": pa.int16(), "object_class": pa.string(),
-                    "status": pa.string(), "smoothed": pa.bool_()}.get(name, pa.float64()),
-             nullable=name in ("length_m", "width_m"))
-    for name in TRACK_POINT_FIELDS
-])  # fmt: skip
+PARQUET_SCHEMA = pa.schema(
+    [
+        pa.field(
+            name,
+            {
+                "track_id": pa.int64(),
+                "lane_index": pa.int16(),
+                "object_class": pa.string(),
+                "status": pa.string(),
+                "smoothed": pa.bool_(),
+            }.get(name, pa.float64()),
+            nullable=name in ("length_m", "width_m"),
+        )
+        for name in TRACK_POINT_FIELDS
+    ]
+)
 
 
 def points_parquet(points: Sequence[TrackPoint]) -> bytes:
@@ -60,23 +72,26 @@ def _position(point: TrackPoint) -> list[float]:
     return [point.longitude_deg, point.latitude_deg]
 
 
-def points_geojson(points: Sequence[TrackPoint], *, next_cursor: str | None = None) -> dict[
-    str, Any
-]:
+def points_geojson(
+    points: Sequence[TrackPoint], *, next_cursor: str | None = None
+) -> dict[str, Any]:
     """A FeatureCollection of Point features; ``next_cursor`` as a foreign member."""
     features = []
     for point in points:
         row = point.model_dump(mode="json")
-        features.append({
-            "type": "Feature",
-            "geometry": {"type": "Point", "coordinates": _position(point)},
-            "properties": {name: row[name] for name in _PROPERTY_FIELDS},
-        })  # fmt: skip
+        features.append(
+            {
+                "type": "Feature",
+                "geometry": {"type": "Point", "coordinates": _position(point)},
+                "properties": {name: row[name] for name in _PROPERTY_FIELDS},
+            }
+        )
     return {"type": "FeatureCollection", "features": features, "next_cursor": next_cursor}
 
 
-def trajectory_geojson(site: str, track_id: int, points: Sequence[TrackPoint], *,
-                       next_cursor: str | None = None) -> dict[str, Any]:  # fmt: skip
+def trajectory_geojson(
+    site: str, track_id: int, points: Sequence[TrackPoint], *, next_cursor: str | None = None
+) -> dict[str, Any]:
     """A FeatureCollection of one feature: the track's path (a LineString, or a Point when
     the page has a single point; no feature when it has none), with per-vertex stamps and
     speeds as properties."""
@@ -88,17 +103,19 @@ def trajectory_geojson(site: str, track_id: int, points: Sequence[TrackPoint], *
             if len(coordinates) > 1
             else {"type": "Point", "coordinates": coordinates[0]}
         )
-        features.append({
-            "type": "Feature",
-            "geometry": geometry,
-            "properties": {
-                "site": site,
-                "track_id": track_id,
-                "start_stamp": points[0].stamp,
-                "end_stamp": points[-1].stamp,
-                "stamps": [p.stamp for p in points],
-                "speeds_mps": [p.speed_mps for p in points],
-                "smoothed": [p.smoothed for p in points],
-            },
-        })  # fmt: skip
+        features.append(
+            {
+                "type": "Feature",
+                "geometry": geometry,
+                "properties": {
+                    "site": site,
+                    "track_id": track_id,
+                    "start_stamp": points[0].stamp,
+                    "end_stamp": points[-1].stamp,
+                    "stamps": [p.stamp for p in points],
+                    "speeds_mps": [p.speed_mps for p in points],
+                    "smoothed": [p.smoothed for p in points],
+                },
+            }
+        )
     return {"type": "FeatureCollection", "features": features, "next_cursor": next_cursor}

@@ -37,12 +37,14 @@ class KeyStore:
     def __init__(self, engine: Engine) -> None:
         self.engine = engine
 
-    def add(self, scope: auth.Scope, secret: str, *, name: str, origin: KeyOrigin,
-            now: float) -> ApiKeyInfo:  # fmt: skip
+    def add(
+        self, scope: auth.Scope, secret: str, *, name: str, origin: KeyOrigin, now: float
+    ) -> ApiKeyInfo:
         """Store a key's hash; the secret itself is not kept."""
         salt = auth.new_salt()
-        info = ApiKeyInfo(key_id=auth.new_key_id(), scope=scope, name=name,
-                          origin=origin, created_at=now)  # fmt: skip
+        info = ApiKeyInfo(
+            key_id=auth.new_key_id(), scope=scope, name=name, origin=origin, created_at=now
+        )
         with self.engine.begin() as connection:
             connection.execute(
                 insert(api_keys).values(
@@ -63,8 +65,9 @@ class KeyStore:
         c = api_keys.c
         with self.engine.connect() as connection:
             rows = connection.execute(
-                select(api_keys).where(c.fingerprint == auth.fingerprint(secret),
-                                       c.revoked_at.is_(None))
+                select(api_keys).where(
+                    c.fingerprint == auth.fingerprint(secret), c.revoked_at.is_(None)
+                )
             ).all()
         for row in rows:
             if auth.verify_secret(secret, row.salt, row.secret_hash):
@@ -84,13 +87,15 @@ class KeyStore:
         c = api_keys.c
         with self.engine.begin() as connection:
             outcome = connection.execute(
-                update(api_keys).where(c.key_id == key_id, c.revoked_at.is_(None))
+                update(api_keys)
+                .where(c.key_id == key_id, c.revoked_at.is_(None))
                 .values(revoked_at=now)
-            )  # fmt: skip
+            )
         return bool(outcome.rowcount)
 
-    def sync_configured(self, configured: Sequence[tuple[auth.Scope, str]],
-                        now: float) -> tuple[int, int]:  # fmt: skip
+    def sync_configured(
+        self, configured: Sequence[tuple[auth.Scope, str]], now: float
+    ) -> tuple[int, int]:
         """Make the ``settings`` keys those configured: add the new, revoke the dropped.
 
         Returns
@@ -106,17 +111,22 @@ class KeyStore:
         added = 0
         for number, (scope, secret) in enumerate(configured, start=1):
             match = next(
-                (row for row in rows
-                 if row.key_id not in kept and row.scope == scope
-                 and row.fingerprint == auth.fingerprint(secret)
-                 and auth.verify_secret(secret, row.salt, row.secret_hash)),
+                (
+                    row
+                    for row in rows
+                    if row.key_id not in kept
+                    and row.scope == scope
+                    and row.fingerprint == auth.fingerprint(secret)
+                    and auth.verify_secret(secret, row.salt, row.secret_hash)
+                ),
                 None,
-            )  # fmt: skip
+            )
             if match is not None:
                 kept.add(match.key_id)
                 continue
-            info = self.add(scope, secret, name=f"settings key {number}", origin="settings",
-                            now=now)  # fmt: skip
+            info = self.add(
+                scope, secret, name=f"settings key {number}", origin="settings", now=now
+            )
             kept.add(info.key_id)
             added += 1
         revoked = sum(self.revoke(row.key_id, now) for row in rows if row.key_id not in kept)
@@ -156,5 +166,11 @@ class KeyCache:
 
 
 def _key_info(row: Any) -> ApiKeyInfo:
-    return ApiKeyInfo(key_id=row.key_id, scope=row.scope, name=row.name, origin=row.origin,
-                      created_at=row.created_at, revoked_at=row.revoked_at)  # fmt: skip
+    return ApiKeyInfo(
+        key_id=row.key_id,
+        scope=row.scope,
+        name=row.name,
+        origin=row.origin,
+        created_at=row.created_at,
+        revoked_at=row.revoked_at,
+    )

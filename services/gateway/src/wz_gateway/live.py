@@ -86,8 +86,9 @@ class LiveEvent:
 
     __slots__ = ("_make", "_text", "event_id", "kind", "sequence")
 
-    def __init__(self, kind: EventKind, sequence: int, event_id: str,
-                 make: Callable[[], str]) -> None:  # fmt: skip
+    def __init__(
+        self, kind: EventKind, sequence: int, event_id: str, make: Callable[[], str]
+    ) -> None:
         self.kind = kind
         self.sequence = sequence
         self.event_id = event_id
@@ -108,8 +109,14 @@ class Subscription:
     threads; ``get`` is awaited by the client's response.
     """
 
-    def __init__(self, broadcaster: Broadcaster, loop: asyncio.AbstractEventLoop,
-                 kinds: frozenset[EventKind], capacity: int, tracks_interval_s: float) -> None:  # fmt: skip
+    def __init__(
+        self,
+        broadcaster: Broadcaster,
+        loop: asyncio.AbstractEventLoop,
+        kinds: frozenset[EventKind],
+        capacity: int,
+        tracks_interval_s: float,
+    ) -> None:
         self.loop = loop
         self.kinds = kinds
         self.dropped = 0
@@ -190,10 +197,16 @@ class Broadcaster:
         Wall clock [Unix s]: the ``received_at`` of the tracks events.
     """
 
-    def __init__(self, *, max_tracks_hz: float = 10.0, queue_capacity: int = 64,
-                 max_clients: int = 32, recent_alerts: int = 100,
-                 registry: CollectorRegistry | None = None,
-                 clock: Callable[[], float] = time.time) -> None:  # fmt: skip
+    def __init__(
+        self,
+        *,
+        max_tracks_hz: float = 10.0,
+        queue_capacity: int = 64,
+        max_clients: int = 32,
+        recent_alerts: int = 100,
+        registry: CollectorRegistry | None = None,
+        clock: Callable[[], float] = time.time,
+    ) -> None:
         if max_tracks_hz <= 0.0 or queue_capacity < 1 or max_clients < 1:
             raise ValueError("max_tracks_hz, queue_capacity and max_clients must be positive")
         self.tracks_interval_s = 1.0 / max_tracks_hz
@@ -214,10 +227,12 @@ class Broadcaster:
         if registry is not None:
             self._dropped_metric = Counter(
                 "wz_gateway_stream_dropped_events",
-                "Live-stream events dropped because a client read too slowly", registry=registry,
-            )  # fmt: skip
-            clients = Gauge("wz_gateway_stream_clients", "Clients of the live stream",
-                            registry=registry)  # fmt: skip
+                "Live-stream events dropped because a client read too slowly",
+                registry=registry,
+            )
+            clients = Gauge(
+                "wz_gateway_stream_clients", "Clients of the live stream", registry=registry
+            )
             clients.set_function(lambda: float(self.client_count))
 
     @property
@@ -274,8 +289,7 @@ class Broadcaster:
         self._sequence += 1
         return LiveEvent(kind, self._sequence, f"{self.boot}-{self._sequence}", make)
 
-    def _schedule(self, subscription: Subscription, call: Callable[..., None],
-                  *args: Any) -> None:  # fmt: skip
+    def _schedule(self, subscription: Subscription, call: Callable[..., None], *args: Any) -> None:
         try:
             subscription.loop.call_soon_threadsafe(call, *args)
         except RuntimeError:  # its event loop is closed: the server is gone
@@ -283,19 +297,22 @@ class Broadcaster:
 
     # --- the clients' side ----------------------------------------------------------------
 
-    def subscribe(self, kinds: frozenset[EventKind],
-                  last_event_id: str | None = None) -> Subscription:  # fmt: skip
+    def subscribe(
+        self, kinds: frozenset[EventKind], last_event_id: str | None = None
+    ) -> Subscription:
         """A new client, in the running event loop: first the newest track batch (when asked
         for tracks) and, after a reconnect, the alerts missed since ``last_event_id``."""
-        subscription = Subscription(self, asyncio.get_running_loop(), kinds,
-                                    self.queue_capacity, self.tracks_interval_s)  # fmt: skip
+        subscription = Subscription(
+            self, asyncio.get_running_loop(), kinds, self.queue_capacity, self.tracks_interval_s
+        )
         with self._lock:
             if self._closed:
                 subscription.close()
                 return subscription
             if len(self._subscriptions) >= self.max_clients:
-                raise TooManyClientsError(f"the live stream already has the most clients it "
-                                     f"serves ({self.max_clients})")  # fmt: skip
+                raise TooManyClientsError(
+                    f"the live stream already has the most clients it serves ({self.max_clients})"
+                )
             self._subscriptions.add(subscription)
             missed = self._missed_alerts(last_event_id)
             latest = self._latest_tracks
@@ -328,12 +345,16 @@ class Broadcaster:
             self._schedule(subscription, subscription.close)
 
 
-def broadcaster_for(settings: GatewaySettings,
-                    registry: CollectorRegistry | None = None) -> Broadcaster:  # fmt: skip
+def broadcaster_for(
+    settings: GatewaySettings, registry: CollectorRegistry | None = None
+) -> Broadcaster:
     """The broadcaster the settings ask for (``stream_*``)."""
-    return Broadcaster(max_tracks_hz=settings.stream_max_hz,
-                       queue_capacity=settings.stream_queue_capacity,
-                       max_clients=settings.stream_max_clients, registry=registry)  # fmt: skip
+    return Broadcaster(
+        max_tracks_hz=settings.stream_max_hz,
+        queue_capacity=settings.stream_queue_capacity,
+        max_clients=settings.stream_max_clients,
+        registry=registry,
+    )
 
 
 def _tracks_text(batch: TrackBatch, received_at: float) -> Callable[[], str]:

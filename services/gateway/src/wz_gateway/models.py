@@ -178,14 +178,24 @@ class NewWebhook(_Model):
     """Subscribe a URL to alert events (admin). Each event is POSTed as signed JSON (Standard
     Webhooks); the secret to check the signatures is in the answer, once."""
 
-    url: Annotated[str, Field(min_length=1, max_length=2000, description="http(s) URL the "
-                              "events are POSTed to; its host must resolve to public "
-                              "addresses unless the settings allow others")]  # fmt: skip
+    url: Annotated[
+        str,
+        Field(
+            min_length=1,
+            max_length=2000,
+            description="http(s) URL the "
+            "events are POSTed to; its host must resolve to public "
+            "addresses unless the settings allow others",
+        ),
+    ]
     event_types: Annotated[
         list[str],
-        Field(min_length=1, max_length=20,
-              description="`alert.*` for every alert, or `alert.<type>` (`alert.speeding`...)"),
-    ] = [webhooks.ALL_ALERTS]  # fmt: skip
+        Field(
+            min_length=1,
+            max_length=20,
+            description="`alert.*` for every alert, or `alert.<type>` (`alert.speeding`...)",
+        ),
+    ] = [webhooks.ALL_ALERTS]
     #: Only alerts of this severity or higher; None: any.
     min_severity: AlertSeverity | None = None
     #: Only these episode phases (start, update, clear); None or empty: every phase.

@@ -112,8 +112,9 @@ class Writer:
     def offer(self, key: str, message: Message) -> None:
         """Queue a decoded message (Zenoh's thread); waits while the queue is full."""
         if message.site not in self.sites or site_of_key(key) not in (None, message.site):
-            self.report(key, "wrong_site", f"{type(message).__name__} of site {message.site} "
-                        f"on {key}")  # fmt: skip
+            self.report(
+                key, "wrong_site", f"{type(message).__name__} of site {message.site} on {key}"
+            )
             return
         while not self.stop.is_set():
             try:
@@ -147,8 +148,11 @@ class Writer:
                 self.last_error = f"{type(exc).__name__}: {exc}"
                 if attempt == _WRITE_ATTEMPTS:
                     self.metrics.write_errors.inc()
-                    log.exception("could not store %d messages after %d attempts; dropped",
-                                  len(group), attempt)  # fmt: skip
+                    log.exception(
+                        "could not store %d messages after %d attempts; dropped",
+                        len(group),
+                        attempt,
+                    )
                     return False
                 log.warning("storing %d messages failed (%s); retrying", len(group), exc)
                 self.stop.wait(0.2 * attempt)
@@ -176,16 +180,18 @@ class Writer:
             return
         self._next_purge = now + self.settings.retention_period_s
         try:
-            deleted = self.storage.purge(now, retention_days=self.settings.retention_days,
-                                         alert_retention_days=self.settings.alert_retention_days)  # fmt: skip
+            deleted = self.storage.purge(
+                now,
+                retention_days=self.settings.retention_days,
+                alert_retention_days=self.settings.alert_retention_days,
+            )
         except Exception:  # retention failing must not stop ingestion; next period tries again
             log.exception("retention failed")
             return
         for table, n in deleted.items():
             self.metrics.retention_deleted.labels(table).inc(n)
         if any(deleted.values()):
-            log.info("retention deleted %s", ", ".join(f"{n} {t}" for t, n in deleted.items()
-                                                      if n))  # fmt: skip
+            log.info("retention deleted %s", ", ".join(f"{n} {t}" for t, n in deleted.items() if n))
 
     def run(self, keep_going: Callable[[], bool] = lambda: True) -> None:
         """Store messages until ``stop`` (or ``keep_going()`` is False), then what is queued;
@@ -237,18 +243,33 @@ def serve(app_server: uvicorn.Server) -> threading.Thread:
     return thread
 
 
-def run(runtime: ServiceRuntime, site: Site | Sites, settings: GatewaySettings,
-        storage: Storage, metrics: GatewayMetrics) -> int:  # fmt: skip
+def run(
+    runtime: ServiceRuntime,
+    site: Site | Sites,
+    settings: GatewaySettings,
+    storage: Storage,
+    metrics: GatewayMetrics,
+) -> int:
     """Store the bus and serve HTTP until ``runtime.stop``; the messages stored."""
     bus = runtime.bus
     sites = Sites.of(site)
     deliverer = WebhookDeliverer(WebhookStore(storage.engine), settings, metrics)
-    finisher = (SiteFinishers.of(storage, sites, settings, metrics) if sites.several
-                else TrackFinisher.of(storage, sites.default, settings, metrics))  # fmt: skip
-    writer = Writer(storage, sites, settings, metrics,
-                    report=lambda key, reason, detail: bus.stats.count_invalid(key, reason, detail),
-                    stop=runtime.stop, live=broadcaster_for(settings, metrics.registry),
-                    finisher=finisher, webhooks=deliverer)  # fmt: skip
+    finisher = (
+        SiteFinishers.of(storage, sites, settings, metrics)
+        if sites.several
+        else TrackFinisher.of(storage, sites.default, settings, metrics)
+    )
+    writer = Writer(
+        storage,
+        sites,
+        settings,
+        metrics,
+        report=lambda key, reason, detail: bus.stats.count_invalid(key, reason, detail),
+        stop=runtime.stop,
+        live=broadcaster_for(settings, metrics.registry),
+        finisher=finisher,
+        webhooks=deliverer,
+    )
     bus.on(sites.key("tracks"), TrackBatch, writer.offer)
     bus.on(sites.key("alerts/*"), Alert, writer.offer, recover=True)
     bus.on(sites.key("devices/state"), RoadsideDeviceState, writer.offer, recover=True)
@@ -258,23 +279,39 @@ def run(runtime: ServiceRuntime, site: Site | Sites, settings: GatewaySettings,
     metrics.watch_webhooks(deliverer.store.pending_count)
 
     def readiness() -> dict[str, str]:
-        checks = {"bus": "closed" if bus.closed else "ok",
-                  "writer": "ok" if writer.last_error is None else writer.last_error}  # fmt: skip
+        checks = {
+            "bus": "closed" if bus.closed else "ok",
+            "writer": "ok" if writer.last_error is None else writer.last_error,
+        }
         if writer.queue.qsize() >= 0.9 * settings.queue_capacity:
             checks["queue"] = f"{writer.queue.qsize()} of {settings.queue_capacity} waiting"
         return checks
 
-    app = create_app(settings, storage, site=sites, metrics=metrics, readiness=readiness,
-                     live=writer.live)  # fmt: skip
+    app = create_app(
+        settings, storage, site=sites, metrics=metrics, readiness=readiness, live=writer.live
+    )
     server = uvicorn.Server(
-        uvicorn.Config(app, host=settings.host, port=settings.port, log_config=None,
-                       access_log=False, lifespan="off", server_header=False,
-                       timeout_graceful_shutdown=5)
-    )  # fmt: skip
+        uvicorn.Config(
+            app,
+            host=settings.host,
+            port=settings.port,
+            log_config=None,
+            access_log=False,
+            lifespan="off",
+            server_header=False,
+            timeout_graceful_shutdown=5,
+        )
+    )
     http = serve(server)
-    log.info("storing %s, %s, %s of %s; API on http://%s:%d", sites.key("tracks"),
-             sites.key("alerts/*"), sites.key("devices/state"), ", ".join(sites.ids),
-             settings.host, settings.port)  # fmt: skip
+    log.info(
+        "storing %s, %s, %s of %s; API on http://%s:%d",
+        sites.key("tracks"),
+        sites.key("alerts/*"),
+        sites.key("devices/state"),
+        ", ".join(sites.ids),
+        settings.host,
+        settings.port,
+    )
     deliverer.start()
     writer.run(keep_going=http.is_alive)
     deliverer.close()  # attempts in flight finish; the rest waits in the outbox
@@ -306,9 +343,11 @@ def main() -> None:
         if dev_secret is not None:
             log.warning("dev mode: reads need no key; admin key for this run: %s", dev_secret)
         # Status on the wall clock; its health is /readyz, not a file.
-        written = node.serve(lambda runtime: run(runtime, sites, settings, storage,
-                                                 GatewayMetrics()),
-                             sim_clock=False, health_file=False)  # fmt: skip
+        written = node.serve(
+            lambda runtime: run(runtime, sites, settings, storage, GatewayMetrics()),
+            sim_clock=False,
+            health_file=False,
+        )
         log.info("stopped after storing %d messages", written)
     finally:
         storage.close()

@@ -150,8 +150,10 @@ class GatewaySettings(ServiceSettings):
             try:
                 ipaddress.ip_network(entry, strict=False)
             except ValueError as exc:
-                raise ValueError(f"WZ_GATEWAY_WEBHOOK_ALLOWED_NETWORKS: {entry!r} is not a "
-                                 "network (write CIDRs such as 10.20.0.0/16)") from exc  # fmt: skip
+                raise ValueError(
+                    f"WZ_GATEWAY_WEBHOOK_ALLOWED_NETWORKS: {entry!r} is not a "
+                    "network (write CIDRs such as 10.20.0.0/16)"
+                ) from exc
         return value
 
     @model_validator(mode="after")

@@ -54,8 +54,9 @@ class StoredTrajectory:
         return len(self.stamp)
 
 
-def smooth_trajectory(points: StoredTrajectory, site: Site,
-                      noise: ProcessNoise) -> StoredTrajectory:  # fmt: skip
+def smooth_trajectory(
+    points: StoredTrajectory, site: Site, noise: ProcessNoise
+) -> StoredTrajectory:
     """The smoothed trajectory of an ended track: :func:`~wz_shared.motion.rts_smooth` on its
     states with the tracker's process noise ``noise``, then the road frame, lane and WGS84
     position of each smoothed state.
@@ -72,12 +73,19 @@ def smooth_trajectory(points: StoredTrajectory, site: Site,
     n = len(points)
     return replace(
         points,
-        x_m=x_s[:, 0], y_m=x_s[:, 1], vx_mps=x_s[:, 2], vy_mps=x_s[:, 3], covariance=P_s,
+        x_m=x_s[:, 0],
+        y_m=x_s[:, 1],
+        vx_mps=x_s[:, 2],
+        vy_mps=x_s[:, 3],
+        covariance=P_s,
         latitude_deg=np.asarray(latitude, dtype=np.float64),
         longitude_deg=np.asarray(longitude, dtype=np.float64),
         station_m=np.asarray(station, dtype=np.float64),
-        offset_m=np.asarray(offset, dtype=np.float64), lane_index=lane,
-        speed_mps=np.hypot(x_s[:, 2], x_s[:, 3]), heading_rad=np.arctan2(x_s[:, 3], x_s[:, 2]),
+        offset_m=np.asarray(offset, dtype=np.float64),
+        lane_index=lane,
+        speed_mps=np.hypot(x_s[:, 2], x_s[:, 3]),
+        heading_rad=np.arctan2(x_s[:, 3], x_s[:, 2]),
         object_class=(points.object_class[-1],) * n,
-        length_m=np.full(n, points.length_m[-1]), width_m=np.full(n, points.width_m[-1]),
-    )  # fmt: skip
+        length_m=np.full(n, points.length_m[-1]),
+        width_m=np.full(n, points.width_m[-1]),
+    )

@@ -315,8 +315,9 @@ class Storage:
                         applied_at=time.time(),
                     )
                 )
-            log.info("database migrated to version %d: %s", migration.version,
-                     migration.description)  # fmt: skip
+            log.info(
+                "database migrated to version %d: %s", migration.version, migration.description
+            )
             applied.append(migration.version)
         return applied
 
@@ -349,9 +350,12 @@ class Storage:
         )
         stmt = stmt.on_conflict_do_update(
             index_elements=[latest.c.site, latest.c.name],
-            set_={"stamp": stmt.excluded.stamp, "received_at": stmt.excluded.received_at,
-                  "body": stmt.excluded.body},
-        )  # fmt: skip
+            set_={
+                "stamp": stmt.excluded.stamp,
+                "received_at": stmt.excluded.received_at,
+                "body": stmt.excluded.body,
+            },
+        )
         connection.execute(stmt)
 
     def ingest(
@@ -413,8 +417,9 @@ class Storage:
                     self._upsert_latest(connection, message.site, "devices", message, received_at)
                     result.device_states += 1
                 elif isinstance(message, ServiceStatus):
-                    self._upsert_latest(connection, message.site, f"status/{message.service}",
-                                        message, received_at)  # fmt: skip
+                    self._upsert_latest(
+                        connection, message.site, f"status/{message.service}", message, received_at
+                    )
                     result.statuses += 1
         return result
 
@@ -426,8 +431,11 @@ class Storage:
         )
         if stamp_went_back(previous, batch.stamp, RESTART_TOLERANCE_S):
             # Stamps went back: a new run (a restarted simulation counts from 0 again).
-            log.warning("track stamps went back from %.3f s to %.3f s: a new run starts",
-                        previous, batch.stamp)  # fmt: skip
+            log.warning(
+                "track stamps went back from %.3f s to %.3f s: a new run starts",
+                previous,
+                batch.stamp,
+            )
             self._upsert_latest(connection, batch.site, "run_start", batch, received_at)
         self._upsert_latest(connection, batch.site, "tracks", batch, received_at)
         if not batch.tracks:
@@ -467,7 +475,9 @@ class Storage:
         )
         # RETURNING says whether a row went in (rowcount is not reliable across drivers here).
         outcome = connection.execute(
-            stmt.on_conflict_do_nothing(index_elements=[alerts.c.site, alerts.c.alert_id]).returning(alerts.c.id)
+            stmt.on_conflict_do_nothing(
+                index_elements=[alerts.c.site, alerts.c.alert_id]
+            ).returning(alerts.c.id)
         )
         return outcome.first() is not None
 
@@ -491,16 +501,18 @@ class Storage:
                 select(latest).where(latest.c.site == site, latest.c.name.startswith("status/"))
             ).all()
         return {
-            row.name.removeprefix("status/"): LatestRow(row.name, row.stamp, row.received_at,
-                                                        row.body)
+            row.name.removeprefix("status/"): LatestRow(
+                row.name, row.stamp, row.received_at, row.body
+            )
             for row in rows
-        }  # fmt: skip
+        }
 
     # --- reading: history -----------------------------------------------------------------
 
     @staticmethod
-    def _page_order(stmt: Select[Any], table: Any, cursor: str | None, limit: int,
-                    newest_first: bool) -> Select[Any]:  # fmt: skip
+    def _page_order(
+        stmt: Select[Any], table: Any, cursor: str | None, limit: int, newest_first: bool
+    ) -> Select[Any]:
         key = tuple_(table.c.stamp, table.c.id)
         if cursor is not None:
             after = tuple_(*decode_cursor(cursor))
@@ -525,8 +537,10 @@ class Storage:
             conditions.append(c.station_m <= query.station_max_m)
         if query.bbox_deg is not None:
             lon_min, lat_min, lon_max, lat_max = query.bbox_deg
-            conditions += [c.longitude_deg.between(lon_min, lon_max),
-                           c.latitude_deg.between(lat_min, lat_max)]  # fmt: skip
+            conditions += [
+                c.longitude_deg.between(lon_min, lon_max),
+                c.latitude_deg.between(lat_min, lat_max),
+            ]
         if query.lane_index is not None:
             conditions.append(c.lane_index == query.lane_index)
         if query.min_speed_mps is not None:
@@ -535,8 +549,13 @@ class Storage:
             conditions.append(c.speed_mps <= query.max_speed_mps)
         if query.smoothed is not None:
             conditions.append(c.smoothed == query.smoothed)
-        stmt = self._page_order(select(track_points).where(and_(*conditions)), track_points,
-                                query.cursor, query.limit, newest_first=False)  # fmt: skip
+        stmt = self._page_order(
+            select(track_points).where(and_(*conditions)),
+            track_points,
+            query.cursor,
+            query.limit,
+            newest_first=False,
+        )
         with self.engine.connect() as connection:
             rows = connection.execute(stmt).all()
         more = len(rows) > query.limit
@@ -565,8 +584,13 @@ class Storage:
             conditions.append(c.track_id == query.track_id)
         if query.episode_id is not None:
             conditions.append(c.episode_id == query.episode_id)
-        stmt = self._page_order(select(alerts).where(and_(true(), *conditions)), alerts, query.cursor,
-                                query.limit, newest_first=query.newest_first)  # fmt: skip
+        stmt = self._page_order(
+            select(alerts).where(and_(true(), *conditions)),
+            alerts,
+            query.cursor,
+            query.limit,
+            newest_first=query.newest_first,
+        )
         with self.engine.connect() as connection:
             rows = connection.execute(stmt).all()
         more = len(rows) > query.limit
@@ -576,15 +600,25 @@ class Storage:
         return Page(items, next_cursor)
 
     def traffic_points(
-        self, site: str, start_stamp: float, end_stamp: float, station_min_m: float,
-        station_max_m: float, received_since: float | None = None,
-    ) -> TrafficPoints:  # fmt: skip
+        self,
+        site: str,
+        start_stamp: float,
+        end_stamp: float,
+        station_min_m: float,
+        station_max_m: float,
+        received_since: float | None = None,
+    ) -> TrafficPoints:
         """Fused (not smoothed) points in a stamp window and a station range, as arrays;
         ``received_since`` (wall clock) leaves out earlier runs that used the same stamps."""
         c = track_points.c
-        conditions = [c.site == site, c.stamp >= start_stamp, c.stamp <= end_stamp,
-                      c.station_m >= station_min_m, c.station_m <= station_max_m,
-                      c.smoothed.is_(False)]  # fmt: skip
+        conditions = [
+            c.site == site,
+            c.stamp >= start_stamp,
+            c.stamp <= end_stamp,
+            c.station_m >= station_min_m,
+            c.station_m <= station_max_m,
+            c.smoothed.is_(False),
+        ]
         if received_since is not None:
             conditions.append(c.received_at >= received_since)
         stmt = (
@@ -600,8 +634,9 @@ class Storage:
             station_m=np.array([r.station_m for r in rows], dtype=np.float64),
             lane_index=np.array([r.lane_index for r in rows], dtype=np.int64),
             speed_mps=np.array([r.speed_mps for r in rows], dtype=np.float64),
-            length_m=np.array([math.nan if r.length_m is None else r.length_m for r in rows],
-                              dtype=np.float64),
+            length_m=np.array(
+                [math.nan if r.length_m is None else r.length_m for r in rows], dtype=np.float64
+            ),
         )
 
     def count(self, table_name: str) -> int:
@@ -614,9 +649,9 @@ class Storage:
 
     # --- retention ------------------------------------------------------------------------
 
-    def purge(self, now: float, *, retention_days: float, alert_retention_days: float) -> dict[
-        str, int
-    ]:
+    def purge(
+        self, now: float, *, retention_days: float, alert_retention_days: float
+    ) -> dict[str, int]:
         """Delete what arrived longer ago than the retention; rows deleted per table.
 
         Track points and device states go after ``retention_days``; alerts and webhook
@@ -627,8 +662,11 @@ class Storage:
         alert_cutoff = now - alert_retention_days * _DAY_S
         deleted: dict[str, int] = {}
         with self.engine.begin() as connection:
-            for table, limit in ((track_points, cutoff), (device_states, cutoff),
-                                 (alerts, alert_cutoff)):  # fmt: skip
+            for table, limit in (
+                (track_points, cutoff),
+                (device_states, cutoff),
+                (alerts, alert_cutoff),
+            ):
                 outcome = connection.execute(delete(table).where(table.c.received_at < limit))
                 deleted[table.name] = outcome.rowcount
             outcome = connection.execute(
@@ -638,17 +676,21 @@ class Storage:
             outcome = connection.execute(
                 delete(webhook_outbox).where(
                     webhook_outbox.c.created_at < alert_cutoff,
-                    or_(webhook_outbox.c.state == "delivered", webhook_outbox.c.state == "failed",
-                        webhook_outbox.c.state == "expired"),
+                    or_(
+                        webhook_outbox.c.state == "delivered",
+                        webhook_outbox.c.state == "failed",
+                        webhook_outbox.c.state == "expired",
+                    ),
                 )
             )
             deleted[webhook_outbox.name] = outcome.rowcount
             # An ended life's record goes with its points (its smoothed ones share their
             # received_at); one still open stays until it ends.
             outcome = connection.execute(
-                delete(tracks).where(tracks.c.ended_at.is_not(None),
-                                     tracks.c.last_received_at < cutoff)
-            )  # fmt: skip
+                delete(tracks).where(
+                    tracks.c.ended_at.is_not(None), tracks.c.last_received_at < cutoff
+                )
+            )
             deleted[tracks.name] = outcome.rowcount
         return deleted
 
@@ -656,8 +698,9 @@ class Storage:
 # --- rows <-> models ----------------------------------------------------------------------
 
 
-def _point_row(batch: TrackBatch, track: Track, latitude_deg: float, longitude_deg: float,
-               received_at: float) -> dict[str, Any]:  # fmt: skip
+def _point_row(
+    batch: TrackBatch, track: Track, latitude_deg: float, longitude_deg: float, received_at: float
+) -> dict[str, Any]:
     return {
         "site": batch.site,
         "track_id": track.track_id,

@@ -253,9 +253,7 @@ webhook_deliveries = Table(
     "webhook_deliveries",
     metadata,
     Column("id", RowId, primary_key=True, autoincrement=True),
-    Column(
-        "outbox_id", RowId, ForeignKey("webhook_outbox.id", ondelete="CASCADE"), nullable=False
-    ),
+    Column("outbox_id", RowId, ForeignKey("webhook_outbox.id", ondelete="CASCADE"), nullable=False),
     Column("attempted_at", Double, nullable=False),
     Column("status_code", Integer, nullable=True),
     Column("error", Text, nullable=True),
@@ -295,8 +293,12 @@ _v1_webhook_tables = [
         _v1_metadata,
         Column("id", RowId, primary_key=True, autoincrement=True),
         Column("event_id", String(64), nullable=False),
-        Column("subscription_id", RowId,
-               ForeignKey("webhook_subscriptions.id", ondelete="CASCADE"), nullable=False),
+        Column(
+            "subscription_id",
+            RowId,
+            ForeignKey("webhook_subscriptions.id", ondelete="CASCADE"),
+            nullable=False,
+        ),
         Column("event_type", String(64), nullable=False),
         Column("payload", Text, nullable=False),
         Column("created_at", Double, nullable=False),
@@ -309,15 +311,16 @@ _v1_webhook_tables = [
         "webhook_deliveries",
         _v1_metadata,
         Column("id", RowId, primary_key=True, autoincrement=True),
-        Column("outbox_id", RowId, ForeignKey("webhook_outbox.id", ondelete="CASCADE"),
-               nullable=False),
+        Column(
+            "outbox_id", RowId, ForeignKey("webhook_outbox.id", ondelete="CASCADE"), nullable=False
+        ),
         Column("attempted_at", Double, nullable=False),
         Column("status_code", Integer, nullable=True),
         Column("error", Text, nullable=True),
         Column("duration_ms", Double, nullable=False),
         Index("ix_webhook_deliveries_outbox", "outbox_id"),
     ),
-]  # fmt: skip
+]
 
 # track_points as migration 1 made it (migration 3 adds the covariance).
 _v1_track_points = Table(
@@ -358,8 +361,7 @@ _v1_alerts.indexes.discard(next(i for i in _v1_alerts.indexes if i.name == "ux_a
 
 def _v1_initial(connection: Connection) -> None:
     metadata.create_all(connection, tables=[device_states, latest, api_keys])
-    _v1_metadata.create_all(connection, tables=[_v1_alerts, _v1_track_points,
-                                                *_v1_webhook_tables])  # fmt: skip
+    _v1_metadata.create_all(connection, tables=[_v1_alerts, _v1_track_points, *_v1_webhook_tables])
 
 
 def _add_columns(connection: Connection, table: Table, names: list[str]) -> None:
@@ -370,14 +372,21 @@ def _add_columns(connection: Connection, table: Table, names: list[str]) -> None
 
 
 def _v2_webhooks(connection: Connection) -> None:
-    _add_columns(connection, webhook_subscriptions, ["min_severity", "phases", "disabled_reason",
-                                                     "previous_secret", "previous_secret_until"])  # fmt: skip
-    _add_columns(connection, webhook_outbox, ["locked_until", "finished_at", "last_status_code",
-                                              "last_error"])  # fmt: skip
+    _add_columns(
+        connection,
+        webhook_subscriptions,
+        ["min_severity", "phases", "disabled_reason", "previous_secret", "previous_secret_until"],
+    )
+    _add_columns(
+        connection,
+        webhook_outbox,
+        ["locked_until", "finished_at", "last_status_code", "last_error"],
+    )
     _add_columns(connection, webhook_deliveries, ["attempt"])
     # One outbox row per event and subscription: an event enqueued twice is written once.
-    next(i for i in webhook_outbox.indexes
-         if i.name == "ux_webhook_outbox_subscription_event").create(connection)  # fmt: skip
+    next(
+        i for i in webhook_outbox.indexes if i.name == "ux_webhook_outbox_subscription_event"
+    ).create(connection)
 
 
 # tracks as migration 3 made it (migration 5 adds the process noise).
@@ -420,19 +429,25 @@ def _v4_alerts_per_site(connection: Connection) -> None:
 
 
 def _v5_track_process_noise(connection: Connection) -> None:
-    _add_columns(connection, tracks, ["sigma_along_mps2", "sigma_across_mps2",
-                                      "heading_min_speed_mps"])  # fmt: skip
+    _add_columns(
+        connection, tracks, ["sigma_along_mps2", "sigma_across_mps2", "heading_min_speed_mps"]
+    )
 
 
 #: Every migration, in order; the last one's version is the schema this code reads and writes.
 MIGRATIONS: tuple[Migration, ...] = (
     Migration(1, "trajectories, alerts, device states, latest, API keys, webhooks", _v1_initial),
     Migration(2, "webhooks: filters, claim leases, expiry, delivery attempts", _v2_webhooks),
-    Migration(3, "track points' covariances, track lives (smoothed when they end)",
-              _v3_smoothing),
-    Migration(4, "alerts: one per site and alert_id (a central gateway stores many sites)",
-              _v4_alerts_per_site),
-    Migration(5, "track lives: the process noise of their track batches, smoothed with it",
-              _v5_track_process_noise),
+    Migration(3, "track points' covariances, track lives (smoothed when they end)", _v3_smoothing),
+    Migration(
+        4,
+        "alerts: one per site and alert_id (a central gateway stores many sites)",
+        _v4_alerts_per_site,
+    ),
+    Migration(
+        5,
+        "track lives: the process noise of their track batches, smoothed with it",
+        _v5_track_process_noise,
+    ),
 )
 SCHEMA_VERSION = MIGRATIONS[-1].version

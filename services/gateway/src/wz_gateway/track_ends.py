@@ -78,8 +78,9 @@ class TrackEnds:
         self.last_stamp: float | None = None
         self.last_received_at: float | None = None
 
-    def resume(self, lives: Iterable[TrackLife], last_stamp: float | None,
-               last_received_at: float | None) -> list[TrackLife]:  # fmt: skip
+    def resume(
+        self, lives: Iterable[TrackLife], last_stamp: float | None, last_received_at: float | None
+    ) -> list[TrackLife]:
         """Take up the lives a previous process left open, as of its newest batch; the lives
         that have ended by then (absent too long, or of an earlier run, or an older life of an
         id that has a newer one)."""
@@ -112,8 +113,14 @@ class TrackEnds:
                 out.ended.append(life)  # gone too long: back under the same id, a new life
                 life = None
             if life is None:
-                life = TrackLife(track.track_id, stamp, received_at, stamp, received_at,
-                                 process_noise=batch.process_noise)  # fmt: skip
+                life = TrackLife(
+                    track.track_id,
+                    stamp,
+                    received_at,
+                    stamp,
+                    received_at,
+                    process_noise=batch.process_noise,
+                )
                 self.open[track.track_id] = life
                 out.started.append(life)
             else:
@@ -158,11 +165,18 @@ class TrackFinisher:
         self._failures: dict[int, int] = {}  # by id() of a pending life
 
     @classmethod
-    def of(cls, storage: Storage, site: Site, settings: GatewaySettings, metrics: GatewayMetrics,
-           clock: Callable[[], float] = time.time) -> TrackFinisher:  # fmt: skip
+    def of(
+        cls,
+        storage: Storage,
+        site: Site,
+        settings: GatewaySettings,
+        metrics: GatewayMetrics,
+        clock: Callable[[], float] = time.time,
+    ) -> TrackFinisher:
         """The finisher the settings describe."""
-        ends = TrackEnds(settings.track_end_after_s, settings.track_end_silence_s,
-                         RESTART_TOLERANCE_S)  # fmt: skip
+        ends = TrackEnds(
+            settings.track_end_after_s, settings.track_end_silence_s, RESTART_TOLERANCE_S
+        )
         return cls(storage, site, ends, metrics, clock)
 
     def resume(self) -> int:
@@ -174,13 +188,20 @@ class TrackFinisher:
         except Exception:  # they stay unfinished in the database, for the next start
             log.exception("could not read the track lives left unfinished")
             return 0
-        ended = self.ends.resume(lives, None if newest is None else newest.stamp,
-                                 None if newest is None else newest.received_at)  # fmt: skip
+        ended = self.ends.resume(
+            lives,
+            None if newest is None else newest.stamp,
+            None if newest is None else newest.received_at,
+        )
         self.pending.extend(ended)
         self.pending.extend(self.ends.silence(self.clock()))
         if lives:
-            log.info("%d track lives left unfinished: %d ended meanwhile, %d followed on",
-                     len(lives), len(self.pending), len(self.ends.open))  # fmt: skip
+            log.info(
+                "%d track lives left unfinished: %d ended meanwhile, %d followed on",
+                len(lives),
+                len(self.pending),
+                len(self.ends.open),
+            )
         return len(self.pending)
 
     def before_write(self, group: Sequence[Message], received_at: float) -> None:
@@ -216,8 +237,11 @@ class TrackFinisher:
                     self._failures[id(life)] = failures
                     self.pending.append(life)
                 else:
-                    log.exception("could not smooth track %d after %d attempts; left for the "
-                                  "next start", life.track_id, failures)  # fmt: skip
+                    log.exception(
+                        "could not smooth track %d after %d attempts; left for the next start",
+                        life.track_id,
+                        failures,
+                    )
                     self._failures.pop(id(life), None)
                 return finished
             self._failures.pop(id(life), None)
@@ -248,8 +272,14 @@ class SiteFinishers:
     finishers: list[TrackFinisher]
 
     @classmethod
-    def of(cls, storage: Storage, sites: Iterable[Site], settings: GatewaySettings,
-           metrics: GatewayMetrics, clock: Callable[[], float] = time.time) -> SiteFinishers:  # fmt: skip
+    def of(
+        cls,
+        storage: Storage,
+        sites: Iterable[Site],
+        settings: GatewaySettings,
+        metrics: GatewayMetrics,
+        clock: Callable[[], float] = time.time,
+    ) -> SiteFinishers:
         return cls([TrackFinisher.of(storage, site, settings, metrics, clock) for site in sites])
 
     def resume(self) -> int:

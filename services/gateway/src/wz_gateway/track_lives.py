@@ -51,12 +51,16 @@ class TrackLifeStore:
         with self.engine.begin() as connection:
             for life in lives:
                 life.life_id = connection.execute(
-                    insert(tracks).values(site=site, track_id=life.track_id,
-                                          first_stamp=life.first_stamp,
-                                          first_received_at=life.first_received_at,
-                                          **_noise_columns(life.process_noise))
+                    insert(tracks)
+                    .values(
+                        site=site,
+                        track_id=life.track_id,
+                        first_stamp=life.first_stamp,
+                        first_received_at=life.first_received_at,
+                        **_noise_columns(life.process_noise),
+                    )
                     .returning(tracks.c.id)
-                ).scalar_one()  # fmt: skip
+                ).scalar_one()
 
     def unfinished(self, site: str) -> list[TrackLife]:
         """Lives recorded and not yet ended (a gateway stopped meanwhile), oldest first, each
@@ -70,77 +74,131 @@ class TrackLifeStore:
             for row in rows:
                 # Its points end where the next life of the same id begins.
                 following = connection.scalar(
-                    select(func.min(t.first_received_at))
-                    .where(t.site == site, t.track_id == row.track_id, t.id > row.id)
-                )  # fmt: skip
-                conditions = [c.site == site, c.track_id == row.track_id, c.smoothed.is_(False),
-                              c.stamp >= row.first_stamp,
-                              c.received_at >= row.first_received_at]  # fmt: skip
+                    select(func.min(t.first_received_at)).where(
+                        t.site == site, t.track_id == row.track_id, t.id > row.id
+                    )
+                )
+                conditions = [
+                    c.site == site,
+                    c.track_id == row.track_id,
+                    c.smoothed.is_(False),
+                    c.stamp >= row.first_stamp,
+                    c.received_at >= row.first_received_at,
+                ]
                 if following is not None:
                     conditions.append(c.received_at < following)
                 newest = connection.execute(
-                    select(c.stamp, c.received_at).where(*conditions)
-                    .order_by(c.received_at.desc(), c.stamp.desc()).limit(1)
-                ).first()  # fmt: skip
+                    select(c.stamp, c.received_at)
+                    .where(*conditions)
+                    .order_by(c.received_at.desc(), c.stamp.desc())
+                    .limit(1)
+                ).first()
                 last_stamp, last_received_at = (
-                    (row.first_stamp, row.first_received_at) if newest is None
+                    (row.first_stamp, row.first_received_at)
+                    if newest is None
                     else (newest.stamp, newest.received_at)
-                )  # fmt: skip
-                lives.append(TrackLife(row.track_id, row.first_stamp, row.first_received_at,
-                                       last_stamp, last_received_at, life_id=row.id,
-                                       process_noise=_noise_of(row)))  # fmt: skip
+                )
+                lives.append(
+                    TrackLife(
+                        row.track_id,
+                        row.first_stamp,
+                        row.first_received_at,
+                        last_stamp,
+                        last_received_at,
+                        life_id=row.id,
+                        process_noise=_noise_of(row),
+                    )
+                )
         return lives
 
     def points(self, site: str, life: TrackLife) -> StoredTrajectory:
         """The fused points of one life (those stored with a covariance), oldest first."""
         c = track_points.c
-        numbers = (c.stamp, c.x_m, c.y_m, c.vx_mps, c.vy_mps, c.latitude_deg, c.longitude_deg,
-                   c.station_m, c.offset_m, c.speed_mps, c.heading_rad, c.length_m, c.width_m,
-                   c.received_at)  # fmt: skip
+        numbers = (
+            c.stamp,
+            c.x_m,
+            c.y_m,
+            c.vx_mps,
+            c.vy_mps,
+            c.latitude_deg,
+            c.longitude_deg,
+            c.station_m,
+            c.offset_m,
+            c.speed_mps,
+            c.heading_rad,
+            c.length_m,
+            c.width_m,
+            c.received_at,
+        )
         stmt = (
             select(*numbers, c.lane_index, c.object_class, c.status, c.covariance)
-            .where(c.site == site, c.track_id == life.track_id, c.smoothed.is_(False),
-                   c.stamp.between(life.first_stamp, life.last_stamp),
-                   c.received_at.between(life.first_received_at, life.last_received_at),
-                   c.covariance.is_not(None))
+            .where(
+                c.site == site,
+                c.track_id == life.track_id,
+                c.smoothed.is_(False),
+                c.stamp.between(life.first_stamp, life.last_stamp),
+                c.received_at.between(life.first_received_at, life.last_received_at),
+                c.covariance.is_not(None),
+            )
             .order_by(c.stamp, c.id)
-        )  # fmt: skip
+        )
         with self.engine.connect() as connection:
             rows = connection.execute(stmt).all()
         # One float array per numeric column (None, a missing size, becomes NaN).
         table = np.array([row[: len(numbers)] for row in rows], dtype=np.float64)
-        column = dict(zip((n.name for n in numbers), table.reshape(-1, len(numbers)).T,
-                          strict=True))  # fmt: skip
+        column = dict(
+            zip((n.name for n in numbers), table.reshape(-1, len(numbers)).T, strict=True)
+        )
         return StoredTrajectory(
-            track_id=life.track_id, stamp=column["stamp"], x_m=column["x_m"], y_m=column["y_m"],
-            vx_mps=column["vx_mps"], vy_mps=column["vy_mps"],
-            covariance=np.frombuffer(b"".join(r.covariance for r in rows),
-                                     dtype="<f8").astype(np.float64).reshape(-1, 4, 4),
-            latitude_deg=column["latitude_deg"], longitude_deg=column["longitude_deg"],
-            station_m=column["station_m"], offset_m=column["offset_m"],
+            track_id=life.track_id,
+            stamp=column["stamp"],
+            x_m=column["x_m"],
+            y_m=column["y_m"],
+            vx_mps=column["vx_mps"],
+            vy_mps=column["vy_mps"],
+            covariance=np.frombuffer(b"".join(r.covariance for r in rows), dtype="<f8")
+            .astype(np.float64)
+            .reshape(-1, 4, 4),
+            latitude_deg=column["latitude_deg"],
+            longitude_deg=column["longitude_deg"],
+            station_m=column["station_m"],
+            offset_m=column["offset_m"],
             lane_index=np.array([r.lane_index for r in rows], dtype=np.int64),
-            speed_mps=column["speed_mps"], heading_rad=column["heading_rad"],
+            speed_mps=column["speed_mps"],
+            heading_rad=column["heading_rad"],
             object_class=tuple(r.object_class for r in rows),
-            status=tuple(r.status for r in rows), length_m=column["length_m"],
-            width_m=column["width_m"], received_at=column["received_at"],
-        )  # fmt: skip
+            status=tuple(r.status for r in rows),
+            length_m=column["length_m"],
+            width_m=column["width_m"],
+            received_at=column["received_at"],
+        )
 
-    def finish(self, site: str, life: TrackLife, smoothed: StoredTrajectory | None,
-                          *, ended_at: float) -> bool:  # fmt: skip
+    def finish(
+        self, site: str, life: TrackLife, smoothed: StoredTrajectory | None, *, ended_at: float
+    ) -> bool:
         """Mark a life ended and write its smoothed points, in one transaction; False (and
         nothing written) when it was already ended: a life is never smoothed twice."""
         t = tracks.c
-        done = {"last_stamp": life.last_stamp, "last_received_at": life.last_received_at,
-                "ended_at": ended_at, "smoothed_points": 0 if smoothed is None else len(smoothed)}  # fmt: skip
+        done = {
+            "last_stamp": life.last_stamp,
+            "last_received_at": life.last_received_at,
+            "ended_at": ended_at,
+            "smoothed_points": 0 if smoothed is None else len(smoothed),
+        }
         with self.engine.begin() as connection:
             if life.life_id is None:  # its start could not be recorded: recorded now, ended
                 life.life_id = connection.execute(
-                    insert(tracks).values(site=site, track_id=life.track_id,
-                                          first_stamp=life.first_stamp,
-                                          first_received_at=life.first_received_at, **done,
-                                          **_noise_columns(life.process_noise))
+                    insert(tracks)
+                    .values(
+                        site=site,
+                        track_id=life.track_id,
+                        first_stamp=life.first_stamp,
+                        first_received_at=life.first_received_at,
+                        **done,
+                        **_noise_columns(life.process_noise),
+                    )
                     .returning(t.id)
-                ).scalar_one()  # fmt: skip
+                ).scalar_one()
             else:
                 claimed = connection.execute(
                     update(tracks).where(t.id == life.life_id, t.ended_at.is_(None)).values(**done)
@@ -154,9 +212,11 @@ class TrackLifeStore:
 
 def _noise_columns(noise: ProcessNoise | None) -> dict[str, float | None]:
     """A track life's process noise as its columns in ``tracks`` (None: not known)."""
-    return {"sigma_along_mps2": None if noise is None else noise.sigma_along_mps2,
-            "sigma_across_mps2": None if noise is None else noise.sigma_across_mps2,
-            "heading_min_speed_mps": None if noise is None else noise.heading_min_speed_mps}  # fmt: skip
+    return {
+        "sigma_along_mps2": None if noise is None else noise.sigma_along_mps2,
+        "sigma_across_mps2": None if noise is None else noise.sigma_across_mps2,
+        "heading_min_speed_mps": None if noise is None else noise.heading_min_speed_mps,
+    }
 
 
 def _noise_of(row: Any) -> ProcessNoise | None:

@@ -67,8 +67,13 @@ def live_tracks(storage: Storage, site: Site, now: float) -> LiveTracks:
             LiveTrack(**t.model_dump(), latitude_deg=float(lat), longitude_deg=float(lon))
             for t, lat, lon in zip(batch.tracks, latitude, longitude, strict=True)
         ]
-    return LiveTracks(site=site.site_id, stamp=batch.stamp, cycle_index=batch.cycle_index,
-                      age_s=max(0.0, now - row.received_at), tracks=tracks)  # fmt: skip
+    return LiveTracks(
+        site=site.site_id,
+        stamp=batch.stamp,
+        cycle_index=batch.cycle_index,
+        age_s=max(0.0, now - row.received_at),
+        tracks=tracks,
+    )
 
 
 def _statuses(storage: Storage, site: Site) -> dict[str, tuple[ServiceStatus, float]]:
@@ -81,8 +86,13 @@ def _statuses(storage: Storage, site: Site) -> dict[str, tuple[ServiceStatus, fl
     return found
 
 
-def traffic_summary(storage: Storage, site: Site, tracks: LatestRow | None, interval_s: float,
-                    detector_override_m: float | None) -> TrafficSummary | None:  # fmt: skip
+def traffic_summary(
+    storage: Storage,
+    site: Site,
+    tracks: LatestRow | None,
+    interval_s: float,
+    detector_override_m: float | None,
+) -> TrafficSummary | None:
     """Counts over the newest ``interval_s`` of stamps (shorter at the start of a run)."""
     if tracks is None:
         return None
@@ -95,19 +105,37 @@ def traffic_summary(storage: Storage, site: Site, tracks: LatestRow | None, inte
         return None
     station = detector_station_m(site, detector_override_m)
     points = storage.traffic_points(
-        site.site_id, start - 5.0, end, station - _CROSSING_REACH_M, station + _CROSSING_REACH_M,
+        site.site_id,
+        start - 5.0,
+        end,
+        station - _CROSSING_REACH_M,
+        station + _CROSSING_REACH_M,
         received_since=None if run_start is None else run_start.received_at,
     )
-    crossings = find_crossings(points.track_id, points.stamp, points.station_m,
-                               points.lane_index, points.speed_mps, points.length_m, station)  # fmt: skip
+    crossings = find_crossings(
+        points.track_id,
+        points.stamp,
+        points.station_m,
+        points.lane_index,
+        points.speed_mps,
+        points.length_m,
+        station,
+    )
     lanes = sorted(lane.index for lane in site.lanes)
     return summarize(crossings, start, end, lanes, station)
 
 
-def device_feed_of(storage: Storage, site: Site, *, now: float, publisher: str,
-                   stale_after_s: float, traffic_interval_s: float,
-                   detector_station_override_m: float | None = None,
-                   contact_email: str | None = None) -> dict[str, Any]:  # fmt: skip
+def device_feed_of(
+    storage: Storage,
+    site: Site,
+    *,
+    now: float,
+    publisher: str,
+    stale_after_s: float,
+    traffic_interval_s: float,
+    detector_station_override_m: float | None = None,
+    contact_email: str | None = None,
+) -> dict[str, Any]:
     """The site's WZDx 4.2 DeviceFeed as of ``now`` (wall clock, Unix s)."""
     keys = Keys(site.site_id)
     tracks = storage.latest(site.site_id, "tracks")
@@ -118,33 +146,49 @@ def device_feed_of(storage: Storage, site: Site, *, now: float, publisher: str,
     )
     mast = traffic_mast(site)
     traffic_parts: list[DeviceHealth] = [
-        freshness("track batches", None if tracks is None else tracks.received_at, now,
-                  stale_after_s),
-    ]  # fmt: skip
+        freshness(
+            "track batches", None if tracks is None else tracks.received_at, now, stale_after_s
+        ),
+    ]
     if mast is not None and mast.kind == "lidar":
-        traffic_parts.append(frames_health(LIDAR_SERVICE, statuses.get(LIDAR_SERVICE),
-                                           keys.raw_lidar(mast.sensor_id), now, stale_after_s,
-                                           missing="warning"))  # fmt: skip
+        traffic_parts.append(
+            frames_health(
+                LIDAR_SERVICE,
+                statuses.get(LIDAR_SERVICE),
+                keys.raw_lidar(mast.sensor_id),
+                now,
+                stale_after_s,
+                missing="warning",
+            )
+        )
     cameras = {
-        sensor.sensor_id: frames_health(CAMERA_SERVICE, statuses.get(CAMERA_SERVICE),
-                                        keys.raw_camera(sensor.sensor_id), now, stale_after_s)
-        for sensor in site.sensors if sensor.kind == "camera"
-    }  # fmt: skip
+        sensor.sensor_id: frames_health(
+            CAMERA_SERVICE,
+            statuses.get(CAMERA_SERVICE),
+            keys.raw_camera(sensor.sensor_id),
+            now,
+            stale_after_s,
+        )
+        for sensor in site.sensors
+        if sensor.kind == "camera"
+    }
     inputs = FeedInputs(
         site=site,
         now=now,
         publisher=publisher,
-        traffic=traffic_summary(storage, site, tracks, traffic_interval_s,
-                                detector_station_override_m),
+        traffic=traffic_summary(
+            storage, site, tracks, traffic_interval_s, detector_station_override_m
+        ),
         traffic_health=combine(*traffic_parts),
         cameras=cameras,
         devices=devices,
-        devices_health=service_health(ALERT_SERVICE, statuses.get(ALERT_SERVICE), now,
-                                      stale_after_s),
+        devices_health=service_health(
+            ALERT_SERVICE, statuses.get(ALERT_SERVICE), now, stale_after_s
+        ),
         stamp_offset_s=stamp_offset_s(tracks),
         traffic_interval_s=traffic_interval_s,
         contact_email=contact_email,
-    )  # fmt: skip
+    )
     return device_feed(inputs)
 
 
@@ -154,7 +198,8 @@ def merge_device_feeds(feeds: list[dict[str, Any]]) -> dict[str, Any]:
     if len(feeds) == 1:
         return feeds[0]
     merged = {**feeds[0], "feed_info": dict(feeds[0]["feed_info"])}
-    merged["feed_info"]["data_sources"] = [source for feed in feeds
-                                           for source in feed["feed_info"]["data_sources"]]  # fmt: skip
+    merged["feed_info"]["data_sources"] = [
+        source for feed in feeds for source in feed["feed_info"]["data_sources"]
+    ]
     merged["features"] = [feature for feed in feeds for feature in feed["features"]]
     return merged

@@ -77,21 +77,37 @@ def enqueue_alert(connection: Connection, alert: Alert, received_at: float) -> i
     if not wanted:
         return 0
     event = webhooks.alert_event(alert, received_at)
-    return _insert_ignoring_duplicates(connection, [
-        {"event_id": event.event_id, "subscription_id": row_id, "event_type": event.event_type,
-         "payload": event.body, "created_at": received_at, "next_attempt_at": received_at,
-         "attempts": 0, "state": "pending"}
-        for row_id in wanted
-    ])  # fmt: skip
+    return _insert_ignoring_duplicates(
+        connection,
+        [
+            {
+                "event_id": event.event_id,
+                "subscription_id": row_id,
+                "event_type": event.event_type,
+                "payload": event.body,
+                "created_at": received_at,
+                "next_attempt_at": received_at,
+                "attempts": 0,
+                "state": "pending",
+            }
+            for row_id in wanted
+        ],
+    )
 
 
 def _info(row: Any) -> WebhookInfo:
     return WebhookInfo(
-        subscription_id=row.subscription_id, url=row.url, event_types=list(row.event_types),
-        min_severity=row.min_severity, phases=row.phases, description=row.description,
-        created_at=row.created_at, disabled_at=row.disabled_at,
-        disabled_reason=row.disabled_reason, previous_secret_until=row.previous_secret_until,
-    )  # fmt: skip
+        subscription_id=row.subscription_id,
+        url=row.url,
+        event_types=list(row.event_types),
+        min_severity=row.min_severity,
+        phases=row.phases,
+        description=row.description,
+        created_at=row.created_at,
+        disabled_at=row.disabled_at,
+        disabled_reason=row.disabled_reason,
+        previous_secret_until=row.previous_secret_until,
+    )
 
 
 class WebhookStore:
@@ -103,15 +119,31 @@ class WebhookStore:
 
     # --- subscriptions --------------------------------------------------------------------
 
-    def create(self, *, subscription_id: str, url: str, secret: str, event_types: list[str],
-               min_severity: str | None, phases: list[str] | None, description: str,
-               now: float) -> WebhookInfo:  # fmt: skip
+    def create(
+        self,
+        *,
+        subscription_id: str,
+        url: str,
+        secret: str,
+        event_types: list[str],
+        min_severity: str | None,
+        phases: list[str] | None,
+        description: str,
+        now: float,
+    ) -> WebhookInfo:
         with self.engine.begin() as connection:
-            connection.execute(insert(webhook_subscriptions).values(
-                subscription_id=subscription_id, url=url, secret=secret,
-                event_types=event_types, min_severity=min_severity, phases=phases or None,
-                description=description, created_at=now,
-            ))  # fmt: skip
+            connection.execute(
+                insert(webhook_subscriptions).values(
+                    subscription_id=subscription_id,
+                    url=url,
+                    secret=secret,
+                    event_types=event_types,
+                    min_severity=min_severity,
+                    phases=phases or None,
+                    description=description,
+                    created_at=now,
+                )
+            )
         found = self.get(subscription_id)
         assert found is not None
         return found
@@ -144,16 +176,19 @@ class WebhookStore:
             connection.execute(delete(webhook_subscriptions).where(s.id == row_id))
         return True
 
-    def rotate_secret(self, subscription_id: str, secret: str, *, now: float,
-                      grace_s: float) -> WebhookInfo | None:  # fmt: skip
+    def rotate_secret(
+        self, subscription_id: str, secret: str, *, now: float, grace_s: float
+    ) -> WebhookInfo | None:
         """Sign with ``secret`` from now on, and with the old one too for ``grace_s``."""
         s = webhook_subscriptions.c
         with self.engine.begin() as connection:
             outcome = connection.execute(
-                update(webhook_subscriptions).where(s.subscription_id == subscription_id)
-                .values(previous_secret=s.secret, previous_secret_until=now + grace_s,
-                        secret=secret)
-            )  # fmt: skip
+                update(webhook_subscriptions)
+                .where(s.subscription_id == subscription_id)
+                .values(
+                    previous_secret=s.secret, previous_secret_until=now + grace_s, secret=secret
+                )
+            )
         return self.get(subscription_id) if outcome.rowcount else None
 
     def enqueue(self, subscription_id: str, event: webhooks.WebhookEvent, now: float) -> bool:
@@ -161,14 +196,26 @@ class WebhookStore:
         active subscription."""
         s = webhook_subscriptions.c
         with self.engine.begin() as connection:
-            row_id = connection.scalar(select(s.id).where(s.subscription_id == subscription_id,
-                                                          s.disabled_at.is_(None)))  # fmt: skip
+            row_id = connection.scalar(
+                select(s.id).where(s.subscription_id == subscription_id, s.disabled_at.is_(None))
+            )
             if row_id is None:
                 return False
-            _insert_ignoring_duplicates(connection, [
-                {"event_id": event.event_id, "subscription_id": row_id,
-                 "event_type": event.event_type, "payload": event.body, "created_at": now,
-                 "next_attempt_at": now, "attempts": 0, "state": "pending"}])  # fmt: skip
+            _insert_ignoring_duplicates(
+                connection,
+                [
+                    {
+                        "event_id": event.event_id,
+                        "subscription_id": row_id,
+                        "event_type": event.event_type,
+                        "payload": event.body,
+                        "created_at": now,
+                        "next_attempt_at": now,
+                        "attempts": 0,
+                        "state": "pending",
+                    }
+                ],
+            )
         return True
 
     def events(self, subscription_id: str, *, limit: int = 100) -> list[WebhookEventInfo]:
@@ -185,19 +232,24 @@ class WebhookStore:
             rows = connection.execute(stmt).all()
         return [
             WebhookEventInfo(
-                event_id=row.event_id, event_type=row.event_type, state=row.state,
-                attempts=row.attempts, created_at=row.created_at,
+                event_id=row.event_id,
+                event_type=row.event_type,
+                state=row.state,
+                attempts=row.attempts,
+                created_at=row.created_at,
                 next_attempt_at=row.next_attempt_at if row.state == "pending" else None,
-                finished_at=row.finished_at, last_status_code=row.last_status_code,
+                finished_at=row.finished_at,
+                last_status_code=row.last_status_code,
                 last_error=row.last_error,
             )
             for row in rows
-        ]  # fmt: skip
+        ]
 
     # --- the delivery's side --------------------------------------------------------------
 
-    def claim(self, now: float, *, lease_until: float, limit: int,
-              busy: Collection[int] = ()) -> list[ClaimedEvent]:  # fmt: skip
+    def claim(
+        self, now: float, *, lease_until: float, limit: int, busy: Collection[int] = ()
+    ) -> list[ClaimedEvent]:
         """Lease up to ``limit`` due events, at most one per subscription, none of a
         subscription in ``busy`` (row ids) or with an event leased now, oldest due first.
 
@@ -212,56 +264,104 @@ class WebhookStore:
         due = and_(o.state == "pending", o.next_attempt_at <= now, free)
         # A subscription with a row leased (by any process) has its request in flight.
         leased = webhook_outbox.alias("leased")
-        in_flight = (select(leased.c.id)
-                     .where(leased.c.subscription_id == o.subscription_id,
-                            leased.c.state == "pending", leased.c.locked_until > now)
-                     .exists())  # fmt: skip
+        in_flight = (
+            select(leased.c.id)
+            .where(
+                leased.c.subscription_id == o.subscription_id,
+                leased.c.state == "pending",
+                leased.c.locked_until > now,
+            )
+            .exists()
+        )
         # Each subscription's first due row (however long another one's backlog is).
         ranked = (
-            select(o.id, o.next_attempt_at, func.row_number().over(
-                partition_by=o.subscription_id, order_by=(o.next_attempt_at, o.id)).label("rank"))
+            select(
+                o.id,
+                o.next_attempt_at,
+                func.row_number()
+                .over(partition_by=o.subscription_id, order_by=(o.next_attempt_at, o.id))
+                .label("rank"),
+            )
             .join(webhook_subscriptions, o.subscription_id == s.id)
             .where(due, s.disabled_at.is_(None), ~in_flight)
-        )  # fmt: skip
+        )
         if busy:
             ranked = ranked.where(o.subscription_id.not_in(list(busy)))
         firsts = ranked.subquery()
-        candidates = (select(firsts.c.id).where(firsts.c.rank == 1)
-                      .order_by(firsts.c.next_attempt_at, firsts.c.id).limit(limit))  # fmt: skip
+        candidates = (
+            select(firsts.c.id)
+            .where(firsts.c.rank == 1)
+            .order_by(firsts.c.next_attempt_at, firsts.c.id)
+            .limit(limit)
+        )
         with self.engine.begin() as connection:
             picked = list(connection.scalars(candidates))
             if not picked:
                 return []
-            claimed = connection.execute(
-                update(webhook_outbox).where(o.id.in_(picked), due)
-                .values(locked_until=lease_until).returning(o.id)
-            ).scalars().all()  # fmt: skip
+            claimed = (
+                connection.execute(
+                    update(webhook_outbox)
+                    .where(o.id.in_(picked), due)
+                    .values(locked_until=lease_until)
+                    .returning(o.id)
+                )
+                .scalars()
+                .all()
+            )
             if not claimed:
                 return []
             rows = connection.execute(
-                select(o.id, o.event_id, o.event_type, o.payload, o.created_at, o.attempts,
-                       o.subscription_id, s.subscription_id.label("public_id"), s.url,
-                       s.secret, s.previous_secret, s.previous_secret_until)
+                select(
+                    o.id,
+                    o.event_id,
+                    o.event_type,
+                    o.payload,
+                    o.created_at,
+                    o.attempts,
+                    o.subscription_id,
+                    s.subscription_id.label("public_id"),
+                    s.url,
+                    s.secret,
+                    s.previous_secret,
+                    s.previous_secret_until,
+                )
                 .join(webhook_subscriptions, o.subscription_id == s.id)
-                .where(o.id.in_(claimed)).order_by(o.next_attempt_at, o.id)
-            ).all()  # fmt: skip
+                .where(o.id.in_(claimed))
+                .order_by(o.next_attempt_at, o.id)
+            ).all()
         return [
             ClaimedEvent(
-                outbox_id=row.id, event_id=row.event_id, event_type=row.event_type,
-                body=row.payload, created_at=row.created_at, attempts=row.attempts,
-                subscription_row=row.subscription_id, subscription_id=row.public_id,
+                outbox_id=row.id,
+                event_id=row.event_id,
+                event_type=row.event_type,
+                body=row.payload,
+                created_at=row.created_at,
+                attempts=row.attempts,
+                subscription_row=row.subscription_id,
+                subscription_id=row.public_id,
                 url=row.url,
-                signing_secrets=(row.secret,) + (
+                signing_secrets=(row.secret,)
+                + (
                     (row.previous_secret,)
                     if row.previous_secret is not None and (row.previous_secret_until or 0.0) > now
-                    else ()),
+                    else ()
+                ),
             )
             for row in rows
-        ]  # fmt: skip
+        ]
 
-    def record_attempt(self, event: ClaimedEvent, *, attempt: int, attempted_at: float,
-                       status_code: int | None, error: str | None, duration_ms: float,
-                       outcome: webhooks.Outcome, now: float) -> dict[str, int]:  # fmt: skip
+    def record_attempt(
+        self,
+        event: ClaimedEvent,
+        *,
+        attempt: int,
+        attempted_at: float,
+        status_code: int | None,
+        error: str | None,
+        duration_ms: float,
+        outcome: webhooks.Outcome,
+        now: float,
+    ) -> dict[str, int]:
         """Log an attempt and apply its outcome, in one transaction.
 
         Returns
@@ -276,43 +376,64 @@ class WebhookStore:
         finished: dict[str, int] = {}
         with self.engine.begin() as connection:
             updated = connection.execute(
-                update(webhook_outbox).where(o.id == event.outbox_id).values(
-                    attempts=attempt, state=outcome.state, locked_until=None,
-                    next_attempt_at=(outcome.next_attempt_at if outcome.next_attempt_at
-                                     is not None else o.next_attempt_at),
-                    finished_at=now if final else None, last_status_code=status_code,
+                update(webhook_outbox)
+                .where(o.id == event.outbox_id)
+                .values(
+                    attempts=attempt,
+                    state=outcome.state,
+                    locked_until=None,
+                    next_attempt_at=(
+                        outcome.next_attempt_at
+                        if outcome.next_attempt_at is not None
+                        else o.next_attempt_at
+                    ),
+                    finished_at=now if final else None,
+                    last_status_code=status_code,
                     last_error=error,
                 )
-            ).rowcount  # fmt: skip
+            ).rowcount
             if not updated:
                 return finished
             if final:
                 finished[outcome.state] = 1
-            connection.execute(insert(webhook_deliveries).values(
-                outbox_id=event.outbox_id, attempt=attempt, attempted_at=attempted_at,
-                status_code=status_code, error=error, duration_ms=duration_ms,
-            ))  # fmt: skip
+            connection.execute(
+                insert(webhook_deliveries).values(
+                    outbox_id=event.outbox_id,
+                    attempt=attempt,
+                    attempted_at=attempted_at,
+                    status_code=status_code,
+                    error=error,
+                    duration_ms=duration_ms,
+                )
+            )
             if outcome.disable_subscription:
                 connection.execute(
                     update(webhook_subscriptions)
                     .where(s.id == event.subscription_row, s.disabled_at.is_(None))
                     .values(disabled_at=now, disabled_reason=outcome.reason[:200])
-                )  # fmt: skip
+                )
                 others = connection.execute(
                     update(webhook_outbox)
                     .where(o.subscription_id == event.subscription_row, o.state == "pending")
-                    .values(state="failed", finished_at=now, locked_until=None,
-                            last_error=_DISABLED_EVENT_ERROR)
-                ).rowcount  # fmt: skip
+                    .values(
+                        state="failed",
+                        finished_at=now,
+                        locked_until=None,
+                        last_error=_DISABLED_EVENT_ERROR,
+                    )
+                ).rowcount
                 if others:
                     finished["failed"] = finished.get("failed", 0) + others
             if outcome.defer_subscription_until is not None:
                 connection.execute(
                     update(webhook_outbox)
-                    .where(o.subscription_id == event.subscription_row, o.state == "pending",
-                           o.next_attempt_at < outcome.defer_subscription_until)
+                    .where(
+                        o.subscription_id == event.subscription_row,
+                        o.state == "pending",
+                        o.next_attempt_at < outcome.defer_subscription_until,
+                    )
                     .values(next_attempt_at=outcome.defer_subscription_until)
-                )  # fmt: skip
+                )
         return finished
 
     def expire(self, outbox_id: int, now: float, reason: str) -> bool:
@@ -320,9 +441,10 @@ class WebhookStore:
         o = webhook_outbox.c
         with self.engine.begin() as connection:
             outcome = connection.execute(
-                update(webhook_outbox).where(o.id == outbox_id, o.state == "pending")
+                update(webhook_outbox)
+                .where(o.id == outbox_id, o.state == "pending")
                 .values(state="expired", finished_at=now, locked_until=None, last_error=reason)
-            )  # fmt: skip
+            )
         return bool(outcome.rowcount)
 
     def expire_overdue(self, now: float, ttl_s: float) -> int:
@@ -332,11 +454,18 @@ class WebhookStore:
         with self.engine.begin() as connection:
             outcome = connection.execute(
                 update(webhook_outbox)
-                .where(o.state == "pending", o.created_at <= now - ttl_s,
-                       or_(o.locked_until.is_(None), o.locked_until <= now))
-                .values(state="expired", finished_at=now, locked_until=None,
-                        last_error=f"not delivered within its time to live ({ttl_s:.0f} s)")
-            )  # fmt: skip
+                .where(
+                    o.state == "pending",
+                    o.created_at <= now - ttl_s,
+                    or_(o.locked_until.is_(None), o.locked_until <= now),
+                )
+                .values(
+                    state="expired",
+                    finished_at=now,
+                    locked_until=None,
+                    last_error=f"not delivered within its time to live ({ttl_s:.0f} s)",
+                )
+            )
         return int(outcome.rowcount)
 
     def pending_count(self) -> int:
@@ -350,12 +479,12 @@ class WebhookStore:
         for an operator's look at one event."""
         d, o = webhook_deliveries.c, webhook_outbox.c
         stmt = (
-            select(d.attempt, d.attempted_at, d.status_code, d.error, d.duration_ms,
-                   o.subscription_id)
+            select(
+                d.attempt, d.attempted_at, d.status_code, d.error, d.duration_ms, o.subscription_id
+            )
             .join(webhook_outbox, d.outbox_id == o.id)
             .where(o.event_id == event_id)
             .order_by(d.id)
-        )  # fmt: skip
+        )
         with self.engine.connect() as connection:
             return [dict(row._mapping) for row in connection.execute(stmt)]
-

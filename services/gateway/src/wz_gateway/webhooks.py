@@ -96,8 +96,11 @@ def alert_event_id(alert: Alert) -> str:
 def alert_event(alert: Alert, created_at: float) -> WebhookEvent:
     """The event ``alert.<alert_type>`` for an alert the gateway received at ``created_at``."""
     event_type = f"{ALERT_EVENT_PREFIX}{alert.alert_type.value}"
-    return WebhookEvent(alert_event_id(alert), event_type,
-                        _body(event_type, created_at, alert.model_dump(mode="json")))  # fmt: skip
+    return WebhookEvent(
+        alert_event_id(alert),
+        event_type,
+        _body(event_type, created_at, alert.model_dump(mode="json")),
+    )
 
 
 def make_test_event(site: str, subscription_id: str, created_at: float, nonce: str) -> WebhookEvent:
@@ -107,8 +110,9 @@ def make_test_event(site: str, subscription_id: str, created_at: float, nonce: s
         "subscription_id": subscription_id,
         "description": "a test event from the work-zone gateway: no alert happened",
     }
-    return WebhookEvent(f"msg_test_{nonce}", TEST_EVENT_TYPE,
-                        _body(TEST_EVENT_TYPE, created_at, data))  # fmt: skip
+    return WebhookEvent(
+        f"msg_test_{nonce}", TEST_EVENT_TYPE, _body(TEST_EVENT_TYPE, created_at, data)
+    )
 
 
 # --- subscriptions ------------------------------------------------------------------------
@@ -144,8 +148,10 @@ class SubscriptionFilter:
         event_type = f"{ALERT_EVENT_PREFIX}{alert.alert_type.value}"
         if ALL_ALERTS not in self.event_types and event_type not in self.event_types:
             return False
-        if (self.min_severity is not None
-                and SEVERITY_RANK[alert.severity] < SEVERITY_RANK[self.min_severity]):  # fmt: skip
+        if (
+            self.min_severity is not None
+            and SEVERITY_RANK[alert.severity] < SEVERITY_RANK[self.min_severity]
+        ):
             return False
         return not self.phases or alert.phase in self.phases
 
@@ -182,17 +188,19 @@ def sign(secret: str, webhook_id: str, timestamp_s: int, body: str) -> str:
     return "v1," + base64.b64encode(digest).decode("ascii")
 
 
-def delivery_headers(signing_secrets: Sequence[str], webhook_id: str, timestamp_s: int,
-                     body: str) -> dict[str, str]:  # fmt: skip
+def delivery_headers(
+    signing_secrets: Sequence[str], webhook_id: str, timestamp_s: int, body: str
+) -> dict[str, str]:
     """The request headers of one attempt; one signature per secret, space-separated."""
     return {
         "content-type": "application/json",
         "user-agent": "wz-gateway-webhooks/1",
         "webhook-id": webhook_id,
         "webhook-timestamp": str(timestamp_s),
-        "webhook-signature": " ".join(sign(s, webhook_id, timestamp_s, body)
-                                      for s in signing_secrets),
-    }  # fmt: skip
+        "webhook-signature": " ".join(
+            sign(s, webhook_id, timestamp_s, body) for s in signing_secrets
+        ),
+    }
 
 
 # --- when to try again --------------------------------------------------------------------
@@ -265,9 +273,16 @@ def is_expired(created_at: float, now: float, policy: RetryPolicy) -> bool:
     return now >= expires_at(created_at, policy)
 
 
-def decide(*, attempt: int, status_code: int | None, retry_after: str | None,
-           created_at: float, now: float, policy: RetryPolicy,
-           rng: random.Random) -> Outcome:  # fmt: skip
+def decide(
+    *,
+    attempt: int,
+    status_code: int | None,
+    retry_after: str | None,
+    created_at: float,
+    now: float,
+    policy: RetryPolicy,
+    rng: random.Random,
+) -> Outcome:
     """The outcome of the ``attempt``-th attempt (1 the first) that ended at ``now``.
 
     ``status_code`` None: no answer (refused connection, timeout, refused address). 2xx is
@@ -278,8 +293,11 @@ def decide(*, attempt: int, status_code: int | None, retry_after: str | None,
     if status_code is not None and 200 <= status_code < 300:
         return Outcome("delivered", reason=f"HTTP {status_code}")
     if status_code == 410:
-        return Outcome("failed", reason="the receiver answered 410 Gone: subscription disabled",
-                       disable_subscription=True)  # fmt: skip
+        return Outcome(
+            "failed",
+            reason="the receiver answered 410 Gone: subscription disabled",
+            disable_subscription=True,
+        )
     delay_s = backoff_s(attempt, policy, rng)
     reason = "no answer" if status_code is None else f"HTTP {status_code}"
     defer_until = None
@@ -291,10 +309,12 @@ def decide(*, attempt: int, status_code: int | None, retry_after: str | None,
             reason += f", Retry-After {asked_s:.0f} s"
     next_attempt_at = now + delay_s
     if next_attempt_at >= expires_at(created_at, policy):
-        return Outcome("expired", reason=f"{reason}; the next attempt would come after the "
-                       f"event's time to live ({policy.event_ttl_s:.0f} s)")  # fmt: skip
-    return Outcome("pending", next_attempt_at, reason=reason,
-                   defer_subscription_until=defer_until)  # fmt: skip
+        return Outcome(
+            "expired",
+            reason=f"{reason}; the next attempt would come after the "
+            f"event's time to live ({policy.event_ttl_s:.0f} s)",
+        )
+    return Outcome("pending", next_attempt_at, reason=reason, defer_subscription_until=defer_until)
 
 
 # --- which addresses may be called (SSRF) --------------------------------------------------
@@ -305,8 +325,10 @@ class RefusedDestinationError(ValueError):
 
 
 _NAT64 = ipaddress.ip_network("64:ff9b::/96")
-_DESCRIBED = {"unspecified": "the unspecified address",
-              "not globally routable": "not a globally routable address"}  # fmt: skip
+_DESCRIBED = {
+    "unspecified": "the unspecified address",
+    "not globally routable": "not a globally routable address",
+}
 
 
 def _translated_ipv4(ip: ipaddress.IPv6Address) -> ipaddress.IPv4Address | None:
@@ -332,10 +354,15 @@ def address_class(ip: Address) -> str | None:
             return address_class(translated)
         if ip.sixtofour is not None and (reason := address_class(ip.sixtofour)) is not None:
             return reason
-    checks = (("unspecified", ip.is_unspecified), ("loopback", ip.is_loopback),
-              ("link-local", ip.is_link_local), ("multicast", ip.is_multicast),
-              ("reserved", ip.is_reserved), ("private", ip.is_private),
-              ("not globally routable", not ip.is_global))  # fmt: skip
+    checks = (
+        ("unspecified", ip.is_unspecified),
+        ("loopback", ip.is_loopback),
+        ("link-local", ip.is_link_local),
+        ("multicast", ip.is_multicast),
+        ("reserved", ip.is_reserved),
+        ("private", ip.is_private),
+        ("not globally routable", not ip.is_global),
+    )
     return next((name for name, applies in checks if applies), None)
 
 
@@ -360,8 +387,12 @@ class AddressPolicy:
         candidates: list[Address] = [ip]
         if isinstance(ip, ipaddress.IPv6Address) and ip.ipv4_mapped is not None:
             candidates.append(ip.ipv4_mapped)
-        if any(a in net for a in candidates for net in self.allowed_networks
-               if a.version == net.version):  # fmt: skip
+        if any(
+            a in net
+            for a in candidates
+            for net in self.allowed_networks
+            if a.version == net.version
+        ):
             return None
         if kind == "loopback" and self.allow_loopback:
             return None
@@ -393,15 +424,21 @@ def parse_destination(url: str) -> Destination:
         raise RefusedDestinationError(f"not a valid URL: {exc}") from exc
     scheme = parts.scheme.lower()
     if scheme not in ("http", "https"):
-        raise RefusedDestinationError(f"the URL must be http:// or https://, not {scheme or 'none'}")
+        raise RefusedDestinationError(
+            f"the URL must be http:// or https://, not {scheme or 'none'}"
+        )
     if not parts.hostname:
         raise RefusedDestinationError("the URL has no host")
     if parts.username is not None or parts.password is not None:
-        raise RefusedDestinationError("put no user or password in the URL; receivers check the "
-                                 "signature instead")  # fmt: skip
+        raise RefusedDestinationError(
+            "put no user or password in the URL; receivers check the signature instead"
+        )
     default_port = 443 if scheme == "https" else 80
-    return Destination("https" if scheme == "https" else "http", parts.hostname,
-                       port if port is not None else default_port)  # fmt: skip
+    return Destination(
+        "https" if scheme == "https" else "http",
+        parts.hostname,
+        port if port is not None else default_port,
+    )
 
 
 def check_addresses(host: str, addresses: Sequence[str], policy: AddressPolicy) -> None:

@@ -50,8 +50,14 @@ class DeviceHealth:
     updated_at: float = 0.0
 
 
-def freshness(what: str, received_at: float | None, now: float, stale_after_s: float,
-              *, stale: DeviceStatus = "error") -> DeviceHealth:  # fmt: skip
+def freshness(
+    what: str,
+    received_at: float | None,
+    now: float,
+    stale_after_s: float,
+    *,
+    stale: DeviceStatus = "error",
+) -> DeviceHealth:
     """``ok`` if ``what`` arrived within ``stale_after_s`` of ``now`` (wall clock [s])."""
     if received_at is None:
         return DeviceHealth("unknown", (f"no {what} received yet",), now)
@@ -68,21 +74,30 @@ def combine(*healths: DeviceHealth) -> DeviceHealth:
     return DeviceHealth(worst.status, messages, min(h.updated_at for h in healths))
 
 
-def service_health(service: str, status: tuple[ServiceStatus, float] | None, now: float,
-                   stale_after_s: float) -> DeviceHealth:  # fmt: skip
+def service_health(
+    service: str, status: tuple[ServiceStatus, float] | None, now: float, stale_after_s: float
+) -> DeviceHealth:
     """Whether ``service`` reports its status (``status`` is the newest and its arrival)."""
-    return freshness(f"status from {service}", None if status is None else status[1], now,
-                     stale_after_s)  # fmt: skip
+    return freshness(
+        f"status from {service}", None if status is None else status[1], now, stale_after_s
+    )
 
 
-def frames_health(service: str, status: tuple[ServiceStatus, float] | None, key: str,
-                  now: float, stale_after_s: float,
-                  *, missing: DeviceStatus = "error") -> DeviceHealth:  # fmt: skip
+def frames_health(
+    service: str,
+    status: tuple[ServiceStatus, float] | None,
+    key: str,
+    now: float,
+    stale_after_s: float,
+    *,
+    missing: DeviceStatus = "error",
+) -> DeviceHealth:
     """Whether ``service`` is alive and receives frames on ``key`` (from its status)."""
     alive = service_health(service, status, now, stale_after_s)
     if alive.status != "ok" or status is None:
-        return DeviceHealth(missing if alive.status == "error" else alive.status,
-                            alive.messages, alive.updated_at)  # fmt: skip
+        return DeviceHealth(
+            missing if alive.status == "error" else alive.status, alive.messages, alive.updated_at
+        )
     if status[0].received_hz.get(key, 0.0) <= 0.0:
         return DeviceHealth(missing, (f"{service} receives no frames on {key}",), status[1])
     return alive
@@ -128,8 +143,9 @@ def _point(site: Site, x_m: float, y_m: float) -> dict[str, Any]:
     return {"type": "Point", "coordinates": [round(float(longitude), 7), round(float(latitude), 7)]}
 
 
-def _core(site: Site, device_type: str, name: str, health: DeviceHealth,
-          description: str) -> dict[str, Any]:  # fmt: skip
+def _core(
+    site: Site, device_type: str, name: str, health: DeviceHealth, description: str
+) -> dict[str, Any]:
     core: dict[str, Any] = {
         "device_type": device_type,
         "data_source_id": data_source_id(site),
@@ -187,14 +203,17 @@ def traffic_sensor_feature(inputs: FeedInputs) -> dict[str, Any] | None:
         start, end = inputs.now - inputs.traffic_interval_s, inputs.now
     properties: dict[str, Any] = {
         "core_details": _core(
-            site, "traffic-sensor", f"Traffic sensor at {mast.sensor_id}", inputs.traffic_health,
+            site,
+            "traffic-sensor",
+            f"Traffic sensor at {mast.sensor_id}",
+            inputs.traffic_health,
             "Volumes, speeds and occupancy per lane, counted at a virtual loop detector from "
             "the fused LiDAR, camera and radar trajectories"
             + ("" if summary is None else f" (station {summary.detector_station_m:.0f} m)"),
         ),
         "collection_interval_start_date": rfc3339(start),
         "collection_interval_end_date": rfc3339(end),
-    }  # fmt: skip
+    }
     if summary is not None:
         if summary.average_speed_mps is not None:
             properties["average_speed_kph"] = _round(summary.average_speed_mps * MPS_TO_KPH)
@@ -224,15 +243,22 @@ def camera_features(inputs: FeedInputs) -> list[dict[str, Any]]:
     features = []
     for camera in (s for s in site.sensors if s.kind == "camera"):
         health = inputs.cameras.get(camera.sensor_id, DeviceHealth("unknown", (), inputs.now))
-        features.append({
-            "id": device_id(site, f"camera/{camera.sensor_id}"),
-            "type": "Feature",
-            "properties": {
-                "core_details": _core(site, "camera", f"Camera {camera.sensor_id}", health,
-                                      "Mast camera watching the approach to the work zone"),
-            },
-            "geometry": _point(site, camera.pose.x_m, camera.pose.y_m),
-        })  # fmt: skip
+        features.append(
+            {
+                "id": device_id(site, f"camera/{camera.sensor_id}"),
+                "type": "Feature",
+                "properties": {
+                    "core_details": _core(
+                        site,
+                        "camera",
+                        f"Camera {camera.sensor_id}",
+                        health,
+                        "Mast camera watching the approach to the work zone",
+                    ),
+                },
+                "geometry": _point(site, camera.pose.x_m, camera.pose.y_m),
+            }
+        )
     return features
 
 
@@ -270,24 +296,33 @@ def roadside_features(inputs: FeedInputs) -> list[dict[str, Any]]:
         "id": device_id(site, "flashing-beacon"),
         "type": "Feature",
         "properties": {
-            "core_details": _core(site, "flashing-beacon", "Flashing beacon", health,
-                                  "Flashes while an alert concerns drivers approaching the "
-                                  "work zone"),
+            "core_details": _core(
+                site,
+                "flashing-beacon",
+                "Flashing beacon",
+                health,
+                "Flashes while an alert concerns drivers approaching the work zone",
+            ),
             "function": _beacon_function(devices),
             "is_flashing": bool(devices is not None and devices.beacon_on),
         },
         "geometry": geometry,
-    }  # fmt: skip
+    }
     sign = {
         "id": device_id(site, "dynamic-message-sign"),
         "type": "Feature",
         "properties": {
-            "core_details": _core(site, "dynamic-message-sign", "Portable message sign", health,
-                                  "Shows the warning of the highest-priority open alert"),
+            "core_details": _core(
+                site,
+                "dynamic-message-sign",
+                "Portable message sign",
+                health,
+                "Shows the warning of the highest-priority open alert",
+            ),
             "message_multi_string": multi(devices.sign_text) if devices is not None else "",
         },
         "geometry": geometry,
-    }  # fmt: skip
+    }
     return [beacon, sign]
 
 

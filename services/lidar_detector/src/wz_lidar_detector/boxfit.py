@@ -445,9 +445,7 @@ def fit_box(
     half_step_m = 0.5 * sight_range_m * _column_step_rad(xy, settings.angular_resolution_deg)
     along_edge = half_step_m * abs(math.sin(sight_rad - heading))
     across_edge = half_step_m * abs(math.cos(sight_rad - heading))
-    low_l, high_l, how_l = _complete(
-        along_min - along_edge, along_max + along_edge, shape.length_m
-    )
+    low_l, high_l, how_l = _complete(along_min - along_edge, along_max + along_edge, shape.length_m)
     low_w, high_w, how_w = _complete(
         across_min - across_edge, across_max + across_edge, shape.width_m
     )

@@ -108,12 +108,18 @@ def box_json(box: BoxDetection) -> dict[str, Any]:
     x, y, z = box.center_xyz_m
     length, width, height = box.size_lwh_m
     return {
-        "x": _number(x), "y": _number(y), "z": _number(z),
-        "length": _number(length), "width": _number(width), "height": _number(height),
-        "heading": _number(box.heading_rad), "class": box.object_class.value,
-        "points": box.num_points, "score": _number(box.score, 3),
+        "x": _number(x),
+        "y": _number(y),
+        "z": _number(z),
+        "length": _number(length),
+        "width": _number(width),
+        "height": _number(height),
+        "heading": _number(box.heading_rad),
+        "class": box.object_class.value,
+        "points": box.num_points,
+        "score": _number(box.score, 3),
         "covariance": [[_number(sxx, 6), _number(sxy, 6)], [_number(syx, 6), _number(syy, 6)]],
-    }  # fmt: skip
+    }
 
 
 def frame_json(
@@ -164,8 +170,11 @@ def _load_background(path: Path, settings: LidarDetectorSettings) -> FastPipelin
     background = VoxelBackground.from_points(xyz, settings.voxel_m)
     log.info(
         "voxel background of %d voxels (%g m) from %d points of %s",
-        background.num_voxels, settings.voxel_m, len(xyz), path,
-    )  # fmt: skip
+        background.num_voxels,
+        settings.voxel_m,
+        len(xyz),
+        path,
+    )
     return FastPipeline(settings.fast, background)
 
 

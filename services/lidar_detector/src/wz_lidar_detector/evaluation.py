@@ -61,8 +61,10 @@ class RangeBinScore:
 
     @property
     def precision(self) -> float:
-        return (self.detections - self.false_alarms) / self.detections if self.detections else (
-            float("nan")
+        return (
+            (self.detections - self.false_alarms) / self.detections
+            if self.detections
+            else (float("nan"))
         )
 
 
@@ -107,9 +109,7 @@ class Scorer:
                 return score
         return None
 
-    def add_frame(
-        self, detections: Sequence[BoxDetection], truths: Sequence[TruthVehicle]
-    ) -> None:
+    def add_frame(self, detections: Sequence[BoxDetection], truths: Sequence[TruthVehicle]) -> None:
         """Score one frame."""
         det_xy = np.array([d.center_xyz_m[:2] for d in detections], dtype=float).reshape(-1, 2)
         truth_xy = np.array([t.center_xyz_m[:2] for t in truths], dtype=float).reshape(-1, 2)

@@ -197,8 +197,6 @@ class BackgroundLearner:
             log.info("saved the background to %s", path)
 
 
-
-
 class ColumnClock:
     """When each column of an organized frame fired, to stamp each detection with its own time.
 
@@ -218,8 +216,9 @@ class ColumnClock:
         unit = np.where(np.isfinite(unit), unit, 0.0)
         summed = unit.sum(axis=0)  # (columns, 2)
         #: Azimuth of each column in the sensor frame [rad]; NaN for a column with no return.
-        self.azimuth_rad = np.where(np.hypot(summed[:, 0], summed[:, 1]) > 0,
-                                    np.arctan2(summed[:, 1], summed[:, 0]), np.nan)  # fmt: skip
+        self.azimuth_rad = np.where(
+            np.hypot(summed[:, 0], summed[:, 1]) > 0, np.arctan2(summed[:, 1], summed[:, 0]), np.nan
+        )
         self.columns = frame.columns
         self.sweep_duration_s = sweep_duration_s
         self._known = np.flatnonzero(np.isfinite(self.azimuth_rad))
@@ -282,9 +281,7 @@ class LidarDetector:
             return ServiceState.RUNNING
         return ServiceState.DEGRADED if has_background else ServiceState.STARTING
 
-    def handle(
-        self, meta: LidarFrameMeta, points: F32, taken_s: float
-    ) -> DetectionBatch | None:
+    def handle(self, meta: LidarFrameMeta, points: F32, taken_s: float) -> DetectionBatch | None:
         """Process one decoded frame.
 
         Parameters
@@ -411,12 +408,18 @@ class LidarDetector:
             return box
         along = np.array([math.cos(box.heading_rad), math.sin(box.heading_rad)])
         across = np.array([-along[1], along[0]])
-        covariance = (np.asarray(box.covariance_xy_m2, dtype=np.float64)
-                      + self.settings.near_field_std_m**2 * np.outer(along, along)
-                      + self.settings.near_field_across_std_m**2 * np.outer(across, across))  # fmt: skip
-        return dataclasses.replace(box, covariance_xy_m2=(
-            (float(covariance[0, 0]), float(covariance[0, 1])),
-            (float(covariance[1, 0]), float(covariance[1, 1]))))  # fmt: skip
+        covariance = (
+            np.asarray(box.covariance_xy_m2, dtype=np.float64)
+            + self.settings.near_field_std_m**2 * np.outer(along, along)
+            + self.settings.near_field_across_std_m**2 * np.outer(across, across)
+        )
+        return dataclasses.replace(
+            box,
+            covariance_xy_m2=(
+                (float(covariance[0, 0]), float(covariance[0, 1])),
+                (float(covariance[1, 0]), float(covariance[1, 1])),
+            ),
+        )
 
     def _site_detections(self, result: DetectionResult) -> list[Detection]:
         offsets: list[float | None] = [None] * len(result.detections)
@@ -502,8 +505,9 @@ def main() -> None:
         settings = settings.model_copy(
             update={"fast": settings.fast.model_copy(update={"heading_prior_rad": prior})}
         )
-        log.info("heading prior from the site's road: %.1f deg in the sensor frame",
-                 math.degrees(prior))  # fmt: skip
+        log.info(
+            "heading prior from the site's road: %.1f deg in the sensor frame", math.degrees(prior)
+        )
     processed = node.serve(lambda runtime: run(runtime, site.site_id, mount, settings, node.clock))
     log.info("stopped after %d frames", processed)
 

@@ -45,8 +45,9 @@ def _near_road(xyz: npt.NDArray[np.float32]) -> npt.NDArray[np.bool_]:
     )
 
 
-def agreement(ours: npt.NDArray[np.float32], theirs: npt.NDArray[np.float32], match_m: float
-              ) -> tuple[float, float]:  # fmt: skip
+def agreement(
+    ours: npt.NDArray[np.float32], theirs: npt.NDArray[np.float32], match_m: float
+) -> tuple[float, float]:
     """(share of theirs near ours, share of ours near theirs), near the road."""
     ours, theirs = ours[_near_road(ours), :3], theirs[_near_road(theirs), :3]
     if not len(ours) or not len(theirs):
@@ -57,10 +58,13 @@ def agreement(ours: npt.NDArray[np.float32], theirs: npt.NDArray[np.float32], ma
 
 
 def top_view(
-    points: npt.NDArray[np.float32], foreground: npt.NDArray[np.bool_],
-    reference_points: npt.NDArray[np.float32], fast: DetectionResult, reference: DetectionResult,
+    points: npt.NDArray[np.float32],
+    foreground: npt.NDArray[np.bool_],
+    reference_points: npt.NDArray[np.float32],
+    fast: DetectionResult,
+    reference: DetectionResult,
     px_per_m: float = 8.0,
-) -> npt.NDArray[np.uint8]:  # fmt: skip
+) -> npt.NDArray[np.uint8]:
     """The picture described in the module docstring (x to the right, y up)."""
     x0, x1 = ROAD_X_M[0] - 5.0, ROAD_X_M[1] + 5.0
     y0, y1 = -25.0, 25.0
@@ -94,17 +98,29 @@ def top_view(
         cv2.circle(image, (int(centre[0]), int(centre[1])), 2, (60, 220, 60), -1)
     for box in reference.detections:
         centre = px(np.array([box.center_xyz_m[:2]]))[0]
-        cv2.drawMarker(image, (int(centre[0]), int(centre[1])), (60, 60, 230),
-                       cv2.MARKER_CROSS, 8, 1)  # fmt: skip
+        cv2.drawMarker(
+            image, (int(centre[0]), int(centre[1])), (60, 60, 230), cv2.MARKER_CROSS, 8, 1
+        )
     for x in range(0, int(ROAD_X_M[1]) + 1, 20):
         u = int((x - x0) * px_per_m)
         cv2.line(image, (u, height - 12), (u, height - 4), (160, 160, 160), 1)
-        cv2.putText(image, f"{x} m", (u + 2, height - 14), cv2.FONT_HERSHEY_SIMPLEX, 0.35,
-                    (160, 160, 160), 1, cv2.LINE_AA)  # fmt: skip
-    legend = ("grey: returns  orange: fast-path foreground  cyan: filtered.pcd (Su et al.)  "
-              "green: fast boxes  red: reference centroids")  # fmt: skip
-    cv2.putText(image, legend, (8, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.42, (220, 220, 220), 1,
-                cv2.LINE_AA)  # fmt: skip
+        cv2.putText(
+            image,
+            f"{x} m",
+            (u + 2, height - 14),
+            cv2.FONT_HERSHEY_SIMPLEX,
+            0.35,
+            (160, 160, 160),
+            1,
+            cv2.LINE_AA,
+        )
+    legend = (
+        "grey: returns  orange: fast-path foreground  cyan: filtered.pcd (Su et al.)  "
+        "green: fast boxes  red: reference centroids"
+    )
+    cv2.putText(
+        image, legend, (8, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.42, (220, 220, 220), 1, cv2.LINE_AA
+    )
     return image
 
 
@@ -119,25 +135,37 @@ def run(data: Path, out: Path | None, match_m: float = 0.3) -> dict[str, Any]:
     reference = ReferencePipeline(ReferenceSettings()).detect(raw)
     ours = raw.points[fast.foreground]
     theirs_covered, ours_covered = agreement(ours, reference_foreground, match_m)
-    on_road = [d for d in fast.detections if _near_road(np.array([d.center_xyz_m],
-                                                                  dtype=np.float32))[0]]
+    on_road = [
+        d for d in fast.detections if _near_road(np.array([d.center_xyz_m], dtype=np.float32))[0]
+    ]
     summary: dict[str, Any] = {
         "returns": int(np.isfinite(raw.points[:, 0]).sum()),
-        "fast": {"detections": len(fast.detections), "on_road": len(on_road),
-                 "foreground_points": int(fast.foreground.sum()),
-                 "ms": round(1e3 * sum(fast.timings_s.values()), 1)},
-        "reference": {"detections": len(reference.detections),
-                      "foreground_points": int(reference.foreground.sum()),
-                      "ms": round(1e3 * sum(reference.timings_s.values()), 1)},
+        "fast": {
+            "detections": len(fast.detections),
+            "on_road": len(on_road),
+            "foreground_points": int(fast.foreground.sum()),
+            "ms": round(1e3 * sum(fast.timings_s.values()), 1),
+        },
+        "reference": {
+            "detections": len(reference.detections),
+            "foreground_points": int(reference.foreground.sum()),
+            "ms": round(1e3 * sum(reference.timings_s.values()), 1),
+        },
         "filtered_pcd_points_near_road": int(_near_road(reference_foreground).sum()),
         f"filtered_within_{match_m}m_of_fast_foreground": round(theirs_covered, 3),
         f"fast_foreground_within_{match_m}m_of_filtered": round(ours_covered, 3),
         "fast_detections_on_road": [
-            {"x": round(d.center_xyz_m[0], 2), "y": round(d.center_xyz_m[1], 2),
-             "length": round(d.size_lwh_m[0], 2), "width": round(d.size_lwh_m[1], 2),
-             "class": d.object_class.value, "points": d.num_points} for d in on_road
+            {
+                "x": round(d.center_xyz_m[0], 2),
+                "y": round(d.center_xyz_m[1], 2),
+                "length": round(d.size_lwh_m[0], 2),
+                "width": round(d.size_lwh_m[1], 2),
+                "class": d.object_class.value,
+                "points": d.num_points,
+            }
+            for d in on_road
         ],
-    }  # fmt: skip
+    }
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
         image = top_view(raw.points, fast.foreground, reference_foreground, fast, reference)

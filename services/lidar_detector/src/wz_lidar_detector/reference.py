@@ -416,11 +416,15 @@ def _inside_roi(xyz: F64, s: ReferenceSettings) -> Bool:
     x, y, z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
     range_sq = x * x + y * y + z * z
     inside: Bool = (
-        (x >= s.roi_x_min_m) & (x <= s.roi_x_max_m)
-        & (y >= s.roi_y_min_m) & (y <= s.roi_y_max_m)
-        & (z >= s.roi_z_min_m) & (z <= s.roi_z_max_m)
-        & (range_sq >= s.roi_min_range_m**2) & (range_sq <= s.roi_max_range_m**2)
-    )  # fmt: skip
+        (x >= s.roi_x_min_m)
+        & (x <= s.roi_x_max_m)
+        & (y >= s.roi_y_min_m)
+        & (y <= s.roi_y_max_m)
+        & (z >= s.roi_z_min_m)
+        & (z <= s.roi_z_max_m)
+        & (range_sq >= s.roi_min_range_m**2)
+        & (range_sq <= s.roi_max_range_m**2)
+    )
     return inside
 
 
@@ -525,9 +529,7 @@ def _dbscan(cloud: F64, eps_m: float, min_points: int) -> I64:
     return np.asarray(labels, dtype=np.int64)
 
 
-def _merge_clusters(
-    cloud: F64, labels: I64, merge_distance_m: float, method: str
-) -> I64:
+def _merge_clusters(cloud: F64, labels: I64, merge_distance_m: float, method: str) -> I64:
     """Agglomerative merge of clusters by their centroids; new labels ``0..k-1`` per point.
 
     Each cluster enters as one observation, its centroid [m]; scipy's hierarchical clustering

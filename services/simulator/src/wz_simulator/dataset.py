@@ -70,9 +70,12 @@ class DatasetOptions:
 
 
 def yolo_lines(
-    labels: tuple[CameraTruthLabel, ...], width_px: int, height_px: int, min_visibility: float,
+    labels: tuple[CameraTruthLabel, ...],
+    width_px: int,
+    height_px: int,
+    min_visibility: float,
     min_box_px: float,
-) -> list[str]:  # fmt: skip
+) -> list[str]:
     """YOLO label lines (class cx cy w h, normalised) of the visible enough vehicles."""
     lines = []
     for label in labels:
@@ -89,8 +92,9 @@ def yolo_lines(
     return lines
 
 
-def in_frame_fraction(camera: PinholeCamera, vehicle: VehicleTruth, width_px: int,
-                      height_px: int) -> float:  # fmt: skip
+def in_frame_fraction(
+    camera: PinholeCamera, vehicle: VehicleTruth, width_px: int, height_px: int
+) -> float:
     """Share of a vehicle's projected box inside the frame: 1 in full view, 0 when a corner is
     behind the camera. (The renderer's visibility counts only pixels inside the frame, so a
     car mostly out of the picture would otherwise look fully visible.)"""
@@ -107,12 +111,15 @@ def in_frame_fraction(camera: PinholeCamera, vehicle: VehicleTruth, width_px: in
     x0, y0 = uv.min(axis=0)
     x1, y1 = uv.max(axis=0)
     area = (x1 - x0) * (y1 - y0)
-    inside = max(0.0, min(x1, width_px) - max(x0, 0.0)) * max(0.0, min(y1, height_px) - max(y0, 0.0))
+    inside = max(0.0, min(x1, width_px) - max(x0, 0.0)) * max(
+        0.0, min(y1, height_px) - max(y0, 0.0)
+    )
     return float(inside / area) if area > 0 else 0.0
 
 
-def truth_records(output: CameraOutput, vehicles: list[VehicleTruth],
-                  camera: PinholeCamera) -> list[dict[str, object]]:  # fmt: skip
+def truth_records(
+    output: CameraOutput, vehicles: list[VehicleTruth], camera: PinholeCamera
+) -> list[dict[str, object]]:
     """One record per vehicle that shows in the frame (a visible box), for evaluation.
 
     ``visibility`` is the renderer's (unoccluded share of the silhouette inside the frame);
@@ -128,20 +135,26 @@ def truth_records(output: CameraOutput, vehicles: list[VehicleTruth],
             continue
         vehicle = by_id[label.vehicle_id]  # the rig culls: the label index is not ours
         in_frame = in_frame_fraction(camera, vehicle, width_px, height_px)
-        records.append({
-            "vehicle_id": label.vehicle_id,
-            "class": label.vehicle_class.value,
-            "box_xyxy_px": [round(v, 2) for v in label.box_xyxy_px],
-            "full_box_xyxy_px": (None if label.full_box_xyxy_px is None
-                                 else [round(v, 2) for v in label.full_box_xyxy_px]),
-            "visibility": round(label.visibility, 4),
-            "in_frame": round(in_frame, 4),
-            "visible_fraction": round(label.visibility * in_frame, 4),
-            "range_m": round(math.hypot(vehicle.x_m - camera_xy_m[0],
-                                        vehicle.y_m - camera_xy_m[1]), 3),
-            "station_m": round(vehicle.station_m, 3),
-            "offset_m": round(vehicle.offset_m, 3),
-        })  # fmt: skip
+        records.append(
+            {
+                "vehicle_id": label.vehicle_id,
+                "class": label.vehicle_class.value,
+                "box_xyxy_px": [round(v, 2) for v in label.box_xyxy_px],
+                "full_box_xyxy_px": (
+                    None
+                    if label.full_box_xyxy_px is None
+                    else [round(v, 2) for v in label.full_box_xyxy_px]
+                ),
+                "visibility": round(label.visibility, 4),
+                "in_frame": round(in_frame, 4),
+                "visible_fraction": round(label.visibility * in_frame, 4),
+                "range_m": round(
+                    math.hypot(vehicle.x_m - camera_xy_m[0], vehicle.y_m - camera_xy_m[1]), 3
+                ),
+                "station_m": round(vehicle.station_m, 3),
+                "offset_m": round(vehicle.offset_m, 3),
+            }
+        )
     return records
 
 
@@ -185,15 +198,23 @@ def export(site: Site, options: DatasetOptions, work_dir: Path | None = None) ->
     for run, weather_name in enumerate(options.weathers):
         seed = options.seed + run
         settings_kwargs: dict[str, object] = {
-            "seed": seed, "realtime_factor": 0.0, "sensors_enabled": False,
-            "vehicles_per_hour": options.vehicles_per_hour, "truck_share": options.truck_share,
+            "seed": seed,
+            "realtime_factor": 0.0,
+            "sensors_enabled": False,
+            "vehicles_per_hour": options.vehicles_per_hour,
+            "truck_share": options.truck_share,
             "duration_s": options.warmup_s + options.duration_s + 1.0,
-        }  # fmt: skip
+        }
         if work_dir is not None:
             settings_kwargs["work_dir"] = work_dir
         settings = SimulatorSettings.model_validate(settings_kwargs)
-        rig = SensorRig(site, WEATHER_PRESETS[weather_name], seed, sensor_ids=cameras + lidars,
-                        jpeg_quality=options.jpeg_quality)  # fmt: skip
+        rig = SensorRig(
+            site,
+            WEATHER_PRESETS[weather_name],
+            seed,
+            sensor_ids=cameras + lidars,
+            jpeg_quality=options.jpeg_quality,
+        )
         with TrafficWorld(site, settings) as world:
             sample = 0
             next_sample_s = options.warmup_s
@@ -210,17 +231,24 @@ def export(site: Site, options: DatasetOptions, work_dir: Path | None = None) ->
                     if isinstance(output, CameraOutput):
                         (out / "images" / split / f"{stem}.jpg").write_bytes(output.jpeg)
                         lines = yolo_lines(
-                            output.frame.labels, output.meta.width_px, output.meta.height_px,
-                            options.min_visibility, options.min_box_px,
-                        )  # fmt: skip
+                            output.frame.labels,
+                            output.meta.width_px,
+                            output.meta.height_px,
+                            options.min_visibility,
+                            options.min_box_px,
+                        )
                         (out / "labels" / split / f"{stem}.txt").write_text(
                             "".join(line + "\n" for line in lines)
                         )
                         camera = cameras_by_id.setdefault(
-                            sensor_id, PinholeCamera(site.sensor(sensor_id)))
+                            sensor_id, PinholeCamera(site.sensor(sensor_id))
+                        )
                         records = truth_records(output, vehicles, camera)
-                        (out / "truth" / split / f"{stem}.json").write_text(json.dumps(
-                            {"stamp_s": now_s, "sensor_id": sensor_id, "vehicles": records}))
+                        (out / "truth" / split / f"{stem}.json").write_text(
+                            json.dumps(
+                                {"stamp_s": now_s, "sensor_id": sensor_id, "vehicles": records}
+                            )
+                        )
                         counts[f"images_{split}"] += 1
                         for line in lines:
                             class_counts[YOLO_CLASSES[int(line.split()[0])].value] += 1
@@ -239,14 +267,14 @@ def export(site: Site, options: DatasetOptions, work_dir: Path | None = None) ->
     )
     manifest: dict[str, object] = {
         "site_id": site.site_id,
-        "sensors": [m.model_dump(mode="json") for m in site.sensors if m.sensor_id in
-                    cameras + lidars],
-        "options": {k: str(v) if isinstance(v, Path) else v
-                    for k, v in options.__dict__.items()},
+        "sensors": [
+            m.model_dump(mode="json") for m in site.sensors if m.sensor_id in cameras + lidars
+        ],
+        "options": {k: str(v) if isinstance(v, Path) else v for k, v in options.__dict__.items()},
         "counts": dict(counts),
         "camera_labels_per_class": dict(class_counts),
         "yolo_classes": names,
-    }  # fmt: skip
+    }
     (out / "manifest.json").write_text(json.dumps(manifest, indent=2))
     return manifest
 
@@ -259,8 +287,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, required=True, help="output folder")
     parser.add_argument("--site", type=Path, default=SimulatorSettings().site_file)
     parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--weather", default="day,dusk,rain,fog",
-                        help="comma-separated presets: day, dusk, rain, fog")  # fmt: skip
+    parser.add_argument(
+        "--weather",
+        default="day,dusk,rain,fog",
+        help="comma-separated presets: day, dusk, rain, fog",
+    )
     parser.add_argument("--duration-s", type=float, default=120.0)
     parser.add_argument("--every-s", type=float, default=1.0)
     parser.add_argument("--warmup-s", type=float, default=60.0)
@@ -279,14 +310,28 @@ def main(argv: list[str] | None = None) -> int:
     site = load_site(args.site)
     configure_logging(service="dataset", site=site.site_id)
     options = DatasetOptions(
-        out_dir=args.out, seed=args.seed, weathers=weathers, duration_s=args.duration_s,
-        every_s=args.every_s, warmup_s=args.warmup_s, val_share=args.val_share,
-        vehicles_per_hour=args.vehicles_per_hour, truck_share=args.truck_share,
-        min_visibility=args.min_visibility, lidar=not args.no_lidar,
-    )  # fmt: skip
+        out_dir=args.out,
+        seed=args.seed,
+        weathers=weathers,
+        duration_s=args.duration_s,
+        every_s=args.every_s,
+        warmup_s=args.warmup_s,
+        val_share=args.val_share,
+        vehicles_per_hour=args.vehicles_per_hour,
+        truck_share=args.truck_share,
+        min_visibility=args.min_visibility,
+        lidar=not args.no_lidar,
+    )
     manifest = export(site, options)
-    sys.stdout.write(json.dumps({"out": str(args.out), **{
-        k: manifest[k] for k in ("counts", "camera_labels_per_class")}}) + "\n")  # fmt: skip
+    sys.stdout.write(
+        json.dumps(
+            {
+                "out": str(args.out),
+                **{k: manifest[k] for k in ("counts", "camera_labels_per_class")},
+            }
+        )
+        + "\n"
+    )
     return 0
 
 

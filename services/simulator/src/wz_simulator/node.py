@@ -141,8 +141,14 @@ def main() -> None:
     node.serve(loop)
 
 
-def simulate(runtime: ServiceRuntime, site: Site, settings: SimulatorSettings,
-             world: TrafficWorld, clock: SimClock, site_json: bytes) -> None:  # fmt: skip
+def simulate(
+    runtime: ServiceRuntime,
+    site: Site,
+    settings: SimulatorSettings,
+    world: TrafficWorld,
+    clock: SimClock,
+    site_json: bytes,
+) -> None:
     """Publish the world until ``runtime.stop`` or its duration: sensors built, warmed up."""
     bus = runtime.bus
     truth = bus.publisher(bus.keys.truth, GroundTruth)
@@ -151,9 +157,11 @@ def simulate(runtime: ServiceRuntime, site: Site, settings: SimulatorSettings,
     publish_sensor = None
     if settings.sensors_enabled and site.sensors:
         rig = SensorRig(
-            site, WEATHER_PRESETS[settings.weather], settings.seed,
+            site,
+            WEATHER_PRESETS[settings.weather],
+            settings.seed,
             jpeg_quality=settings.jpeg_quality,
-        )  # fmt: skip
+        )
         publish_sensor = SensorPublisher(bus, site).publish
         log.info("sensors: %s (%s)", [m.sensor_id for m in rig.mounts], settings.weather)
     if settings.warmup_s > 0:
@@ -164,9 +172,11 @@ def simulate(runtime: ServiceRuntime, site: Site, settings: SimulatorSettings,
             rig.skip_until(world.sim_time_s)
         log.info(
             "warmed up: %.1f s simulated in %.2f s (%d steps), %d vehicles on the road",
-            world.sim_time_s, time.monotonic() - started, steps,
+            world.sim_time_s,
+            time.monotonic() - started,
+            steps,
             world.counters.departed - world.counters.arrived,
-        )  # fmt: skip
+        )
     # The scene, the models and their caches live for the whole run: move them out of the
     # collector's generations so full collections stay short (they paused single camera
     # frames for 70-85 ms; BENCHMARKS.md, sensors).
@@ -174,9 +184,14 @@ def simulate(runtime: ServiceRuntime, site: Site, settings: SimulatorSettings,
     gc.freeze()
     runtime.state = ServiceState.RUNNING
     steps = run_loop(
-        world, truth.put, clock, Pacer(settings.realtime_factor), runtime.stop, rig,
+        world,
+        truth.put,
+        clock,
+        Pacer(settings.realtime_factor),
+        runtime.stop,
+        rig,
         publish_sensor,
-    )  # fmt: skip
+    )
     log.info(
         "simulation ended after %d steps (%.1f s simulated): %s",
         steps,

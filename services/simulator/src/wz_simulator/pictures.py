@@ -37,13 +37,28 @@ log = logging.getLogger(__name__)
 #: Distinct colours (BGR) for vehicle labels.
 PALETTE = np.array(
     [
-        (75, 25, 230), (75, 180, 60), (25, 225, 255), (200, 130, 0), (48, 130, 245),
-        (180, 30, 145), (240, 240, 70), (230, 50, 240), (60, 245, 210), (212, 190, 250),
-        (128, 128, 0), (255, 190, 220), (40, 110, 170), (200, 250, 255), (0, 0, 128),
-        (195, 255, 170), (0, 128, 128), (180, 215, 255), (128, 0, 0),
+        (75, 25, 230),
+        (75, 180, 60),
+        (25, 225, 255),
+        (200, 130, 0),
+        (48, 130, 245),
+        (180, 30, 145),
+        (240, 240, 70),
+        (230, 50, 240),
+        (60, 245, 210),
+        (212, 190, 250),
+        (128, 128, 0),
+        (255, 190, 220),
+        (40, 110, 170),
+        (200, 250, 255),
+        (0, 0, 128),
+        (195, 255, 170),
+        (0, 128, 128),
+        (180, 215, 255),
+        (128, 0, 0),
     ],
     dtype=np.uint8,
-)  # fmt: skip
+)
 
 
 def lidar_top_view(
@@ -70,8 +85,16 @@ def lidar_top_view(
 
     for radius_m in range(25, int(extent_m * 1.5), 25):
         cv2.circle(image, (int(centre), int(centre)), int(radius_m * scale), (60, 60, 60), 1)
-        cv2.putText(image, f"{radius_m} m", (int(centre) + 4, int(centre - radius_m * scale) - 4),
-                    cv2.FONT_HERSHEY_SIMPLEX, 0.4, (110, 110, 110), 1, cv2.LINE_AA)  # fmt: skip
+        cv2.putText(
+            image,
+            f"{radius_m} m",
+            (int(centre) + 4, int(centre - radius_m * scale) - 4),
+            cv2.FONT_HERSHEY_SIMPLEX,
+            0.4,
+            (110, 110, 110),
+            1,
+            cv2.LINE_AA,
+        )
     points = scan.points
     valid = np.isfinite(points[:, 0])
     xy = to_px(points[valid, 0].astype(np.float64), points[valid, 1].astype(np.float64))
@@ -98,11 +121,27 @@ def lidar_top_view(
         cv2.polylines(image, [polygon], True, colour, 1, cv2.LINE_AA)
         if box.num_points:
             x0, y0 = polygon.min(axis=0)
-            cv2.putText(image, f"{box.vehicle_id} ({box.num_points})", (int(x0), int(y0) - 3),
-                        cv2.FONT_HERSHEY_SIMPLEX, 0.35, colour, 1, cv2.LINE_AA)  # fmt: skip
+            cv2.putText(
+                image,
+                f"{box.vehicle_id} ({box.num_points})",
+                (int(x0), int(y0) - 3),
+                cv2.FONT_HERSHEY_SIMPLEX,
+                0.35,
+                colour,
+                1,
+                cv2.LINE_AA,
+            )
     cv2.drawMarker(image, (int(centre), int(centre)), (255, 255, 255), cv2.MARKER_CROSS, 12)
-    cv2.putText(image, "forward (sensor x)", (int(centre) + 8, 16), cv2.FONT_HERSHEY_SIMPLEX,
-                0.45, (200, 200, 200), 1, cv2.LINE_AA)  # fmt: skip
+    cv2.putText(
+        image,
+        "forward (sensor x)",
+        (int(centre) + 8, 16),
+        cv2.FONT_HERSHEY_SIMPLEX,
+        0.45,
+        (200, 200, 200),
+        1,
+        cv2.LINE_AA,
+    )
     return image
 
 
@@ -111,9 +150,13 @@ def simulate_instant(
 ) -> tuple[list[VehicleTruth], float]:
     """Truth after ``warmup_s`` of simulated traffic (as fast as possible)."""
     settings = SimulatorSettings(
-        seed=seed, realtime_factor=0.0, sensors_enabled=False,
-        vehicles_per_hour=vehicles_per_hour, truck_share=0.25, duration_s=warmup_s,
-    )  # fmt: skip
+        seed=seed,
+        realtime_factor=0.0,
+        sensors_enabled=False,
+        vehicles_per_hour=vehicles_per_hour,
+        truck_share=0.25,
+        duration_s=warmup_s,
+    )
     vehicles: list[VehicleTruth] = []
     with TrafficWorld(site, settings) as world:
         while not world.finished:
@@ -122,9 +165,13 @@ def simulate_instant(
 
 
 def write_pictures(
-    site: Site, out_dir: Path, seed: int = 5, warmup_s: float = 75.0,
-    vehicles_per_hour: float = 2000.0, scene: StaticScene | None = None,
-) -> list[Path]:  # fmt: skip
+    site: Site,
+    out_dir: Path,
+    seed: int = 5,
+    warmup_s: float = 75.0,
+    vehicles_per_hour: float = 2000.0,
+    scene: StaticScene | None = None,
+) -> list[Path]:
     """Write the three pictures; return their paths."""
     out_dir.mkdir(parents=True, exist_ok=True)
     vehicles, now_s = simulate_instant(site, seed, warmup_s, vehicles_per_hour)
@@ -134,14 +181,18 @@ def write_pictures(
     written = []
     tiles = []
     for weather in ("day", "dusk", "rain", "fog"):
-        rig = SensorRig(site, WEATHER_PRESETS[weather], seed, sensor_ids=[camera_id, lidar_id],
-                        scene=scene)  # fmt: skip
+        rig = SensorRig(
+            site, WEATHER_PRESETS[weather], seed, sensor_ids=[camera_id, lidar_id], scene=scene
+        )
         camera = rig.capture(camera_id, 0, now_s, vehicles, now_s)
         assert isinstance(camera, CameraOutput)
         if weather == "day":
             path = out_dir / "camera-truth.jpg"
-            cv2.imwrite(str(path), draw_truth(camera.frame.image, list(camera.frame.labels)),
-                        [cv2.IMWRITE_JPEG_QUALITY, 88])  # fmt: skip
+            cv2.imwrite(
+                str(path),
+                draw_truth(camera.frame.image, list(camera.frame.labels)),
+                [cv2.IMWRITE_JPEG_QUALITY, 88],
+            )
             written.append(path)
             lidar = rig.capture(lidar_id, 0, now_s, vehicles, now_s)
             assert isinstance(lidar, LidarOutput)
@@ -149,8 +200,9 @@ def write_pictures(
             cv2.imwrite(str(path), lidar_top_view(lidar.scan))
             written.append(path)
         tile = cv2.resize(camera.frame.image, (600, 600), interpolation=cv2.INTER_AREA)
-        cv2.putText(tile, weather, (16, 40), cv2.FONT_HERSHEY_SIMPLEX, 1.1, (255, 255, 255), 2,
-                    cv2.LINE_AA)  # fmt: skip
+        cv2.putText(
+            tile, weather, (16, 40), cv2.FONT_HERSHEY_SIMPLEX, 1.1, (255, 255, 255), 2, cv2.LINE_AA
+        )
         tiles.append(tile)
     montage = np.vstack([np.hstack(tiles[:2]), np.hstack(tiles[2:])])
     path = out_dir / "camera-weather.jpg"

@@ -33,7 +33,8 @@ from wz_shared.site import Site
 SITE_PATTERN = r"^[a-z0-9][a-z0-9_-]{0,62}$"
 #: The answer of a route that takes ``site``, for one the gateway does not serve.
 SITE_RESPONSES: dict[int | str, dict[str, Any]] = {
-    404: problem_response("The gateway does not serve this site")}  # fmt: skip
+    404: problem_response("The gateway does not serve this site")
+}
 
 
 @dataclass
@@ -71,16 +72,24 @@ def site_of(context: GatewayContext, site: str | None) -> Site:
         return context.sites.default
     found = context.sites.get(site)
     if found is None:
-        raise HTTPException(404, f"this gateway does not serve site {site!r}; it serves "
-                            f"{', '.join(context.sites.ids)} (GET /v1/sites)")  # fmt: skip
+        raise HTTPException(
+            404,
+            f"this gateway does not serve site {site!r}; it serves "
+            f"{', '.join(context.sites.ids)} (GET /v1/sites)",
+        )
     return found
 
 
 def _site(
     context: Ctx,
-    site: Annotated[str | None, Query(pattern=SITE_PATTERN, description="Site id (a central "
-                                      "gateway serves several; default: its first)")] = None,
-) -> Site:  # fmt: skip
+    site: Annotated[
+        str | None,
+        Query(
+            pattern=SITE_PATTERN,
+            description="Site id (a central gateway serves several; default: its first)",
+        ),
+    ] = None,
+) -> Site:
     return site_of(context, site)
 
 
@@ -96,11 +105,16 @@ class Principal:
 
 
 _api_key_header = APIKeyHeader(
-    name="X-API-Key", auto_error=False, scheme_name="ApiKey",
+    name="X-API-Key",
+    auto_error=False,
+    scheme_name="ApiKey",
     description="An API key: `read` for reads, `admin` for /v1/admin",
-)  # fmt: skip
-_bearer = HTTPBearer(auto_error=False, scheme_name="Bearer",
-                     description="The same API key as `Authorization: Bearer <key>`")  # fmt: skip
+)
+_bearer = HTTPBearer(
+    auto_error=False,
+    scheme_name="Bearer",
+    description="The same API key as `Authorization: Bearer <key>`",
+)
 
 
 def require(needed: auth.Scope) -> Callable[..., Principal]:
@@ -120,22 +134,26 @@ def require(needed: auth.Scope) -> Callable[..., Principal]:
         if wait_s > 0.0:
             context.metrics.rate_limited.inc()
             raise HTTPException(
-                429, f"too many requests from {identity.split(':')[0]}; retry in {wait_s:.1f} s",
+                429,
+                f"too many requests from {identity.split(':')[0]}; retry in {wait_s:.1f} s",
                 headers={"Retry-After": auth.TokenBuckets.retry_after_header(wait_s)},
-            )  # fmt: skip
+            )
         challenge = {"WWW-Authenticate": 'Bearer realm="wz-gateway"'}
         if secret and info is None:
             context.metrics.auth_failures.labels("invalid").inc()
-            raise HTTPException(401, "the API key is not valid (unknown or revoked)",
-                                headers=challenge)  # fmt: skip
+            raise HTTPException(
+                401, "the API key is not valid (unknown or revoked)", headers=challenge
+            )
         if info is None:
             if context.settings.dev_mode and needed == "read":
                 return Principal("anonymous", "read")
             context.metrics.auth_failures.labels("missing").inc()
             raise HTTPException(
-                401, "an API key is needed: send it as the X-API-Key header or as "
-                "Authorization: Bearer <key>", headers=challenge,
-            )  # fmt: skip
+                401,
+                "an API key is needed: send it as the X-API-Key header or as "
+                "Authorization: Bearer <key>",
+                headers=challenge,
+            )
         if not auth.scope_allows(info.scope, needed):
             context.metrics.auth_failures.labels("scope").inc()
             raise HTTPException(403, f"this key has scope {info.scope!r}; {needed!r} is needed")

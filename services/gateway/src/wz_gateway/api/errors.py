@@ -36,20 +36,37 @@ class InputError(Exception):
         self.message = message
 
 
-def problem(status: int, detail: str, *, instance: str | None = None,
-            errors: list[ProblemField] | None = None,
-            headers: dict[str, str] | None = None) -> JSONResponse:  # fmt: skip
+def problem(
+    status: int,
+    detail: str,
+    *,
+    instance: str | None = None,
+    errors: list[ProblemField] | None = None,
+    headers: dict[str, str] | None = None,
+) -> JSONResponse:
     """A problem answer with this status and ``detail``."""
-    body = Problem(title=HTTPStatus(status).phrase, status=status, detail=detail,
-                   instance=instance, errors=errors)  # fmt: skip
-    return JSONResponse(body.model_dump(mode="json", exclude_none=True), status_code=status,
-                        media_type=PROBLEM_JSON, headers=headers)  # fmt: skip
+    body = Problem(
+        title=HTTPStatus(status).phrase,
+        status=status,
+        detail=detail,
+        instance=instance,
+        errors=errors,
+    )
+    return JSONResponse(
+        body.model_dump(mode="json", exclude_none=True),
+        status_code=status,
+        media_type=PROBLEM_JSON,
+        headers=headers,
+    )
 
 
 def problem_response(description: str) -> dict[str, Any]:
     """The OpenAPI description of a problem answer (for a route's ``responses``)."""
-    return {"description": description, "model": Problem,
-            "content": {PROBLEM_JSON: {"schema": {"$ref": "#/components/schemas/Problem"}}}}  # fmt: skip
+    return {
+        "description": description,
+        "model": Problem,
+        "content": {PROBLEM_JSON: {"schema": {"$ref": "#/components/schemas/Problem"}}},
+    }
 
 
 V1_RESPONSES: dict[int | str, dict[str, Any]] = {
@@ -71,8 +88,12 @@ def _location(loc: tuple[Any, ...]) -> str:
 
 def _describe(location: str) -> str:
     kind, _, name = location.partition(".")
-    words = {"query": "query parameter", "path": "path parameter", "header": "header",
-             "body": "body field"}  # fmt: skip
+    words = {
+        "query": "query parameter",
+        "path": "path parameter",
+        "header": "header",
+        "body": "body field",
+    }
     if kind == "body" and not name:
         return "the request body"
     return f"{words.get(kind, kind)} {name!r}" if name else kind
@@ -98,8 +119,12 @@ async def _on_validation_error(request: Request, exc: Exception) -> JSONResponse
 
 async def _on_input_error(request: Request, exc: Exception) -> JSONResponse:
     assert isinstance(exc, InputError)
-    return problem(422, f"{_describe(exc.location)}: {exc.message}", instance=request.url.path,
-                   errors=[ProblemField(location=exc.location, message=exc.message)])  # fmt: skip
+    return problem(
+        422,
+        f"{_describe(exc.location)}: {exc.message}",
+        instance=request.url.path,
+        errors=[ProblemField(location=exc.location, message=exc.message)],
+    )
 
 
 async def _on_cursor_error(request: Request, exc: Exception) -> JSONResponse:
@@ -115,20 +140,26 @@ async def _on_http_error(request: Request, exc: Exception) -> JSONResponse:
         detail = "the request body could not be read: send UTF-8 JSON"
     elif exc.status_code == 405:
         detail = f"{request.method} is not allowed on {request.url.path}"
-    return problem(exc.status_code, detail, instance=request.url.path,
-                   headers=dict(exc.headers or {}))  # fmt: skip
+    return problem(
+        exc.status_code, detail, instance=request.url.path, headers=dict(exc.headers or {})
+    )
 
 
 async def _on_database_error(request: Request, exc: Exception) -> JSONResponse:
     log.warning("database error on %s: %s", request.url.path, exc)
-    return problem(503, "the database is busy or unavailable; try again shortly",
-                   instance=request.url.path, headers={"Retry-After": "5"})  # fmt: skip
+    return problem(
+        503,
+        "the database is busy or unavailable; try again shortly",
+        instance=request.url.path,
+        headers={"Retry-After": "5"},
+    )
 
 
 async def _on_unexpected(request: Request, exc: Exception) -> JSONResponse:
     log.error("unexpected error on %s %s", request.method, request.url.path, exc_info=exc)
-    return problem(500, "internal error in the gateway; its log has the details",
-                   instance=request.url.path)  # fmt: skip
+    return problem(
+        500, "internal error in the gateway; its log has the details", instance=request.url.path
+    )
 
 
 def add_exception_handlers(app: FastAPI) -> None:

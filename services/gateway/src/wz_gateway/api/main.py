@@ -8,8 +8,18 @@ from fastapi import APIRouter
 from wz_gateway.api.routes import alerts, health, keys, live, metrics, sites, tracks, webhooks, wzdx
 
 api_router = APIRouter()
-for _router in (sites.router, tracks.router, alerts.router, wzdx.router, keys.router,
-                webhooks.router, live.router, live.page_router, health.router, metrics.router):  # fmt: skip
+for _router in (
+    sites.router,
+    tracks.router,
+    alerts.router,
+    wzdx.router,
+    keys.router,
+    webhooks.router,
+    live.router,
+    live.page_router,
+    health.router,
+    metrics.router,
+):
     api_router.include_router(_router)
 
 static_files = live.static_files

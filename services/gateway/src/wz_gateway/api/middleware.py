@@ -77,8 +77,9 @@ class HttpMetrics:
         finally:
             route = scope.get("route")
             template = getattr(route, "path", None) or "unmatched"
-            self.metrics.http_requests.labels(template, scope.get("method", ""),
-                                              str(status[0])).inc()  # fmt: skip
+            self.metrics.http_requests.labels(
+                template, scope.get("method", ""), str(status[0])
+            ).inc()
             self.metrics.http_latency.labels(template).observe(time.perf_counter() - started)
 
 
@@ -89,7 +90,10 @@ def add_middleware(app: FastAPI, settings: GatewaySettings, metrics: GatewayMetr
     app.add_middleware(HttpMetrics, metrics=metrics)
     if settings.cors_origins:
         app.add_middleware(
-            CORSMiddleware, allow_origins=settings.cors_origins, allow_methods=["GET", "POST",
-            "DELETE"], allow_headers=["Authorization", "X-API-Key", "Content-Type"],
-            expose_headers=["Link", "X-Next-Cursor", "Retry-After"], max_age=600,
-        )  # fmt: skip
+            CORSMiddleware,
+            allow_origins=settings.cors_origins,
+            allow_methods=["GET", "POST", "DELETE"],
+            allow_headers=["Authorization", "X-API-Key", "Content-Type"],
+            expose_headers=["Link", "X-Next-Cursor", "Retry-After"],
+            max_age=600,
+        )

@@ -17,24 +17,43 @@ MAX_ID = 2**53
 _MAX_STAMP_S = 1e11
 _MAX_STATION_M = 1e7
 
-Stamp = Annotated[float | None, Query(ge=0.0, le=_MAX_STAMP_S, allow_inf_nan=False,
-                                      description="Capture time [s], inclusive")]  # fmt: skip
-Limit = Annotated[int | None, Query(ge=1, le=100_000, description="Items per page (default "
-                                    "1000 points or 100 alerts, at most max_page_size)")]
-Cursor = Annotated[str | None, Query(max_length=200, description="`next_cursor` of the previous page")]  # fmt: skip
-Format = Annotated[OutputFormat, Query(alias="format",
-                                        description="json, csv, geojson or parquet")]
-Speed = Annotated[float | None, Query(ge=0.0, le=200.0, allow_inf_nan=False,
-                                      description="Speed bound [m/s], inclusive")]  # fmt: skip
-Station = Annotated[float | None, Query(ge=-_MAX_STATION_M, le=_MAX_STATION_M,
-                                        allow_inf_nan=False,
-                                        description="Station bound [m], inclusive")]  # fmt: skip
+Stamp = Annotated[
+    float | None,
+    Query(ge=0.0, le=_MAX_STAMP_S, allow_inf_nan=False, description="Capture time [s], inclusive"),
+]
+Limit = Annotated[
+    int | None,
+    Query(
+        ge=1,
+        le=100_000,
+        description="Items per page (default 1000 points or 100 alerts, at most max_page_size)",
+    ),
+]
+Cursor = Annotated[
+    str | None, Query(max_length=200, description="`next_cursor` of the previous page")
+]
+Format = Annotated[OutputFormat, Query(alias="format", description="json, csv, geojson or parquet")]
+Speed = Annotated[
+    float | None,
+    Query(ge=0.0, le=200.0, allow_inf_nan=False, description="Speed bound [m/s], inclusive"),
+]
+Station = Annotated[
+    float | None,
+    Query(
+        ge=-_MAX_STATION_M,
+        le=_MAX_STATION_M,
+        allow_inf_nan=False,
+        description="Station bound [m], inclusive",
+    ),
+]
 
 
 def check_order(low: float | None, high: float | None, low_name: str, high_name: str) -> None:
     """:class:`InputError` if both bounds are given and ``low`` is above ``high``."""
     if low is not None and high is not None and low > high:
-        raise InputError(f"query.{low_name}", f"{low_name} ({low}) is greater than {high_name} ({high})")  # fmt: skip
+        raise InputError(
+            f"query.{low_name}", f"{low_name} ({low}) is greater than {high_name} ({high})"
+        )
 
 
 def page_limit(limit: int | None, context: GatewayContext, default: int = 1000) -> int:

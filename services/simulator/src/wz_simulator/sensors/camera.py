@@ -265,7 +265,9 @@ class CameraModel:
         gain = shade(self._lighting, quads.normal)
         emissive = (arrays.materials == Material.LIGHT)[quads.face // 6]
         colour = np.where(emissive[:, None], quads.base_rgb, quads.base_rgb * gain)
-        normal_cam, offset = self._projector.face_planes(quads.site[: count * 6], quads.normal[: count * 6])
+        normal_cam, offset = self._projector.face_planes(
+            quads.site[: count * 6], quads.normal[: count * 6]
+        )
         for q, pts in enumerate(projected.polygons):
             if pts is None:
                 continue
@@ -461,7 +463,9 @@ class CameraModel:
             own = (sub_faces >= f0) & (sub_faces < f1)
             if self._static_in(x0, y0, x1, y1):
                 if planes is None:
-                    planes = self._projector.face_planes(quads.site[:face_count], quads.normal[:face_count])
+                    planes = self._projector.face_planes(
+                        quads.site[:face_count], quads.normal[:face_count]
+                    )
                 self._occlude_by_static(image, face_buffer, own, x0, y0, planes)
             visible = int(np.count_nonzero(own))
             labels[vehicle] = CameraTruthLabel(
@@ -486,7 +490,6 @@ class CameraModel:
                 roi = image[y0:y1, x0:x1]
                 cv2.GaussianBlur(roi, (3, 3), self.blur_sigma_px, dst=roi)
         return labels
-
 
     def _draw_shadows(
         self, image: U8, arrays: BoxArrays, layer: IntP, starts: IntP, ends: IntP
@@ -597,5 +600,3 @@ class CameraModel:
                 continue
             extent = float(np.ptp(pts, axis=0).max()) / ONE
             self._effects.add_glow(image, column, row, extent, int(quads.kind[q]))
-
-

@@ -18,6 +18,7 @@ from wz_simulator.sensors.scene import Light, Weather
 #: Koschmieder's constant: contrast falls to 2 % at the meteorological visibility.
 KOSCHMIEDER = 3.912
 
+
 @dataclass(frozen=True)
 class Lighting:
     """What the weather means for the picture (colours RGB 0-255, intensities unitless)."""

@@ -57,7 +57,6 @@ class Projected:
     bounds: I32  # (Q, 4) x0, y0, x1, y1 pixel indices (inclusive), meaningless where None
 
 
-
 class Projector:
     """Clips and projects site-frame polygons for one camera.
 

@@ -149,7 +149,6 @@ class _VehicleBodies:
     velocity_mps: F64  # (m, 3)
 
 
-
 class LidarModel:
     """Simulated spinning LiDAR: static scene once, vehicle truth per sweep, organized frames.
 
@@ -710,4 +709,3 @@ class LidarModel:
 
 def _triple(values: F64) -> tuple[float, float, float]:
     return (float(values[0]), float(values[1]), float(values[2]))
-

@@ -137,9 +137,7 @@ def static_mesh(
     material_blocks: list[IntP] = []
     offset = 0
 
-    def add(
-        vertices: F64, triangles: npt.NDArray[np.uint32], material: IntP
-    ) -> None:
+    def add(vertices: F64, triangles: npt.NDArray[np.uint32], material: IntP) -> None:
         nonlocal offset
         vertex_blocks.append(vertices - position_m)
         triangle_blocks.append(triangles + np.uint32(offset))
@@ -188,6 +186,7 @@ def static_mesh(
         np.ascontiguousarray(np.concatenate(triangle_blocks), dtype=np.uint32),
         np.concatenate(material_blocks),
     )
+
 
 # --- one sweep ----------------------------------------------------------------------
 
@@ -250,7 +249,6 @@ def azimuth_extent(x: F64, y: F64) -> tuple[F64, F64, Bool]:
     widest_gap = np.take_along_axis(gaps, widest, axis=-1)[..., 0]
     start = np.take_along_axis(azimuth, (widest + 1) % x.shape[-1], axis=-1)[..., 0]
     return start, 2.0 * np.pi - widest_gap, widest_gap <= np.pi
-
 
 
 def centred_grid(count: int) -> F64:

@@ -107,7 +107,6 @@ KOSCHMIEDER = 3.912
 _DB_PER_KM_TO_PER_M = 1.0 / (10.0 * math.log10(math.e) * 1000.0)
 
 
-
 @dataclass(frozen=True)
 class LidarPhysics:
     """Settings of the LiDAR model (units in the names).
@@ -223,7 +222,6 @@ def rain_extinction_per_m(
     return float(coefficient_db_per_km * rain_mm_per_h**exponent * _DB_PER_KM_TO_PER_M)
 
 
-
 @dataclass(frozen=True)
 class Returns:
     """Returns of a subset of rays: indices into the frame and their physics."""
@@ -276,9 +274,7 @@ class ReturnPhysics:
         )
         self.grazing_onset_cos = math.cos(math.radians(physics.grazing_onset_deg))
 
-    def response(
-        self, range_m: F32, cos_incidence: F32, material: IntP
-    ) -> Returns:
+    def response(self, range_m: F32, cos_incidence: F32, material: IntP) -> Returns:
         """Intensity, detection and dropout probability of hits (see the module docstring).
 
         ``range_m``, ``cos_incidence`` and ``material`` are parallel, shape (n,); the returned
@@ -309,9 +305,7 @@ class ReturnPhysics:
 
 def incidence_cosine(directions: F32, normals: F32) -> F32:
     """|cos| of the angle between unit ray directions and unit normals, both (n, 3); (n,)."""
-    cosine: F32 = np.minimum(
-        np.abs(np.einsum("ij,ij->i", directions, normals)), np.float32(1.0)
-    )
+    cosine: F32 = np.minimum(np.abs(np.einsum("ij,ij->i", directions, normals)), np.float32(1.0))
     return cosine
 
 

@@ -115,9 +115,7 @@ def _wrap_rad(angle_rad: F64) -> F64:
     return wrapped
 
 
-def _interval_overlap(
-    low_a: F64, high_a: F64, low_b: F64, high_b: F64
-) -> F64:
+def _interval_overlap(low_a: F64, high_a: F64, low_b: F64, high_b: F64) -> F64:
     """Length of the intersection of intervals ``[low_a, high_a]`` and ``[low_b, high_b]``."""
     overlap: F64 = np.clip(np.minimum(high_a, high_b) - np.maximum(low_a, low_b), 0.0, None)
     return overlap

@@ -130,9 +130,13 @@ class SensorRig:
             sensor_seed = seed * 1000 + position
             if mount.kind == "lidar":
                 self._lidars[mount.sensor_id] = LidarModel.from_scene(
-                    mount, self.scene, weather, sensor_seed, boxes_for=vehicle_boxes,
+                    mount,
+                    self.scene,
+                    weather,
+                    sensor_seed,
+                    boxes_for=vehicle_boxes,
                     site_id=site.site_id,
-                )  # fmt: skip
+                )
             elif mount.kind == "camera":
                 self._cameras[mount.sensor_id] = CameraModel.from_scene(
                     mount, self.scene, weather, sensor_seed
@@ -200,19 +204,26 @@ class SensorRig:
             cx, cy = camera.camera.position_m[0], camera.camera.position_m[1]
             # In front of the camera (a vehicle's length of slack) and not beyond sight.
             seen = [
-                v for v in now
+                v
+                for v in now
                 if abs(v.station_m - station) < CAMERA_CULL_STATION_M
                 and (v.x_m - cx) * fx + (v.y_m - cy) * fy > -v.length_m
-            ]  # fmt: skip
+            ]
             frame = camera.render(
-                vehicle_boxes(seen), [v.vehicle_id for v in seen], fire_s,
+                vehicle_boxes(seen),
+                [v.vehicle_id for v in seen],
+                fire_s,
                 [v.vehicle_class for v in seen],
-            )  # fmt: skip
+            )
             height, width = frame.image.shape[:2]
             meta = CameraFrameMeta(
-                site=self.site.site_id, source_id=sensor_id, stamp=fire_s, frame_index=index,
-                width_px=width, height_px=height,
-            )  # fmt: skip
+                site=self.site.site_id,
+                source_id=sensor_id,
+                stamp=fire_s,
+                frame_index=index,
+                width_px=width,
+                height_px=height,
+            )
             return CameraOutput(sensor_id, meta, frame, encode_jpeg(frame.image, self.jpeg_quality))
         result = self._radars[sensor_id].scan(now, fire_s, index)
         return RadarOutput(sensor_id, result)

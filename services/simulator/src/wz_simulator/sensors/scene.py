@@ -194,17 +194,32 @@ def _palette_index(vehicle_id: str, size: int) -> int:
 
 
 def _part(
-    x: float, y: float, cos_h: float, sin_h: float, heading: float, label: int,
-    along_m: float, across_m: float, z0_m: float, z1_m: float,
-    length_m: float, width_m: float, material: Material, rgb: tuple[int, int, int],
+    x: float,
+    y: float,
+    cos_h: float,
+    sin_h: float,
+    heading: float,
+    label: int,
+    along_m: float,
+    across_m: float,
+    z0_m: float,
+    z1_m: float,
+    length_m: float,
+    width_m: float,
+    material: Material,
+    rgb: tuple[int, int, int],
 ) -> Box:
     """A box of a vehicle given in the vehicle's frame (along/across its heading)."""
     cx = x + along_m * cos_h - across_m * sin_h
     cy = y + along_m * sin_h + across_m * cos_h
     return Box(
-        (cx, cy, 0.5 * (z0_m + z1_m)), (length_m, width_m, z1_m - z0_m), heading, material, rgb,
+        (cx, cy, 0.5 * (z0_m + z1_m)),
+        (length_m, width_m, z1_m - z0_m),
+        heading,
+        material,
+        rgb,
         label,
-    )  # fmt: skip
+    )
 
 
 def vehicle_boxes(vehicles: Sequence[VehicleTruth], dt_s: float = 0.0) -> list[Box]:
@@ -241,15 +256,45 @@ def vehicle_boxes(vehicles: Sequence[VehicleTruth], dt_s: float = 0.0) -> list[B
             cab_top = 0.85 * height if vehicle.vehicle_class == "truck" else height
             cab_center = half - 0.5 * cab_length
             cab_width = 0.96 * width if vehicle.vehicle_class == "truck" else width
-            boxes.append(part(cab_center, 0.0, 0.5, cab_top, cab_length, cab_width,
-                              Material.TRUCK_BODY, cab_rgb))
-            boxes.append(part(half - 0.03, 0.0, 0.55 * cab_top, 0.92 * cab_top, 0.06,
-                              width * 0.85, Material.GLASS, GLASS_RGB))
+            boxes.append(
+                part(
+                    cab_center,
+                    0.0,
+                    0.5,
+                    cab_top,
+                    cab_length,
+                    cab_width,
+                    Material.TRUCK_BODY,
+                    cab_rgb,
+                )
+            )
+            boxes.append(
+                part(
+                    half - 0.03,
+                    0.0,
+                    0.55 * cab_top,
+                    0.92 * cab_top,
+                    0.06,
+                    width * 0.85,
+                    Material.GLASS,
+                    GLASS_RGB,
+                )
+            )
             if vehicle.vehicle_class == "truck":
                 trailer_length = length - cab_length - 0.6
                 trailer_center = -half + 0.5 * trailer_length
-                boxes.append(part(trailer_center, 0.0, 1.2, height, trailer_length, width,
-                                  Material.TRUCK_BODY, body_rgb))
+                boxes.append(
+                    part(
+                        trailer_center,
+                        0.0,
+                        1.2,
+                        height,
+                        trailer_length,
+                        width,
+                        Material.TRUCK_BODY,
+                        body_rgb,
+                    )
+                )
                 axles = (half - 0.8, half - cab_length - 0.2, -half + 2.2, -half + 1.0)
             else:
                 axles = (half - 2.5, -half + 2.5)
@@ -258,15 +303,45 @@ def vehicle_boxes(vehicles: Sequence[VehicleTruth], dt_s: float = 0.0) -> list[B
             sill, belt = 0.28, 0.58 * height
             boxes.append(part(0.0, 0.0, sill, belt, length, width, Material.CAR_PAINT, body_rgb))
             cabin_length = 0.5 * length
-            boxes.append(part(-0.05 * length, 0.0, belt, 0.94 * height, cabin_length,
-                              0.88 * width, Material.GLASS, GLASS_RGB))
-            boxes.append(part(-0.05 * length, 0.0, 0.94 * height, height, cabin_length * 0.9,
-                              0.86 * width, Material.CAR_PAINT, body_rgb))
+            boxes.append(
+                part(
+                    -0.05 * length,
+                    0.0,
+                    belt,
+                    0.94 * height,
+                    cabin_length,
+                    0.88 * width,
+                    Material.GLASS,
+                    GLASS_RGB,
+                )
+            )
+            boxes.append(
+                part(
+                    -0.05 * length,
+                    0.0,
+                    0.94 * height,
+                    height,
+                    cabin_length * 0.9,
+                    0.86 * width,
+                    Material.CAR_PAINT,
+                    body_rgb,
+                )
+            )
             axles = (half - 0.85 * min(1.0, length / 4.6), -half + 0.85 * min(1.0, length / 4.6))
         for along in axles:
             for side in (-1.0, 1.0):
-                boxes.append(part(along, side * (0.5 * width - 0.14), 0.0, wheel_d, wheel_d,
-                                  0.26, Material.TIRE, TIRE_RGB))
+                boxes.append(
+                    part(
+                        along,
+                        side * (0.5 * width - 0.14),
+                        0.0,
+                        wheel_d,
+                        wheel_d,
+                        0.26,
+                        Material.TIRE,
+                        TIRE_RGB,
+                    )
+                )
     return boxes
 
 
@@ -309,19 +384,23 @@ def _strip(
 
 
 def _upright(
-    frame: RoadFrame, station_m: float, offset_m: float, size_lwh_m: tuple[float, float, float],
-    z0_m: float, material: Material, rgb: tuple[int, int, int],
+    frame: RoadFrame,
+    station_m: float,
+    offset_m: float,
+    size_lwh_m: tuple[float, float, float],
+    z0_m: float,
+    material: Material,
+    rgb: tuple[int, int, int],
 ) -> Box:
     """A box standing at (station, offset), its length along the road."""
     x, y = frame.to_site(station_m, offset_m)
     heading = float(frame.heading_at(station_m))
-    return Box(
-        (float(x), float(y), z0_m + 0.5 * size_lwh_m[2]), size_lwh_m, heading, material, rgb
-    )
+    return Box((float(x), float(y), z0_m + 0.5 * size_lwh_m[2]), size_lwh_m, heading, material, rgb)
 
 
-def static_scene(site: Site, center_station_m: float | None = None, radius_m: float = 450.0,
-                 seed: int = 7) -> StaticScene:
+def static_scene(
+    site: Site, center_station_m: float | None = None, radius_m: float = 450.0, seed: int = 7
+) -> StaticScene:
     """Build the work zone's static scene from the site file.
 
     Ground: grass, the carriageway with shoulders, edge lines and broken lane lines where both
@@ -348,11 +427,19 @@ def static_scene(site: Site, center_station_m: float | None = None, radius_m: fl
     right_edge = lanes[0].center_offset_m - 0.5 * lanes[0].width_m
     left_edge = lanes[-1].center_offset_m + 0.5 * lanes[-1].width_m
     ground = [
-        GroundPolygon(_strip(frame, lo, hi, right_edge - 60.0, left_edge + 60.0, 25.0),
-                      Material.GRASS, GRASS_RGB, z_m=-0.03),
-        GroundPolygon(_strip(frame, lo, hi, right_edge - RIGHT_SHOULDER_M,
-                             left_edge + LEFT_SHOULDER_M), Material.ASPHALT, ASPHALT_RGB, 0.0),
-    ]  # fmt: skip
+        GroundPolygon(
+            _strip(frame, lo, hi, right_edge - 60.0, left_edge + 60.0, 25.0),
+            Material.GRASS,
+            GRASS_RGB,
+            z_m=-0.03,
+        ),
+        GroundPolygon(
+            _strip(frame, lo, hi, right_edge - RIGHT_SHOULDER_M, left_edge + LEFT_SHOULDER_M),
+            Material.ASPHALT,
+            ASPHALT_RGB,
+            0.0,
+        ),
+    ]
 
     def line(s0: float, s1: float, d: float, rgb: tuple[int, int, int]) -> None:
         if s1 - s0 > 0.1:
@@ -374,8 +461,14 @@ def static_scene(site: Site, center_station_m: float | None = None, radius_m: fl
 
     boxes: list[Box] = []
 
-    def add(station: float, offset: float, size: tuple[float, float, float], z0: float,
-            material: Material, rgb: tuple[int, int, int]) -> None:
+    def add(
+        station: float,
+        offset: float,
+        size: tuple[float, float, float],
+        z0: float,
+        material: Material,
+        rgb: tuple[int, int, int],
+    ) -> None:
         if lo <= station <= hi:
             boxes.append(_upright(frame, station, offset, size, z0, material, rgb))
 
@@ -407,23 +500,35 @@ def static_scene(site: Site, center_station_m: float | None = None, radius_m: fl
     try:
         activity = site.area(AreaKind.ACTIVITY)
         for station in np.arange(activity.start_station_m + 3.0, activity.end_station_m, 6.1):
-            add(float(station), near_edge + closed_sign * 0.5, (6.0, 0.6, 0.81), 0.0,
-                Material.CONCRETE, CONCRETE_RGB)
+            add(
+                float(station),
+                near_edge + closed_sign * 0.5,
+                (6.0, 0.6, 0.81),
+                0.0,
+                Material.CONCRETE,
+                CONCRETE_RGB,
+            )
     except KeyError:
         pass
     # Arrow board at the start of the taper, on the closed lane's shoulder.
     board_offset = far_edge + closed_sign * 1.0
-    add(taper.start_station_m - 10.0, board_offset, (2.4, 1.8, 1.0), 0.3, Material.METAL,
-        METAL_RGB)
-    add(taper.start_station_m - 9.0, board_offset, (0.15, 2.4, 1.2), 2.2, Material.SIGN,
-        (20, 20, 20))
+    add(taper.start_station_m - 10.0, board_offset, (2.4, 1.8, 1.0), 0.3, Material.METAL, METAL_RGB)
+    add(
+        taper.start_station_m - 9.0,
+        board_offset,
+        (0.15, 2.4, 1.2),
+        2.2,
+        Material.SIGN,
+        (20, 20, 20),
+    )
     # Advance-warning signs on the right shoulder, facing traffic.
     try:
         warning = site.area(AreaKind.ADVANCE_WARNING)
         sign_offset = right_edge - RIGHT_SHOULDER_M - 0.8
         for f in (0.0, 0.4, 0.75):
-            station = warning.start_station_m + f * (warning.end_station_m -
-                                                     warning.start_station_m)
+            station = warning.start_station_m + f * (
+                warning.end_station_m - warning.start_station_m
+            )
             add(station, sign_offset, (0.1, 0.1, 2.1), 0.0, Material.METAL, METAL_RGB)
             add(station, sign_offset, (0.08, 1.2, 1.2), 2.1, Material.SIGN, SIGN_RGB)
     except KeyError:
@@ -433,8 +538,7 @@ def static_scene(site: Site, center_station_m: float | None = None, radius_m: fl
     for station in np.arange(lo, hi, 4.0):
         add(float(station) + 2.0, rail_offset, (4.0, 0.3, 0.33), 0.55, Material.METAL, METAL_RGB)
     for station in np.arange(lo, hi, 1.905):
-        add(float(station), rail_offset - 0.2, (0.15, 0.15, 0.75), 0.0, Material.METAL,
-            METAL_RGB)
+        add(float(station), rail_offset - 0.2, (0.15, 0.15, 0.75), 0.0, Material.METAL, METAL_RGB)
     for station in np.arange(lo - lo % 60.0, hi, 60.0):
         add(float(station), rail_offset - 1.5, (0.3, 0.3, 10.0), 0.0, Material.METAL, METAL_RGB)
     for station in np.arange(lo, hi, 20.0):
@@ -442,18 +546,30 @@ def static_scene(site: Site, center_station_m: float | None = None, radius_m: fl
             height = float(rng.uniform(2.5, 7.0))
             depth = float(rng.uniform(6.0, 12.0))
             offset = side_offset - 0.5 * depth if side_offset < 0 else side_offset + 0.5 * depth
-            add(float(station) + 10.0, offset, (20.0, depth, height), 0.0, Material.VEGETATION,
-                VEGETATION_RGB)
+            add(
+                float(station) + 10.0,
+                offset,
+                (20.0, depth, height),
+                0.0,
+                Material.VEGETATION,
+                VEGETATION_RGB,
+            )
     # The sensor trailer and its mast (the mast stops below the lowest sensor).
     if site.sensors:
         poses = [sensor.pose for sensor in site.sensors]
         x, y = poses[0].x_m, poses[0].y_m
         trailer_station, trailer_offset = (float(v) for v in frame.to_road(x, y))
         lowest = min(pose.z_m for pose in poses)
-        add(trailer_station, trailer_offset - 0.3, (4.0, 2.0, 0.9), 0.4, Material.METAL,
-            METAL_RGB)
-        boxes.append(Box((x, y, 0.5 * (lowest - 0.6)), (0.25, 0.25, lowest - 0.6), 0.0,
-                         Material.METAL, METAL_RGB))
+        add(trailer_station, trailer_offset - 0.3, (4.0, 2.0, 0.9), 0.4, Material.METAL, METAL_RGB)
+        boxes.append(
+            Box(
+                (x, y, 0.5 * (lowest - 0.6)),
+                (0.25, 0.25, lowest - 0.6),
+                0.0,
+                Material.METAL,
+                METAL_RGB,
+            )
+        )
     return StaticScene(boxes=boxes, ground=ground)
 
 

@@ -413,12 +413,16 @@ def build_network(site: Site, work_dir: Path, netconvert: Path | None = None) ->
         nod, edg, con = write_plain_xml(site, edges, scratch_dir)
         command = [
             str(binary),
-            "--node-files", str(nod),
-            "--edge-files", str(edg),
-            "--connection-files", str(con),
-            "--output-file", str(scratch_dir / NET_FILE_NAME),
+            "--node-files",
+            str(nod),
+            "--edge-files",
+            str(edg),
+            "--connection-files",
+            str(con),
+            "--output-file",
+            str(scratch_dir / NET_FILE_NAME),
             *_NETCONVERT_OPTIONS,
-        ]  # fmt: skip
+        ]
         try:
             result = subprocess.run(command, capture_output=True, text=True, check=False)
         except OSError as exc:

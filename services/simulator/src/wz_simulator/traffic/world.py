@@ -226,22 +226,34 @@ class TrafficWorld:
 
         command = [
             _sumo_binary(),
-            "--net-file", str(self.network.net_file),
-            "--route-files", str(route_file),
-            "--step-length", f"{settings.step_s}",
-            "--seed", str(settings.seed),
-            "--no-step-log", "true",
-            "--duration-log.disable", "true",
-            "--collision.action", "warn",
-            "--collision.mingap-factor", "0",
-            "--time-to-teleport", f"{settings.teleport_after_s if settings.teleport_after_s > 0 else -1}",
+            "--net-file",
+            str(self.network.net_file),
+            "--route-files",
+            str(route_file),
+            "--step-length",
+            f"{settings.step_s}",
+            "--seed",
+            str(settings.seed),
+            "--no-step-log",
+            "true",
+            "--duration-log.disable",
+            "true",
+            "--collision.action",
+            "warn",
+            "--collision.mingap-factor",
+            "0",
+            "--time-to-teleport",
+            f"{settings.teleport_after_s if settings.teleport_after_s > 0 else -1}",
             # Any positive duration turns continuous lane changes on; each vType's maxSpeedLat
             # then sets how fast a vehicle moves sideways.
-            "--lanechange.duration", "3" if settings.continuous_lane_changes else "0",
+            "--lanechange.duration",
+            "3" if settings.continuous_lane_changes else "0",
             # SUMO's warnings (emergency braking ...) go to a file, not to our stderr.
-            "--error-log", str(run_dir / "sumo-warnings.log"),
-            "--no-warnings", "true",
-        ]  # fmt: skip
+            "--error-log",
+            str(run_dir / "sumo-warnings.log"),
+            "--no-warnings",
+            "true",
+        ]
         libsumo.start(command)
         _active_world = self
         logger.info(

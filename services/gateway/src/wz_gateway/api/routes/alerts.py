@@ -24,11 +24,16 @@ def get_alerts(
     response: Response,
     context: Ctx,
     _: Reader,
-    site: Annotated[str | None, Query(pattern=r"^(\*|[a-z0-9][a-z0-9_-]{0,62})$",
-                                      description="Site id, or `*` for every site's "
-                                      "(default: the gateway's first site)")] = None,
-    alert_type: Annotated[list[AlertType] | None, Query(alias="type", description="Repeat "
-                                                        "for several")] = None,
+    site: Annotated[
+        str | None,
+        Query(
+            pattern=r"^(\*|[a-z0-9][a-z0-9_-]{0,62})$",
+            description="Site id, or `*` for every site's (default: the gateway's first site)",
+        ),
+    ] = None,
+    alert_type: Annotated[
+        list[AlertType] | None, Query(alias="type", description="Repeat for several")
+    ] = None,
     severity: Annotated[list[AlertSeverity] | None, Query()] = None,
     phase: Annotated[list[Literal["start", "update", "clear"]] | None, Query()] = None,
     start: Stamp = None,
@@ -38,19 +43,27 @@ def get_alerts(
     order: Annotated[Literal["newest", "oldest"], Query()] = "newest",
     limit: Limit = None,
     cursor: Cursor = None,
-) -> AlertPage:  # fmt: skip
+) -> AlertPage:
     """Alert events (start, update, clear), newest first unless ``order=oldest``."""
     check_order(start, end, "start", "end")
     site_id = site if site == "*" else site_of(context, site).site_id
-    page = context.storage.alerts(AlertQuery(
-        site=None if site_id == "*" else site_id,
-        alert_types=tuple(t.value for t in alert_type or ()),
-        severities=tuple(s.value for s in severity or ()),
-        phases=tuple(phase or ()), start_stamp=start, end_stamp=end, track_id=track_id,
-        episode_id=episode_id, newest_first=order == "newest",
-        limit=page_limit(limit, context, default=100), cursor=cursor,
-    ))  # fmt: skip
+    page = context.storage.alerts(
+        AlertQuery(
+            site=None if site_id == "*" else site_id,
+            alert_types=tuple(t.value for t in alert_type or ()),
+            severities=tuple(s.value for s in severity or ()),
+            phases=tuple(phase or ()),
+            start_stamp=start,
+            end_stamp=end,
+            track_id=track_id,
+            episode_id=episode_id,
+            newest_first=order == "newest",
+            limit=page_limit(limit, context, default=100),
+            cursor=cursor,
+        )
+    )
     for name, value in next_link(request, page.next_cursor).items():
         response.headers[name] = value
-    return AlertPage(site=site_id, count=len(page.items),
-                     next_cursor=page.next_cursor, alerts=page.items)  # fmt: skip
+    return AlertPage(
+        site=site_id, count=len(page.items), next_cursor=page.next_cursor, alerts=page.items
+    )

@@ -19,15 +19,22 @@ def healthz() -> Health:
     return Health(status="ok")
 
 
-@router.get("/readyz", response_model=Readiness, tags=["operations"],
-            responses={503: {"model": Readiness, "description": "Not ready"}})  # fmt: skip
+@router.get(
+    "/readyz",
+    response_model=Readiness,
+    tags=["operations"],
+    responses={503: {"model": Readiness, "description": "Not ready"}},
+)
 def readyz(context: Ctx) -> JSONResponse:
     """Ready to serve: the database answers at the expected schema (and the bus is up)."""
     checks: dict[str, str] = {}
     try:
         version = context.storage.current_schema_version()
-        checks["database"] = ("ok" if version == SCHEMA_VERSION
-                              else f"schema version {version}, expected {SCHEMA_VERSION}")  # fmt: skip
+        checks["database"] = (
+            "ok"
+            if version == SCHEMA_VERSION
+            else f"schema version {version}, expected {SCHEMA_VERSION}"
+        )
     except Exception as exc:  # any failure means not ready; say which
         checks["database"] = f"unreachable: {type(exc).__name__}"
     if context.readiness is not None:

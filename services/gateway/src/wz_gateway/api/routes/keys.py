@@ -28,20 +28,23 @@ def list_keys(
     return context.key_store.all(include_revoked=include_revoked)
 
 
-@router.post("/admin/api-keys", response_model=CreatedApiKey, status_code=201,
-             tags=["admin"])  # fmt: skip
+@router.post("/admin/api-keys", response_model=CreatedApiKey, status_code=201, tags=["admin"])
 def create_key(context: Ctx, principal: Admin, request_body: NewApiKey) -> CreatedApiKey:
     """Make a key. Its secret is in this answer only; the gateway keeps its hash."""
     secret = auth.new_secret()
-    info = context.key_store.add(request_body.scope, secret, name=request_body.name,
-                                 origin="api", now=context.clock())  # fmt: skip
-    log.info("API key %s (%s, %r) made by %s", info.key_id, info.scope, info.name,
-             principal.key_id)  # fmt: skip
+    info = context.key_store.add(
+        request_body.scope, secret, name=request_body.name, origin="api", now=context.clock()
+    )
+    log.info("API key %s (%s, %r) made by %s", info.key_id, info.scope, info.name, principal.key_id)
     return CreatedApiKey(**info.model_dump(), secret=secret)
 
 
-@router.delete("/admin/api-keys/{key_id}", status_code=204, tags=["admin"],
-               responses={404: problem_response("No such live key")})  # fmt: skip
+@router.delete(
+    "/admin/api-keys/{key_id}",
+    status_code=204,
+    tags=["admin"],
+    responses={404: problem_response("No such live key")},
+)
 def revoke_key(
     context: Ctx,
     principal: Admin,
@@ -53,4 +56,3 @@ def revoke_key(
     context.keys.clear()
     log.info("API key %s revoked by %s", key_id, principal.key_id)
     return Response(status_code=204)
-

@@ -40,8 +40,9 @@ router = APIRouter(prefix="/v1", dependencies=[Depends(require_read)], responses
 page_router = APIRouter(include_in_schema=False)
 
 
-async def _event_stream(subscription: Subscription, broadcaster: Broadcaster,
-                        heartbeat_s: float, retry_ms: int) -> AsyncIterator[str]:  # fmt: skip
+async def _event_stream(
+    subscription: Subscription, broadcaster: Broadcaster, heartbeat_s: float, retry_ms: int
+) -> AsyncIterator[str]:
     try:
         yield f"retry: {retry_ms}\n: stream of {', '.join(sorted(subscription.kinds))}\n\n"
         while True:
@@ -56,27 +57,44 @@ async def _event_stream(subscription: Subscription, broadcaster: Broadcaster,
     finally:
         broadcaster.unsubscribe(subscription)
         if subscription.dropped or subscription.decimated:
-            log.info("stream client left: %d events dropped (slow reader), %d track batches "
-                     "decimated", subscription.dropped, subscription.decimated)  # fmt: skip
+            log.info(
+                "stream client left: %d events dropped (slow reader), %d track batches decimated",
+                subscription.dropped,
+                subscription.decimated,
+            )
 
 
 @router.get(
-    "/stream", tags=["tracks"], response_class=StreamingResponse,
+    "/stream",
+    tags=["tracks"],
+    response_class=StreamingResponse,
     responses={
-        200: {"description": "An endless text/event-stream: events `tracks` and `alert`, "
-                             "`: keep-alive` comments in between",
-              "content": {EVENT_STREAM: {"schema": {"type": "string"}}}},
-        503: {**V1_RESPONSES[503], "description": "Database unavailable, or the "
-              "stream has all the clients it takes (`stream_max_clients`): retry later"},
+        200: {
+            "description": "An endless text/event-stream: events `tracks` and `alert`, "
+            "`: keep-alive` comments in between",
+            "content": {EVENT_STREAM: {"schema": {"type": "string"}}},
+        },
+        503: {
+            **V1_RESPONSES[503],
+            "description": "Database unavailable, or the "
+            "stream has all the clients it takes (`stream_max_clients`): retry later",
+        },
     },
-)  # fmt: skip
+)
 async def get_stream(
     context: Ctx,
-    event: Annotated[list[EventKind] | None, Query(description="Events to send (repeat "
-                                                   "for several); default: all")] = None,
-    last_event_id: Annotated[str | None, Header(max_length=64, description="Sent by a "
-                             "reconnecting client: the alerts it missed come first")] = None,
-) -> StreamingResponse:  # fmt: skip
+    event: Annotated[
+        list[EventKind] | None,
+        Query(description="Events to send (repeat for several); default: all"),
+    ] = None,
+    last_event_id: Annotated[
+        str | None,
+        Header(
+            max_length=64,
+            description="Sent by a reconnecting client: the alerts it missed come first",
+        ),
+    ] = None,
+) -> StreamingResponse:
     """Live events as Server-Sent Events: ``tracks`` (the newest track batch, compact, at
     most ``stream_max_hz`` a second) and ``alert`` (each alert as it is stored), each with
     an ``id``; a ``retry`` hint first and a comment every ``stream_heartbeat_s``. A client
@@ -100,9 +118,11 @@ def root() -> RedirectResponse:
 
 @page_router.get("/live")
 def live_page() -> FileResponse:
-    return FileResponse(STATIC_DIR / "live.html", media_type="text/html",
-                        headers={"Content-Security-Policy": PAGE_SECURITY_POLICY,
-                                 "Cache-Control": "no-cache"})  # fmt: skip
+    return FileResponse(
+        STATIC_DIR / "live.html",
+        media_type="text/html",
+        headers={"Content-Security-Policy": PAGE_SECURITY_POLICY, "Cache-Control": "no-cache"},
+    )
 
 
 def static_files() -> StaticFiles:

@@ -11,9 +11,17 @@ from wz_gateway.api.deps import Ctx
 router = APIRouter()
 
 
-@router.get("/metrics", tags=["operations"], response_class=Response,
-            responses={200: {"content": {"text/plain": {"schema": {"type": "string"}}},
-                             "description": "Prometheus text format"}})  # fmt: skip
+@router.get(
+    "/metrics",
+    tags=["operations"],
+    response_class=Response,
+    responses={
+        200: {
+            "content": {"text/plain": {"schema": {"type": "string"}}},
+            "description": "Prometheus text format",
+        }
+    },
+)
 def prometheus(context: Ctx) -> Response:
     """Prometheus metrics: HTTP, ingestion, bus, queue, retention."""
     return Response(generate_latest(context.metrics.registry), media_type=CONTENT_TYPE_LATEST)

@@ -15,8 +15,10 @@ router = APIRouter(prefix="/v1", responses=V1_RESPONSES)
 @router.get("/sites", response_model=list[SiteSummary], tags=["site"])
 def get_sites(context: Ctx, _: Reader) -> list[SiteSummary]:
     """The sites this gateway serves; the first is the default ``site`` of every route."""
-    return [SiteSummary(site_id=site.site_id, name=site.name, default=index == 0)
-            for index, site in enumerate(context.sites)]  # fmt: skip
+    return [
+        SiteSummary(site_id=site.site_id, name=site.name, default=index == 0)
+        for index, site in enumerate(context.sites)
+    ]
 
 
 @router.get("/site", response_model=Site, tags=["site"], responses=SITE_RESPONSES)

@@ -40,14 +40,21 @@ _EXPORT_RESPONSES: dict[int | str, dict[str, Any]] = {
         "content": {
             CSV: {"schema": {"type": "string"}},
             PARQUET: {"schema": {"type": "string", "format": "binary"}},
-            GEOJSON: {"schema": {"type": "object", "required": ["type", "features"],
-                                 "properties": {"type": {"const": "FeatureCollection"},
-                                                "features": {"type": "array"}}}},
+            GEOJSON: {
+                "schema": {
+                    "type": "object",
+                    "required": ["type", "features"],
+                    "properties": {
+                        "type": {"const": "FeatureCollection"},
+                        "features": {"type": "array"},
+                    },
+                }
+            },
         },
         "description": "JSON by default; CSV, GeoJSON or Parquet (the CSV's columns, typed) "
-                       "with `format`",
+        "with `format`",
     }
-}  # fmt: skip
+}
 
 router = APIRouter(prefix="/v1", responses=V1_RESPONSES)
 
@@ -69,10 +76,14 @@ def parse_bbox(text: str) -> tuple[float, float, float, float]:
     return lon_min, lat_min, lon_max, lat_max
 
 
-def _points_response(request: Request, output: OutputFormat, page: Page,
-                     json_body: Callable[[list[TrackPoint]], Any],
-                     geojson: Callable[[list[TrackPoint]], dict[str, Any]],
-                     filename: str) -> Response:  # fmt: skip
+def _points_response(
+    request: Request,
+    output: OutputFormat,
+    page: Page,
+    json_body: Callable[[list[TrackPoint]], Any],
+    geojson: Callable[[list[TrackPoint]], dict[str, Any]],
+    filename: str,
+) -> Response:
     headers = next_link(request, page.next_cursor)
     points: list[TrackPoint] = page.items
     if output == "parquet":
@@ -87,16 +98,18 @@ def _points_response(request: Request, output: OutputFormat, page: Page,
     return JSONResponse(body.model_dump(mode="json"), headers=headers)
 
 
-@router.get("/tracks/live", response_model=LiveTracks, tags=["tracks"],
-            responses=SITE_RESPONSES)  # fmt: skip
+@router.get("/tracks/live", response_model=LiveTracks, tags=["tracks"], responses=SITE_RESPONSES)
 def get_live_tracks(context: Ctx, site: SiteParam, _: Reader) -> LiveTracks:
     """The newest fused tracks (the tracker's last batch), with WGS84 positions."""
     return views.live_tracks(context.storage, site, context.clock())
 
 
-@router.get("/tracks/{track_id}", response_model=Trajectory, tags=["tracks"],
-            responses={**_EXPORT_RESPONSES,
-                       404: problem_response("No such track, or a site not served")})  # fmt: skip
+@router.get(
+    "/tracks/{track_id}",
+    response_model=Trajectory,
+    tags=["tracks"],
+    responses={**_EXPORT_RESPONSES, 404: problem_response("No such track, or a site not served")},
+)
 def get_track(
     request: Request,
     context: Ctx,
@@ -105,34 +118,58 @@ def get_track(
     track_id: Annotated[int, Path(ge=0, le=MAX_ID, description="The tracker's track id")],
     start: Stamp = None,
     end: Stamp = None,
-    smoothed: Annotated[bool, Query(description="The smoothed trajectory (true; stored "
-                                                "when the track ends) or the fused one "
-                                                "(false)")] = False,
+    smoothed: Annotated[
+        bool,
+        Query(
+            description="The smoothed trajectory (true; stored "
+            "when the track ends) or the fused one "
+            "(false)"
+        ),
+    ] = False,
     limit: Limit = None,
     cursor: Cursor = None,
     output: Format = "json",
-) -> Response:  # fmt: skip
+) -> Response:
     """One track's stored trajectory, oldest first, a page at a time."""
     check_order(start, end, "start", "end")
     site_id = site.site_id
-    page = context.storage.points(PointQuery(
-        site=site_id, track_id=track_id, start_stamp=start, end_stamp=end,
-        smoothed=smoothed, limit=page_limit(limit, context), cursor=cursor,
-    ))  # fmt: skip
+    page = context.storage.points(
+        PointQuery(
+            site=site_id,
+            track_id=track_id,
+            start_stamp=start,
+            end_stamp=end,
+            smoothed=smoothed,
+            limit=page_limit(limit, context),
+            cursor=cursor,
+        )
+    )
     if not page.items and cursor is None:
         raise HTTPException(404, f"no stored point of track {track_id} matches")
     return _points_response(
-        request, output, page,
-        lambda points: Trajectory(site=site_id, track_id=track_id, count=len(points),
-                                  next_cursor=page.next_cursor, points=points),
-        lambda points: export.trajectory_geojson(site_id, track_id, points,
-                                                 next_cursor=page.next_cursor),
+        request,
+        output,
+        page,
+        lambda points: Trajectory(
+            site=site_id,
+            track_id=track_id,
+            count=len(points),
+            next_cursor=page.next_cursor,
+            points=points,
+        ),
+        lambda points: export.trajectory_geojson(
+            site_id, track_id, points, next_cursor=page.next_cursor
+        ),
         f"track-{track_id}",
-    )  # fmt: skip
+    )
 
 
-@router.get("/trajectories", response_model=PointPage, tags=["tracks"],
-            responses={**_EXPORT_RESPONSES, **SITE_RESPONSES})  # fmt: skip
+@router.get(
+    "/trajectories",
+    response_model=PointPage,
+    tags=["tracks"],
+    responses={**_EXPORT_RESPONSES, **SITE_RESPONSES},
+)
 def get_trajectories(
     request: Request,
     context: Ctx,
@@ -141,22 +178,27 @@ def get_trajectories(
     start: Stamp = None,
     end: Stamp = None,
     track_id: Annotated[int | None, Query(ge=0, le=MAX_ID)] = None,
-    area: Annotated[AreaKind | None, Query(description="Only points in this work-zone "
-                                                       "area (by station)")] = None,
+    area: Annotated[
+        AreaKind | None, Query(description="Only points in this work-zone area (by station)")
+    ] = None,
     station_min: Station = None,
     station_max: Station = None,
-    bbox: Annotated[str | None, Query(max_length=200, description="minLon,minLat,maxLon,"
-                                      "maxLat [deg]")] = None,
-    lane: Annotated[int | None, Query(ge=-1, le=64, description="Lane index (0: the "
-                                      "rightmost; -1: between lanes)")] = None,
+    bbox: Annotated[
+        str | None, Query(max_length=200, description="minLon,minLat,maxLon,maxLat [deg]")
+    ] = None,
+    lane: Annotated[
+        int | None,
+        Query(ge=-1, le=64, description="Lane index (0: the rightmost; -1: between lanes)"),
+    ] = None,
     min_speed: Speed = None,
     max_speed: Speed = None,
-    smoothed: Annotated[bool, Query(description="Smoothed points (true) or fused ones "
-                                                "(false)")] = False,
+    smoothed: Annotated[
+        bool, Query(description="Smoothed points (true) or fused ones (false)")
+    ] = False,
     limit: Limit = None,
     cursor: Cursor = None,
     output: Format = "json",
-) -> Response:  # fmt: skip
+) -> Response:
     """Stored track points, oldest first, filtered by time window, area, speed and lane."""
     check_order(start, end, "start", "end")
     check_order(station_min, station_max, "station_min", "station_max")
@@ -165,22 +207,37 @@ def get_trajectories(
         zone = next((a for a in site.work_zone if a.kind == area), None)
         if zone is None:
             raise InputError("query.area", f"site {site.site_id} has no {area.value} area")
-        station_min = max(zone.start_station_m, station_min if station_min is not None
-                          else zone.start_station_m)  # fmt: skip
-        station_max = min(zone.end_station_m, station_max if station_max is not None
-                          else zone.end_station_m)  # fmt: skip
+        station_min = max(
+            zone.start_station_m, station_min if station_min is not None else zone.start_station_m
+        )
+        station_max = min(
+            zone.end_station_m, station_max if station_max is not None else zone.end_station_m
+        )
     site_id = site.site_id
-    page = context.storage.points(PointQuery(
-        site=site_id, start_stamp=start, end_stamp=end, track_id=track_id,
-        station_min_m=station_min, station_max_m=station_max,
-        bbox_deg=None if bbox is None else parse_bbox(bbox), lane_index=lane,
-        min_speed_mps=min_speed, max_speed_mps=max_speed, smoothed=smoothed,
-        limit=page_limit(limit, context), cursor=cursor,
-    ))  # fmt: skip
+    page = context.storage.points(
+        PointQuery(
+            site=site_id,
+            start_stamp=start,
+            end_stamp=end,
+            track_id=track_id,
+            station_min_m=station_min,
+            station_max_m=station_max,
+            bbox_deg=None if bbox is None else parse_bbox(bbox),
+            lane_index=lane,
+            min_speed_mps=min_speed,
+            max_speed_mps=max_speed,
+            smoothed=smoothed,
+            limit=page_limit(limit, context),
+            cursor=cursor,
+        )
+    )
     return _points_response(
-        request, output, page,
-        lambda points: PointPage(site=site_id, count=len(points),
-                                 next_cursor=page.next_cursor, points=points),
+        request,
+        output,
+        page,
+        lambda points: PointPage(
+            site=site_id, count=len(points), next_cursor=page.next_cursor, points=points
+        ),
         lambda points: export.points_geojson(points, next_cursor=page.next_cursor),
         "trajectories",
-    )  # fmt: skip
+    )

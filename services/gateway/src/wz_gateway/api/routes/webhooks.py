@@ -39,8 +39,9 @@ from wz_gateway.models import (
 
 log = logging.getLogger(__name__)
 
-SubscriptionId = Annotated[str, Path(pattern=WEBHOOK_ID_PATTERN,
-                                     description="The subscription's id (`wh_...`)")]  # fmt: skip
+SubscriptionId = Annotated[
+    str, Path(pattern=WEBHOOK_ID_PATTERN, description="The subscription's id (`wh_...`)")
+]
 _NOT_FOUND: dict[int | str, dict[str, Any]] = {404: problem_response("No such subscription")}
 
 router = APIRouter(prefix="/v1/webhooks", tags=["webhooks"], responses=V1_RESPONSES)
@@ -59,8 +60,7 @@ def _found(info: Any, subscription_id: str) -> Any:
 
 
 @router.post("", response_model=CreatedWebhook, status_code=201)
-def create_webhook(context: Ctx, store: Webhooks, new: NewWebhook,
-                   caller: Admin) -> CreatedWebhook:  # fmt: skip
+def create_webhook(context: Ctx, store: Webhooks, new: NewWebhook, caller: Admin) -> CreatedWebhook:
     """Subscribe a URL to alert events. Each event is POSTed as JSON
     ``{"type": "alert.<alert_type>", "timestamp": ..., "data": <the alert>}`` signed as
     Standard Webhooks say (headers ``webhook-id``, ``webhook-timestamp``,
@@ -72,16 +72,23 @@ def create_webhook(context: Ctx, store: Webhooks, new: NewWebhook,
         raise _refuse_url(url, str(exc)) from exc
     secret = webhooks.new_secret()
     info = store.create(
-        subscription_id=f"wh_{secrets.token_hex(8)}", url=url, secret=secret,
+        subscription_id=f"wh_{secrets.token_hex(8)}",
+        url=url,
+        secret=secret,
         event_types=new.event_types,
         min_severity=None if new.min_severity is None else new.min_severity.value,
-        phases=None if new.phases is None else list(new.phases), description=new.description,
+        phases=None if new.phases is None else list(new.phases),
+        description=new.description,
         now=context.clock(),
-    )  # fmt: skip
+    )
     # The host only: a URL's path or query may hold the receiver's own token.
-    log.info("webhook %s to %s (%s) made by %s", info.subscription_id,
-             webhooks.parse_destination(url).host, ", ".join(info.event_types),
-             caller.key_id)  # fmt: skip
+    log.info(
+        "webhook %s to %s (%s) made by %s",
+        info.subscription_id,
+        webhooks.parse_destination(url).host,
+        ", ".join(info.event_types),
+        caller.key_id,
+    )
     return CreatedWebhook(**info.model_dump(), secret=secret)
 
 
@@ -92,16 +99,14 @@ def list_webhooks(store: Webhooks, _: Admin) -> list[WebhookInfo]:
 
 
 @router.get("/{subscription_id}", response_model=WebhookInfo, responses=_NOT_FOUND)
-def get_webhook(store: Webhooks, subscription_id: SubscriptionId,
-                _: Admin) -> WebhookInfo:  # fmt: skip
+def get_webhook(store: Webhooks, subscription_id: SubscriptionId, _: Admin) -> WebhookInfo:
     """One subscription (``disabled_at`` is set once its receiver answered 410 Gone)."""
     info: WebhookInfo = _found(store.get(subscription_id), subscription_id)
     return info
 
 
 @router.delete("/{subscription_id}", status_code=204, responses=_NOT_FOUND)
-def delete_webhook(store: Webhooks, subscription_id: SubscriptionId,
-                   caller: Admin) -> Response:  # fmt: skip
+def delete_webhook(store: Webhooks, subscription_id: SubscriptionId, caller: Admin) -> Response:
     """Unsubscribe: nothing more is sent; its undelivered events and its delivery log go."""
     if not store.delete(subscription_id):
         raise HTTPException(404, f"no webhook subscription {subscription_id}")
@@ -109,42 +114,62 @@ def delete_webhook(store: Webhooks, subscription_id: SubscriptionId,
     return Response(status_code=204)
 
 
-@router.post("/{subscription_id}/test", response_model=WebhookTestEvent, status_code=202,
-             responses={**_NOT_FOUND, 409: problem_response("The subscription is disabled")})  # fmt: skip
-def test_webhook(context: Ctx, store: Webhooks, subscription_id: SubscriptionId,
-                 _: Admin) -> WebhookTestEvent:  # fmt: skip
+@router.post(
+    "/{subscription_id}/test",
+    response_model=WebhookTestEvent,
+    status_code=202,
+    responses={**_NOT_FOUND, 409: problem_response("The subscription is disabled")},
+)
+def test_webhook(
+    context: Ctx, store: Webhooks, subscription_id: SubscriptionId, _: Admin
+) -> WebhookTestEvent:
     """Queue a ``webhook.test`` event for this subscription (whatever its filters); it is
     delivered, retried and logged as alerts are."""
     info = _found(store.get(subscription_id), subscription_id)
     if info.disabled_at is not None:
-        raise HTTPException(409, f"webhook subscription {subscription_id} is disabled "
-                            f"({info.disabled_reason}); delete it and subscribe again")  # fmt: skip
-    event = webhooks.make_test_event(context.site.site_id, subscription_id, context.clock(),
-                                     secrets.token_hex(12))  # fmt: skip
+        raise HTTPException(
+            409,
+            f"webhook subscription {subscription_id} is disabled "
+            f"({info.disabled_reason}); delete it and subscribe again",
+        )
+    event = webhooks.make_test_event(
+        context.site.site_id, subscription_id, context.clock(), secrets.token_hex(12)
+    )
     if not store.enqueue(subscription_id, event, context.clock()):
         raise HTTPException(404, f"no webhook subscription {subscription_id}")
-    return WebhookTestEvent(subscription_id=subscription_id, event_id=event.event_id,
-                            event_type=event.event_type)  # fmt: skip
+    return WebhookTestEvent(
+        subscription_id=subscription_id, event_id=event.event_id, event_type=event.event_type
+    )
 
 
-@router.post("/{subscription_id}/rotate-secret", response_model=WebhookSecret,
-             responses=_NOT_FOUND)  # fmt: skip
-def rotate_secret(context: Ctx, store: Webhooks, subscription_id: SubscriptionId,
-                  caller: Admin) -> WebhookSecret:  # fmt: skip
+@router.post("/{subscription_id}/rotate-secret", response_model=WebhookSecret, responses=_NOT_FOUND)
+def rotate_secret(
+    context: Ctx, store: Webhooks, subscription_id: SubscriptionId, caller: Admin
+) -> WebhookSecret:
     """A new signing secret, shown this once. Until ``previous_secret_until``
     (``webhook_secret_grace_s`` from now) every event carries two signatures, one per
     secret, so the receiver can switch when it likes."""
     secret = webhooks.new_secret()
-    info = _found(store.rotate_secret(
-        subscription_id, secret, now=context.clock(),
-        grace_s=context.settings.webhook_secret_grace_s), subscription_id)  # fmt: skip
+    info = _found(
+        store.rotate_secret(
+            subscription_id,
+            secret,
+            now=context.clock(),
+            grace_s=context.settings.webhook_secret_grace_s,
+        ),
+        subscription_id,
+    )
     log.info("webhook %s secret rotated by %s", subscription_id, caller.key_id)
-    return WebhookSecret(subscription_id=subscription_id, secret=secret,
-                         previous_secret_until=info.previous_secret_until)  # fmt: skip
+    return WebhookSecret(
+        subscription_id=subscription_id,
+        secret=secret,
+        previous_secret_until=info.previous_secret_until,
+    )
 
 
-@router.get("/{subscription_id}/events", response_model=list[WebhookEventInfo],
-            responses=_NOT_FOUND)  # fmt: skip
+@router.get(
+    "/{subscription_id}/events", response_model=list[WebhookEventInfo], responses=_NOT_FOUND
+)
 def list_events(
     store: Webhooks,
     subscription_id: SubscriptionId,

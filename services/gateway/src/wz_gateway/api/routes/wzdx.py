@@ -15,27 +15,44 @@ from wz_gateway.api.errors import V1_RESPONSES
 router = APIRouter(prefix="/v1", responses=V1_RESPONSES)
 
 
-@router.get("/wzdx/device-feed", tags=["wzdx"],
-            responses={200: {"description": "A WZDx 4.2 DeviceFeed (GeoJSON)",
-                             "content": {"application/json": {"schema": {
-                                 "type": "object",
-                                 "required": ["feed_info", "type", "features"]}}}},
-                        **SITE_RESPONSES})  # fmt: skip
+@router.get(
+    "/wzdx/device-feed",
+    tags=["wzdx"],
+    responses={
+        200: {
+            "description": "A WZDx 4.2 DeviceFeed (GeoJSON)",
+            "content": {
+                "application/json": {
+                    "schema": {"type": "object", "required": ["feed_info", "type", "features"]}
+                }
+            },
+        },
+        **SITE_RESPONSES,
+    },
+)
 def get_device_feed(
     context: Ctx,
     _: Reader,
-    site: Annotated[str | None, Query(pattern=SITE_PATTERN, description="Only this site's "
-                                      "devices (default: every site's)")] = None,
-) -> JSONResponse:  # fmt: skip
+    site: Annotated[
+        str | None,
+        Query(pattern=SITE_PATTERN, description="Only this site's devices (default: every site's)"),
+    ] = None,
+) -> JSONResponse:
     """The WZDx 4.2 DeviceFeed: traffic sensor (per-lane volumes, speeds, occupancy over the
     newest collection interval), cameras, flashing beacon and message sign, with status."""
     settings = context.settings
     served = [site_of(context, site)] if site is not None else list(context.sites)
-    feeds = [views.device_feed_of(
-        context.storage, one, now=context.clock(), publisher=settings.publisher,
-        stale_after_s=settings.stale_after_s, traffic_interval_s=settings.traffic_interval_s,
-        detector_station_override_m=settings.traffic_detector_station_m,
-        contact_email=settings.contact_email,
-    ) for one in served]  # fmt: skip
+    feeds = [
+        views.device_feed_of(
+            context.storage,
+            one,
+            now=context.clock(),
+            publisher=settings.publisher,
+            stale_after_s=settings.stale_after_s,
+            traffic_interval_s=settings.traffic_interval_s,
+            detector_station_override_m=settings.traffic_detector_station_m,
+            contact_email=settings.contact_email,
+        )
+        for one in served
+    ]
     return JSONResponse(views.merge_device_feeds(feeds))
-
