@@ -16,7 +16,7 @@ from types import ModuleType
 import numpy as np
 import pytest
 
-from tests.purity import top_level_imports
+from tests.purity import imported_modules, top_level_imports
 from wz_fusion_tracker import association, identity, track_table, types
 from wz_fusion_tracker import tracker as tracker_module
 from wz_fusion_tracker.association import (
@@ -131,9 +131,11 @@ def ids_by_vehicle(
     "module", [tracker_module, association, identity, track_table, types], ids=lambda m: m.__name__
 )
 def test_core_imports_no_io_library(module: ModuleType) -> None:
-    assert top_level_imports(module).isdisjoint(
-        {"zenoh", "fastapi", "uvicorn", "requests", "io", "wz_shared"}
-    )
+    """No I/O library, and of the shared library only its pure array types and motion model
+    (never the bus, the service runtime or the codecs)."""
+    assert top_level_imports(module).isdisjoint({"zenoh", "fastapi", "uvicorn", "requests", "io"})
+    shared = {name for name in imported_modules(module) if name.split(".")[0] == "wz_shared"}
+    assert shared <= {"wz_shared.arrays", "wz_shared.motion"}
 
 
 def test_settings_refuse_coasting_after_deletion() -> None:
