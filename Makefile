@@ -12,8 +12,9 @@ TYPED := shared/src services/simulator/src services/lidar_detector/src \
 	services/alert_service/src services/gateway/src services/drivers/src
 
 # `make pytest` fails when the tests cover less of the packages than this (per cent of lines;
-# the packages are [tool.coverage.run]'s in pyproject.toml).
-COV_FLOOR ?= 0
+# the packages are [tool.coverage.run]'s in pyproject.toml). Measured 86 % on 2026-11-26 (lines
+# run in the pytest process; the services' own processes are not counted); raise it as it grows.
+COV_FLOOR ?= 84
 
 .PHONY: bootstrap demo test lint typecheck pytest bench clean
 

@@ -63,7 +63,7 @@ def test_lint_checks_format_as_the_hooks_do() -> None:
 
 def test_pytest_measures_coverage_against_the_floor() -> None:
     floor = makefile_variable("COV_FLOOR")
-    assert len(floor) == 1 and 0 <= float(floor[0]) <= 100
+    assert len(floor) == 1 and 80 <= float(floor[0]) <= 100  # measured 86 %
     (command,) = makefile_recipe("pytest")
     assert "--cov" in shlex.split(command)
     assert "--cov-fail-under=$(COV_FLOOR)" in shlex.split(command)
