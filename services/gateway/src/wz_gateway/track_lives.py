@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from sqlalchemy import Engine, func, insert, select, update
+from sqlalchemy import Connection, Engine, func, insert, select, update
 
 from wz_gateway.smoothing import StoredTrajectory
 from wz_gateway.tables import track_points, tracks
@@ -50,17 +50,7 @@ class TrackLifeStore:
         """Record lives that start (before their first points are written); sets ``life_id``."""
         with self.engine.begin() as connection:
             for life in lives:
-                life.life_id = connection.execute(
-                    insert(tracks)
-                    .values(
-                        site=site,
-                        track_id=life.track_id,
-                        first_stamp=life.first_stamp,
-                        first_received_at=life.first_received_at,
-                        **_noise_columns(life.process_noise),
-                    )
-                    .returning(tracks.c.id)
-                ).scalar_one()
+                life.life_id = _insert_life(connection, site, life)
 
     def unfinished(self, site: str) -> list[TrackLife]:
         """Lives recorded and not yet ended (a gateway stopped meanwhile), oldest first, each
@@ -187,18 +177,7 @@ class TrackLifeStore:
         }
         with self.engine.begin() as connection:
             if life.life_id is None:  # its start could not be recorded: recorded now, ended
-                life.life_id = connection.execute(
-                    insert(tracks)
-                    .values(
-                        site=site,
-                        track_id=life.track_id,
-                        first_stamp=life.first_stamp,
-                        first_received_at=life.first_received_at,
-                        **done,
-                        **_noise_columns(life.process_noise),
-                    )
-                    .returning(t.id)
-                ).scalar_one()
+                life.life_id = _insert_life(connection, site, life, **done)
             else:
                 claimed = connection.execute(
                     update(tracks).where(t.id == life.life_id, t.ended_at.is_(None)).values(**done)
@@ -208,6 +187,20 @@ class TrackLifeStore:
             if smoothed is not None and len(smoothed):
                 connection.execute(insert(track_points), _smoothed_rows(site, smoothed))
         return True
+
+
+def _insert_life(connection: Connection, site: str, life: TrackLife, **ended: float) -> int:
+    """A ``tracks`` row for ``life`` (its start, its process noise, and ``ended`` columns when
+    it is recorded already ended); the row's id."""
+    row = insert(tracks).values(
+        site=site,
+        track_id=life.track_id,
+        first_stamp=life.first_stamp,
+        first_received_at=life.first_received_at,
+        **ended,
+        **_noise_columns(life.process_noise),
+    )
+    return int(connection.execute(row.returning(tracks.c.id)).scalar_one())
 
 
 def _noise_columns(noise: ProcessNoise | None) -> dict[str, float | None]:
