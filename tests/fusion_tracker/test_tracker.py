@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from tests.purity import imported_modules, top_level_imports
-from wz_fusion_tracker import association, identity, track_table, types
+from wz_fusion_tracker import association, identity, life_cycle, track_table, types
 from wz_fusion_tracker import tracker as tracker_module
 from wz_fusion_tracker.association import (
     association_cost,
@@ -128,7 +128,9 @@ def ids_by_vehicle(
 
 
 @pytest.mark.parametrize(
-    "module", [tracker_module, association, identity, track_table, types], ids=lambda m: m.__name__
+    "module",
+    [tracker_module, association, identity, life_cycle, track_table, types],
+    ids=lambda m: m.__name__,
 )
 def test_core_imports_no_io_library(module: ModuleType) -> None:
     """No I/O library, and of the shared library only its pure array types and motion model

@@ -77,7 +77,6 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-import numpy.typing as npt
 
 from wz_fusion_tracker.association import (
     association_cost,
@@ -95,6 +94,7 @@ from wz_fusion_tracker.identity import (
 )
 from wz_fusion_tracker.imm import IMMStateBank
 from wz_fusion_tracker.kalman import STATE_DIM, TrackStateBank
+from wz_fusion_tracker.life_cycle import check_confirmation, expired, prune, start_track
 from wz_fusion_tracker.settings import TrackerSettings
 from wz_fusion_tracker.track_table import Track, TrackStore, UpdateRecord
 from wz_fusion_tracker.types import (
@@ -305,7 +305,7 @@ class MultiTargetTracker:
         processed = self._release(horizon_s)
         if self._last_processed_s is None or horizon_s > self._last_processed_s:
             self._last_processed_s = horizon_s
-            self._prune(horizon_s)
+            prune(self._store, self.settings, horizon_s, self._last_batch_s)
         return processed
 
     def _release(self, horizon_s: float) -> int:
@@ -370,7 +370,7 @@ class MultiTargetTracker:
         reference_s = stamp_s if stamp_s is not None else self._last_processed_s
         live, slots = self._store.live()
         if reference_s is not None and live:
-            kept = ~self._expired(slots, reference_s)
+            kept = ~expired(self._store, self.settings, slots, reference_s, self._last_batch_s)
             if not kept.all():
                 live = [t for t, k in zip(live, kept.tolist(), strict=True) if k]
                 slots = slots[kept]
@@ -458,7 +458,7 @@ class MultiTargetTracker:
         tracks that missed updates with measurements left near them; spawn tentative tracks
         from the measurements still left; then hand-over and duplicate merging.
         """
-        self._prune(stamp_s)
+        prune(self._store, self.settings, stamp_s, self._last_batch_s)
         self._last_processed_s = stamp_s
         self._store.counters.batches_processed += 1
         self._last_batch_s[sensor_id] = stamp_s
@@ -620,7 +620,19 @@ class MultiTargetTracker:
             self._store.counters.measurements_unlocated += int(np.count_nonzero(~located))
             candidates = candidates[located]
         for column in candidates.tolist():
-            self._spawn(batch.measurements[column], R[column], batch.sensor_id, batch.stamp_s)
+            measurement = batch.measurements[column]
+            heading = self._road_heading(measurement.x_m, measurement.y_m)
+            start_track(
+                self._store,
+                settings,
+                self._next_id,
+                measurement,
+                R[column],
+                batch.sensor_id,
+                batch.stamp_s,
+                heading,
+            )
+            self._next_id += 1
 
     def _identity(self, stamp_s: float) -> None:
         """Every ``IDENTITY_PERIOD_S`` of data time: the hand-over (a vehicle come back gets its
@@ -810,145 +822,10 @@ class MultiTargetTracker:
         for i in np.flatnonzero(~table.confirmed[matched_slots]).tolist():
             # a confirmed track has no hits left to count
             tracks[i].hit_stamps_s.append(stamp_s)
-            self._check_confirmation(tracks[i], stamp_s)
+            check_confirmation(self._store, self.settings, tracks[i], stamp_s)
 
     def _road_heading(self, x_m: float, y_m: float) -> float | None:
         if self._heading_at is None:
             return None
         heading = float(self._heading_at(x_m, y_m))
         return heading if math.isfinite(heading) else None
-
-    def _spawn(self, measurement: Measurement, R: F64, sensor_id: str, stamp_s: float) -> None:
-        """Start a tentative track: ``x = [z, v0]``, ``P = blockdiag(R, P_v)``.
-
-        Without a road heading: ``v0 = 0``, ``P_v = sigma_v^2 I``. With one, ``h``:
-        ``v0 = s (cos h, sin h)`` with ``s`` the radar speed (std ``speed_std_mps``) or
-        ``initial_speed_mps`` (std ``initial_velocity_std_mps``), and
-        ``P_v = Rot(h) diag(std_s^2, sigma_across_v^2) Rot(h)^T``.
-        """
-        settings = self.settings
-        x = np.array([measurement.x_m, measurement.y_m, 0.0, 0.0])
-        P = np.zeros((STATE_DIM, STATE_DIM))
-        P[:2, :2] = R
-        heading = self._road_heading(measurement.x_m, measurement.y_m)
-        if heading is None:
-            P[2, 2] = P[3, 3] = settings.initial_velocity_std_mps**2
-        else:
-            if settings.use_speed_measurements and measurement.speed_mps is not None:
-                speed, speed_std = measurement.speed_mps, settings.speed_std_mps
-            else:
-                speed, speed_std = settings.initial_speed_mps, settings.initial_velocity_std_mps
-            along = np.array([math.cos(heading), math.sin(heading)])
-            across = np.array([-along[1], along[0]])
-            x[2:] = speed * along
-            P[2:, 2:] = speed_std**2 * np.outer(along, along) + (
-                settings.initial_across_velocity_std_mps**2
-            ) * np.outer(across, across)
-        delta = measurement.time_offset_s
-        if delta:
-            # captured delta after the stamp: start where it was at the stamp, p = z - delta v0
-            x[:2] -= delta * x[2:]
-            P[:2, :2] += delta**2 * P[2:, 2:]
-            P[:2, 2:] = -delta * P[2:, 2:]
-            P[2:, :2] = P[:2, 2:].T
-        track = Track(
-            track_id=self._next_id,
-            slot=self._store.bank.add(x, P, stamp_s),
-            max_history=settings.max_history,
-        )
-        table = self._store.table
-        table.reset(track.slot, stamp_s, heading)
-        self._next_id += 1
-        self._store.tracks[track.track_id] = track
-        self._store.changed()
-        self._store.counters.tracks_started += 1
-        length, width = measurement.length_m, measurement.width_m
-        table.record_hits(
-            np.array([track.slot]),
-            stamp_s,
-            table.sensor_column(sensor_id),
-            np.array([table.class_column(measurement.object_class)]),
-            np.array([measurement.score], dtype=np.float64),
-            np.array([math.nan if length is None else length], dtype=np.float64),
-            np.array([math.nan if width is None else width], dtype=np.float64),
-        )
-        track.hit_stamps_s.append(stamp_s)
-        track.history.append(((stamp_s, x[None], P[None], x[None], P[None]), 0))
-        if measurement.local_track_id is not None:
-            self._store.local_ids[(sensor_id, measurement.local_track_id)] = track.track_id
-        self._check_confirmation(track, stamp_s)
-
-    def _check_confirmation(self, track: Track, stamp_s: float) -> None:
-        """Confirm a tentative track with ``confirm_hits`` hits within ``confirm_window_s``,
-        ``confirm_min_age_s`` after its first; its hit stamps (the latest appended)."""
-        window_start_s = stamp_s - self.settings.confirm_window_s
-        while track.hit_stamps_s and track.hit_stamps_s[0] < window_start_s:
-            track.hit_stamps_s.popleft()
-        table = self._store.table
-        if (
-            not table.confirmed[track.slot]
-            and len(track.hit_stamps_s) >= self.settings.confirm_hits
-            and stamp_s - table.born_s[track.slot] >= self.settings.confirm_min_age_s
-        ):
-            table.confirmed[track.slot] = True
-            table.confirmed_s[track.slot] = stamp_s
-            track.hit_stamps_s.clear()  # only needed until confirmation
-            self._store.counters.tracks_confirmed += 1
-
-    def _expired(self, slots: IntP, stamp_s: float) -> npt.NDArray[np.bool_]:
-        """Which tracks of ``slots`` are to be deleted at ``stamp_s``, shape (K,).
-
-        A tentative track not updated for ``tentative_max_age_s``, a confirmed one for
-        ``max_coast_s``; but a confirmed track one of whose sensors has gone silent (an outage,
-        not a vehicle gone: no batch from it for ``sensor_silent_after_s``) coasts up to
-        ``max_outage_coast_s``, so it keeps its id when the sensor comes back. Any, not all:
-        a vehicle passing under the mast during a LiDAR outage also leaves the camera's view,
-        and the camera still sending frames does not mean it could see the vehicle."""
-        settings, table = self.settings, self._store.table
-        updated_s = table.updated_s[slots]
-        age_s = stamp_s - updated_s
-        confirmed = table.confirmed[slots]
-        expired = np.where(
-            confirmed, age_s > settings.max_coast_s, age_s > settings.tentative_max_age_s
-        )
-        outage = np.flatnonzero(expired & confirmed & (age_s <= settings.max_outage_coast_s))
-        if len(outage):
-            # the sensors that saw it shortly before its last update, and the silent ones
-            seen = table.sensor_updated_s[slots[outage]]
-            recent = seen >= (updated_s[outage] - settings.max_coast_s)[:, None]
-            last_batch_s = np.array(
-                [self._last_batch_s.get(sensor, -math.inf) for sensor in table.sensor_ids]
-            )
-            silent = last_batch_s < stamp_s - settings.sensor_silent_after_s
-            expired[outage] = ~(recent & silent[None, :]).any(axis=1)
-        return expired
-
-    def _prune(self, stamp_s: float) -> None:
-        live, slots = self._store.live()
-        if not live:
-            expired: list[Track] = []
-        else:
-            expired_rows = np.flatnonzero(self._expired(slots, stamp_s)).tolist()
-            expired = [live[i] for i in expired_rows]
-        memory_s = self.settings.lost_memory_s
-        confirmed = self._store.table.confirmed
-        for track in expired:
-            del self._store.tracks[track.track_id]
-            self._store.changed()
-            self._store.counters.tracks_deleted += 1
-            if confirmed[track.slot] and memory_s > 0.0:
-                track.lost_s = stamp_s  # its slot stays, for the hand-over's prediction
-                self._store.lost[track.track_id] = track
-                continue
-            self._store.bank.remove(track.slot)
-            if confirmed[track.slot]:
-                self._store.finished.append(track.to_history())
-        if self._store.lost:
-            for track in [t for t in self._store.lost.values() if stamp_s - t.lost_s > memory_s]:
-                del self._store.lost[track.track_id]
-                self._store.bank.remove(track.slot)
-                self._store.finished.append(track.to_history())
-        if expired:
-            gone = {t.track_id for t in expired}
-            local_ids = self._store.local_ids
-            self._store.local_ids = {k: v for k, v in local_ids.items() if v not in gone}

@@ -1,0 +1,178 @@
+"""A track's life cycle: started from a measurement no track took, confirmed after enough hits,
+deleted when it stops being updated (or kept coasting through a sensor's outage), kept as lost
+for a while for the hand-over, then ended. Functions on the :class:`TrackStore`, called by
+:class:`~wz_fusion_tracker.tracker.MultiTargetTracker`'s cycle (spawn and prune steps)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+from wz_fusion_tracker.kalman import STATE_DIM
+from wz_fusion_tracker.settings import TrackerSettings
+from wz_fusion_tracker.track_table import Track, TrackStore
+from wz_fusion_tracker.types import Measurement
+from wz_shared.arrays import F64, Bool, IntP
+
+
+def start_track(
+    store: TrackStore,
+    settings: TrackerSettings,
+    track_id: int,
+    measurement: Measurement,
+    R: F64,
+    sensor_id: str,
+    stamp_s: float,
+    heading: float | None,
+) -> Track:
+    """Start tentative track ``track_id``: ``x = [z, v0]``, ``P = blockdiag(R, P_v)``.
+
+    Without a road heading: ``v0 = 0``, ``P_v = sigma_v^2 I``. With one, ``h``:
+    ``v0 = s (cos h, sin h)`` with ``s`` the radar speed (std ``speed_std_mps``) or
+    ``initial_speed_mps`` (std ``initial_velocity_std_mps``), and
+    ``P_v = Rot(h) diag(std_s^2, sigma_across_v^2) Rot(h)^T``, ``h`` the road's heading at the
+    measurement (None: no road there).
+    """
+    x = np.array([measurement.x_m, measurement.y_m, 0.0, 0.0])
+    P = np.zeros((STATE_DIM, STATE_DIM))
+    P[:2, :2] = R
+    if heading is None:
+        P[2, 2] = P[3, 3] = settings.initial_velocity_std_mps**2
+    else:
+        if settings.use_speed_measurements and measurement.speed_mps is not None:
+            speed, speed_std = measurement.speed_mps, settings.speed_std_mps
+        else:
+            speed, speed_std = settings.initial_speed_mps, settings.initial_velocity_std_mps
+        along = np.array([math.cos(heading), math.sin(heading)])
+        across = np.array([-along[1], along[0]])
+        x[2:] = speed * along
+        P[2:, 2:] = speed_std**2 * np.outer(along, along) + (
+            settings.initial_across_velocity_std_mps**2
+        ) * np.outer(across, across)
+    delta = measurement.time_offset_s
+    if delta:
+        # captured delta after the stamp: start where it was at the stamp, p = z - delta v0
+        x[:2] -= delta * x[2:]
+        P[:2, :2] += delta**2 * P[2:, 2:]
+        P[:2, 2:] = -delta * P[2:, 2:]
+        P[2:, :2] = P[:2, 2:].T
+    track = Track(
+        track_id=track_id,
+        slot=store.bank.add(x, P, stamp_s),
+        max_history=settings.max_history,
+    )
+    table = store.table
+    table.reset(track.slot, stamp_s, heading)
+    store.tracks[track.track_id] = track
+    store.changed()
+    store.counters.tracks_started += 1
+    length, width = measurement.length_m, measurement.width_m
+    table.record_hits(
+        np.array([track.slot]),
+        stamp_s,
+        table.sensor_column(sensor_id),
+        np.array([table.class_column(measurement.object_class)]),
+        np.array([measurement.score], dtype=np.float64),
+        np.array([math.nan if length is None else length], dtype=np.float64),
+        np.array([math.nan if width is None else width], dtype=np.float64),
+    )
+    track.hit_stamps_s.append(stamp_s)
+    track.history.append(((stamp_s, x[None], P[None], x[None], P[None]), 0))
+    if measurement.local_track_id is not None:
+        store.local_ids[(sensor_id, measurement.local_track_id)] = track.track_id
+    check_confirmation(store, settings, track, stamp_s)
+    return track
+
+
+def check_confirmation(
+    store: TrackStore, settings: TrackerSettings, track: Track, stamp_s: float
+) -> None:
+    """Confirm a tentative track with ``confirm_hits`` hits within ``confirm_window_s``,
+    ``confirm_min_age_s`` after its first; its hit stamps (the latest appended)."""
+    window_start_s = stamp_s - settings.confirm_window_s
+    while track.hit_stamps_s and track.hit_stamps_s[0] < window_start_s:
+        track.hit_stamps_s.popleft()
+    table = store.table
+    if (
+        not table.confirmed[track.slot]
+        and len(track.hit_stamps_s) >= settings.confirm_hits
+        and stamp_s - table.born_s[track.slot] >= settings.confirm_min_age_s
+    ):
+        table.confirmed[track.slot] = True
+        table.confirmed_s[track.slot] = stamp_s
+        track.hit_stamps_s.clear()  # only needed until confirmation
+        store.counters.tracks_confirmed += 1
+
+
+def expired(
+    store: TrackStore,
+    settings: TrackerSettings,
+    slots: IntP,
+    stamp_s: float,
+    last_batch_s: Mapping[str, float],
+) -> Bool:
+    """Which tracks of ``slots`` are to be deleted at ``stamp_s``, shape (K,).
+
+    A tentative track not updated for ``tentative_max_age_s``, a confirmed one for
+    ``max_coast_s``; but a confirmed track one of whose sensors has gone silent (an outage,
+    not a vehicle gone: no batch from it for ``sensor_silent_after_s``) coasts up to
+    ``max_outage_coast_s``, so it keeps its id when the sensor comes back. Any, not all:
+    a vehicle passing under the mast during a LiDAR outage also leaves the camera's view,
+    and the camera still sending frames does not mean it could see the vehicle.
+    ``last_batch_s``: the newest batch stamp processed per sensor."""
+    table = store.table
+    updated_s = table.updated_s[slots]
+    age_s = stamp_s - updated_s
+    confirmed = table.confirmed[slots]
+    deleted: Bool = np.where(
+        confirmed, age_s > settings.max_coast_s, age_s > settings.tentative_max_age_s
+    )
+    outage = np.flatnonzero(deleted & confirmed & (age_s <= settings.max_outage_coast_s))
+    if len(outage):
+        # the sensors that saw it shortly before its last update, and the silent ones
+        seen = table.sensor_updated_s[slots[outage]]
+        recent = seen >= (updated_s[outage] - settings.max_coast_s)[:, None]
+        newest_s = np.array([last_batch_s.get(sensor, -math.inf) for sensor in table.sensor_ids])
+        silent = newest_s < stamp_s - settings.sensor_silent_after_s
+        deleted[outage] = ~(recent & silent[None, :]).any(axis=1)
+    return deleted
+
+
+def prune(
+    store: TrackStore, settings: TrackerSettings, stamp_s: float, last_batch_s: Mapping[str, float]
+) -> None:
+    """Delete the tracks expired at ``stamp_s`` (:func:`expired`): a confirmed one is kept as
+    lost for ``lost_memory_s`` (its slot too, for the hand-over), then ends and its history is
+    handed out; the sensors' local ids that pointed at a deleted track are forgotten."""
+    live, slots = store.live()
+    if not live:
+        gone_tracks: list[Track] = []
+    else:
+        expired_rows = np.flatnonzero(
+            expired(store, settings, slots, stamp_s, last_batch_s)
+        ).tolist()
+        gone_tracks = [live[i] for i in expired_rows]
+    memory_s = settings.lost_memory_s
+    confirmed = store.table.confirmed
+    for track in gone_tracks:
+        del store.tracks[track.track_id]
+        store.changed()
+        store.counters.tracks_deleted += 1
+        if confirmed[track.slot] and memory_s > 0.0:
+            track.lost_s = stamp_s  # its slot stays, for the hand-over's prediction
+            store.lost[track.track_id] = track
+            continue
+        store.bank.remove(track.slot)
+        if confirmed[track.slot]:
+            store.finished.append(track.to_history())
+    if store.lost:
+        for track in [t for t in store.lost.values() if stamp_s - t.lost_s > memory_s]:
+            del store.lost[track.track_id]
+            store.bank.remove(track.slot)
+            store.finished.append(track.to_history())
+    if gone_tracks:
+        gone = {t.track_id for t in gone_tracks}
+        local_ids = store.local_ids
+        store.local_ids = {k: v for k, v in local_ids.items() if v not in gone}
