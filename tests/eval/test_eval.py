@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from wz_eval.fusion import SOURCES, Dropout
+from wz_eval.fusion import SOURCES, Dropout, EvalOptions, pipeline_options
 from wz_fusion_tracker.calibration import load_bias_map
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -62,6 +62,12 @@ def test_wz_eval_writes_the_report_json_markdown_and_plots(tmp_path: Path) -> No
     for axis in ("rmse_longitudinal_m", "rmse_lateral_m", "rmse_speed_mps"):
         assert set(report[axis]) == set(SOURCES)
     assert report["vehicles"] >= 5
+    assert report["conditions"] == {
+        "weather": "day",
+        "vehicles_per_hour": 1400.0,
+        "truck_share": 0.15,
+        "aggressive_share": 0.2,
+    }
     assert 0.0 < report["mota"] <= 1.0 and 0.0 < report["idf1"] <= 1.0
     assert report["id_switches"] >= 0
     fused = report["sources"]["fused"]
@@ -111,6 +117,7 @@ def test_wz_eval_writes_the_report_json_markdown_and_plots(tmp_path: Path) -> No
     markdown = (out / "eval.md").read_text()
     assert "MOTA" in markdown and "| fused |" in markdown and "hidden ones included" in markdown
     assert "Issue 6's targets on this run" in markdown
+    assert "Weather day, 1400 vehicles/h, 15 % trucks, 20 % aggressive." in markdown
     assert all((out / name).stat().st_size > 10_000 for name in report.get("plots", []))
     assert "simulating" in result.stderr  # the progress lines
 
@@ -121,6 +128,45 @@ def test_wz_eval_refuses_a_bad_bias_map_before_it_simulates(tmp_path: Path) -> N
     result = wz("eval", "--bias-map", str(bad), "--out", str(tmp_path / "eval"))
     assert result.returncode == 2
     assert "for site 'elsewhere'" in result.stderr and "simulating" not in result.stderr
+
+
+@pytest.mark.parametrize(
+    ("arguments", "said"),
+    [
+        (["--duration-s", "-5"], "argument --duration-s: -5 is not above 0"),
+        (["--duration-s", "nan"], "argument --duration-s: 'nan' is not a finite number"),
+        (["--warmup-s", "-1"], "argument --warmup-s: -1 is below 0"),
+        (["--max-range-m", "0"], "argument --max-range-m: 0 is not above 0"),
+        (["--vehicles-per-hour", "lots"], "argument --vehicles-per-hour: 'lots' is not a number"),
+        (["--truck-share", "1.5"], "argument --truck-share: 1.5 is not a share from 0 to 1"),
+        (["--aggressive-share", "-0.1"], "-0.1 is not a share from 0 to 1"),
+        (["--weather", "snow"], "argument --weather: invalid choice: 'snow'"),
+        (["--site", "/nonexistent/site.yaml"], "cannot read site file /nonexistent/site.yaml"),
+    ],
+)
+def test_wz_eval_refuses_bad_arguments_before_it_simulates(
+    tmp_path: Path, arguments: list[str], said: str
+) -> None:
+    result = wz("eval", *arguments, "--out", str(tmp_path / "eval"))
+    assert result.returncode == 2
+    assert said in result.stderr and "Traceback" not in result.stderr
+    assert "simulating" not in result.stderr and not (tmp_path / "eval").exists()
+
+
+def test_the_conditions_asked_for_are_the_ones_simulated() -> None:
+    options = EvalOptions(
+        seed=5,
+        duration_s=30.0,
+        warmup_s=10.0,
+        vehicles_per_hour=1800.0,
+        weather="fog",
+        truck_share=0.3,
+        aggressive_share=0.1,
+    )
+    simulated = pipeline_options(options)
+    assert (simulated.seed, simulated.duration_s, simulated.warmup_s) == (5, 30.0, 10.0)
+    assert (simulated.weather, simulated.vehicles_per_hour) == ("fog", 1800.0)
+    assert (simulated.truck_share, simulated.aggressive_share) == (0.3, 0.1)
 
 
 def test_dropout_parsing() -> None:

@@ -114,7 +114,8 @@ from wz_shared.arrays import F64
 from wz_shared.logs import configure_logging
 from wz_shared.messages import DetectionBatch, TrackBatch, VehicleTruth
 from wz_shared.motion import rts_smooth
-from wz_shared.site import Site, load_site
+from wz_shared.site import Site, SiteFileError, load_site
+from wz_simulator.sensors.scene import WEATHER_PRESETS
 from wz_simulator.settings import SimulatorSettings
 
 log = logging.getLogger("wz_eval.fusion")
@@ -163,12 +164,30 @@ class EvalOptions:
     window_upstream_m: tuple[float, float] = (40.0, 100.0)
     dropouts: tuple[Dropout, ...] = ()
     camera_model: Path | None = None
+    #: Traffic and weather of the simulated run (:class:`~wz_eval.pipeline.PipelineOptions`).
     vehicles_per_hour: float = 1400.0
+    weather: str = "day"
+    truck_share: float = 0.15
+    aggressive_share: float = 0.2
     tracker: TrackerSettings = field(default_factory=TrackerSettings)
     paper: PaperFusionSettings = field(default_factory=PaperFusionSettings)
     #: Each sensor's lateral bias, removed from its detections before the tracker takes them
     #: (as the fusion node does with ``WZ_FUSION_BIAS_MAP``); None: none removed.
     bias_map: BiasMap | None = None
+
+
+def pipeline_options(options: EvalOptions) -> PipelineOptions:
+    """What to simulate for an evaluation: its seed, length, traffic, weather and camera model."""
+    return PipelineOptions(
+        seed=options.seed,
+        duration_s=options.duration_s,
+        warmup_s=options.warmup_s,
+        weather=options.weather,
+        vehicles_per_hour=options.vehicles_per_hour,
+        truck_share=options.truck_share,
+        aggressive_share=options.aggressive_share,
+        camera_model=options.camera_model,
+    )
 
 
 def _progress(sim_s: float, total_s: float) -> None:
@@ -268,17 +287,7 @@ def evaluate(
 ) -> dict[str, Any]:
     """Run (or take) the pipeline record and score every source (module docstring)."""
     if record is None:
-        record = run_pipeline(
-            site,
-            PipelineOptions(
-                seed=options.seed,
-                duration_s=options.duration_s,
-                warmup_s=options.warmup_s,
-                camera_model=options.camera_model,
-                vehicles_per_hour=options.vehicles_per_hour,
-            ),
-            progress=_progress,
-        )
+        record = run_pipeline(site, pipeline_options(options), progress=_progress)
     started = time.perf_counter()
     truth = TruthIndex(record.truth)
     mast = lidar_mount(site, None).pose
@@ -463,6 +472,12 @@ def evaluate(
         "seed": options.seed,
         "duration_s": options.duration_s,
         "warmup_s": options.warmup_s,
+        "conditions": {
+            "weather": record.options.weather,
+            "vehicles_per_hour": record.options.vehicles_per_hour,
+            "truck_share": record.options.truck_share,
+            "aggressive_share": record.options.aggressive_share,
+        },
         "max_range_m": options.max_range_m,
         "vehicles": len(
             {
@@ -713,6 +728,35 @@ def paper_table(
     return rows
 
 
+def _number(text: str) -> float:
+    """A finite number from the command line (``nan`` and ``inf`` refused)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return value
+
+
+def _positive(text: str) -> float:
+    if (value := _number(text)) <= 0.0:
+        raise argparse.ArgumentTypeError(f"{text} is not above 0")
+    return value
+
+
+def _not_negative(text: str) -> float:
+    if (value := _number(text)) < 0.0:
+        raise argparse.ArgumentTypeError(f"{text} is below 0")
+    return value
+
+
+def _share(text: str) -> float:
+    if not 0.0 <= (value := _number(text)) <= 1.0:
+        raise argparse.ArgumentTypeError(f"{text} is not a share from 0 to 1")
+    return value
+
+
 def main(argv: list[str] | None = None) -> int:
     arguments = sys.argv[1:] if argv is None else argv
     if any(a.split("=")[0] in ("--log", "--truth") for a in arguments):  # a field log
@@ -726,10 +770,14 @@ def main(argv: list[str] | None = None) -> int:
         "field validation on a field log instead (its own options).",
     )
     parser.add_argument("--site", type=Path, default=SimulatorSettings().site_file)
-    parser.add_argument("--duration-s", type=float, default=600.0)
-    parser.add_argument("--warmup-s", type=float, default=60.0)
+    parser.add_argument("--duration-s", type=_positive, default=600.0, help="scored [s]")
+    parser.add_argument("--warmup-s", type=_not_negative, default=60.0, help="before it [s]")
     parser.add_argument("--seed", type=int, default=7)
-    parser.add_argument("--max-range-m", type=float, default=150.0)
+    parser.add_argument("--max-range-m", type=_positive, default=150.0)
+    parser.add_argument("--weather", choices=sorted(WEATHER_PRESETS), default="day")
+    parser.add_argument("--vehicles-per-hour", type=_positive, default=1400.0)
+    parser.add_argument("--truck-share", type=_share, default=0.15, help="0 to 1")
+    parser.add_argument("--aggressive-share", type=_share, default=0.2, help="0 to 1")
     parser.add_argument(
         "--drop",
         action="append",
@@ -760,7 +808,10 @@ def main(argv: list[str] | None = None) -> int:
         dropouts = tuple(Dropout.parse(text) for text in args.drop)
     except ValueError as exc:
         parser.error(str(exc))
-    site = load_site(args.site)
+    try:
+        site = load_site(args.site)
+    except SiteFileError as exc:
+        parser.error(str(exc))
     bias_map = None
     if args.bias_map is not None:
         try:
@@ -775,6 +826,10 @@ def main(argv: list[str] | None = None) -> int:
         max_range_m=args.max_range_m,
         dropouts=dropouts,
         camera_model=args.model,
+        vehicles_per_hour=args.vehicles_per_hour,
+        weather=args.weather,
+        truck_share=args.truck_share,
+        aggressive_share=args.aggressive_share,
         bias_map=bias_map,
     )
     args.out.mkdir(parents=True, exist_ok=True)

@@ -124,6 +124,17 @@ def must_show(report: dict[str, Any]) -> list[dict[str, Any]]:
     return rows
 
 
+def _conditions(report: dict[str, Any]) -> str:
+    """The run's weather and traffic, as a sentence (empty for a report without them)."""
+    c = report.get("conditions")
+    if not c:
+        return ""
+    return (
+        f" Weather {c['weather']}, {c['vehicles_per_hour']:g} vehicles/h, "
+        f"{100 * c['truck_share']:g} % trucks, {100 * c['aggressive_share']:g} % aggressive."
+    )
+
+
 def markdown(report: dict[str, Any]) -> str:
     def cell(value: float | None) -> str:
         return "-" if value is None else f"{value:.2f}"
@@ -138,7 +149,7 @@ def markdown(report: dict[str, Any]) -> str:
         f"{report['vehicles']} vehicles. MOTA **{report['mota']:.3f}**, IDF1 "
         f"**{report['idf1']:.3f}**, identity switches {report['id_switches']} "
         f"({report['id_switches_per_100_vehicles']:.2f} per 100 vehicles). Lateral bias map "
-        f"given to the tracker: {report.get('bias_map') or 'none'}.",
+        f"given to the tracker: {report.get('bias_map') or 'none'}.{_conditions(report)}",
         "",
         "| source | RMSE longitudinal [m] | RMSE lateral [m] | RMSE speed [m/s] | matched | "
         "missed |",
