@@ -173,9 +173,7 @@ def fuse(
         sample_s = first + k / SAMPLE_HZ
         while position < len(batches) and batches[position].stamp <= sample_s + 1e-9:
             batch = batches[position]
-            tracker.add(
-                batch.source_id, batch.stamp, to_measurements(batch, lambda r, d: None, bias)
-            )
+            tracker.add(batch.source_id, batch.stamp, to_measurements(batch, bias))
             position += 1
         tracker.flush()
         tracker.advance_to(sample_s)

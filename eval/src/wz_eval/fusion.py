@@ -352,9 +352,7 @@ def evaluate(
         t0 = time.perf_counter()
         while position < len(batches) and batches[position].stamp <= sample_s + 1e-9:
             batch = batches[position]
-            tracker.add(
-                batch.source_id, batch.stamp, to_measurements(batch, lambda r, d: None, bias)
-            )
+            tracker.add(batch.source_id, batch.stamp, to_measurements(batch, bias))
             position += 1
         tracker.flush()
         tracker.advance_to(sample_s)

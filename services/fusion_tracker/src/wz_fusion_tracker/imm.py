@@ -56,14 +56,13 @@ import numpy as np
 import numpy.typing as npt
 
 from wz_fusion_tracker.kalman import (
-    STATE_DIM,
     SlotBank,
     _inverse_2x2,
     update,
     update_position_blocks,
 )
 from wz_shared.arrays import F64, IntP
-from wz_shared.motion import predict_cv
+from wz_shared.motion import STATE_DIM, predict_cv
 
 #: Mode probabilities are kept at least this, so that a mode long out of favour can come back
 #: within one update (a floor well below any probability that changes a decision).

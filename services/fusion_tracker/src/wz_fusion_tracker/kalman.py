@@ -36,10 +36,7 @@ import numpy as np
 import numpy.typing as npt
 
 from wz_shared.arrays import F64, IntP
-
-# STATE_DIM re-exported: the tracker's modules import it from here.
-from wz_shared.motion import STATE_DIM as STATE_DIM
-from wz_shared.motion import ProcessNoise, cv_transition, predict_cv
+from wz_shared.motion import STATE_DIM, ProcessNoise, cv_transition, predict_cv
 
 #: Dimension of a position measurement ``[x, y]``.
 POSITION_DIM = 2

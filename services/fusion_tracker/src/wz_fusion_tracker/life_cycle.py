@@ -10,11 +10,11 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from wz_fusion_tracker.kalman import STATE_DIM
 from wz_fusion_tracker.settings import TrackerSettings
 from wz_fusion_tracker.track_table import Track, TrackStore
 from wz_fusion_tracker.types import Measurement
 from wz_shared.arrays import F64, Bool, IntP
+from wz_shared.motion import STATE_DIM
 
 
 def start_track(

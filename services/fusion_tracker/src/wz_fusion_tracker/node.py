@@ -27,9 +27,9 @@ each sensor's calibrated lateral bias is removed from its detections before the 
 them; a map that cannot be read or is another site's stops the start with what is wrong.
 
 Bad input never stops it; each problem is counted in the status message's ``invalid_counts``
-under ``<detections key>|<reason>``: ``wrong_site``, ``bad_detection`` (a covariance that is not
-symmetric positive definite), ``late`` (a batch older than the reorder window: dropped by the
-tracker).
+under ``<detections key>|<reason>``: ``wrong_site``, ``late`` (a batch older than the reorder
+window: dropped by the tracker). A batch with a covariance that is not symmetric positive
+definite does not decode (``Covariance2``): the bus counts it ``invalid``.
 """
 
 from __future__ import annotations
@@ -86,23 +86,14 @@ def sensor_positions(site: Site) -> dict[str, tuple[float, float]]:
 
 
 def to_measurements(
-    batch: DetectionBatch, report: Report, bias: LateralBiasCorrector | None = None
+    batch: DetectionBatch, bias: LateralBiasCorrector | None = None
 ) -> list[Measurement]:
-    """The batch's detections as tracker measurements; bad covariances reported and dropped;
-    with ``bias``, each sensor's calibrated lateral bias removed."""
+    """The batch's detections as tracker measurements; with ``bias``, each sensor's calibrated
+    lateral bias removed. Every covariance is symmetric positive definite already: the message
+    schema (:data:`wz_shared.messages.Covariance2`) refuses a batch with one that is not."""
     out = []
-    for index, detection in enumerate(batch.detections):
+    for detection in batch.detections:
         covariance = np.asarray(detection.covariance_m2, dtype=np.float64).reshape(2, 2)
-        symmetric = abs(covariance[0, 1] - covariance[1, 0]) <= 1e-9 * max(
-            1.0, abs(covariance[0, 1])
-        )
-        if not symmetric or covariance[0, 0] <= 0 or np.linalg.det(covariance) <= 0:
-            report(
-                "bad_detection",
-                f"{batch.source_id} frame {batch.frame_index} detection {index}: covariance "
-                f"{detection.covariance_m2} is not symmetric positive definite",
-            )
-            continue
         out.append(
             Measurement(
                 x_m=detection.x_m,
@@ -233,9 +224,7 @@ class FusionCore:
         if watch.observe(batch.stamp) == "new_run":
             self._start_new_run(batch)
         late_before = self.tracker.counters.batches_late
-        self.tracker.add(
-            batch.source_id, batch.stamp, to_measurements(batch, self.report, self.bias)
-        )
+        self.tracker.add(batch.source_id, batch.stamp, to_measurements(batch, self.bias))
         if self.tracker.counters.batches_late > late_before:
             self.report("late", f"{batch.source_id} batch at {batch.stamp:.3f} s is too late")
         return self._outputs()

@@ -16,9 +16,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from wz_fusion_tracker.imm import IMMStateBank
-from wz_fusion_tracker.kalman import STATE_DIM, TrackStateBank
+from wz_fusion_tracker.kalman import TrackStateBank
 from wz_fusion_tracker.types import UNKNOWN_CLASS, TrackerCounters, TrackHistory
 from wz_shared.arrays import F64, IntP
+from wz_shared.motion import STATE_DIM
 
 #: The priors and posteriors of the tracks one batch updated, row k for its k-th track:
 #: ``(stamp_s, x_pred (K, 4), P_pred (K, 4, 4), x_filt (K, 4), P_filt (K, 4, 4))``. A plain

@@ -93,7 +93,7 @@ from wz_fusion_tracker.identity import (
     reacquisitions,
 )
 from wz_fusion_tracker.imm import IMMStateBank
-from wz_fusion_tracker.kalman import STATE_DIM, TrackStateBank
+from wz_fusion_tracker.kalman import TrackStateBank
 from wz_fusion_tracker.life_cycle import check_confirmation, expired, prune, start_track
 from wz_fusion_tracker.settings import TrackerSettings
 from wz_fusion_tracker.track_table import Track, TrackStore, UpdateRecord
@@ -108,6 +108,7 @@ from wz_fusion_tracker.types import (
     TrackStatus,
 )
 from wz_shared.arrays import F64, IntP
+from wz_shared.motion import STATE_DIM
 
 __all__ = [
     "Measurement",
