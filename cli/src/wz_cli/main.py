@@ -280,6 +280,10 @@ SERVICE_TOOLS = {
         "wz_eval.fusion",
         "run the pipeline on the simulated work zone and score it against truth (tracks, MOT)",
     ),
+    "site": (
+        "wz_eval.site_tool",
+        "generate a seeded work-zone site file, or draw a site file's plan",
+    ),
     "field-log": (
         "wz_eval.field_log",
         "write a field log (Ouster pcap, radar-camera objects, RTK-GPS NMEA) from simulation",

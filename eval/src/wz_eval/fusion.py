@@ -761,11 +761,16 @@ def main(argv: list[str] | None = None) -> int:
         from wz_eval.field_run import main as field_main
 
         return field_main(arguments)
+    if any(a.split("=")[0] == "--sites" for a in arguments):  # generated sites
+        from wz_eval.sites import main as sites_main
+
+        return sites_main(arguments)
     parser = argparse.ArgumentParser(
         prog="wz eval",
         description=__doc__.split("\n")[0],
         epilog="With --log LOG_DIR [--truth GPS_FILE]: the paper's "
-        "field validation on a field log instead (its own options).",
+        "field validation on a field log instead (its own options). With --sites N [--seed S]: "
+        "N generated sites, one report (its own options).",
     )
     parser.add_argument("--site", type=Path, default=SimulatorSettings().site_file)
     parser.add_argument("--duration-s", type=_positive, default=600.0, help="scored [s]")

@@ -264,7 +264,7 @@ def main(argv: list[str] | None = None) -> int:
         site = load_site(settings.site_file)
         mount = camera_mount(site, settings.camera_id)
         configure_logging(service="detect-camera", site=site.site_id, level=settings.log_level)
-        backend = make_backend(settings)
+        backend = make_backend(settings, site, mount)
     except (ValidationError, SiteFileError, ModelLoadError, ValueError) as exc:
         sys.stderr.write(f"wz detect-camera: {exc}\n")
         return 2

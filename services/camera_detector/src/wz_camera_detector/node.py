@@ -73,12 +73,13 @@ from wz_camera_detector.association import (
     to_detection,
 )
 from wz_camera_detector.background import BACKEND, BackgroundSubtractionDetector
+from wz_camera_detector.regions import camera_at_size, detector_regions
 from wz_camera_detector.settings import CameraDetectorSettings, camera_mount, radar_mount
 from wz_camera_detector.tracker import ImageTrack, ImageTracker
 from wz_camera_detector.world import VehicleShape, box_to_ground, fit_box_to_ground
 from wz_camera_detector.yolo import ImageDetection, ModelLoadError, YoloOnnxDetector
 from wz_shared.arrays import F64, U8
-from wz_shared.camera_geometry import PinholeCamera, camera_intrinsics
+from wz_shared.camera_geometry import PinholeCamera
 from wz_shared.codec import Frame
 from wz_shared.messages import (
     CameraFrameMeta,
@@ -130,8 +131,16 @@ class ImageBackend(Protocol):
     def detect(self, image_bgr: U8) -> list[ImageDetection]: ...
 
 
-def make_backend(settings: CameraDetectorSettings) -> ImageBackend:
+def make_backend(
+    settings: CameraDetectorSettings,
+    site: Site | None = None,
+    camera: SensorMount | None = None,
+) -> ImageBackend:
     """The image detector the settings name.
+
+    With ``site`` and ``camera``, YOLO looks at the region of interest and far-field tiles the
+    road's geometry gives (:func:`~wz_camera_detector.regions.detector_regions`), unless the
+    settings give their own; without them, at the model's metadata regions, else the frame.
 
     Raises
     ------
@@ -143,26 +152,27 @@ def make_backend(settings: CameraDetectorSettings) -> ImageBackend:
         return BackgroundSubtractionDetector(settings.background)
     if settings.model_path is None:  # the settings validator refuses this already
         raise ModelLoadError("backend 'yolo' needs WZ_CAMERA_MODEL_PATH (a local .onnx file)")
-    return YoloOnnxDetector(
+    detector = YoloOnnxDetector(
         settings.model_path,
         settings.class_names,
         conf_threshold=settings.conf_threshold,
         roi_xyxy_px=settings.roi_xyxy_px,
+        tiles_xyxy_px=settings.tiles_xyxy_px,
     )
-
-
-def camera_at_size(mount: SensorMount, width_px: int, height_px: int) -> PinholeCamera:
-    """The mount's pinhole model for frames of another size (same pose and field of view)."""
-    intrinsics = camera_intrinsics(mount)
-    if (intrinsics.width_px, intrinsics.height_px) != (width_px, height_px):
-        mount = mount.model_copy(
-            update={
-                "intrinsics": intrinsics.model_copy(
-                    update={"width_px": width_px, "height_px": height_px}
-                )
-            }
+    if site is not None and camera is not None:
+        regions = detector_regions(site, camera, max(detector.input_size))
+        detector.set_regions(
+            settings.roi_xyxy_px if settings.roi_xyxy_px is not None else regions.roi_xyxy_px,
+            settings.tiles_xyxy_px if settings.tiles_xyxy_px is not None else regions.tiles_xyxy_px,
         )
-    return PinholeCamera(mount)
+        log.info(
+            "camera %s: detector ROI %s, far-field tiles %s (from %s)",
+            camera.sensor_id,
+            detector.roi_xyxy_px,
+            list(detector.tiles_xyxy_px),
+            "the settings" if settings.roi_xyxy_px is not None else "the road's geometry",
+        )
+    return detector
 
 
 def cut_by_view(
@@ -241,7 +251,7 @@ class CameraDetector:
         self.radar_mount = radar
         self.settings = settings
         self.report = report
-        self.backend = backend if backend is not None else make_backend(settings)
+        self.backend = backend if backend is not None else make_backend(settings, site, camera)
         self.tracker = ImageTracker(settings.tracker)
         self._cameras: dict[tuple[int, int], PinholeCamera] = {}
         self._radar_heading = (

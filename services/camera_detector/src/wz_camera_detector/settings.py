@@ -54,8 +54,12 @@ class CameraDetectorSettings(ServiceSettings):
     #: ignored.
     class_names: tuple[str, ...] | None = None
     #: Region of interest ``(x0, y0, x1, y1)`` [px] the YOLO model looks at (the frame is
-    #: cropped to it); default: the model's metadata (the ROI it was trained on), else the frame.
+    #: cropped to it); default: the site's road projected into the camera's image
+    #: (:mod:`wz_camera_detector.regions`).
     roi_xyxy_px: tuple[int, int, int, int] | None = None
+    #: Far-field tiles ``x0, y0, x1, y1`` [px], each letterboxed on its own (yolo); default:
+    #: from the road's geometry with the ROI; ``()`` for none.
+    tiles_xyxy_px: tuple[tuple[int, int, int, int], ...] | None = None
     #: Minimum class score of a YOLO detection [0-1].
     conf_threshold: Annotated[float, Field(ge=0.0, lt=1.0)] = 0.25
     #: A radar scan is fused with a frame when their stamps differ by at most this [s].

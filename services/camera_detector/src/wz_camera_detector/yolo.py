@@ -386,17 +386,12 @@ class YoloOnnxDetector:
         self.class_names = (
             tuple(class_names) if class_names is not None else self._metadata_class_names()
         )
-        self.roi_xyxy_px = roi_xyxy_px if roi_xyxy_px is not None else self._metadata_roi()
-        self.tiles_xyxy_px: tuple[tuple[int, int, int, int], ...] = (
-            tuple(tiles_xyxy_px) if tiles_xyxy_px is not None else self._metadata_tiles()
+        self.roi_xyxy_px: tuple[int, int, int, int] | None = None
+        self.tiles_xyxy_px: tuple[tuple[int, int, int, int], ...] = ()
+        self.set_regions(
+            roi_xyxy_px if roi_xyxy_px is not None else self._metadata_roi(),
+            tiles_xyxy_px if tiles_xyxy_px is not None else self._metadata_tiles(),
         )
-        for tile in self.tiles_xyxy_px:
-            if not (0 <= tile[0] < tile[2] and 0 <= tile[1] < tile[3]):
-                raise ValueError(f"tile {tile} is empty or negative")
-        if self.roi_xyxy_px is not None:
-            x0, y0, x1, y1 = self.roi_xyxy_px
-            if not (0 <= x0 < x1 and 0 <= y0 < y1):
-                raise ValueError(f"ROI {self.roi_xyxy_px} is empty or negative")
         self.input_size = self._check_input(input_size)
         self._check_output()
         logger.info(
@@ -406,6 +401,28 @@ class YoloOnnxDetector:
             self.input_size[0],
             len(self.class_names),
         )
+
+    def set_regions(
+        self,
+        roi_xyxy_px: tuple[int, int, int, int] | None,
+        tiles_xyxy_px: Sequence[tuple[int, int, int, int]],
+    ) -> None:
+        """Look at ``roi_xyxy_px`` (None: the whole frame) and these far-field tiles [px].
+
+        Raises
+        ------
+        ValueError
+            For an empty or negative box.
+        """
+        for tile in tiles_xyxy_px:
+            if not (0 <= tile[0] < tile[2] and 0 <= tile[1] < tile[3]):
+                raise ValueError(f"tile {tile} is empty or negative")
+        if roi_xyxy_px is not None:
+            x0, y0, x1, y1 = roi_xyxy_px
+            if not (0 <= x0 < x1 and 0 <= y0 < y1):
+                raise ValueError(f"ROI {roi_xyxy_px} is empty or negative")
+        self.roi_xyxy_px = None if roi_xyxy_px is None else tuple(roi_xyxy_px)  # type: ignore[assignment]
+        self.tiles_xyxy_px = tuple(tuple(tile) for tile in tiles_xyxy_px)  # type: ignore[misc]
 
     def _metadata_class_names(self) -> tuple[str, ...]:
         text = self.metadata.get("wz_class_names")
