@@ -29,7 +29,7 @@ import cv2
 import numpy as np
 
 from benchmarks.common import ROOT, free_port
-from wz_camera_detector.node import CameraDetector
+from wz_camera_detector.node import CameraDetector, make_backend
 from wz_camera_detector.settings import CameraDetectorSettings, camera_mount, radar_mount
 from wz_camera_detector.yolo import YoloOnnxDetector
 from wz_shared.bus import Bus
@@ -97,7 +97,9 @@ def _stats_ms(values_s: list[float]) -> dict[str, float]:
 def _inference(recorded: Recorded) -> dict[str, Any]:
     settings = CameraDetectorSettings.model_validate({})
     assert settings.model_path is not None
-    detector = YoloOnnxDetector(settings.model_path, conf_threshold=settings.conf_threshold)
+    site = load_site(DEFAULT_SITE_PATH)
+    detector = make_backend(settings, site, camera_mount(site, None))
+    assert isinstance(detector, YoloOnnxDetector)
     images = [
         cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR)
         for _, jpeg in recorded.frames()
@@ -120,6 +122,7 @@ def _inference(recorded: Recorded) -> dict[str, Any]:
         "model": settings.model_path.name,
         "input_size_px": list(detector.input_size),
         "roi_xyxy_px": list(detector.roi_xyxy_px) if detector.roi_xyxy_px else None,
+        "tiles_xyxy_px": [list(tile) for tile in detector.tiles_xyxy_px],
         "frames": len(images),
         "steps": {name: _stats_ms(values) for name, values in steps.items()},
     }

@@ -27,6 +27,11 @@ def model(tmp_path: Path) -> Path:
     return path
 
 
+#: The region the fixed-output model's boxes were written for, given by hand (it overrides
+#: the one the road's geometry gives), with no far-field tile.
+HAND_ROI = ["--roi", "480,440,1200,1160", "--tiles", ""]
+
+
 def _image(tmp_path: Path, name: str) -> Path:
     path = tmp_path / name
     image = np.random.default_rng(3).integers(0, 255, size=(1200, 1200, 3), dtype=np.uint8)
@@ -38,7 +43,7 @@ def test_images_give_one_line_per_frame_with_boxes_and_world_positions(
     tmp_path: Path, model: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     files = [_image(tmp_path, f"f{i}.jpg") for i in range(3)]
-    assert main(["--model", str(model), "--backend", "yolo", *map(str, files)]) == 0
+    assert main(["--model", str(model), "--backend", "yolo", *HAND_ROI, *map(str, files)]) == 0
     lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     assert [line["frame"] for line in lines] == [0, 1, 2]
     assert [line["stamp"] for line in lines] == pytest.approx([0.0, 0.1, 0.2])  # 10 Hz camera
@@ -71,6 +76,7 @@ def test_a_bad_file_is_a_line_with_the_error_and_exit_code_1(
             str(model),
             "--backend",
             "yolo",
+            *HAND_ROI,
             str(broken),
             str(small),
             str(tmp_path / "missing.jpg"),
@@ -121,3 +127,15 @@ def test_a_missing_model_is_a_start_up_error(tmp_path: Path) -> None:
     )
     assert result.returncode == 2
     assert "no such file" in result.stderr and "never downloads" in result.stderr
+
+
+@pytest.mark.parametrize(
+    "arguments",
+    [["--roi", "480,440,1200"], ["--roi", "10,10,5,20"], ["--tiles", "0,0,a,b"]],
+)
+def test_a_bad_roi_or_tile_is_a_start_up_error(
+    tmp_path: Path, model: Path, arguments: list[str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    image = _image(tmp_path, "f.jpg")
+    assert main(["--model", str(model), *arguments, str(image)]) == 2
+    assert "expected x0,y0,x1,y1" in capsys.readouterr().err

@@ -23,7 +23,7 @@ def iou(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> float:
     return inter / (area - inter)
 
 
-def camera_of(site: Site):  # noqa: ANN201
+def camera_of(site: Site):
     return next(m for m in site.sensors if m.kind == "camera")
 
 

@@ -51,9 +51,20 @@ def main(argv: list[str] | None = None) -> int:
         "--data",
         type=Path,
         nargs="+",
-        required=True,
-        help="wz dataset folders (train and val splits)",
+        default=[],
+        help="wz dataset folders (train and val splits), cropped here to --roi",
     )
+    parser.add_argument(
+        "--prepared",
+        type=Path,
+        default=None,
+        help="an already cropped dataset's data.yaml (site_dataset.py: every site cropped to "
+        "its own ROI and tile); the model's metadata then carries no ROI: the service computes "
+        "each camera's from the road's geometry",
+    )
+    parser.add_argument("--device", default="cpu", help="cpu, or a CUDA device such as 0")
+    parser.add_argument("--no-plots", action="store_true", help="no ultralytics plots")
+    parser.add_argument("--no-simplify", action="store_true", help="export without onnxslim")
     parser.add_argument("--out", type=Path, required=True, help="work folder")
     parser.add_argument("--roi", default="480,440,1200,1160", help="x0,y0,x1,y1 [px]")
     parser.add_argument("--imgsz", type=int, default=480)
@@ -93,30 +104,40 @@ def main(argv: list[str] | None = None) -> int:
         help="far-field tiles x0,y0,x1,y1;... written to the model's metadata ('' for none)",
     )
     args = parser.parse_args(argv)
+    if not args.data and args.prepared is None:
+        parser.error("give --data folders or a --prepared data.yaml")
 
     from wz_camera_detector.train_data import Roi, prepare_roi_dataset
 
     roi = Roi.parse(args.roi)
     args.out.mkdir(parents=True, exist_ok=True)
     _offline(args.out / "yolo-config")
-    roi_data = args.out / "roi-dataset"
-    if roi_data.exists():
-        shutil.rmtree(roi_data)
-    tiles = tuple(Roi.parse(t) for t in args.tiles.split(";") if t.strip())
-    counts = prepare_roi_dataset(list(args.data), roi_data, roi, tiles if args.train_tiles else ())
-    sys.stdout.write(f"ROI dataset {roi.as_tuple()}: {counts}\n")
+    if args.prepared is not None:
+        data_yaml = args.prepared.resolve()
+        manifest_path = data_yaml.parent / "manifest.json"
+    else:
+        roi_data = args.out / "roi-dataset"
+        if roi_data.exists():
+            shutil.rmtree(roi_data)
+        tiles = tuple(Roi.parse(t) for t in args.tiles.split(";") if t.strip())
+        counts = prepare_roi_dataset(
+            list(args.data), roi_data, roi, tiles if args.train_tiles else ()
+        )
+        sys.stdout.write(f"ROI dataset {roi.as_tuple()}: {counts}\n")
+        data_yaml = roi_data / "data.yaml"
+        manifest_path = roi_data / "manifest.json"
 
     from ultralytics import YOLO
 
     started = time.time()
     model = YOLO(str(args.weights if args.weights is not None else args.model))
     train_args = {
-        "data": str(roi_data / "data.yaml"),
+        "data": str(data_yaml),
         "epochs": args.epochs,
         "imgsz": args.imgsz,
         "batch": args.batch,
         "workers": args.workers,
-        "device": "cpu",
+        "device": args.device,
         "seed": args.seed,
         "deterministic": True,
         "pretrained": False,
@@ -129,7 +150,7 @@ def main(argv: list[str] | None = None) -> int:
             args.close_mosaic if args.close_mosaic is not None else max(1, args.epochs // 5)
         ),
         "patience": args.epochs,
-        "plots": True,
+        "plots": not args.no_plots,
     }
     if args.weights is not None:
         train_args["pretrained"] = True
@@ -145,10 +166,10 @@ def main(argv: list[str] | None = None) -> int:
     best = run_dir / "weights" / "best.pt"
     trained = YOLO(str(best))
     metrics = trained.val(
-        data=str(roi_data / "data.yaml"),
+        data=str(data_yaml),
         imgsz=args.imgsz,
         batch=args.batch,
-        device="cpu",
+        device=args.device,
         plots=False,
         project=str(args.out / "runs"),
         name=f"{args.name}-val",
@@ -156,7 +177,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     exported = Path(
         trained.export(
-            format="onnx", imgsz=args.imgsz, opset=17, simplify=True, dynamic=False, device="cpu"
+            format="onnx",
+            imgsz=args.imgsz,
+            opset=17,
+            simplify=not args.no_simplify,
+            dynamic=False,
+            device="cpu",
         )
     )
 
@@ -173,6 +199,10 @@ def main(argv: list[str] | None = None) -> int:
     }
     if not args.tiles:
         del extra["wz_tiles_xyxy_px"]
+    if args.prepared is not None:  # many cameras: each one's regions come from its geometry
+        del extra["wz_roi_xyxy_px"]
+        extra.pop("wz_tiles_xyxy_px", None)
+        extra["wz_regions"] = "geometry"
     kept = [p for p in proto.metadata_props if p.key not in extra]
     del proto.metadata_props[:]
     proto.metadata_props.extend(kept)
@@ -185,11 +215,11 @@ def main(argv: list[str] | None = None) -> int:
         "model": final.name,
         "architecture": args.model.name,
         "started_from": str(args.weights) if args.weights is not None else "scratch",
-        "tiles_xyxy_px": args.tiles,
+        "tiles_xyxy_px": args.tiles if args.prepared is None else "geometry",
         "input_size_px": [args.imgsz, args.imgsz],
-        "roi_xyxy_px": list(roi.as_tuple()),
+        "roi_xyxy_px": list(roi.as_tuple()) if args.prepared is None else "geometry",
         "class_names": names,
-        "train_args": train_args | {"data": "roi-dataset/data.yaml", "project": "runs"},
+        "train_args": train_args | {"data": data_yaml.name, "project": "runs"},
         "train_seconds": round(train_s, 1),
         "ultralytics_val_all_labels": {
             "precision": float(box.mp),
@@ -197,7 +227,7 @@ def main(argv: list[str] | None = None) -> int:
             "map50": float(box.map50),
             "map50_95": float(box.map),
         },
-        "datasets": json.loads((roi_data / "manifest.json").read_text()),
+        "datasets": json.loads(manifest_path.read_text()) if manifest_path.exists() else None,
     }
     (args.out / "training.json").write_text(json.dumps(record, indent=2))
     sys.stdout.write(f"model {final}\n{json.dumps(record['ultralytics_val_all_labels'])}\n")

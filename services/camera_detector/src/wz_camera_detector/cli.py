@@ -86,7 +86,16 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--site", type=Path, default=None, help="site file (camera pose)")
     parser.add_argument("--camera", default=None, help="camera id in the site file")
     parser.add_argument("--conf", type=float, default=None, help="minimum score [0-1)")
-    parser.add_argument("--roi", default=None, help="region of interest x0,y0,x1,y1 [px]")
+    parser.add_argument(
+        "--roi",
+        default=None,
+        help="region of interest x0,y0,x1,y1 [px] (default: the site's road in the image)",
+    )
+    parser.add_argument(
+        "--tiles",
+        default=None,
+        help="far-field tiles x0,y0,x1,y1;... [px], '' for none (default: from the road)",
+    )
     parser.add_argument("--no-track", action="store_true", help="no tracking across frames")
     return parser
 
@@ -104,8 +113,23 @@ def _settings(args: argparse.Namespace) -> CameraDetectorSettings:
     if args.conf is not None:
         overrides["conf_threshold"] = args.conf
     if args.roi is not None:
-        overrides["roi_xyxy_px"] = tuple(int(v) for v in args.roi.split(","))
+        overrides["roi_xyxy_px"] = _box(args.roi, "--roi")
+    if args.tiles is not None:
+        overrides["tiles_xyxy_px"] = tuple(
+            _box(text, "--tiles") for text in args.tiles.split(";") if text.strip()
+        )
     return CameraDetectorSettings(**overrides)
+
+
+def _box(text: str, option: str) -> tuple[int, int, int, int]:
+    """``x0,y0,x1,y1`` [px] -> a box; ValueError in words for the operator."""
+    try:
+        values = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 4 or not (0 <= values[0] < values[2] and 0 <= values[1] < values[3]):
+        raise ValueError(f"{option} {text!r}: expected x0,y0,x1,y1 pixels with x0 < x1, y0 < y1")
+    return values  # type: ignore[return-value]
 
 
 def read_frames(path: Path, rate_hz: float, start_index: int) -> Iterator[tuple[int, float, U8]]:

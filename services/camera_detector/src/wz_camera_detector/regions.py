@@ -40,6 +40,9 @@ CAR_HEIGHT_M = 1.5
 EDGE_MARGIN_M = 1.5
 #: Station step of the sampled road outline [m].
 STEP_M = 2.0
+#: A ROI side this close to the frame's edge (share of the frame) goes to the edge: the road
+#: leaves the frame there, between two of its samples.
+SNAP_SHARE = 0.05
 
 
 @dataclass(frozen=True)
@@ -88,14 +91,23 @@ def _road_points(site: Site, camera: PinholeCamera, max_range_m: float) -> tuple
     return points, np.concatenate([ground_range, ground_range])
 
 
-def _bounds(uv: F64, width_px: int, height_px: int) -> Box | None:
-    """Bounding box of pixel points clipped to the frame, None if none falls inside."""
+def _bounds(uv: F64, width_px: int, height_px: int, *, snap: bool = False) -> Box | None:
+    """Bounding box of pixel points clipped to the frame, None if none falls inside.
+
+    With ``snap``, a side within :data:`SNAP_SHARE` of the frame's edge, where the sampled road
+    leaves the frame between two samples, is moved onto the edge.
+    """
     inside = (uv[:, 0] >= 0) & (uv[:, 0] <= width_px) & (uv[:, 1] >= 0) & (uv[:, 1] <= height_px)
     if not inside.any():
         return None
     u, v = uv[inside, 0], uv[inside, 1]
     x0, y0 = math.floor(u.min()), math.floor(v.min())
     x1, y1 = math.ceil(u.max()), math.ceil(v.max())
+    if snap:
+        x0 = 0 if x0 < SNAP_SHARE * width_px else x0
+        y0 = 0 if y0 < SNAP_SHARE * height_px else y0
+        x1 = width_px if x1 > (1.0 - SNAP_SHARE) * width_px else x1
+        y1 = height_px if y1 > (1.0 - SNAP_SHARE) * height_px else y1
     return max(0, x0), max(0, y0), min(width_px, x1), min(height_px, y1)
 
 
@@ -160,7 +172,7 @@ def detector_regions(
     camera = camera_at_size(mount, width, height)
     points, ranges = _road_points(site, camera, max_range_m)
     uv, visible = _projected(camera, points)
-    roi = _bounds(uv[visible], width, height)
+    roi = _bounds(uv[visible], width, height, snap=True)
     if roi is None:
         return DetectorRegions(None, ())
     scale = input_size_px / max(roi[2] - roi[0], roi[3] - roi[1])

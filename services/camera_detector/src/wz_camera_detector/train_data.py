@@ -110,7 +110,13 @@ def crop_label_lines(lines: list[str], image_size: tuple[int, int], roi: Roi) ->
 
 
 def prepare_roi_dataset(
-    sources: list[Path], dest: Path, roi: Roi, tiles: tuple[Roi, ...] = ()
+    sources: list[Path],
+    dest: Path,
+    roi: Roi,
+    tiles: tuple[Roi, ...] = (),
+    *,
+    max_side_px: int | None = None,
+    jpeg_quality: int = 95,
 ) -> dict[str, int]:
     """Write the ROI-cropped union of the ``wz dataset`` folders ``sources`` to ``dest``.
 
@@ -118,7 +124,9 @@ def prepare_roi_dataset(
     that crop too (``<stem>-tile<i>.jpg``), so the model also learns the magnified far field it
     sees through a tile. Returns counts of images and labels per split. The class names of the
     first source's ``data.yaml`` are kept (all sources must have the same); the manifests are
-    gathered in ``dest/manifest.json`` with the ROI and tiles.
+    gathered in ``dest/manifest.json`` with the ROI and tiles. With ``max_side_px`` (the
+    model's input side) a larger crop is shrunk to it before it is written: the letterbox
+    would shrink it the same way, and the dataset is smaller (labels are relative, unchanged).
     """
     if not sources:
         raise ValueError("no source dataset")
@@ -151,10 +159,16 @@ def prepare_roi_dataset(
                     )
                 crop = np.ascontiguousarray(image[region.y0 : region.y1, region.x0 : region.x1])
                 stem = f"{image_path.stem}{suffix}"
+                side = max(crop.shape[:2])
+                written = crop
+                if max_side_px is not None and side > max_side_px:
+                    scale = max_side_px / side
+                    size = (round(crop.shape[1] * scale), round(crop.shape[0] * scale))
+                    written = cv2.resize(crop, size, interpolation=cv2.INTER_AREA)
                 cv2.imwrite(
                     str(dest / "images" / split / f"{stem}.jpg"),
-                    crop,
-                    [cv2.IMWRITE_JPEG_QUALITY, 95],
+                    written,
+                    [cv2.IMWRITE_JPEG_QUALITY, jpeg_quality],
                 )
                 cropped = crop_label_lines(lines, (width, height), region)
                 n_labels += len(cropped)

@@ -39,8 +39,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from wz_camera_detector.regions import detector_regions
 from wz_camera_detector.yolo import YoloOnnxDetector, box_iou
 from wz_shared.arrays import F64
+from wz_shared.site import load_site
 
 #: Distance bins of the report [m].
 RANGE_BINS_M: tuple[tuple[float, float], ...] = ((0, 25), (25, 50), (50, 75), (75, 100))
@@ -344,14 +346,31 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--iou", type=float, default=0.5)
     parser.add_argument("--conf", type=float, default=0.25)
     parser.add_argument("--json", type=Path, default=None, help="also write the report here")
+    parser.add_argument(
+        "--site",
+        type=Path,
+        default=None,
+        help="the frames' site file: the detector looks where the road's geometry says "
+        "(as the service does); default: the model's metadata regions",
+    )
     args = parser.parse_args(argv)
     pairs = frames(args.data, args.split)
     if not pairs:
         parser.error(f"no {args.split} frames with truth sidecars in {args.data}")
     detector = YoloOnnxDetector(args.model, conf_threshold=0.001, max_detections=300)
+    if args.site is not None:
+        site = load_site(args.site)
+        regions = detector_regions(
+            site, next(m for m in site.sensors if m.kind == "camera"), max(detector.input_size)
+        )
+        detector.set_regions(regions.roi_xyxy_px, regions.tiles_xyxy_px)
     started = time.perf_counter()
     report = validate(detector, pairs, args.max_range_m, args.min_visibility, args.iou, args.conf)
     report["model"] = str(args.model)
+    report["regions"] = {
+        "roi_xyxy_px": detector.roi_xyxy_px,
+        "tiles_xyxy_px": detector.tiles_xyxy_px,
+    }
     report["data"] = [str(p) for p in args.data]
     report["seconds"] = round(time.perf_counter() - started, 1)
     text = json.dumps(report, indent=2)
