@@ -435,3 +435,33 @@ def test_episodes_never_overlap_and_respect_the_cool_down(
                 assert event.episode_id == open_episode
                 if event.phase == "clear":
                     open_episode, last_clear_s = None, event.stamp
+
+
+def test_a_speed_corrected_after_an_outage_is_no_hard_braking() -> None:
+    """A track coasts 0.6 s (its last measurement stays at 1.0 s), then its first measurement
+    corrects the speed by -3.5 m/s at once: the error its prediction gathered, not a vehicle
+    braking at 0.45 g. The trend starts again from that measurement (issue 25)."""
+    engine = only(AlertType.HARD_BRAKING)
+    events: list[AlertEvent] = []
+    for k, t in enumerate(stamps(4.0)):
+        measured_s = t if t < 1.0 or t >= 1.6 else 1.0
+        speed = 25.0 if t < 1.6 else 21.5
+        track = make_track(1, 600.0 + 20.0 * t, speed).model_copy(
+            update={"last_update_s": measured_s}
+        )
+        events.extend(engine.update(batch(t, [track], k)))
+    assert events == []
+
+
+def test_hard_braking_measured_without_a_break_still_alerts_with_measurement_stamps() -> None:
+    """The same engine on a track measured every cycle (last_update_s = stamp) through a
+    0.51 g stop: the outage rule leaves it alone."""
+    engine = only(AlertType.HARD_BRAKING)
+
+    def tracks(t: float) -> list[Track]:
+        track = make_track(1, 600.0, braking_speed(t))
+        return [track.model_copy(update={"last_update_s": t})]
+
+    events = run(engine, stamps(4.0), tracks)
+    assert [e.phase for e in events] == ["start"]
+    assert engine.active()[0].finding.measured_value == pytest.approx(DECEL_MPS2, abs=1e-9)

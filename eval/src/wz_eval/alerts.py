@@ -81,6 +81,8 @@ MATCH_SLACK_S = 1.0
 #: Largest gap between an alert's stamp and the nearest truth step [s].
 MAX_TRUTH_GAP_S = 0.06
 TRUTH_SOURCE = "truth"
+#: False alerts listed per type in the report (where each started), to find why.
+MAX_FALSE_STARTS = 20
 
 
 @dataclass(frozen=True)
@@ -407,8 +409,9 @@ def score_alerts(
         Keyed by alert type (``"speeding"``...), each: ``precision``, ``recall`` (None when
         undefined), ``true_positives``, ``false_positives``, ``false_negatives``,
         ``duplicates``, ``alerts`` (alert episodes), ``truth_episodes``, ``lead_time_s`` and
-        ``truth_lead_time_s`` (medians [s], None without samples), ``lead_time_samples``; for
-        speeding also ``lead_time_aggressive_s``.
+        ``truth_lead_time_s`` (medians [s], None without samples), ``lead_time_samples``,
+        ``false_positive_starts`` (where and when the first :data:`MAX_FALSE_STARTS` false
+        alerts started, to find why); for speeding also ``lead_time_aggressive_s``.
     """
     index = TruthIndex([(stamp, list(vehicles)) for stamp, vehicles in truth_frames])
     profile = {v.vehicle_id: v.driver_profile for _, vehicles in truth_frames for v in vehicles}
@@ -425,6 +428,7 @@ def score_alerts(
         )
 
     tied = {e.episode_id: tie(e) for e in reduced if e.phase == "start"}
+    starts = {e.episode_id: e for e in reduced if e.phase == "start"}
     alert_episodes = _episodes(reduced, tied)
     truths = truth_episodes(site, truth_frames)
     arrivals = taper_arrivals(truth_frames, ZoneGeometry.from_site(site).taper_start_m)
@@ -440,6 +444,7 @@ def score_alerts(
         matched: set[str] = set()
         true_positives: list[Episode] = []
         false_positives = duplicates = 0
+        false_starts: list[dict[str, Any]] = []
         for alert in (a for a in alert_episodes if a.alert_type is alert_type):
             overlapping = [
                 t
@@ -457,6 +462,18 @@ def score_alerts(
             else:
                 false_positives += 1
                 duplicates += bool(overlapping)
+                start = starts.get(alert.episode_id)
+                if start is not None and len(false_starts) < MAX_FALSE_STARTS:
+                    false_starts.append(
+                        {
+                            "stamp_s": round(start.stamp_s, 2),
+                            "station_m": round(start.station_m, 1),
+                            "offset_m": round(start.offset_m, 2),
+                            "track_id": start.track_id,
+                            "vehicle_id": alert.vehicle_id,
+                            "duplicate": bool(overlapping),
+                        }
+                    )
         tp, fn = len(true_positives), len(candidates) - len(matched)
         leads = [x for x in map(lead, true_positives) if x is not None]
         entry: dict[str, Any] = {
@@ -471,6 +488,7 @@ def score_alerts(
             "lead_time_s": _median(leads),
             "lead_time_samples": len(leads),
             "truth_lead_time_s": _median([x for x in map(lead, candidates) if x is not None]),
+            "false_positive_starts": false_starts,
         }
         if alert_type is AlertType.SPEEDING:
             aggressive = [

@@ -75,6 +75,7 @@ import numpy as np
 
 from wz_camera_detector.settings import camera_mount
 from wz_eval.alerts import observed_truth, run_alert_engine, score_alerts, track_follows
+from wz_eval.by_station import StationBreakdown
 from wz_eval.fusion_report import (
     ALERT_TRUTH_RANGE_M,
     markdown,
@@ -337,6 +338,7 @@ def evaluate(
     )
     bias = None if options.bias_map is None else LateralBiasCorrector(site, options.bias_map)
     mot = _MotAccumulator()
+    by_station = StationBreakdown(site, centre)
     sample_times = [stamp for stamp, _ in record.camera_only]
     batches = [b for b in record.batches if not _dropped(b, options.dropouts, options.warmup_s)]
     position = 0
@@ -385,6 +387,7 @@ def evaluate(
         matched = scores.add(
             site, "fused", sample_s, [(s.x_m, s.y_m, s.speed_mps) for s in states], vehicles
         )
+        by_station.add(vehicles, matched, [s.speed_mps for s in states])
         fused_samples.extend((sample_s, lon, lat) for _, _, lon, lat in matched)
         mot.update(vehicles, states)
         mot_times.append(sample_s)
@@ -494,6 +497,7 @@ def evaluate(
         "paper_table": paper_table(site, scores, centre, options.window_upstream_m),
         "alerts": alerts,
         "alerts_all_in_range": alerts_all_in_range,
+        "fused_by_station": by_station.report(),
         "dropouts": [
             _dropout_report(d, options.warmup_s, fused_samples, mot, mot_times)
             for d in options.dropouts

@@ -165,6 +165,8 @@ def summarise(site_id: str, name: str, job: SiteJob, report: dict[str, Any]) -> 
     return {
         "site_id": site_id,
         "name": name,
+        "missed_upstream": _missed(report, upstream=True),
+        "missed_downstream": _missed(report, upstream=False),
         "seed": job.seed,
         "weather": job.weather,
         "vehicles_per_hour": job.vehicles_per_hour,
@@ -176,6 +178,19 @@ def summarise(site_id: str, name: str, job: SiteJob, report: dict[str, Any]) -> 
         "picture": f"{job.out_dir.name}/site.png",
         "pipeline_problems": report.get("pipeline_problems", {}),
     }
+
+
+def _missed(report: dict[str, Any], *, upstream: bool) -> float | None:
+    """Share of the scored vehicle samples upstream (or downstream) of the mast with no track."""
+    rows = [
+        row
+        for row in report.get("fused_by_station", [])
+        if (row["from_mast_m"][1] <= 0.0) == upstream
+    ]
+    samples = sum(row["vehicle_samples"] for row in rows)
+    if not samples:
+        return None
+    return sum(row["missed_share"] * row["vehicle_samples"] for row in rows) / samples
 
 
 def distribution(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -233,8 +248,8 @@ def markdown(report: dict[str, Any]) -> str:
     names = [t.name for t in SITE_TARGETS]
     lines += [
         "",
-        "| site | conditions | vehicles | " + " | ".join(names) + " |",
-        "|---|---|---|" + "---|" * len(names),
+        "| site | conditions | vehicles | " + " | ".join(names) + " | missed up / downstream |",
+        "|---|---|---|" + "---|" * len(names) + "---|",
     ]
     for row in rows:
         cells = []
@@ -246,8 +261,11 @@ def markdown(report: dict[str, Any]) -> str:
             f"{row['weather']}, {row['vehicles_per_hour']:.0f} veh/h, "
             f"{100 * row['truck_share']:.0f} % trucks"
         )
+        missed = f"{_cell(row.get('missed_upstream'))} / {_cell(row.get('missed_downstream'))}"
         lines.append(
-            f"| {row['site_id']} | {conditions} | {row['vehicles']} | " + " | ".join(cells) + " |"
+            f"| {row['site_id']} | {conditions} | {row['vehicles']} | "
+            + " | ".join(cells)
+            + f" | {missed} |"
         )
     lines.append("")
     for row in rows:

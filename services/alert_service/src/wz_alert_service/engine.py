@@ -7,7 +7,8 @@ returns :class:`AlertEvent` s. Time is the batches' stamps (capture time), never
 
 1. the open episodes of tracks no longer in the batch clear at once (the tracker deletes a
    track only after it has coasted for a while, and never reuses an id);
-2. each confirmed track's speed joins its history, kept for the longest trend window;
+2. each confirmed track's speed joins its history, kept for the longest trend window; a
+   track back from an outage (:data:`MEASUREMENT_GAP_S`) starts a new history;
 3. every enabled per-track rule of :mod:`wz_alert_service.rules` is evaluated on every
    confirmed track, then the site-level queue rule on all of them;
 4. each (track, type) key steps its episode state machine (below).
@@ -82,6 +83,13 @@ from wz_shared.site import AlertRules, EpisodeTiming, Site
 TIME_EPS_S = 1e-6
 #: Fewest speeds for the aggressive-approach speed trend.
 TREND_MIN_SAMPLES = 3
+#: A track whose newest measurement comes more than this after the one before [s] has been
+#: through an outage (occluded, or between sensors): its speed then jumps by the error the
+#: prediction gathered over the outage, which is no deceleration of the vehicle. The speed
+#: trends start again from that measurement. Sensors here run at 10-20 Hz, so 0.25 s is at
+#: least two missed frames of the slowest. (Issue 25: on a generated site 12 of 13 hard-braking
+#: alerts in 120 s were such jumps, vehicles re-acquired behind the taper's drums.)
+MEASUREMENT_GAP_S = 0.25
 _MAX_DESCRIPTION = 500
 _PREFIX = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.:-]{0,63}$")
 
@@ -302,6 +310,8 @@ class AlertEngine:
         self._episodes: dict[EpisodeKey, _Episode] = {}
         self._cooldown_until_s: dict[EpisodeKey, float] = {}
         self._history: dict[int, deque[tuple[float, float]]] = {}
+        #: Each track's newest measurement stamp seen, to tell an outage (see MEASUREMENT_GAP_S).
+        self._measured_s: dict[int, float] = {}
         self._history_s = max(
             self.rules.hard_braking.window_s, self.rules.aggressive_approach.trend_window_s
         )
@@ -389,10 +399,17 @@ class AlertEngine:
                 events.append(self._clear(key, episode, t, track_lost=True))
         for track_id in [tid for tid in self._history if tid not in present]:
             del self._history[track_id]
+            self._measured_s.pop(track_id, None)
         return events
 
     def _remember_speed(self, track: Track, t: float) -> None:
         history = self._history.setdefault(track.track_id, deque())
+        measured_s = track.last_update_s
+        if measured_s is not None:
+            previous_s = self._measured_s.get(track.track_id)
+            if previous_s is not None and measured_s - previous_s > MEASUREMENT_GAP_S + TIME_EPS_S:
+                history.clear()  # back from an outage: the jump is the prediction's error
+            self._measured_s[track.track_id] = measured_s
         history.append((t, track.speed_mps))
         while history and history[0][0] < t - self._history_s - TIME_EPS_S:
             history.popleft()
