@@ -26,6 +26,7 @@ import yaml
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 from matplotlib.axes import Axes
+from matplotlib.patches import Circle
 
 from wz_shared.arrays import F64
 from wz_shared.camera_geometry import PinholeCamera
@@ -147,7 +148,7 @@ def _draw(ax: Axes, site: Site, *, zoom: bool) -> None:
         if mount.kind == "lidar":
             ring = getattr(mount.intrinsics, "max_range_m", 200.0)
             ax.add_patch(
-                plt.Circle(
+                Circle(
                     (x, y),
                     ring,
                     fill=False,

@@ -187,10 +187,11 @@ def _missed(report: dict[str, Any], *, upstream: bool) -> float | None:
         for row in report.get("fused_by_station", [])
         if (row["from_mast_m"][1] <= 0.0) == upstream
     ]
-    samples = sum(row["vehicle_samples"] for row in rows)
+    samples = sum(int(row["vehicle_samples"]) for row in rows)
     if not samples:
         return None
-    return sum(row["missed_share"] * row["vehicle_samples"] for row in rows) / samples
+    missed = sum(float(row["missed_share"]) * int(row["vehicle_samples"]) for row in rows)
+    return missed / samples
 
 
 def distribution(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:

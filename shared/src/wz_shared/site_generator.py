@@ -42,6 +42,7 @@ from wz_shared.site import (
     LidarIntrinsics,
     Pose,
     RadarIntrinsics,
+    RoadDirection,
     SensorMount,
     Site,
     SpeedLimit,
@@ -95,7 +96,7 @@ LIDAR_MODELS: tuple[LidarModel, ...] = (
 )
 
 #: Compass bearings (clockwise from north) and the WZDx direction each rounds to.
-_DIRECTIONS = (
+_DIRECTIONS: tuple[tuple[float, RoadDirection], ...] = (
     (0.0, "northbound"),
     (90.0, "eastbound"),
     (180.0, "southbound"),
@@ -207,7 +208,7 @@ def _centerline(
     return points, description, bearing_deg  # type: ignore[return-value]
 
 
-def _direction(bearing_deg: float) -> str:
+def _direction(bearing_deg: float) -> RoadDirection:
     best = min(_DIRECTIONS, key=lambda d: abs((bearing_deg - d[0] + 180.0) % 360.0 - 180.0))
     return best[1]
 
@@ -286,7 +287,8 @@ def generate_site(seed: int) -> Site:
     from wz_shared.geometry import RoadFrame
 
     road = RoadFrame(centerline)
-    mast_xy = tuple(float(v) for v in road.to_site(mast_station_m, mast_offset_m))
+    mast_x, mast_y = road.to_site(mast_station_m, mast_offset_m)
+    mast_xy = (float(mast_x), float(mast_y))
     open_lanes = [lane for lane in lanes if lane.index != closed_lane]
     open_centre_m = float(np.mean([lane.center_offset_m for lane in open_lanes]))
     road_centre_m = float(np.mean([lane.center_offset_m for lane in lanes]))
@@ -377,7 +379,7 @@ def generate_site(seed: int) -> Site:
             f"{height_m:.1f} m high {taper_start_m - mast_station_m:.0f} m before the taper"
         ),
         road_names=[f"SR-{int(rng.integers(1, 999))}"],
-        road_direction=_direction(bearing_deg),  # type: ignore[arg-type]
+        road_direction=_direction(bearing_deg),
         origin=GeoOrigin(
             latitude_deg=round(float(rng.uniform(30.0, 47.0)), 5),
             longitude_deg=round(float(rng.uniform(-120.0, -75.0)), 5),

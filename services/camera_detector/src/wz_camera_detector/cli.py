@@ -52,11 +52,11 @@ from pydantic import ValidationError
 from wz_camera_detector.node import (
     CLASS_SHAPES,
     ImageBackend,
-    camera_at_size,
     cut_by_view,
     make_backend,
     road_heading_at,
 )
+from wz_camera_detector.regions import camera_at_size
 from wz_camera_detector.settings import CameraDetectorSettings, camera_mount
 from wz_camera_detector.tracker import ImageTracker
 from wz_camera_detector.world import box_to_ground, fit_box_to_ground, paper_box_to_ground
@@ -124,12 +124,12 @@ def _settings(args: argparse.Namespace) -> CameraDetectorSettings:
 def _box(text: str, option: str) -> tuple[int, int, int, int]:
     """``x0,y0,x1,y1`` [px] -> a box; ValueError in words for the operator."""
     try:
-        values = tuple(int(v) for v in text.split(","))
+        numbers = [int(v) for v in text.split(",")]
     except ValueError:
-        values = ()
-    if len(values) != 4 or not (0 <= values[0] < values[2] and 0 <= values[1] < values[3]):
+        numbers = []
+    if len(numbers) != 4 or not (0 <= numbers[0] < numbers[2] and 0 <= numbers[1] < numbers[3]):
         raise ValueError(f"{option} {text!r}: expected x0,y0,x1,y1 pixels with x0 < x1, y0 < y1")
-    return values  # type: ignore[return-value]
+    return numbers[0], numbers[1], numbers[2], numbers[3]
 
 
 def read_frames(path: Path, rate_hz: float, start_index: int) -> Iterator[tuple[int, float, U8]]:
