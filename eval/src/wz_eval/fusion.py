@@ -494,6 +494,7 @@ def evaluate(
         },
         "sources": {s: scores.errors[s].summary() for s in SOURCES},
         **mot.summary(len(record.truth)),
+        "id_switch_events": mot.switch_events(mot_times, site, centre),
         "paper_table": paper_table(site, scores, centre, options.window_upstream_m),
         "alerts": alerts,
         "alerts_all_in_range": alerts_all_in_range,
@@ -644,6 +645,10 @@ def _dropout_report(
     }
 
 
+#: Identity switches listed in the report (where each happened).
+MAX_SWITCH_EVENTS = 30
+
+
 class _MotAccumulator:
     """py-motmetrics over the sampled confirmed and coasting tracks."""
 
@@ -653,6 +658,33 @@ class _MotAccumulator:
         self._mm = motmetrics
         self.acc = motmetrics.MOTAccumulator(auto_id=True)
         self._numbers: dict[str, int] = {}  # motmetrics wants numeric object ids
+        #: Per frame, each object's vehicle id and position, to say where a switch happened.
+        self._where: list[dict[int, tuple[str, float, float]]] = []
+
+    def switch_events(
+        self, frame_times: Sequence[float], site: Site, mast_xy_m: tuple[float, float]
+    ) -> list[dict[str, Any]]:
+        """Where and when the first :data:`MAX_SWITCH_EVENTS` identity switches happened: the
+        vehicle, its station from the mast (negative upstream) and lane offset."""
+        events = self.acc.mot_events
+        switches = events[events.Type == "SWITCH"]
+        mast_station = float(site.road_frame.to_road(*mast_xy_m)[0])
+        out: list[dict[str, Any]] = []
+        for (frame, _), row in switches.iterrows():
+            if len(out) >= MAX_SWITCH_EVENTS:
+                break
+            vehicle_id, x_m, y_m = self._where[int(frame)][int(row.OId)]
+            station, offset = site.road_frame.to_road(x_m, y_m)
+            out.append(
+                {
+                    "stamp_s": round(frame_times[int(frame)], 2),
+                    "vehicle_id": vehicle_id,
+                    "from_mast_m": round(float(station) - mast_station, 1),
+                    "offset_m": round(float(offset), 2),
+                    "track_id": int(row.HId),
+                }
+            )
+        return out
 
     def switches_between(self, frame_times: Sequence[float], start_s: float, end_s: float) -> int:
         """Identity switches in frames stamped within ``[start_s, end_s]``."""
@@ -666,6 +698,9 @@ class _MotAccumulator:
         hyp = np.array([(s.x_m, s.y_m) for s in states], dtype=np.float64).reshape(-1, 2)
         distances = self._mm.distances.norm2squared_matrix(gt, hyp, max_d2=MOT_GATE_M**2)
         objects = [self._numbers.setdefault(v.vehicle_id, len(self._numbers) + 1) for v in vehicles]
+        self._where.append(
+            {n: (v.vehicle_id, v.x_m, v.y_m) for n, v in zip(objects, vehicles, strict=True)}
+        )
         self.acc.update(objects, [s.track_id for s in states], distances)
 
     def summary(self, _: int) -> dict[str, Any]:
