@@ -197,3 +197,24 @@ def test_wz_eval_camera_gives_errors_by_distance_for_the_three_methods(tmp_path:
     # downstream of their centre (towards the camera).
     assert table["paper_eq12"]["all"]["bias_longitudinal_m"] > 0.5
     assert "| all |" in (tmp_path / "camera-eval.md").read_text()
+
+
+def test_the_approach_is_upstream_of_the_mast_and_a_track_goes_where_its_vehicle_is() -> None:
+    from types import SimpleNamespace
+
+    from tests.eval.test_alerts_scoring import truth_at
+    from wz_eval.fusion import approach_region
+    from wz_shared.site import DEFAULT_SITE_PATH, load_site
+
+    site = load_site(DEFAULT_SITE_PATH)  # straight road: station = y; the mast at 980 m
+    vehicles = truth_at(0.0)  # at stations 400, 300 and 600 m
+    vehicles[2] = vehicles[2].model_copy(update={"y_m": 980.5, "station_m": 980.5})
+    states = [
+        SimpleNamespace(x_m=1.83, y_m=401.0),  # A's track
+        SimpleNamespace(x_m=1.83, y_m=978.5),  # C's track (C just downstream): C's side
+        SimpleNamespace(x_m=1.83, y_m=1100.0),  # a false track downstream
+        SimpleNamespace(x_m=1.83, y_m=700.0),  # a false track upstream
+    ]
+    kept_vehicles, kept_states = approach_region(site, vehicles, states, 980.0)  # type: ignore[arg-type]
+    assert [v.vehicle_id for v in kept_vehicles] == ["A", "B"]
+    assert [s.y_m for s in kept_states] == [401.0, 700.0]

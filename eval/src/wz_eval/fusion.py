@@ -339,6 +339,9 @@ def evaluate(
     bias = None if options.bias_map is None else LateralBiasCorrector(site, options.bias_map)
     mot = _MotAccumulator()
     by_station = StationBreakdown(site, centre)
+    # The approach alone (upstream of the mast): what the sensors face.
+    mot_approach = _MotAccumulator()
+    mast_station_m = float(site.road_frame.to_road(*centre)[0])
     sample_times = [stamp for stamp, _ in record.camera_only]
     batches = [b for b in record.batches if not _dropped(b, options.dropouts, options.warmup_s)]
     position = 0
@@ -390,6 +393,7 @@ def evaluate(
         by_station.add(vehicles, matched, [s.speed_mps for s in states])
         fused_samples.extend((sample_s, lon, lat) for _, _, lon, lat in matched)
         mot.update(vehicles, states)
+        mot_approach.update(*approach_region(site, vehicles, states, mast_station_m))
         mot_times.append(sample_s)
         scored_ids.append((sample_s, [s.track_id for s in states], vehicles))
         histories.extend(tracker.pop_finished_histories())
@@ -495,6 +499,7 @@ def evaluate(
         "sources": {s: scores.errors[s].summary() for s in SOURCES},
         **mot.summary(len(record.truth)),
         "id_switch_events": mot.switch_events(mot_times, site, centre),
+        "approach": mot_approach.summary(len(record.truth)),
         "paper_table": paper_table(site, scores, centre, options.window_upstream_m),
         "alerts": alerts,
         "alerts_all_in_range": alerts_all_in_range,
@@ -619,6 +624,35 @@ def scored_region(
         )
     ]
     return [v for v in vehicles if inside(v.x_m, v.y_m)], kept_states
+
+
+def approach_region(
+    site: Site,
+    vehicles: Sequence[VehicleTruth],
+    states: Sequence[TrackState],
+    mast_station_m: float,
+) -> tuple[list[VehicleTruth], list[TrackState]]:
+    """Of the scored vehicles and tracks, those of the approach: upstream of the mast, where
+    traffic comes from and every sensor of the trailer faces. A track paired with a vehicle
+    (nearest first, within the MOT gate) goes where its vehicle is; an unpaired one where it is.
+    """
+
+    def upstream(x_m: float, y_m: float) -> bool:
+        return float(site.road_frame.to_road(x_m, y_m)[0]) <= mast_station_m
+
+    est = np.array([(s.x_m, s.y_m) for s in states], dtype=np.float64).reshape(-1, 2)
+    tru = np.array([(v.x_m, v.y_m) for v in vehicles], dtype=np.float64).reshape(-1, 2)
+    partner = {e: t for e, t in match(est, tru, MOT_GATE_M)}
+    kept = [
+        s
+        for e, s in enumerate(states)
+        if (
+            upstream(vehicles[partner[e]].x_m, vehicles[partner[e]].y_m)
+            if e in partner
+            else upstream(s.x_m, s.y_m)
+        )
+    ]
+    return [v for v in vehicles if upstream(v.x_m, v.y_m)], kept
 
 
 def _dropout_report(

@@ -205,6 +205,28 @@ def markdown(report: dict[str, Any]) -> str:
         value = row["value"]
         shown = str(value) if isinstance(value, int) else ratio(value)
         lines.append(f"| {row['check']} | {shown} | {row['target']} | {holds} |")
+    approach = report.get("approach")
+    if approach is not None:
+        lines += [
+            "",
+            f"On the approach alone (upstream of the mast, which every sensor faces): MOTA "
+            f"{ratio(approach['mota'])}, {approach['id_switches_per_100_vehicles']:.1f} identity "
+            "switches per 100 vehicles.",
+        ]
+    by_station = report.get("fused_by_station", [])
+    if by_station:
+        lines += [
+            "",
+            "| from the mast [m] | vehicle samples | missed | speed RMSE [m/s] | lateral RMSE [m] |",
+            "|---|---|---|---|---|",
+        ]
+        for row in by_station:
+            low, high = row["from_mast_m"]
+            lines.append(
+                f"| {low:+.0f} to {high:+.0f} | {row['vehicle_samples']} | "
+                f"{ratio(row['missed_share'])} | {cell(row['rmse_speed_mps'])} | "
+                f"{cell(row['rmse_lateral_m'])} |"
+            )
     lines += [
         "",
         "Alerts (the alert service on the fused tracks against the same rules on the "

@@ -166,6 +166,8 @@ def summarise(site_id: str, name: str, job: SiteJob, report: dict[str, Any]) -> 
         "site_id": site_id,
         "name": name,
         "missed_upstream": _missed(report, upstream=True),
+        "approach_mota": report.get("approach", {}).get("mota"),
+        "approach_switches_per_100": report.get("approach", {}).get("id_switches_per_100_vehicles"),
         "missed_downstream": _missed(report, upstream=False),
         "seed": job.seed,
         "weather": job.weather,
@@ -235,7 +237,10 @@ def markdown(report: dict[str, Any]) -> str:
         f"{len(rows)} generated sites, {report['duration_s']:.0f} s scored each after a "
         f"{report['warmup_s']:.0f} s warm-up; the live fused track within 150 m of the mast; "
         "alerts scored against the same rules on the truth. A site meets the bar when every "
-        "figure holds ('-': the run cannot tell, e.g. no late merge happened).",
+        "figure holds ('-': the run cannot tell, e.g. no late merge happened). The last two "
+        "columns are not targets: the share of vehicle samples with no track upstream and "
+        "downstream of the mast, and MOTA and switches on the approach alone (upstream of the "
+        "mast, which every sensor faces; downstream only the LiDAR sees).",
         "",
         "| target | bound | sites meeting | failing | no value | median | worst |",
         "|---|---|---|---|---|---|---|",
@@ -249,8 +254,10 @@ def markdown(report: dict[str, Any]) -> str:
     names = [t.name for t in SITE_TARGETS]
     lines += [
         "",
-        "| site | conditions | vehicles | " + " | ".join(names) + " | missed up / downstream |",
-        "|---|---|---|" + "---|" * len(names) + "---|",
+        "| site | conditions | vehicles | "
+        + " | ".join(names)
+        + " | missed up / downstream | approach MOTA / switches |",
+        "|---|---|---|" + "---|" * len(names) + "---|---|",
     ]
     for row in rows:
         cells = []
@@ -263,10 +270,13 @@ def markdown(report: dict[str, Any]) -> str:
             f"{100 * row['truck_share']:.0f} % trucks"
         )
         missed = f"{_cell(row.get('missed_upstream'))} / {_cell(row.get('missed_downstream'))}"
+        approach = (
+            f"{_cell(row.get('approach_mota'))} / {_cell(row.get('approach_switches_per_100'))}"
+        )
         lines.append(
             f"| {row['site_id']} | {conditions} | {row['vehicles']} | "
             + " | ".join(cells)
-            + f" | {missed} |"
+            + f" | {missed} | {approach} |"
         )
     lines.append("")
     for row in rows:
