@@ -66,7 +66,7 @@ import math
 import sys
 import time
 from collections import defaultdict
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -611,6 +611,17 @@ def scored_region(
     def inside(x_m: float, y_m: float) -> bool:
         return math.hypot(x_m - centre[0], y_m - centre[1]) <= max_range_m
 
+    return _region(vehicles, states, inside)
+
+
+def _region(
+    vehicles: Sequence[VehicleTruth],
+    states: Sequence[TrackState],
+    inside: Callable[[float, float], bool],
+) -> tuple[list[VehicleTruth], list[TrackState]]:
+    """The vehicles ``inside`` a region and the tracks that go with them: a track paired with
+    a vehicle (nearest first, within the MOT gate) goes where its vehicle is, an unpaired one
+    where it is."""
     est = np.array([(s.x_m, s.y_m) for s in states], dtype=np.float64).reshape(-1, 2)
     tru = np.array([(v.x_m, v.y_m) for v in vehicles], dtype=np.float64).reshape(-1, 2)
     partner = {e: t for e, t in match(est, tru, MOT_GATE_M)}
@@ -640,19 +651,7 @@ def approach_region(
     def upstream(x_m: float, y_m: float) -> bool:
         return float(site.road_frame.to_road(x_m, y_m)[0]) <= mast_station_m
 
-    est = np.array([(s.x_m, s.y_m) for s in states], dtype=np.float64).reshape(-1, 2)
-    tru = np.array([(v.x_m, v.y_m) for v in vehicles], dtype=np.float64).reshape(-1, 2)
-    partner = {e: t for e, t in match(est, tru, MOT_GATE_M)}
-    kept = [
-        s
-        for e, s in enumerate(states)
-        if (
-            upstream(vehicles[partner[e]].x_m, vehicles[partner[e]].y_m)
-            if e in partner
-            else upstream(s.x_m, s.y_m)
-        )
-    ]
-    return [v for v in vehicles if upstream(v.x_m, v.y_m)], kept
+    return _region(vehicles, states, upstream)
 
 
 def _dropout_report(
