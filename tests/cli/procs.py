@@ -107,6 +107,26 @@ def start_wz(
     )
 
 
+def start_wz_up(
+    tmp_path: Path, endpoint: str, http_port: int, *args: str
+) -> subprocess.Popen[bytes]:
+    """`wz up --listen ENDPOINT ARGS...` with its state under ``tmp_path``, the gateway on
+    ``http_port`` and every line of its output in ``tmp_path / "up.log"``."""
+    log = (tmp_path / "up.log").open("wb")
+    return subprocess.Popen(
+        wz_argv("up", "--listen", endpoint, *args),
+        cwd=ROOT,
+        env=wz_env(
+            WZ_SIM_WORK_DIR=str(tmp_path / "sim"),
+            WZ_STATUS_PERIOD_S="1.0",
+            WZ_GATEWAY_PORT=str(http_port),
+            WZ_GATEWAY_DATA_DIR=str(tmp_path / "gw"),
+        ),
+        stdout=log,
+        stderr=subprocess.STDOUT,
+    )
+
+
 @contextlib.contextmanager
 def running(process: P) -> Iterator[P]:
     """Make sure ``process`` is gone when the block ends, whatever happened in it."""

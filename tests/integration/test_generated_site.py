@@ -4,13 +4,12 @@ keys, the tracks come from both detectors, and the gateway serves tracks and ale
 
 from __future__ import annotations
 
-import subprocess
 import time
 from pathlib import Path
 
 import httpx
 
-from tests.cli.procs import ROOT, free_port, port_open, running, wait_for, wz_argv, wz_env
+from tests.cli.procs import free_port, port_open, running, start_wz_up, wait_for
 from wz_eval.site_tool import site_yaml
 from wz_shared.bus import Bus
 from wz_shared.messages import DetectionBatch, TrackBatch
@@ -38,19 +37,7 @@ def test_wz_up_runs_a_generated_site_end_to_end(tmp_path: Path) -> None:
     site_file.write_text(site_yaml(site), encoding="utf-8")
     port, http_port = free_port(), free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
-    log = (tmp_path / "up.log").open("wb")
-    up = subprocess.Popen(
-        wz_argv("up", "--site", str(site_file), "--listen", endpoint, "--seed", "4"),
-        cwd=ROOT,
-        env=wz_env(
-            WZ_SIM_WORK_DIR=str(tmp_path / "sim"),
-            WZ_STATUS_PERIOD_S="1.0",
-            WZ_GATEWAY_PORT=str(http_port),
-            WZ_GATEWAY_DATA_DIR=str(tmp_path / "gw"),
-        ),
-        stdout=log,
-        stderr=subprocess.STDOUT,
-    )
+    up = start_wz_up(tmp_path, endpoint, http_port, "--site", str(site_file), "--seed", "4")
     settings = BusSettings(mode="client", connect_endpoints=[endpoint], listen_endpoints=[])
     base = f"http://127.0.0.1:{http_port}"
     with running(up):

@@ -6,13 +6,12 @@ the truth, and the gateway serves them over HTTP."""
 from __future__ import annotations
 
 import math
-import subprocess
 import time
 from pathlib import Path
 
 import httpx
 
-from tests.cli.procs import ROOT, free_port, port_open, running, wait_for, wz_argv, wz_env
+from tests.cli.procs import free_port, port_open, running, start_wz_up, wait_for
 from wz_shared.bus import Bus
 from wz_shared.messages import GroundTruth, TrackBatch
 from wz_shared.settings import BusSettings
@@ -25,19 +24,7 @@ def test_wz_up_runs_the_pipeline_from_sensors_to_fused_tracks(tmp_path: Path) ->
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     http_port = free_port()
-    log = (tmp_path / "up.log").open("wb")
-    up = subprocess.Popen(
-        wz_argv("up", "--listen", endpoint, "--seed", "3"),
-        cwd=ROOT,
-        env=wz_env(
-            WZ_SIM_WORK_DIR=str(tmp_path / "sim"),
-            WZ_STATUS_PERIOD_S="1.0",
-            WZ_GATEWAY_PORT=str(http_port),
-            WZ_GATEWAY_DATA_DIR=str(tmp_path / "gw"),
-        ),
-        stdout=log,
-        stderr=subprocess.STDOUT,
-    )
+    up = start_wz_up(tmp_path, endpoint, http_port, "--seed", "3")
     settings = BusSettings(mode="client", connect_endpoints=[endpoint], listen_endpoints=[])
     with running(up):
         wait_for(lambda: port_open(port), 30.0, "the router to listen")

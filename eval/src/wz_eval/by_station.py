@@ -15,7 +15,6 @@ from collections.abc import Sequence
 from typing import Any
 
 from wz_shared.messages import VehicleTruth
-from wz_shared.site import Site
 
 #: Bin width along the road [m].
 BIN_M = 50.0
@@ -24,17 +23,15 @@ BIN_M = 50.0
 class StationBreakdown:
     """Accumulates, per bin of station relative to the mast, misses and errors."""
 
-    def __init__(self, site: Site, mast_xy_m: tuple[float, float]) -> None:
-        self._site = site
-        self._mast_station_m = float(site.road_frame.to_road(*mast_xy_m)[0])
+    def __init__(self, mast_station_m: float) -> None:
+        self._mast_station_m = mast_station_m
         self._vehicles: dict[int, int] = defaultdict(int)
         self._missed: dict[int, int] = defaultdict(int)
         self._speed_sq: dict[int, list[float]] = defaultdict(list)
         self._lateral_sq: dict[int, list[float]] = defaultdict(list)
 
-    def _bin(self, vehicle: VehicleTruth) -> tuple[int, float]:
-        station, offset = self._site.road_frame.to_road(vehicle.x_m, vehicle.y_m)
-        return math.floor((float(station) - self._mast_station_m) / BIN_M), float(offset)
+    def _bin(self, vehicle: VehicleTruth) -> int:
+        return math.floor((vehicle.station_m - self._mast_station_m) / BIN_M)
 
     def add(
         self,
@@ -46,7 +43,7 @@ class StationBreakdown:
         index, vehicle, longitudinal and lateral error) of estimates with these speeds."""
         found = {vehicle.vehicle_id: (index, lat) for index, vehicle, _, lat in matched}
         for vehicle in vehicles:
-            key, _ = self._bin(vehicle)
+            key = self._bin(vehicle)
             self._vehicles[key] += 1
             if vehicle.vehicle_id not in found:
                 self._missed[key] += 1

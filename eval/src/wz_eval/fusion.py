@@ -338,10 +338,10 @@ def evaluate(
     )
     bias = None if options.bias_map is None else LateralBiasCorrector(site, options.bias_map)
     mot = _MotAccumulator()
-    by_station = StationBreakdown(site, centre)
+    mast_station_m = float(site.road_frame.to_road(*centre)[0])
+    by_station = StationBreakdown(mast_station_m)
     # The approach alone (upstream of the mast): what the sensors face.
     mot_approach = _MotAccumulator()
-    mast_station_m = float(site.road_frame.to_road(*centre)[0])
     sample_times = [stamp for stamp, _ in record.camera_only]
     batches = [b for b in record.batches if not _dropped(b, options.dropouts, options.warmup_s)]
     position = 0
@@ -498,7 +498,7 @@ def evaluate(
         },
         "sources": {s: scores.errors[s].summary() for s in SOURCES},
         **mot.summary(len(record.truth)),
-        "id_switch_events": mot.switch_events(mot_times, site, centre),
+        "id_switch_events": mot.switch_events(mot_times, mast_station_m),
         "approach": mot_approach.summary(len(record.truth)),
         "paper_table": paper_table(site, scores, centre, options.window_upstream_m),
         "alerts": alerts,
@@ -611,30 +611,27 @@ def scored_region(
     def inside(x_m: float, y_m: float) -> bool:
         return math.hypot(x_m - centre[0], y_m - centre[1]) <= max_range_m
 
-    return _region(vehicles, states, inside)
+    return _region(vehicles, states, lambda v: inside(v.x_m, v.y_m), inside)
 
 
 def _region(
     vehicles: Sequence[VehicleTruth],
     states: Sequence[TrackState],
+    holds: Callable[[VehicleTruth], bool],
     inside: Callable[[float, float], bool],
 ) -> tuple[list[VehicleTruth], list[TrackState]]:
-    """The vehicles ``inside`` a region and the tracks that go with them: a track paired with
+    """The vehicles a region ``holds`` and the tracks that go with them: a track paired with
     a vehicle (nearest first, within the MOT gate) goes where its vehicle is, an unpaired one
-    where it is."""
+    where it is (``inside`` at its position)."""
     est = np.array([(s.x_m, s.y_m) for s in states], dtype=np.float64).reshape(-1, 2)
     tru = np.array([(v.x_m, v.y_m) for v in vehicles], dtype=np.float64).reshape(-1, 2)
     partner = {e: t for e, t in match(est, tru, MOT_GATE_M)}
     kept_states = [
         s
         for e, s in enumerate(states)
-        if (
-            inside(vehicles[partner[e]].x_m, vehicles[partner[e]].y_m)
-            if e in partner
-            else inside(s.x_m, s.y_m)
-        )
+        if (holds(vehicles[partner[e]]) if e in partner else inside(s.x_m, s.y_m))
     ]
-    return [v for v in vehicles if inside(v.x_m, v.y_m)], kept_states
+    return [v for v in vehicles if holds(v)], kept_states
 
 
 def approach_region(
@@ -651,7 +648,7 @@ def approach_region(
     def upstream(x_m: float, y_m: float) -> bool:
         return float(site.road_frame.to_road(x_m, y_m)[0]) <= mast_station_m
 
-    return _region(vehicles, states, upstream)
+    return _region(vehicles, states, lambda v: v.station_m <= mast_station_m, upstream)
 
 
 def _dropout_report(
@@ -691,29 +688,27 @@ class _MotAccumulator:
         self._mm = motmetrics
         self.acc = motmetrics.MOTAccumulator(auto_id=True)
         self._numbers: dict[str, int] = {}  # motmetrics wants numeric object ids
-        #: Per frame, each object's vehicle id and position, to say where a switch happened.
-        self._where: list[dict[int, tuple[str, float, float]]] = []
+        #: Per frame, each object's vehicle: where a switch happened.
+        self._where: list[dict[int, VehicleTruth]] = []
 
     def switch_events(
-        self, frame_times: Sequence[float], site: Site, mast_xy_m: tuple[float, float]
+        self, frame_times: Sequence[float], mast_station_m: float
     ) -> list[dict[str, Any]]:
         """Where and when the first :data:`MAX_SWITCH_EVENTS` identity switches happened: the
         vehicle, its station from the mast (negative upstream) and lane offset."""
         events = self.acc.mot_events
         switches = events[events.Type == "SWITCH"]
-        mast_station = float(site.road_frame.to_road(*mast_xy_m)[0])
         out: list[dict[str, Any]] = []
         for (frame, _), row in switches.iterrows():
             if len(out) >= MAX_SWITCH_EVENTS:
                 break
-            vehicle_id, x_m, y_m = self._where[int(frame)][int(row.OId)]
-            station, offset = site.road_frame.to_road(x_m, y_m)
+            vehicle = self._where[int(frame)][int(row.OId)]
             out.append(
                 {
                     "stamp_s": round(frame_times[int(frame)], 2),
-                    "vehicle_id": vehicle_id,
-                    "from_mast_m": round(float(station) - mast_station, 1),
-                    "offset_m": round(float(offset), 2),
+                    "vehicle_id": vehicle.vehicle_id,
+                    "from_mast_m": round(vehicle.station_m - mast_station_m, 1),
+                    "offset_m": round(vehicle.offset_m, 2),
                     "track_id": int(row.HId),
                 }
             )
@@ -731,9 +726,7 @@ class _MotAccumulator:
         hyp = np.array([(s.x_m, s.y_m) for s in states], dtype=np.float64).reshape(-1, 2)
         distances = self._mm.distances.norm2squared_matrix(gt, hyp, max_d2=MOT_GATE_M**2)
         objects = [self._numbers.setdefault(v.vehicle_id, len(self._numbers) + 1) for v in vehicles]
-        self._where.append(
-            {n: (v.vehicle_id, v.x_m, v.y_m) for n, v in zip(objects, vehicles, strict=True)}
-        )
+        self._where.append(dict(zip(objects, vehicles, strict=True)))
         self.acc.update(objects, [s.track_id for s in states], distances)
 
     def summary(self, _: int) -> dict[str, Any]:

@@ -82,20 +82,14 @@ def _camera_footprint(site: Site, mount_index: int) -> F64 | None:
             np.column_stack([np.zeros(40), np.linspace(0, h, 40)]),
         ]
     )
-    rays = camera.pixel_to_ray(border)
-    centre = camera.position_m
-    points = []
-    for ray in rays:
-        horizontal = math.hypot(ray[0], ray[1])
-        if ray[2] < -1e-9:
-            t = -centre[2] / ray[2]
-            if t * horizontal <= CAMERA_RANGE_M:
-                points.append(centre[:2] + t * ray[:2])
-                continue
-        if horizontal < 1e-9:
-            continue
-        points.append(centre[:2] + CAMERA_RANGE_M * ray[:2] / horizontal)
-    return np.array(points) if points else None
+    centre = camera.position_m[:2]
+    ground = camera.ground_point(border)[:, :2]  # NaN at and above the horizon
+    rays = camera.pixel_to_ray(border)[:, :2]
+    reach = np.hypot(rays[:, 0], rays[:, 1])
+    far = np.isnan(ground[:, 0]) | (np.hypot(*(ground - centre).T) > CAMERA_RANGE_M)
+    clipped = centre + CAMERA_RANGE_M * rays / np.where(reach > 1e-9, reach, np.inf)[:, None]
+    points = np.where(far[:, None], clipped, ground)[(~far) | (reach > 1e-9)]
+    return points if len(points) else None
 
 
 def _draw(ax: Axes, site: Site, *, zoom: bool) -> None:

@@ -69,6 +69,7 @@ def _render(job: tuple[Path, Path, int, str, float, float, int, float]) -> Path:
 
 def main(argv: list[str] | None = None) -> int:
     from wz_camera_detector.regions import detector_regions
+    from wz_camera_detector.settings import camera_mount
     from wz_camera_detector.train_data import Roi, prepare_roi_dataset
     from wz_eval.site_tool import site_yaml
     from wz_shared.site import DEFAULT_SITE_PATH, load_site
@@ -122,8 +123,7 @@ def main(argv: list[str] | None = None) -> int:
     counts = {}
     for job, source in zip(jobs, rendered, strict=True):
         site = load_site(job[0])
-        camera = next(m for m in site.sensors if m.kind == "camera")
-        regions = detector_regions(site, camera, args.input)
+        regions = detector_regions(site, camera_mount(site, None), args.input)
         if regions.roi_xyxy_px is None:
             continue
         dest = crops / source.name

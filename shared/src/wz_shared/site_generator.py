@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wz_shared.geometry import RoadFrame
 from wz_shared.site import (
     MPH_TO_MPS,
     AlertRules,
@@ -204,8 +205,11 @@ def _centerline(
                 x, y = x + tail * math.cos(theta), y + tail * math.sin(theta)
         return x, y
 
-    points = [tuple(round(v, 3) for v in position(station)) for station in stations]
-    return points, description, bearing_deg  # type: ignore[return-value]
+    points = []
+    for station in stations:
+        x, y = position(station)
+        points.append((round(x, 3), round(y, 3)))
+    return points, description, bearing_deg
 
 
 def _direction(bearing_deg: float) -> RoadDirection:
@@ -213,13 +217,9 @@ def _direction(bearing_deg: float) -> RoadDirection:
     return best[1]
 
 
-def _aim(
-    site_xy: tuple[float, float], height_m: float, target_xy: tuple[float, float]
-) -> tuple[float, float]:
-    """Yaw [deg CCW from east] and the depression [deg] of the line of sight from a mount to a
-    point on the ground."""
-    dx, dy = target_xy[0] - site_xy[0], target_xy[1] - site_xy[1]
-    return math.degrees(math.atan2(dy, dx)), math.degrees(math.atan2(height_m, math.hypot(dx, dy)))
+def _yaw_deg(site_xy: tuple[float, float], target_xy: tuple[float, float]) -> float:
+    """Yaw [deg CCW from east] of the line of sight from a mount to a point."""
+    return math.degrees(math.atan2(target_xy[1] - site_xy[1], target_xy[0] - site_xy[0]))
 
 
 def _sensor_id(rng: np.random.Generator, kind: str, model: str) -> str:
@@ -284,8 +284,6 @@ def generate_site(seed: int) -> Site:
     height_m = float(rng.uniform(4.0, 10.0))
 
     centerline, shape, bearing_deg = _centerline(rng, length_m, mast_station_m)
-    from wz_shared.geometry import RoadFrame
-
     road = RoadFrame(centerline)
     mast_x, mast_y = road.to_site(mast_station_m, mast_offset_m)
     mast_xy = (float(mast_x), float(mast_y))
@@ -300,7 +298,7 @@ def generate_site(seed: int) -> Site:
     sensors: list[SensorMount] = []
     # LiDAR: level, its azimuth zero down the road.
     model = LIDAR_MODELS[int(rng.integers(len(LIDAR_MODELS)))]
-    lidar_yaw, _ = _aim(mast_xy, height_m, road_point(60.0, road_centre_m))
+    lidar_yaw = _yaw_deg(mast_xy, road_point(60.0, road_centre_m))
     sensors.append(
         SensorMount(
             sensor_id=_sensor_id(rng, "lidar", model.name),
@@ -326,17 +324,16 @@ def generate_site(seed: int) -> Site:
     focal_px = width_px / 2.0 / math.tan(math.radians(hfov_deg) / 2.0)
     horizon_row = float(rng.uniform(0.22, 0.40)) * height_px
     pitch_deg = -math.degrees(math.atan((height_px / 2.0 - horizon_row) / focal_px))
-    camera_yaw, _ = _aim(
-        mast_xy, height_m, road_point(float(rng.uniform(70.0, 110.0)), open_centre_m)
-    )
+    camera_yaw = _yaw_deg(mast_xy, road_point(float(rng.uniform(70.0, 110.0)), open_centre_m))
     camera_yaw += float(rng.normal(0.0, 1.0))  # the technician's hand
-    camera_xy = road.to_site(mast_station_m - 0.2, mast_offset_m)
+    # The camera and the radar share a bracket 0.2 m upstream of the LiDAR.
+    head_x, head_y = road.to_site(mast_station_m - 0.2, mast_offset_m)
     sensors.append(
         SensorMount(
             sensor_id=_sensor_id(rng, "camera", "cam"),
             pose=Pose(
-                x_m=round(float(camera_xy[0]), 3),
-                y_m=round(float(camera_xy[1]), 3),
+                x_m=round(float(head_x), 3),
+                y_m=round(float(head_y), 3),
                 z_m=round(height_m + 0.2, 2),
                 yaw_deg=round(camera_yaw, 2),
                 pitch_deg=round(pitch_deg, 2),
@@ -348,14 +345,13 @@ def generate_site(seed: int) -> Site:
         )
     )
     # Radar: under the camera, aimed at the approach 100 m upstream.
-    radar_yaw, _ = _aim(mast_xy, height_m, road_point(100.0, road_centre_m))
-    radar_xy = road.to_site(mast_station_m - 0.2, mast_offset_m)
+    radar_yaw = _yaw_deg(mast_xy, road_point(100.0, road_centre_m))
     sensors.append(
         SensorMount(
             sensor_id=_sensor_id(rng, "radar", "radar"),
             pose=Pose(
-                x_m=round(float(radar_xy[0]), 3),
-                y_m=round(float(radar_xy[1]), 3),
+                x_m=round(float(head_x), 3),
+                y_m=round(float(head_y), 3),
                 z_m=round(max(2.0, height_m - 1.0), 2),
                 yaw_deg=round(radar_yaw, 2),
             ),
@@ -370,11 +366,10 @@ def generate_site(seed: int) -> Site:
             for i, sensor in enumerate(sensors)
         ]
 
-    closed_word = "right" if closed_side == "right" else "left"
     return Site(
         site_id=f"gen-{seed}",
         name=(
-            f"Generated site {seed}: {lanes_n} to {lanes_n - 1} lanes, {closed_word} lane "
+            f"Generated site {seed}: {lanes_n} to {lanes_n - 1} lanes, {closed_side} lane "
             f"closed, {shape}, {upstream_mph:.0f}/{zone_mph:.0f} mph, mast on the {mast_side} "
             f"{height_m:.1f} m high {taper_start_m - mast_station_m:.0f} m before the taper"
         ),

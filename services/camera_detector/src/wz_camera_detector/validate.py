@@ -40,6 +40,7 @@ import cv2
 import numpy as np
 
 from wz_camera_detector.regions import detector_regions
+from wz_camera_detector.settings import camera_mount
 from wz_camera_detector.yolo import YoloOnnxDetector, box_iou
 from wz_shared.arrays import F64
 from wz_shared.site import load_site
@@ -360,9 +361,7 @@ def main(argv: list[str] | None = None) -> int:
     detector = YoloOnnxDetector(args.model, conf_threshold=0.001, max_detections=300)
     if args.site is not None:
         site = load_site(args.site)
-        regions = detector_regions(
-            site, next(m for m in site.sensors if m.kind == "camera"), max(detector.input_size)
-        )
+        regions = detector_regions(site, camera_mount(site, None), max(detector.input_size))
         detector.set_regions(regions.roi_xyxy_px, regions.tiles_xyxy_px)
     started = time.perf_counter()
     report = validate(detector, pairs, args.max_range_m, args.min_visibility, args.iou, args.conf)

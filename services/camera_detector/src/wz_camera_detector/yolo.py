@@ -421,8 +421,8 @@ class YoloOnnxDetector:
             x0, y0, x1, y1 = roi_xyxy_px
             if not (0 <= x0 < x1 and 0 <= y0 < y1):
                 raise ValueError(f"ROI {roi_xyxy_px} is empty or negative")
-        self.roi_xyxy_px = None if roi_xyxy_px is None else tuple(roi_xyxy_px)  # type: ignore[assignment]
-        self.tiles_xyxy_px = tuple(tuple(tile) for tile in tiles_xyxy_px)  # type: ignore[misc]
+        self.roi_xyxy_px = roi_xyxy_px
+        self.tiles_xyxy_px = tuple(tiles_xyxy_px)
 
     def _metadata_class_names(self) -> tuple[str, ...]:
         text = self.metadata.get("wz_class_names")
