@@ -4,6 +4,7 @@ over 200 seeded trials (radar range, camera bearing), camera-only, radar-only an
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -301,6 +302,46 @@ def test_moving_radar_target_far_from_cameras_becomes_radar_only() -> None:
     assert_spd(radar_only.covariance_m2)
     along = np.array([math.cos(bearing), math.sin(bearing)])
     assert along @ radar_only.covariance_m2 @ along > SETTINGS.radar_only_size_std_m**2
+
+
+def test_a_second_echo_of_a_truck_is_not_a_vehicle_of_its_own() -> None:
+    # A 16.5 m truck, 40 m out, heading north (towards the mast): the radar sees its side
+    # from the cab to the trailer's end. One echo pairs with the camera's box; the others lie
+    # on the truck's footprint and are dropped, not turned into cars ahead of its centre.
+    x_m, y_m = 5.5, 940.0
+    truck = dataclasses.replace(
+        camera_object(1, x_m, y_m),
+        object_class=VehicleClass.TRUCK,
+        heading_rad=ROAD_HEADING_RAD,
+        length_m=16.5,
+        width_m=2.6,
+    )
+    face = radar_target(x_m, y_m + 8.0, radial_speed_mps=-20.0)  # the front, paired
+    middle = radar_target(x_m + 1.2, y_m - 1.0, radial_speed_mps=-20.0)  # on the body
+    trailer = radar_target(x_m + 1.2, y_m - 6.0, radial_speed_mps=-20.0)  # on the body
+    behind = radar_target(x_m, y_m - 20.0, radial_speed_mps=-20.0)  # a car behind it
+    fused = fuse_camera_radar(
+        [truck], scan_of(face, middle, trailer, behind), RADAR, SETTINGS, ROAD_HEADING_RAD
+    )
+    (paired,) = by_source(fused, "camera+radar")
+    assert paired.object_class == VehicleClass.TRUCK and paired.radar_target_index == 0
+    (radar_only,) = by_source(fused, "radar")
+    assert radar_only.radar_target_index == 3
+    # Without a footprint (no heading or size known), every leftover echo stays.
+    bare = camera_object(1, x_m, y_m)
+    fused = fuse_camera_radar(
+        [bare], scan_of(face, middle, trailer, behind), RADAR, SETTINGS, ROAD_HEADING_RAD
+    )
+    assert {1, 2} <= {f.radar_target_index for f in by_source(fused, "radar")}
+
+
+def test_a_radar_only_objects_unknown_length_lies_along_the_road() -> None:
+    # Seen across the road (the echo beside the mast), the size guess widens the variance
+    # along the road, where the vehicle's length lies, not along the line of sight.
+    beside = radar_target(RADAR.pose.x_m - 12.0, RADAR.pose.y_m - 10.0, radial_speed_mps=-15.0)
+    (radar_only,) = fuse_camera_radar([], scan_of(beside), RADAR, SETTINGS, ROAD_HEADING_RAD)
+    road = np.array([math.cos(ROAD_HEADING_RAD), math.sin(ROAD_HEADING_RAD)])
+    assert road @ radar_only.covariance_m2 @ road >= SETTINGS.radar_only_size_std_m**2
 
 
 @pytest.mark.parametrize(

@@ -69,6 +69,13 @@ def test_wz_eval_writes_the_report_json_markdown_and_plots(tmp_path: Path) -> No
         "aggressive_share": 0.2,
     }
     assert 0.0 < report["mota"] <= 1.0 and 0.0 < report["idf1"] <= 1.0
+    # Scored where a sensor sees a car; the whole circle alongside, with the coverage.
+    assert report["scored_region"] == "covered"
+    assert 0.0 < report["circle"]["mota"] <= 1.0
+    assert report["circle"]["vehicles_scored"] >= report["vehicles_scored"]
+    coverage = report["coverage"]
+    assert coverage["covered_share_upstream"] > 0.95 > coverage["covered_share_downstream"]
+    assert coverage["per_sensor_reach_m"]["camera-mast"][1] < 0.0  # it faces the approach
     assert report["id_switches"] >= 0
     fused = report["sources"]["fused"]
     assert fused["rmse_longitudinal_m"] < 1.5 and fused["rmse_lateral_m"] < 1.0
@@ -218,3 +225,39 @@ def test_the_approach_is_upstream_of_the_mast_and_a_track_goes_where_its_vehicle
     kept_vehicles, kept_states = approach_region(site, vehicles, states, 980.0)  # type: ignore[arg-type]
     assert [v.vehicle_id for v in kept_vehicles] == ["A", "B"]
     assert [s.y_m for s in kept_states] == [401.0, 700.0]
+
+
+def test_the_covered_region_leaves_out_what_no_sensor_sees_and_the_tracks_that_go_with_it() -> None:
+    from types import SimpleNamespace
+
+    from tests.eval.test_alerts_scoring import truth_at
+    from wz_eval.fusion import scored_region
+    from wz_shared.coverage import SiteCoverage, lidar_car_ranges_m
+    from wz_shared.site import DEFAULT_SITE_PATH, load_site
+
+    site = load_site(DEFAULT_SITE_PATH)  # straight road: station = y; the mast at 980 m
+    mast = next(m for m in site.sensors if m.kind == "lidar")
+    reach = lidar_car_ranges_m(mast)
+    assert reach is not None and reach[1] < 140.0  # a 64-beam LiDAR 6 m up: about 131 m
+    far = mast.pose.y_m + 145.0  # inside the 150 m circle, beyond where a car is sure to be hit
+    vehicles = truth_at(0.0)[:2]  # at stations 400 and 300 m: moved into the circle
+    vehicles[0] = vehicles[0].model_copy(update={"y_m": 900.0, "station_m": 900.0})
+    vehicles[1] = vehicles[1].model_copy(update={"y_m": far, "station_m": far})
+    states = [
+        SimpleNamespace(x_m=vehicles[0].x_m, y_m=901.0),  # the covered vehicle's track
+        SimpleNamespace(x_m=vehicles[1].x_m, y_m=far - 1.0),  # the unseen vehicle's track
+        SimpleNamespace(x_m=vehicles[1].x_m, y_m=far + 3.5),  # a false track where none sees
+        SimpleNamespace(x_m=vehicles[1].x_m, y_m=1000.0),  # a false track where the LiDAR sees
+    ]
+    centre = (mast.pose.x_m, mast.pose.y_m)
+    circle = scored_region(vehicles, states, centre, 150.0)  # type: ignore[arg-type]
+    assert len(circle[0]) == 2 and len(circle[1]) == 4
+    kept_vehicles, kept_states = scored_region(
+        vehicles,
+        states,
+        centre,
+        150.0,
+        SiteCoverage(site),  # type: ignore[arg-type]
+    )
+    assert [v.vehicle_id for v in kept_vehicles] == [vehicles[0].vehicle_id]
+    assert [s.y_m for s in kept_states] == [901.0, 1000.0]

@@ -29,6 +29,14 @@ an ended track: what ``/v1/trajectories`` serves).
 Multi-object tracking scores of ``fused`` (py-motmetrics: MOTA, IDF1, identity switches) use
 the confirmed and coasting tracks against the vehicles in range, matched within 3 m.
 
+The fused track is scored inside the circle *where a sensor of the site can see a car*
+(:mod:`wz_shared.coverage`, from the sensors' geometry: the camera's picture, the radar's
+wedge, and as far as the LiDAR's beams are sure to hit a car; a 32-beam LiDAR reaches about
+65 m, so on such a site most of the circle downstream of the mast is seen by nothing). No
+tracker can be held to what no sensor sees; ``coverage`` gives the share covered and each
+sensor's reach, and ``circle`` the MOT figures over the whole circle, so nothing is hidden.
+``EvalOptions.covered_only=False`` scores the whole circle.
+
 ``paper_table`` reproduces the paper's Tables 1-2: for vehicles seen through the whole station
 window (default 40-100 m upstream of the mast, like the paper's short segment), the cumulative
 absolute longitudinal and lateral error over the camera frames in the window where every
@@ -72,6 +80,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from wz_camera_detector.settings import camera_mount
 from wz_eval.alerts import observed_truth, run_alert_engine, score_alerts, track_follows
@@ -112,10 +121,11 @@ from wz_fusion_tracker.tracker import MultiTargetTracker
 from wz_fusion_tracker.types import TrackHistory, TrackState
 from wz_lidar_detector.settings import lidar_mount
 from wz_shared.arrays import F64
+from wz_shared.coverage import SiteCoverage
 from wz_shared.logs import configure_logging
 from wz_shared.messages import DetectionBatch, TrackBatch, VehicleTruth
 from wz_shared.motion import rts_smooth
-from wz_shared.site import Site, SiteFileError, load_site
+from wz_shared.site import SensorMount, Site, SiteFileError, load_site
 from wz_simulator.sensors.scene import WEATHER_PRESETS
 from wz_simulator.settings import SimulatorSettings
 
@@ -175,6 +185,9 @@ class EvalOptions:
     #: Each sensor's lateral bias, removed from its detections before the tracker takes them
     #: (as the fusion node does with ``WZ_FUSION_BIAS_MAP``); None: none removed.
     bias_map: BiasMap | None = None
+    #: Score the fused tracks only where a sensor can see a car (:mod:`wz_shared.coverage`)
+    #: inside the circle; False: the whole circle. Either way the report has both MOTAs.
+    covered_only: bool = True
 
 
 def pipeline_options(options: EvalOptions) -> PipelineOptions:
@@ -342,6 +355,9 @@ def evaluate(
     by_station = StationBreakdown(mast_station_m)
     # The approach alone (upstream of the mast): what the sensors face.
     mot_approach = _MotAccumulator()
+    # The whole circle, covered or not: what the coverage leaves out.
+    mot_circle = _MotAccumulator()
+    coverage = SiteCoverage(site) if options.covered_only else None
     sample_times = [stamp for stamp, _ in record.camera_only]
     batches = [b for b in record.batches if not _dropped(b, options.dropouts, options.warmup_s)]
     position = 0
@@ -386,7 +402,8 @@ def evaluate(
         if found is None:
             continue
         nearby = in_range(site, found, centre, options.max_range_m + EDGE_MARGIN_M)
-        vehicles, states = scored_region(nearby, states, centre, options.max_range_m)
+        mot_circle.update(*scored_region(nearby, states, centre, options.max_range_m))
+        vehicles, states = scored_region(nearby, states, centre, options.max_range_m, coverage)
         matched = scores.add(
             site, "fused", sample_s, [(s.x_m, s.y_m, s.speed_mps) for s in states], vehicles
         )
@@ -500,6 +517,9 @@ def evaluate(
         **mot.summary(len(record.truth)),
         "id_switch_events": mot.switch_events(mot_times, mast_station_m),
         "approach": mot_approach.summary(len(record.truth)),
+        "scored_region": "covered" if options.covered_only else "circle",
+        "coverage": coverage_report(site, centre, options.max_range_m),
+        "circle": mot_circle.summary(len(record.truth)),
         "paper_table": paper_table(site, scores, centre, options.window_upstream_m),
         "alerts": alerts,
         "alerts_all_in_range": alerts_all_in_range,
@@ -597,8 +617,10 @@ def scored_region(
     states: Sequence[TrackState],
     centre: tuple[float, float],
     max_range_m: float,
+    coverage: SiteCoverage | None = None,
 ) -> tuple[list[VehicleTruth], list[TrackState]]:
-    """The vehicles and tracks scored at one instant: those within ``max_range_m``.
+    """The vehicles and tracks scored at one instant: those within ``max_range_m`` and, with
+    ``coverage``, where a sensor of the site can see a car (:mod:`wz_shared.coverage`).
 
     The region's edge is a "don't care" band, as in KITTI's and MOTChallenge's ignore regions:
     a track just inside the edge whose vehicle is just outside is neither a match nor a false
@@ -608,10 +630,71 @@ def scored_region(
     an unpaired track outside it.
     """
 
+    points = [(v.x_m, v.y_m) for v in vehicles] + [(s.x_m, s.y_m) for s in states]
+    seen: set[tuple[float, float]] | None = None
+    if coverage is not None and points:
+        xy = np.array(points, dtype=np.float64)
+        seen = {p for p, c in zip(points, coverage(xy[:, 0], xy[:, 1]), strict=True) if c}
+
     def inside(x_m: float, y_m: float) -> bool:
-        return math.hypot(x_m - centre[0], y_m - centre[1]) <= max_range_m
+        within = math.hypot(x_m - centre[0], y_m - centre[1]) <= max_range_m
+        return within and (seen is None or (x_m, y_m) in seen)
 
     return _region(vehicles, states, lambda v: inside(v.x_m, v.y_m), inside)
+
+
+#: Spacing of the road samples :func:`coverage_report` counts [m].
+COVERAGE_STEP_M = 1.0
+
+
+def coverage_report(site: Site, centre: tuple[float, float], max_range_m: float) -> dict[str, Any]:
+    """How much of the road inside the circle the sensors cover: lane centres sampled every
+    :data:`COVERAGE_STEP_M`, the covered share overall, up- and downstream of the mast, and
+    each sensor's reach along the road."""
+    frame = site.road_frame
+    mast_station = float(frame.to_road(*centre)[0])
+    stations = np.arange(
+        mast_station - max_range_m, mast_station + max_range_m + 1e-9, COVERAGE_STEP_M
+    )
+    coverage = SiteCoverage(site)
+    inside_all: list[F64] = []
+    seen_all: list[npt.NDArray[np.bool_]] = []
+    for offset in (lane.center_offset_m for lane in site.lanes):
+        x, y = frame.to_site(stations, np.full_like(stations, offset))
+        inside = np.hypot(x - centre[0], y - centre[1]) <= max_range_m
+        inside_all.append(np.where(inside, stations - mast_station, np.nan))
+        seen_all.append(inside & coverage(x, y))
+    rel = np.concatenate(inside_all)
+    seen = np.concatenate(seen_all)
+    up = rel <= 0.0  # NaN (outside the circle) compares False both ways
+    down = rel > 0.0
+
+    def share(part: npt.NDArray[np.bool_]) -> float:
+        return round(float(seen[part].sum() / max(1, part.sum())), 3)
+
+    return {
+        "covered_share": share(up | down),
+        "covered_share_upstream": share(up),
+        "covered_share_downstream": share(down),
+        "per_sensor_reach_m": {
+            m.sensor_id: _reach(coverage, m, site, stations, mast_station) for m in site.sensors
+        },
+    }
+
+
+def _reach(
+    coverage: SiteCoverage, mount: SensorMount, site: Site, stations: F64, mast_station: float
+) -> list[float] | None:
+    """The stations (from the mast, [m]) between which ``mount`` covers some lane's centre, or
+    None where it covers none of them."""
+    covered_at = np.zeros(stations.shape, dtype=bool)
+    for lane in site.lanes:
+        x, y = site.road_frame.to_site(stations, np.full_like(stations, lane.center_offset_m))
+        covered_at |= coverage.sensor(mount, x, y)
+    if not covered_at.any():
+        return None
+    rel = stations[covered_at] - mast_station
+    return [round(float(rel.min()), 1), round(float(rel.max()), 1)]
 
 
 def _region(

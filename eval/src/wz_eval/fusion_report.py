@@ -205,6 +205,21 @@ def markdown(report: dict[str, Any]) -> str:
         value = row["value"]
         shown = str(value) if isinstance(value, int) else ratio(value)
         lines.append(f"| {row['check']} | {shown} | {row['target']} | {holds} |")
+    coverage, circle = report.get("coverage"), report.get("circle")
+    if coverage is not None and circle is not None:
+        reach = ", ".join(
+            f"{sensor} {span[0]:g} to {span[1]:g} m" if span else f"{sensor} nowhere"
+            for sensor, span in coverage["per_sensor_reach_m"].items()
+        )
+        lines += [
+            "",
+            f"Scored region: {report.get('scored_region', 'circle')}. The sensors cover "
+            f"{100 * coverage['covered_share_upstream']:.0f} % of the road upstream of the mast "
+            f"inside the circle and {100 * coverage['covered_share_downstream']:.0f} % "
+            f"downstream (where a car is sure to be seen; along the road, from the mast: "
+            f"{reach}). Over the whole circle, covered or not: MOTA {ratio(circle['mota'])}, "
+            f"{circle['id_switches_per_100_vehicles']:.1f} identity switches per 100 vehicles.",
+        ]
     approach = report.get("approach")
     if approach is not None:
         lines += [

@@ -7,7 +7,7 @@ Usage::
 
 The plan is drawn in the site frame (metres, north up): the lanes and their lines, the closed
 lane hatched from the taper to the end of the work zone, the work-zone areas' boundaries, the
-mast, the LiDAR's range ring, the radar's wedge and the camera's footprint on the road (the
+mast, the LiDAR's range ring and the ring to which a car is sure to be hit (:mod:`wz_shared.coverage`), the radar's wedge and the camera's footprint on the road (the
 image's edges projected onto the ground, out to 200 m). A second panel zooms on the mast.
 """
 
@@ -30,6 +30,7 @@ from matplotlib.patches import Circle
 
 from wz_shared.arrays import F64
 from wz_shared.camera_geometry import PinholeCamera
+from wz_shared.coverage import lidar_car_ranges_m
 from wz_shared.site import AreaKind, RadarIntrinsics, Site, SiteFileError, load_site
 from wz_shared.site_generator import generate_site
 
@@ -151,6 +152,19 @@ def _draw(ax: Axes, site: Site, *, zoom: bool) -> None:
                     label=f"{mount.sensor_id} ({ring:.0f} m)",
                 )
             )
+            car_reach = lidar_car_ranges_m(mount)
+            if car_reach is not None:
+                ax.add_patch(
+                    Circle(
+                        (x, y),
+                        car_reach[1],
+                        fill=False,
+                        color=colour,
+                        linestyle="-",
+                        linewidth=1.2,
+                        label=f"{mount.sensor_id}: a car sure to be hit to {car_reach[1]:.0f} m",
+                    )
+                )
         elif mount.kind == "radar" and isinstance(mount.intrinsics, RadarIntrinsics):
             heading = mount.pose.ground_heading_rad()
             half_fov = math.radians(mount.intrinsics.horizontal_fov_deg) / 2.0

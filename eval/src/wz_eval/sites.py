@@ -169,6 +169,8 @@ def summarise(site_id: str, name: str, job: SiteJob, report: dict[str, Any]) -> 
         "approach_mota": report.get("approach", {}).get("mota"),
         "approach_switches_per_100": report.get("approach", {}).get("id_switches_per_100_vehicles"),
         "missed_downstream": _missed(report, upstream=False),
+        "covered_downstream": report.get("coverage", {}).get("covered_share_downstream"),
+        "circle_mota": report.get("circle", {}).get("mota"),
         "seed": job.seed,
         "weather": job.weather,
         "vehicles_per_hour": job.vehicles_per_hour,
@@ -235,12 +237,15 @@ def markdown(report: dict[str, Any]) -> str:
         f"# `wz eval --sites {len(rows)} --seed {report['seed']}`",
         "",
         f"{len(rows)} generated sites, {report['duration_s']:.0f} s scored each after a "
-        f"{report['warmup_s']:.0f} s warm-up; the live fused track within 150 m of the mast; "
-        "alerts scored against the same rules on the truth. A site meets the bar when every "
-        "figure holds ('-': the run cannot tell, e.g. no late merge happened). The last two "
-        "columns are not targets: the share of vehicle samples with no track upstream and "
-        "downstream of the mast, and MOTA and switches on the approach alone (upstream of the "
-        "mast, which every sensor faces; downstream only the LiDAR sees).",
+        f"{report['warmup_s']:.0f} s warm-up; the live fused track within 150 m of the mast "
+        "where a sensor of the site can see a car (wz_shared.coverage: downstream, as far as "
+        "the LiDAR's beams are sure to hit one); alerts scored against the same rules on the "
+        "truth. A site meets the bar when every figure holds ('-': the run cannot tell, e.g. "
+        "no late merge happened). The last columns are not targets: the share of vehicle "
+        "samples with no track upstream and downstream of the mast, MOTA and switches on the "
+        "approach alone (upstream of the mast, which every sensor faces; downstream only the "
+        "LiDAR sees), the share of the road downstream inside the circle that a sensor covers, "
+        "and MOTA over the whole circle, covered or not.",
         "",
         "| target | bound | sites meeting | failing | no value | median | worst |",
         "|---|---|---|---|---|---|---|",
@@ -256,8 +261,9 @@ def markdown(report: dict[str, Any]) -> str:
         "",
         "| site | conditions | vehicles | "
         + " | ".join(names)
-        + " | missed up / downstream | approach MOTA / switches |",
-        "|---|---|---|" + "---|" * len(names) + "---|---|",
+        + " | missed up / downstream | approach MOTA / switches | covered downstream "
+        "| whole-circle MOTA |",
+        "|---|---|---|" + "---|" * len(names) + "---|---|---|---|",
     ]
     for row in rows:
         cells = []
@@ -276,7 +282,8 @@ def markdown(report: dict[str, Any]) -> str:
         lines.append(
             f"| {row['site_id']} | {conditions} | {row['vehicles']} | "
             + " | ".join(cells)
-            + f" | {missed} | {approach} |"
+            + f" | {missed} | {approach} | {_cell(row.get('covered_downstream'))}"
+            f" | {_cell(row.get('circle_mota'))} |"
         )
     lines.append("")
     for row in rows:

@@ -1,0 +1,149 @@
+"""Where a site's sensors can see a car: the region a tracker can be held to.
+
+A spot on the road is *covered* when at least one of the site's sensors would detect a
+passenger car standing there, other vehicles aside (hiding behind another vehicle is the
+tracker's to bridge, not a hole in the coverage). Everything follows from the site file's
+sensor geometry; nothing is fitted:
+
+- **LiDAR**: the spot is within ``max_range_m`` and the beams are dense enough there that at
+  least one is sure to cross the car. A car of height :data:`CAR_HEIGHT_M` at ground range
+  ``r`` from a LiDAR ``h`` above the road spans the elevations
+  ``[atan(-h / r), atan((CAR_HEIGHT_M - h) / r)]``; one beam is sure to fall in it when that
+  span is at least the beam spacing ``(vertical_max - vertical_min) / (beams - 1)`` and lies
+  inside the beams' fan. A 32-beam LiDAR over 40 degrees (1.3 degrees apart) 5 m up covers a
+  car to about 66 m; a 64-beam one over 41 degrees, to about 130 m. Beyond, a car falls
+  between two beams, and a tracker downstream of the mast sees nothing there.
+- **camera**: the car's middle (half its height above the road) is in front of the camera,
+  inside the image and within ``camera_range_m`` (the camera detector publishes nothing
+  beyond its ``max_range_m``, 200 m by default).
+- **radar**: within ``max_range_m`` and half the horizontal field of view of the boresight.
+
+:func:`covered` answers for points; ``wz eval`` scores the tracks inside the 150 m circle
+*and* the covered road (and reports the whole circle alongside); ``wz site show`` draws what
+each sensor covers.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import numpy.typing as npt
+
+from wz_shared.camera_geometry import PinholeCamera
+from wz_shared.site import CameraIntrinsics, LidarIntrinsics, RadarIntrinsics, SensorMount, Site
+
+F64 = npt.NDArray[np.float64]
+Bool = npt.NDArray[np.bool_]
+
+#: The vehicle a sensor must be able to see for a spot to count as covered: a passenger car's
+#: height [m] (trucks, taller, are seen further).
+CAR_HEIGHT_M = 1.5
+#: The camera detector's default range [m] (``CameraDetectorSettings.max_range_m``).
+CAMERA_RANGE_M = 200.0
+
+
+def lidar_covers(mount: SensorMount, x_m: npt.ArrayLike, y_m: npt.ArrayLike) -> Bool:
+    """Whether a LiDAR is sure to put a beam on a car at each point (module docstring)."""
+    intrinsics = mount.intrinsics
+    assert isinstance(intrinsics, LidarIntrinsics)
+    r = np.hypot(np.asarray(x_m, float) - mount.pose.x_m, np.asarray(y_m, float) - mount.pose.y_m)
+    r = np.maximum(r, 1e-3)
+    low = np.degrees(np.arctan2(-mount.pose.z_m, r))
+    high = np.degrees(np.arctan2(CAR_HEIGHT_M - mount.pose.z_m, r))
+    lo = np.maximum(low, intrinsics.vertical_min_deg)
+    hi = np.minimum(high, intrinsics.vertical_max_deg)
+    if intrinsics.beams > 1:
+        spacing = (intrinsics.vertical_max_deg - intrinsics.vertical_min_deg) / (
+            intrinsics.beams - 1
+        )
+    else:
+        spacing = 0.0
+    sure = (hi - lo) >= spacing if spacing > 0.0 else (lo <= 0.0) & (hi >= 0.0)
+    result: Bool = (r <= intrinsics.max_range_m) & (hi > lo) & sure
+    return result
+
+
+def lidar_car_ranges_m(mount: SensorMount, step_m: float = 0.5) -> tuple[float, float] | None:
+    """The nearest and farthest ground range [m] at which :func:`lidar_covers` holds (the
+    blind cone under the sensor inside, beams too sparse for a car beyond); None if nowhere."""
+    intrinsics = mount.intrinsics
+    assert isinstance(intrinsics, LidarIntrinsics)
+    r = np.arange(step_m, intrinsics.max_range_m + step_m / 2.0, step_m)
+    hit = lidar_covers(mount, mount.pose.x_m + r, np.full_like(r, mount.pose.y_m))
+    if not hit.any():
+        return None
+    return float(r[hit].min()), float(r[hit].max())
+
+
+def camera_covers(
+    mount: SensorMount,
+    x_m: npt.ArrayLike,
+    y_m: npt.ArrayLike,
+    range_m: float = CAMERA_RANGE_M,
+    camera: PinholeCamera | None = None,
+) -> Bool:
+    """Whether a car at each point is in the camera's picture and range (module docstring);
+    ``camera``: the mount's :class:`PinholeCamera`, when the caller keeps one."""
+    intrinsics = mount.intrinsics
+    assert isinstance(intrinsics, CameraIntrinsics)
+    x = np.atleast_1d(np.asarray(x_m, float))
+    y = np.atleast_1d(np.asarray(y_m, float))
+    camera = camera if camera is not None else PinholeCamera(mount)
+    points = np.column_stack([x, y, np.full_like(x, CAR_HEIGHT_M / 2.0)])
+    uv, depth = camera.project(points)
+    with np.errstate(invalid="ignore"):
+        inside = (
+            (depth > 0.0)
+            & (uv[:, 0] >= 0.0)
+            & (uv[:, 0] < intrinsics.width_px)
+            & (uv[:, 1] >= 0.0)
+            & (uv[:, 1] < intrinsics.height_px)
+        )
+    near = np.hypot(x - mount.pose.x_m, y - mount.pose.y_m) <= range_m
+    result: Bool = inside & near
+    return result
+
+
+def radar_covers(mount: SensorMount, x_m: npt.ArrayLike, y_m: npt.ArrayLike) -> Bool:
+    """Whether each point is inside the radar's range and field of view."""
+    intrinsics = mount.intrinsics
+    assert isinstance(intrinsics, RadarIntrinsics)
+    dx = np.asarray(x_m, float) - mount.pose.x_m
+    dy = np.asarray(y_m, float) - mount.pose.y_m
+    azimuth = np.arctan2(dy, dx) - mount.pose.ground_heading_rad()
+    azimuth = (azimuth + math.pi) % (2.0 * math.pi) - math.pi
+    result: Bool = (np.hypot(dx, dy) <= intrinsics.max_range_m) & (
+        np.abs(azimuth) <= math.radians(intrinsics.horizontal_fov_deg) / 2.0
+    )
+    return result
+
+
+class SiteCoverage:
+    """What a site's sensors cover (:func:`covered`), the cameras' models built once."""
+
+    def __init__(self, site: Site) -> None:
+        self.site = site
+        self._cameras = {m.sensor_id: PinholeCamera(m) for m in site.sensors if m.kind == "camera"}
+
+    def sensor(self, mount: SensorMount, x_m: npt.ArrayLike, y_m: npt.ArrayLike) -> Bool:
+        """Whether ``mount`` can see a car at each point (dispatch on its kind)."""
+        if mount.kind == "lidar":
+            return lidar_covers(mount, x_m, y_m)
+        if mount.kind == "camera":
+            return camera_covers(mount, x_m, y_m, camera=self._cameras[mount.sensor_id])
+        return radar_covers(mount, x_m, y_m)
+
+    def __call__(self, x_m: npt.ArrayLike, y_m: npt.ArrayLike) -> Bool:
+        """Whether at least one of the site's sensors can see a car at each point."""
+        x = np.atleast_1d(np.asarray(x_m, float))
+        y = np.atleast_1d(np.asarray(y_m, float))
+        out = np.zeros(x.shape, dtype=bool)
+        for mount in self.site.sensors:
+            out |= self.sensor(mount, x, y)
+        return out
+
+
+def covered(site: Site, x_m: npt.ArrayLike, y_m: npt.ArrayLike) -> Bool:
+    """Whether at least one of the site's sensors can see a car at each point."""
+    return SiteCoverage(site)(x_m, y_m)
