@@ -523,3 +523,65 @@ def tracker_cycle(result: dict[str, Any]) -> list[str]:
             )
     lines += md_table(["Step", "median", "mean", "p99", "max", "samples"], rows)
     return [*lines, ""]
+
+
+def generated_sites(result: dict[str, Any]) -> list[str]:
+    def cell(value: float | None) -> str:
+        return "-" if value is None else f"{value:.3g}"
+
+    taken = result.get("taken_from")
+    lines = [
+        f"`wz eval --sites {result['count']} --seed {result['seed']} --duration-s "
+        f"{result['duration_s']:g} --warmup-s {result['warmup_s']:g}`: "
+        f"**{result['sites_meeting_every_target']} of {result['count']} sites meet every target** "
+        "(issue 25; the live fused track within 150 m of the mast where a sensor can see a car; "
+        "alerts against the same rules on the truth)."
+        + (
+            f" Figures taken from the run written at {taken['written_at']} "
+            f"(`{taken['path']}`), the same command, not re-run."
+            if taken
+            else ""
+        ),
+        "",
+    ]
+    rows = [
+        [
+            row["target"],
+            row["bound"],
+            str(row["sites_meeting"]),
+            str(row["sites_failing"]),
+            str(row["sites_without_value"]),
+            cell(row["median"]),
+            cell(row["worst"]),
+        ]
+        for row in result["distribution"]
+    ]
+    lines += md_table(
+        ["target", "bound", "sites meeting", "failing", "no value", "median", "worst"], rows
+    )
+    names = [row["target"] for row in result["distribution"]]
+    site_rows = []
+    for site in result["sites"]:
+        figures = site["figures"]
+        cells = [
+            f"**{cell(figures[n]['value'])}**"
+            if figures[n]["holds"] is False
+            else cell(figures[n]["value"])
+            for n in names
+        ]
+        site_rows.append(
+            [
+                site["site_id"],
+                f"{site['weather']}, {site['vehicles_per_hour']:.0f} veh/h, "
+                f"{100 * site['truck_share']:.0f} % trucks",
+                *cells,
+                cell(site.get("covered_downstream")),
+                cell(site.get("circle_mota")),
+            ]
+        )
+    lines += [""]
+    lines += md_table(
+        ["site", "conditions", *names, "covered downstream", "whole-circle MOTA"], site_rows
+    )
+    lines += ["", *[f"- {site['site_id']}: {site['name']}" for site in result["sites"]], ""]
+    return lines

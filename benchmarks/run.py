@@ -33,6 +33,7 @@ from benchmarks import (
     bus_throughput,
     camera_detection,
     gateway_live,
+    generated_sites,
     lidar_detection,
     recovery,
     report,
@@ -57,6 +58,7 @@ BENCHMARKS: dict[str, Callable[[bool], dict[str, Any]]] = {
     "gateway_live": gateway_live.run,
     "webhook_latency": webhook_latency.run,
     "recovery": recovery.run,
+    "generated_sites": generated_sites.run,
 }
 RESULTS_PATH = ROOT / "benchmarks" / "results.json"
 MARKDOWN_PATH = ROOT / "BENCHMARKS.md"

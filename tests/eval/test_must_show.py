@@ -58,7 +58,9 @@ def _holds(report: dict[str, Any]) -> dict[str, bool | None]:
 def test_every_target_holds_on_a_report_that_meets_them() -> None:
     table = [_row(f"v{i}", 0.5, 1.0) for i in range(10)]
     holds = _holds(_report(table))
-    assert len(holds) == 10 and all(holds.values()), holds
+    # the live and smoothed paper-table rows are shown, not held (None): eight targets
+    assert len(holds) == 10 and list(holds.values()).count(True) == 8, holds
+    assert not any(value is False for value in holds.values()), holds
 
 
 def test_each_target_fails_on_its_own() -> None:
@@ -85,12 +87,24 @@ def test_each_target_fails_on_its_own() -> None:
 
 
 def test_the_paper_table_needs_nine_in_ten_of_at_least_ten_vehicles() -> None:
-    # the live track loses laterally to the average on 2 of 10: 80 %; the stored track wins all
+    # the live track loses laterally to the average on 2 of 10: 80 %; the stored track wins all.
+    # The table is read on the stored trajectories (the paper's tables are offline): the live
+    # row is shown with its share but holds nothing.
     table = [_row(f"v{i}", 1.3 if i < 2 else 0.5, 1.0) for i in range(10)]
     report = _report(table)
     holds = _holds(report)
-    assert holds["paper table, live track below camera, LiDAR and average on both axes"] is False
+    assert holds["paper table, live track below camera, LiDAR and average on both axes"] is None
     assert holds["paper table, stored track below camera, LiDAR and average on both axes"] is True
+    live = next(r for r in must_show(report) if r["check"].startswith("paper table, live"))
+    assert live["value"] == 0.8 and "not a target" in live["target"]
+    for row in table:  # the stored track loses too: now the check fails
+        row["fused_stored"]["lateral_m"] = 1.3
+    assert (
+        _holds(_report(table))[
+            "paper table, stored track below camera, LiDAR and average on both axes"
+        ]
+        is False
+    )
     # a loss of 0.3 m over 20 samples is 1.5 cm a sample: not a tie; 0.1 m is
     assert report["paper_table_summary"]["fused_lateral_losses_to_average_within_1cm"] == 0
     table[0]["fused"]["lateral_m"] = 1.1

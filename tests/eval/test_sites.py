@@ -9,7 +9,14 @@ from pathlib import Path
 
 import pytest
 
-from wz_eval.sites import SITE_TARGETS, distribution, plan_jobs, summarise, worst_site
+from wz_eval.sites import (
+    SITE_TARGETS,
+    distribution,
+    finished_report,
+    plan_jobs,
+    summarise,
+    worst_site,
+)
 from wz_shared.site import load_site
 from wz_shared.site_generator import generate_site
 
@@ -155,3 +162,42 @@ def test_wz_eval_sites_smoke_two_generated_sites(tmp_path: Path) -> None:
         assert row["pipeline_problems"] == {}
     assert (out / "sites.md").read_text().startswith("# `wz eval --sites 2 --seed 900`")
     assert (result.returncode == 0) == all(not row["failed"] for row in report["sites"])
+    # Taken up again with --resume: both sites come from their eval.json, same figures.
+    again = wz(
+        "eval",
+        *("--sites", "2", "--seed", "900", "--duration-s", "60", "--warmup-s", "30"),
+        *("--out", str(out), "--resume"),
+        timeout=300,
+    )
+    assert again.returncode == result.returncode, again.stderr[-3000:]
+    assert again.stderr.count("taken from its eval.json") == 2
+    resumed = json.loads((out / "sites.json").read_text())
+    assert [r["figures"] for r in resumed["sites"]] == [r["figures"] for r in report["sites"]]
+
+
+def test_resume_takes_only_a_report_of_the_very_same_job(tmp_path: Path) -> None:
+    from wz_eval.site_tool import site_yaml
+
+    (job,) = plan_jobs(1, 42, 300.0, 60.0, tmp_path, resume=True)
+    site_text = site_yaml(generate_site(42))
+    assert finished_report(job, site_text) is None  # nothing there yet
+    job.out_dir.mkdir(parents=True)
+    (job.out_dir / "site.yaml").write_text(site_text, encoding="utf-8")
+    report = {
+        "seed": 42,
+        "duration_s": 300.0,
+        "warmup_s": 60.0,
+        "conditions": {
+            "weather": job.weather,
+            "vehicles_per_hour": job.vehicles_per_hour,
+            "truck_share": job.truck_share,
+        },
+    }
+    (job.out_dir / "eval.json").write_text(json.dumps(report))
+    assert finished_report(job, site_text) == report
+    # another duration, another site file, a truncated report: run it again
+    (shorter,) = plan_jobs(1, 42, 120.0, 60.0, tmp_path, resume=True)
+    assert finished_report(shorter, site_text) is None
+    assert finished_report(job, site_yaml(generate_site(43))) is None
+    (job.out_dir / "eval.json").write_text(json.dumps(report)[:-5])
+    assert finished_report(job, site_text) is None

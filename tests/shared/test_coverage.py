@@ -5,13 +5,17 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from wz_shared.coverage import (
     CAR_HEIGHT_M,
+    CAR_REFLECTIVITY,
     SiteCoverage,
     camera_covers,
+    camera_fog_range_m,
     lidar_car_ranges_m,
     lidar_covers,
+    lidar_detection_range_m,
     radar_covers,
 )
 from wz_shared.site import (
@@ -56,10 +60,24 @@ def test_a_lidar_covers_a_car_while_its_beams_are_closer_than_the_car_subtends()
     assert not lidar_covers(dense, [3.0], [0.0])[0]
 
 
-def test_a_dense_lidar_covers_to_its_range_and_no_further() -> None:
-    mount = _lidar(128, -11.25, 11.25, 5.0, max_range_m=120.0)
-    assert lidar_covers(mount, [0.0, 119.0], [100.0, 0.0]).all()
-    assert not lidar_covers(mount, [121.0], [0.0])[0]
+def test_a_dense_lidar_covers_as_far_as_a_cars_paint_returns() -> None:
+    mount = _lidar(128, -11.25, 11.25, 5.0, max_range_m=200.0)
+    # Datasheet convention: 80 % reflectivity at 200 m, so paint of 30 % to 200 sqrt(0.3 / 0.8).
+    reach = 200.0 * math.sqrt(CAR_REFLECTIVITY / 0.8)
+    assert lidar_detection_range_m(200.0) == pytest.approx(reach)
+    assert lidar_covers(mount, [0.0, reach - 1.0], [100.0, 0.0]).all()
+    assert not lidar_covers(mount, [reach + 1.0], [0.0])[0]
+    # Fog of 150 m visibility (Koschmieder, 3.912 / 150 per metre): the two-way loss
+    # exp(-2 alpha r) brings it in to where 0.3 exp(-2 alpha r) (200 / r)^2 = 0.8.
+    alpha = 3.912 / 150.0
+    foggy = lidar_detection_range_m(200.0, alpha)
+    assert 0.3 * math.exp(-2 * alpha * foggy) * (200.0 / foggy) ** 2 == pytest.approx(0.8)
+    assert 35.0 < foggy < 50.0
+    assert lidar_covers(mount, [foggy - 1.0], [0.0], alpha)[0]
+    assert not lidar_covers(mount, [foggy + 1.0], [0.0], alpha)[0]
+    # A camera finds a car in fog to where its contrast falls to 5 %: exp(-3.912 r / V).
+    assert math.exp(-3.912 * camera_fog_range_m(150.0) / 150.0) == pytest.approx(0.05)
+    assert camera_fog_range_m(math.inf) == math.inf
 
 
 def test_radar_covers_its_wedge_only() -> None:
@@ -88,8 +106,13 @@ def test_on_the_default_site_the_approach_is_covered_and_the_far_downstream_is_n
     assert camera_covers(camera, np.full(3, lane_x), up).all()
     assert not camera_covers(camera, [lane_x], [mast.pose.y_m + 60.0])[0]
     assert coverage(np.full(3, lane_x), up).all()
-    # Downstream the LiDAR alone, as far as a car is sure to be hit (64 beams 6 m up: 131 m).
+    # Downstream the LiDAR alone, as far as it sees a car (64 beams 6 m up put one on it to
+    # 131 m; its paint returns to 122 m of a 200 m sensor).
     reach = lidar_car_ranges_m(mast)
-    assert reach is not None and 120.0 < reach[1] < 140.0
+    assert reach is not None and 120.0 < reach[1] < 125.0
     down = mast.pose.y_m + np.array([60.0, reach[1] - 5.0, reach[1] + 10.0])
     assert coverage(np.full(3, lane_x), down).tolist() == [True, True, False]
+    # In fog the LiDAR sees less than half as far; the radar still covers the approach.
+    fog = SiteCoverage(site, lidar_extinction_per_m=3.912 / 150.0, visibility_m=150.0)
+    assert fog(np.full(3, lane_x), down).tolist() == [False, False, False]
+    assert fog(np.full(3, lane_x), up).all()

@@ -30,9 +30,11 @@ Multi-object tracking scores of ``fused`` (py-motmetrics: MOTA, IDF1, identity s
 the confirmed and coasting tracks against the vehicles in range, matched within 3 m.
 
 The fused track is scored inside the circle *where a sensor of the site can see a car*
-(:mod:`wz_shared.coverage`, from the sensors' geometry: the camera's picture, the radar's
-wedge, and as far as the LiDAR's beams are sure to hit a car; a 32-beam LiDAR reaches about
-65 m, so on such a site most of the circle downstream of the mast is seen by nothing). No
+(:mod:`wz_shared.coverage`, from the sensors' geometry and the run's weather: the camera's
+picture, the radar's wedge, and as far as a car's paint returns to the LiDAR and its beams are
+sure to hit one; a 32-beam LiDAR reaches about 65 m, so on such a site most of the circle
+downstream of the mast is seen by nothing, and fog of 150 m visibility stops any LiDAR at about
+45 m). No
 tracker can be held to what no sensor sees; ``coverage`` gives the share covered and each
 sensor's reach, and ``circle`` the MOT figures over the whole circle, so nothing is hidden.
 ``EvalOptions.covered_only=False`` scores the whole circle.
@@ -126,6 +128,11 @@ from wz_shared.logs import configure_logging
 from wz_shared.messages import DetectionBatch, TrackBatch, VehicleTruth
 from wz_shared.motion import rts_smooth
 from wz_shared.site import SensorMount, Site, SiteFileError, load_site
+from wz_simulator.sensors.lidar_physics import (
+    LidarPhysics,
+    fog_extinction_per_m,
+    rain_extinction_per_m,
+)
 from wz_simulator.sensors.scene import WEATHER_PRESETS
 from wz_simulator.settings import SimulatorSettings
 
@@ -357,7 +364,7 @@ def evaluate(
     mot_approach = _MotAccumulator()
     # The whole circle, covered or not: what the coverage leaves out.
     mot_circle = _MotAccumulator()
-    coverage = SiteCoverage(site) if options.covered_only else None
+    coverage = weather_coverage(site, options.weather) if options.covered_only else None
     sample_times = [stamp for stamp, _ in record.camera_only]
     batches = [b for b in record.batches if not _dropped(b, options.dropouts, options.warmup_s)]
     position = 0
@@ -518,7 +525,9 @@ def evaluate(
         "id_switch_events": mot.switch_events(mot_times, mast_station_m),
         "approach": mot_approach.summary(len(record.truth)),
         "scored_region": "covered" if options.covered_only else "circle",
-        "coverage": coverage_report(site, centre, options.max_range_m),
+        "coverage": coverage_report(
+            weather_coverage(site, options.weather), centre, options.max_range_m
+        ),
         "circle": mot_circle.summary(len(record.truth)),
         "paper_table": paper_table(site, scores, centre, options.window_upstream_m),
         "alerts": alerts,
@@ -647,16 +656,33 @@ def scored_region(
 COVERAGE_STEP_M = 1.0
 
 
-def coverage_report(site: Site, centre: tuple[float, float], max_range_m: float) -> dict[str, Any]:
+def weather_coverage(site: Site, weather: str) -> SiteCoverage:
+    """What the site's sensors cover in the run's weather (:data:`WEATHER_PRESETS`): the
+    LiDAR's extinction as the simulator computes it (fog and rain), the fog's visibility."""
+    conditions = WEATHER_PRESETS[weather]
+    physics = LidarPhysics()
+    extinction = fog_extinction_per_m(
+        conditions.fog_visibility_m, physics.wavelength_nm
+    ) + rain_extinction_per_m(
+        conditions.rain_mm_per_h,
+        physics.rain_attenuation_db_per_km,
+        physics.rain_attenuation_exponent,
+    )
+    return SiteCoverage(site, extinction, conditions.fog_visibility_m)
+
+
+def coverage_report(
+    coverage: SiteCoverage, centre: tuple[float, float], max_range_m: float
+) -> dict[str, Any]:
     """How much of the road inside the circle the sensors cover: lane centres sampled every
     :data:`COVERAGE_STEP_M`, the covered share overall, up- and downstream of the mast, and
     each sensor's reach along the road."""
+    site = coverage.site
     frame = site.road_frame
     mast_station = float(frame.to_road(*centre)[0])
     stations = np.arange(
         mast_station - max_range_m, mast_station + max_range_m + 1e-9, COVERAGE_STEP_M
     )
-    coverage = SiteCoverage(site)
     inside_all: list[F64] = []
     seen_all: list[npt.NDArray[np.bool_]] = []
     for offset in (lane.center_offset_m for lane in site.lanes):

@@ -93,13 +93,18 @@ def must_show(report: dict[str, Any]) -> list[dict[str, Any]]:
     ):
         wins = summary[f"{fused_source}_below_camera_lidar_average_both_axes"]
         share = wins / vehicles if vehicles else None
+        # The paper's tables are offline, so the table is read on the stored trajectories
+        # (what /v1/trajectories serves, issue 25); the live and smoothed rows are shown, not
+        # held to it (the live track is held to the RMSE, MOTA and switch targets).
+        held = fused_source == "fused_stored"
         add(
             f"paper table, {label} track below camera, LiDAR and average on both axes "
             f"({wins} of {vehicles} vehicles)",
             share,
-            f">= {TARGETS['paper_table_share']:g} of >= {TARGETS['paper_table_vehicles']}",
+            f">= {TARGETS['paper_table_share']:g} of >= {TARGETS['paper_table_vehicles']}"
+            + ("" if held else " (shown, not a target)"),
             None
-            if share is None
+            if share is None or not held
             else vehicles >= TARGETS["paper_table_vehicles"]
             and share >= TARGETS["paper_table_share"],
         )
@@ -195,7 +200,10 @@ def markdown(report: dict[str, Any]) -> str:
     ]
     lines += [
         "",
-        "Issue 6's targets on this run (`must_show`; - : this run cannot tell):",
+        "Issue 6's targets on this run (`must_show`; - : this run cannot tell, or shown but "
+        "not a target). The live track is held to the RMSE, MOTA and switch targets; the paper's "
+        "tables are offline, so the paper table is held on the stored trajectories (what "
+        "`/v1/trajectories` serves: the published states smoothed as the gateway smooths them).",
         "",
         "| check | value | target | holds |",
         "|---|---|---|---|",

@@ -7,7 +7,7 @@ Usage::
 
 The plan is drawn in the site frame (metres, north up): the lanes and their lines, the closed
 lane hatched from the taper to the end of the work zone, the work-zone areas' boundaries, the
-mast, the LiDAR's range ring and the ring to which a car is sure to be hit (:mod:`wz_shared.coverage`), the radar's wedge and the camera's footprint on the road (the
+mast, the LiDAR's range ring and the ring to which it sees a car in clear air (:mod:`wz_shared.coverage`), the radar's wedge and the camera's footprint on the road (the
 image's edges projected onto the ground, out to 200 m). A second panel zooms on the mast.
 """
 
@@ -162,7 +162,7 @@ def _draw(ax: Axes, site: Site, *, zoom: bool) -> None:
                         color=colour,
                         linestyle="-",
                         linewidth=1.2,
-                        label=f"{mount.sensor_id}: a car sure to be hit to {car_reach[1]:.0f} m",
+                        label=f"{mount.sensor_id}: sees a car to {car_reach[1]:.0f} m (clear air)",
                     )
                 )
         elif mount.kind == "radar" and isinstance(mount.intrinsics, RadarIntrinsics):

@@ -6,7 +6,9 @@ dusk, rain, fog in turn, 1200-2000 veh/h and 15-30 % trucks drawn from the seed.
 parallel, one process per core (``--jobs``). Each site's folder holds its site file, its plan
 picture and its ``wz eval`` report; ``sites.json`` and ``sites.md`` hold, per site and in
 distribution, the accuracy, tracking and alert figures against the targets of
-:data:`SITE_TARGETS`, and the worst site's figures and picture.
+:data:`SITE_TARGETS`, and the worst site's figures and picture. ``--resume`` reuses the sites
+that a run cut short already finished in ``--out`` (same site file, seed, conditions and
+durations), so a long run can be taken up again.
 """
 
 from __future__ import annotations
@@ -108,10 +110,18 @@ class SiteJob:
     duration_s: float
     warmup_s: float
     out_dir: Path
+    #: Reuse this site's ``eval.json`` in ``out_dir`` when it is of this very job (see
+    #: :func:`finished_report`): a run cut short goes on where it stopped.
+    resume: bool = False
 
 
 def plan_jobs(
-    count: int, seed: int, duration_s: float, warmup_s: float, out_dir: Path
+    count: int,
+    seed: int,
+    duration_s: float,
+    warmup_s: float,
+    out_dir: Path,
+    resume: bool = False,
 ) -> list[SiteJob]:
     """The runs of ``--sites count --seed seed``: site seeds ``seed .. seed + count - 1``."""
     jobs = []
@@ -128,6 +138,7 @@ def plan_jobs(
                 duration_s=duration_s,
                 warmup_s=warmup_s,
                 out_dir=out_dir / f"gen-{site_seed}",
+                resume=resume,
             )
         )
     return jobs
@@ -140,6 +151,8 @@ def run_job(job: SiteJob) -> dict[str, Any]:
     from wz_shared.site_generator import generate_site
 
     site = generate_site(job.seed)
+    if job.resume and (report := finished_report(job, site_yaml(site))) is not None:
+        return {**summarise(site.site_id, site.name, job, report), "resumed": True}
     job.out_dir.mkdir(parents=True, exist_ok=True)
     (job.out_dir / "site.yaml").write_text(site_yaml(site), encoding="utf-8")
     draw_site(site, job.out_dir / "site.png")
@@ -154,6 +167,28 @@ def run_job(job: SiteJob) -> dict[str, Any]:
     report = evaluate(site, options, plots_dir=job.out_dir)
     (job.out_dir / "eval.json").write_text(json.dumps(report, indent=2, default=str) + "\n")
     return summarise(site.site_id, site.name, job, report)
+
+
+def finished_report(job: SiteJob, site_text: str) -> dict[str, Any] | None:
+    """The ``eval.json`` a run of this very job left in its folder, or None: the same site
+    file, seed, scored and warm-up seconds, weather, demand and truck share (all seeded, so a
+    run of the same code gives the same figures)."""
+    try:
+        saved_site = (job.out_dir / "site.yaml").read_text(encoding="utf-8")
+        report: dict[str, Any] = json.loads((job.out_dir / "eval.json").read_text())
+    except (OSError, ValueError):
+        return None
+    conditions = report.get("conditions", {})
+    same = (
+        saved_site == site_text
+        and report.get("seed") == job.seed
+        and report.get("duration_s") == job.duration_s
+        and report.get("warmup_s") == job.warmup_s
+        and conditions.get("weather") == job.weather
+        and conditions.get("vehicles_per_hour") == job.vehicles_per_hour
+        and conditions.get("truck_share") == job.truck_share
+    )
+    return report if same else None
 
 
 def summarise(site_id: str, name: str, job: SiteJob, report: dict[str, Any]) -> dict[str, Any]:
@@ -307,9 +342,11 @@ def run_sites(
     warmup_s: float,
     out_dir: Path,
     jobs: int | None = None,
+    resume: bool = False,
 ) -> dict[str, Any]:
-    """Run the sites (in parallel), write ``sites.json`` and ``sites.md`` in ``out_dir``."""
-    plan = plan_jobs(count, seed, duration_s, warmup_s, out_dir)
+    """Run the sites (in parallel), write ``sites.json`` and ``sites.md`` in ``out_dir``;
+    ``resume``: reuse the sites a run cut short already finished there."""
+    plan = plan_jobs(count, seed, duration_s, warmup_s, out_dir, resume)
     workers = max(1, min(count, jobs or os.cpu_count() or 1))
     rows: list[dict[str, Any]] = []
     with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
@@ -319,7 +356,8 @@ def run_sites(
             row = future.result()
             rows.append(row)
             sys.stderr.write(
-                f"site {job.seed} done ({len(rows)}/{count}): "
+                f"site {job.seed} {'taken from its eval.json' if row.get('resumed') else 'done'}"
+                f" ({len(rows)}/{count}): "
                 f"fails {', '.join(row['failed']) or 'nothing'}\n"
             )
     rows.sort(key=lambda r: r["seed"])
@@ -348,6 +386,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--warmup-s", type=_not_negative, default=60.0, help="before it [s]")
     parser.add_argument("--jobs", type=int, default=None, help="processes (default: cores)")
     parser.add_argument("--out", type=Path, default=Path("runs/sites"))
+    parser.add_argument(
+        "--resume",
+        action="store_true",
+        help="reuse each site's eval.json already in --out from a run of the same site, seed, "
+        "conditions and durations (a run cut short goes on where it stopped)",
+    )
     args = parser.parse_args(argv)
     if args.sites < 1:
         parser.error(f"--sites must be at least 1, got {args.sites}")
@@ -355,7 +399,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(f"--seed must be non-negative, got {args.seed}")
     if args.jobs is not None and args.jobs < 1:
         parser.error(f"--jobs must be at least 1, got {args.jobs}")
-    report = run_sites(args.sites, args.seed, args.duration_s, args.warmup_s, args.out, args.jobs)
+    report = run_sites(
+        args.sites, args.seed, args.duration_s, args.warmup_s, args.out, args.jobs, args.resume
+    )
     sys.stdout.write(markdown(report))
     failing = sum(1 for row in report["sites"] if row["failed"])
     return 0 if failing == 0 else 1

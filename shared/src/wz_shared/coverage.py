@@ -3,19 +3,25 @@
 A spot on the road is *covered* when at least one of the site's sensors would detect a
 passenger car standing there, other vehicles aside (hiding behind another vehicle is the
 tracker's to bridge, not a hole in the coverage). Everything follows from the site file's
-sensor geometry; nothing is fitted:
+sensor geometry and the weather; nothing is fitted:
 
-- **LiDAR**: the spot is within ``max_range_m`` and the beams are dense enough there that at
-  least one is sure to cross the car. A car of height :data:`CAR_HEIGHT_M` at ground range
-  ``r`` from a LiDAR ``h`` above the road spans the elevations
-  ``[atan(-h / r), atan((CAR_HEIGHT_M - h) / r)]``; one beam is sure to fall in it when that
-  span is at least the beam spacing ``(vertical_max - vertical_min) / (beams - 1)`` and lies
-  inside the beams' fan. A 32-beam LiDAR over 40 degrees (1.3 degrees apart) 5 m up covers a
-  car to about 66 m; a 64-beam one over 41 degrees, to about 130 m. Beyond, a car falls
-  between two beams, and a tracker downstream of the mast sees nothing there.
+- **LiDAR**: the spot is within the range at which a car's paint still returns, and the
+  beams are dense enough there that at least one is sure to cross the car. The range follows
+  the datasheet convention (an 80 % target is detected at ``max_range_m``): paint of
+  :data:`CAR_REFLECTIVITY` at normal incidence is detected while
+  ``rho exp(-2 alpha r) (max_range / r)^2 >= 0.8``, ``alpha`` the weather's extinction (fog,
+  rain; 0 in clear air). Clear: 0.61 ``max_range_m`` (122 m for a 200 m sensor); in fog of
+  150 m visibility (``alpha`` 0.026 /m), about 45 m. The beams: a car of height
+  :data:`CAR_HEIGHT_M` at ground range ``r`` from a LiDAR ``h`` above the road spans the
+  elevations ``[atan(-h / r), atan((CAR_HEIGHT_M - h) / r)]``; one beam is sure to fall in it
+  when that span is at least the beam spacing ``(vertical_max - vertical_min) / (beams - 1)``
+  and lies inside the beams' fan. A 32-beam LiDAR over 40 degrees (1.3 degrees apart) 5 m up
+  has a beam on a car to about 66 m; a 64-beam one over 41 degrees, to about 130 m. Beyond, a
+  car falls between two beams, and a tracker downstream of the mast sees nothing there.
 - **camera**: the car's middle (half its height above the road) is in front of the camera,
   inside the image and within ``camera_range_m`` (the camera detector publishes nothing
-  beyond its ``max_range_m``, 200 m by default).
+  beyond its ``max_range_m``, 200 m by default); in fog, no farther than where the car's
+  contrast falls to :data:`CAMERA_MIN_CONTRAST` (Koschmieder: ``exp(-3.912 r / V)``; 0.77 V).
 - **radar**: within ``max_range_m`` and half the horizontal field of view of the boresight.
 
 :func:`covered` answers for points; ``wz eval`` scores the tracks inside the 150 m circle
@@ -41,10 +47,46 @@ Bool = npt.NDArray[np.bool_]
 CAR_HEIGHT_M = 1.5
 #: The camera detector's default range [m] (``CameraDetectorSettings.max_range_m``).
 CAMERA_RANGE_M = 200.0
+#: Diffuse reflectivity of car paint in the near infrared (the simulator's, and a mid value of
+#: the 0.05-0.8 that paints span).
+CAR_REFLECTIVITY = 0.3
+#: Datasheet convention: a target of this reflectivity is just detected at ``max_range_m``.
+SPEC_REFLECTIVITY = 0.8
+#: The least contrast at which a camera still finds a car in fog (5 %, against the 2 % that
+#: defines meteorological visibility).
+CAMERA_MIN_CONTRAST = 0.05
+#: Koschmieder's constant: visibility is where contrast falls to 2 % (-ln 0.02).
+KOSCHMIEDER = 3.912
 
 
-def lidar_covers(mount: SensorMount, x_m: npt.ArrayLike, y_m: npt.ArrayLike) -> Bool:
-    """Whether a LiDAR is sure to put a beam on a car at each point (module docstring)."""
+def lidar_detection_range_m(
+    max_range_m: float, extinction_per_m: float = 0.0, reflectivity: float = CAR_REFLECTIVITY
+) -> float:
+    """The farthest range [m] a target of ``reflectivity`` at normal incidence returns
+    (module docstring): ``rho exp(-2 alpha r) (max_range / r)^2 >= SPEC_REFLECTIVITY``."""
+    clear = max_range_m * math.sqrt(min(1.0, reflectivity / SPEC_REFLECTIVITY))
+    if extinction_per_m <= 0.0:
+        return clear
+    lo, hi = 0.0, clear  # the left side falls with r: bisect its crossing
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        seen = reflectivity * math.exp(-2.0 * extinction_per_m * mid) * (max_range_m / mid) ** 2
+        lo, hi = (mid, hi) if seen >= SPEC_REFLECTIVITY else (lo, mid)
+    return lo
+
+
+def camera_fog_range_m(visibility_m: float) -> float:
+    """How far a camera still finds a car in fog of ``visibility_m`` (inf when clear)."""
+    if not math.isfinite(visibility_m):
+        return math.inf
+    return -math.log(CAMERA_MIN_CONTRAST) / KOSCHMIEDER * visibility_m
+
+
+def lidar_covers(
+    mount: SensorMount, x_m: npt.ArrayLike, y_m: npt.ArrayLike, extinction_per_m: float = 0.0
+) -> Bool:
+    """Whether a LiDAR sees a car at each point: its paint returns from there and a beam is
+    sure to cross it (module docstring)."""
     intrinsics = mount.intrinsics
     assert isinstance(intrinsics, LidarIntrinsics)
     r = np.hypot(np.asarray(x_m, float) - mount.pose.x_m, np.asarray(y_m, float) - mount.pose.y_m)
@@ -60,17 +102,20 @@ def lidar_covers(mount: SensorMount, x_m: npt.ArrayLike, y_m: npt.ArrayLike) -> 
     else:
         spacing = 0.0
     sure = (hi - lo) >= spacing if spacing > 0.0 else (lo <= 0.0) & (hi >= 0.0)
-    result: Bool = (r <= intrinsics.max_range_m) & (hi > lo) & sure
+    reach = lidar_detection_range_m(intrinsics.max_range_m, extinction_per_m)
+    result: Bool = (r <= reach) & (hi > lo) & sure
     return result
 
 
-def lidar_car_ranges_m(mount: SensorMount, step_m: float = 0.5) -> tuple[float, float] | None:
+def lidar_car_ranges_m(
+    mount: SensorMount, step_m: float = 0.5, extinction_per_m: float = 0.0
+) -> tuple[float, float] | None:
     """The nearest and farthest ground range [m] at which :func:`lidar_covers` holds (the
     blind cone under the sensor inside, beams too sparse for a car beyond); None if nowhere."""
     intrinsics = mount.intrinsics
     assert isinstance(intrinsics, LidarIntrinsics)
     r = np.arange(step_m, intrinsics.max_range_m + step_m / 2.0, step_m)
-    hit = lidar_covers(mount, mount.pose.x_m + r, np.full_like(r, mount.pose.y_m))
+    hit = lidar_covers(mount, mount.pose.x_m + r, np.full_like(r, mount.pose.y_m), extinction_per_m)
     if not hit.any():
         return None
     return float(r[hit].min()), float(r[hit].max())
@@ -120,18 +165,29 @@ def radar_covers(mount: SensorMount, x_m: npt.ArrayLike, y_m: npt.ArrayLike) -> 
 
 
 class SiteCoverage:
-    """What a site's sensors cover (:func:`covered`), the cameras' models built once."""
+    """What a site's sensors cover (:func:`covered`), the cameras' models built once.
 
-    def __init__(self, site: Site) -> None:
+    ``lidar_extinction_per_m`` and ``visibility_m``: the weather (clear by default): the
+    LiDAR's extinction coefficient [1/m] (fog and rain) and the meteorological visibility [m]
+    that limits the camera in fog. The radar is taken to see through both.
+    """
+
+    def __init__(
+        self, site: Site, lidar_extinction_per_m: float = 0.0, visibility_m: float = math.inf
+    ) -> None:
         self.site = site
+        self.lidar_extinction_per_m = lidar_extinction_per_m
+        self.camera_range_m = min(CAMERA_RANGE_M, camera_fog_range_m(visibility_m))
         self._cameras = {m.sensor_id: PinholeCamera(m) for m in site.sensors if m.kind == "camera"}
 
     def sensor(self, mount: SensorMount, x_m: npt.ArrayLike, y_m: npt.ArrayLike) -> Bool:
         """Whether ``mount`` can see a car at each point (dispatch on its kind)."""
         if mount.kind == "lidar":
-            return lidar_covers(mount, x_m, y_m)
+            return lidar_covers(mount, x_m, y_m, self.lidar_extinction_per_m)
         if mount.kind == "camera":
-            return camera_covers(mount, x_m, y_m, camera=self._cameras[mount.sensor_id])
+            return camera_covers(
+                mount, x_m, y_m, self.camera_range_m, camera=self._cameras[mount.sensor_id]
+            )
         return radar_covers(mount, x_m, y_m)
 
     def __call__(self, x_m: npt.ArrayLike, y_m: npt.ArrayLike) -> Bool:
