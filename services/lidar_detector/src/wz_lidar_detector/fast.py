@@ -114,6 +114,13 @@ class FastSettings(BaseModel):
     #: Points at which a detection's score reaches 1 (score = min(1, points / this)).
     full_score_points: int = Field(default=50, ge=1)
     box: BoxFitSettings = Field(default_factory=BoxFitSettings)
+    #: A cluster reaching down to the lowest beam is cut by the field of view's lower edge (a
+    #: vehicle coming out of, or going into, the blind cone under a high mast): its extent
+    #: towards the sensor is unknown, and its box, anchored on that edge, stands still while
+    #: the vehicle drives out. Its centre gets this std along the vehicle [m] (about half a
+    #: truck's 16.5 m over two), more than a new track accepts (the tracker's
+    #: ``spawn_max_std_m``): it may update a vehicle's track, not start one. 0: not checked.
+    fov_cut_std_m: float = Field(default=5.0, ge=0.0)
 
     # --- update ---
     update_background: bool = True
@@ -192,6 +199,8 @@ class _Fitted:
 
     fit: BoxFit
     num_points: int
+    #: Cut by the lower edge of the field of view (see ``FastSettings.fov_cut_std_m``).
+    fov_cut: bool = False
 
     def contains_xy(self, xy_m: F64, margin_m: float) -> Bool:
         """Which ``(K, 2)`` points [m] fall in the box's footprint grown by ``margin_m``."""
@@ -204,6 +213,31 @@ class _Fitted:
         half = 0.5 * np.asarray(self.fit.size_lwh_m[:2]) + margin_m
         inside: Bool = (np.abs(local[:, 0]) <= half[0]) & (np.abs(local[:, 1]) <= half[1])
         return inside
+
+
+def _lowest_beam_rad(frame: PointFrame) -> tuple[float, float] | None:
+    """The lowest beam's elevation and half the beam spacing [rad], from an organized frame's
+    returns (each beam's median elevation in the sensor frame); None for an unorganized one
+    or a frame with too few returns to tell."""
+    if not frame.organized:
+        return None
+    xyz = frame.points[:, :3].astype(np.float64).reshape(frame.rows, frame.columns, 3)
+    with np.errstate(invalid="ignore"):
+        elevation = np.arctan2(xyz[..., 2], np.hypot(xyz[..., 0], xyz[..., 1]))
+    counts = np.isfinite(elevation).sum(axis=1)
+    if (counts >= 8).sum() < 2:
+        return None
+    with np.errstate(all="ignore"):
+        beams = np.sort(np.nanmedian(elevation[counts >= 8], axis=1))
+    spacing = float(np.median(np.diff(beams))) if len(beams) > 1 else 0.0
+    return float(beams[0]), 0.5 * spacing
+
+
+def _reaches_floor(cluster: F64, floor: tuple[float, float]) -> bool:
+    """Whether a cluster has a return on the lowest beam (within half a beam spacing)."""
+    lowest, half = floor
+    elevation = np.arctan2(cluster[:, 2], np.hypot(cluster[:, 0], cluster[:, 1]))
+    return bool(elevation.min() <= lowest + half)
 
 
 class FastPipeline:
@@ -221,6 +255,9 @@ class FastPipeline:
     def __init__(self, settings: FastSettings, background: BackgroundModel) -> None:
         self.settings = settings
         self.background = background
+        #: The lowest beam (:func:`_lowest_beam_rad`), from the first frame that tells it:
+        #: a sensor's beams do not move.
+        self._floor: tuple[float, float] | None = None
 
     def detect(self, frame: PointFrame) -> DetectionResult:
         """Detect vehicles in one frame.
@@ -265,7 +302,10 @@ class FastPipeline:
         timings["cluster"] = time.perf_counter() - start
 
         start = time.perf_counter()
-        detections = self._boxes(xyz, labels)
+        if self._floor is None and settings.fov_cut_std_m > 0.0:
+            self._floor = _lowest_beam_rad(frame)
+        floor = self._floor if settings.fov_cut_std_m > 0.0 else None
+        detections = self._boxes(xyz, labels, floor)
         timings["boxes"] = time.perf_counter() - start
 
         if settings.update_background:
@@ -275,7 +315,10 @@ class FastPipeline:
 
         return DetectionResult(detections=detections, foreground=foreground, timings_s=timings)
 
-    def _boxes(self, xyz: F64, labels: I64) -> list[BoxDetection]:
+    def _boxes(
+        self, xyz: F64, labels: I64, floor: tuple[float, float] | None = None
+    ) -> list[BoxDetection]:
+        """``floor``: the lowest beam's elevation and half a beam spacing [rad], or None."""
         settings = self.settings
         if len(labels) == 0:
             return []
@@ -308,7 +351,8 @@ class FastPipeline:
                 ground_z_m=ground,
                 settings=settings.box,
             )
-            fitted.append(_Fitted(fit, len(cluster)))
+            cut = floor is not None and _reaches_floor(cluster, floor)
+            fitted.append(_Fitted(fit, len(cluster), cut))
         return [self._detection(box) for box in fitted]
 
     def _ground_heights(self, clusters: list[F64]) -> list[float | None]:
@@ -342,6 +386,9 @@ class FastPipeline:
 
     def _detection(self, box: _Fitted) -> BoxDetection:
         fit, covariance = box.fit, box.fit.covariance_xy_m2
+        if box.fov_cut:
+            along = np.array([math.cos(fit.heading_rad), math.sin(fit.heading_rad)])
+            covariance = covariance + self.settings.fov_cut_std_m**2 * np.outer(along, along)
         return BoxDetection(
             center_xyz_m=fit.center_xyz_m,
             size_lwh_m=fit.size_lwh_m,
