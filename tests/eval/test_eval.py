@@ -72,7 +72,8 @@ def test_wz_eval_writes_the_report_json_markdown_and_plots(tmp_path: Path) -> No
     # Scored where a sensor sees a car; the whole circle alongside, with the coverage.
     assert report["scored_region"] == "covered"
     assert 0.0 < report["circle"]["mota"] <= 1.0
-    assert report["circle"]["vehicles_scored"] >= report["vehicles_scored"]
+    circle, covered = report["circle"]["mot_detail"], report["mot_detail"]
+    assert circle["vehicles_scored"] >= covered["vehicles_scored"]
     coverage = report["coverage"]
     assert coverage["covered_share_upstream"] > 0.95 > coverage["covered_share_downstream"]
     assert coverage["per_sensor_reach_m"]["camera-mast"][1] < 0.0  # it faces the approach

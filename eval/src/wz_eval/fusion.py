@@ -82,11 +82,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
 from wz_camera_detector.settings import camera_mount
 from wz_eval.alerts import observed_truth, run_alert_engine, score_alerts, track_follows
 from wz_eval.by_station import StationBreakdown
+from wz_eval.coverage_report import coverage_report, weather_coverage
 from wz_eval.fusion_report import (
     ALERT_TRUTH_RANGE_M,
     markdown,
@@ -127,12 +127,7 @@ from wz_shared.coverage import SiteCoverage
 from wz_shared.logs import configure_logging
 from wz_shared.messages import DetectionBatch, TrackBatch, VehicleTruth
 from wz_shared.motion import rts_smooth
-from wz_shared.site import SensorMount, Site, SiteFileError, load_site
-from wz_simulator.sensors.lidar_physics import (
-    LidarPhysics,
-    fog_extinction_per_m,
-    rain_extinction_per_m,
-)
+from wz_shared.site import Site, SiteFileError, load_site
 from wz_simulator.sensors.scene import WEATHER_PRESETS
 from wz_simulator.settings import SimulatorSettings
 
@@ -650,77 +645,6 @@ def scored_region(
         return within and (seen is None or (x_m, y_m) in seen)
 
     return _region(vehicles, states, lambda v: inside(v.x_m, v.y_m), inside)
-
-
-#: Spacing of the road samples :func:`coverage_report` counts [m].
-COVERAGE_STEP_M = 1.0
-
-
-def weather_coverage(site: Site, weather: str) -> SiteCoverage:
-    """What the site's sensors cover in the run's weather (:data:`WEATHER_PRESETS`): the
-    LiDAR's extinction as the simulator computes it (fog and rain), the fog's visibility."""
-    conditions = WEATHER_PRESETS[weather]
-    physics = LidarPhysics()
-    extinction = fog_extinction_per_m(
-        conditions.fog_visibility_m, physics.wavelength_nm
-    ) + rain_extinction_per_m(
-        conditions.rain_mm_per_h,
-        physics.rain_attenuation_db_per_km,
-        physics.rain_attenuation_exponent,
-    )
-    return SiteCoverage(site, extinction, conditions.fog_visibility_m)
-
-
-def coverage_report(
-    coverage: SiteCoverage, centre: tuple[float, float], max_range_m: float
-) -> dict[str, Any]:
-    """How much of the road inside the circle the sensors cover: lane centres sampled every
-    :data:`COVERAGE_STEP_M`, the covered share overall, up- and downstream of the mast, and
-    each sensor's reach along the road."""
-    site = coverage.site
-    frame = site.road_frame
-    mast_station = float(frame.to_road(*centre)[0])
-    stations = np.arange(
-        mast_station - max_range_m, mast_station + max_range_m + 1e-9, COVERAGE_STEP_M
-    )
-    inside_all: list[F64] = []
-    seen_all: list[npt.NDArray[np.bool_]] = []
-    for offset in (lane.center_offset_m for lane in site.lanes):
-        x, y = frame.to_site(stations, np.full_like(stations, offset))
-        inside = np.hypot(x - centre[0], y - centre[1]) <= max_range_m
-        inside_all.append(np.where(inside, stations - mast_station, np.nan))
-        seen_all.append(inside & coverage(x, y))
-    rel = np.concatenate(inside_all)
-    seen = np.concatenate(seen_all)
-    up = rel <= 0.0  # NaN (outside the circle) compares False both ways
-    down = rel > 0.0
-
-    def share(part: npt.NDArray[np.bool_]) -> float:
-        return round(float(seen[part].sum() / max(1, part.sum())), 3)
-
-    return {
-        "covered_share": share(up | down),
-        "covered_share_upstream": share(up),
-        "covered_share_downstream": share(down),
-        "per_sensor_reach_m": {
-            m.sensor_id: _reach(coverage, m, site, stations, mast_station) for m in site.sensors
-        },
-    }
-
-
-def _reach(
-    coverage: SiteCoverage, mount: SensorMount, site: Site, stations: F64, mast_station: float
-) -> list[float] | None:
-    """The stations (from the mast, [m]) between which ``mount`` covers some lane's centre, or
-    None where it covers none of them."""
-    covered_at = np.zeros(stations.shape, dtype=bool)
-    for lane in site.lanes:
-        x, y = site.road_frame.to_site(stations, np.full_like(stations, lane.center_offset_m))
-        covered_at |= coverage.sensor(mount, x, y)
-    if not covered_at.any():
-        return None
-    rel = stations[covered_at] - mast_station
-    return [round(float(rel.min()), 1), round(float(rel.max()), 1)]
 
 
 def _region(
