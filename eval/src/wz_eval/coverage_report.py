@@ -50,10 +50,12 @@ def coverage_report(
     stations = np.arange(
         mast_station - max_range_m, mast_station + max_range_m + 1e-9, COVERAGE_STEP_M
     )
+    lanes = [
+        frame.to_site(stations, np.full_like(stations, lane.center_offset_m)) for lane in site.lanes
+    ]
     inside_all: list[F64] = []
     seen_all: list[npt.NDArray[np.bool_]] = []
-    for offset in (lane.center_offset_m for lane in site.lanes):
-        x, y = frame.to_site(stations, np.full_like(stations, offset))
+    for x, y in lanes:
         inside = np.hypot(x - centre[0], y - centre[1]) <= max_range_m
         inside_all.append(np.where(inside, stations - mast_station, np.nan))
         seen_all.append(inside & coverage(x, y))
@@ -70,19 +72,22 @@ def coverage_report(
         "covered_share_upstream": share(up),
         "covered_share_downstream": share(down),
         "per_sensor_reach_m": {
-            m.sensor_id: _reach(coverage, m, site, stations, mast_station) for m in site.sensors
+            m.sensor_id: _reach(coverage, m, lanes, stations, mast_station) for m in site.sensors
         },
     }
 
 
 def _reach(
-    coverage: SiteCoverage, mount: SensorMount, site: Site, stations: F64, mast_station: float
+    coverage: SiteCoverage,
+    mount: SensorMount,
+    lanes: list[tuple[F64, F64]],
+    stations: F64,
+    mast_station: float,
 ) -> list[float] | None:
-    """The stations (from the mast, [m]) between which ``mount`` covers some lane's centre, or
-    None where it covers none of them."""
+    """The stations (from the mast, [m]) between which ``mount`` covers some lane's centre
+    (``lanes``: each lane centre's site x, y at ``stations``), or None where it covers none."""
     covered_at = np.zeros(stations.shape, dtype=bool)
-    for lane in site.lanes:
-        x, y = site.road_frame.to_site(stations, np.full_like(stations, lane.center_offset_m))
+    for x, y in lanes:
         covered_at |= coverage.sensor(mount, x, y)
     if not covered_at.any():
         return None

@@ -359,7 +359,8 @@ def evaluate(
     mot_approach = _MotAccumulator()
     # The whole circle, covered or not: what the coverage leaves out.
     mot_circle = _MotAccumulator()
-    coverage = weather_coverage(site, options.weather) if options.covered_only else None
+    in_weather = weather_coverage(site, options.weather)
+    coverage = in_weather if options.covered_only else None
     sample_times = [stamp for stamp, _ in record.camera_only]
     batches = [b for b in record.batches if not _dropped(b, options.dropouts, options.warmup_s)]
     position = 0
@@ -520,9 +521,7 @@ def evaluate(
         "id_switch_events": mot.switch_events(mot_times, mast_station_m),
         "approach": mot_approach.summary(len(record.truth)),
         "scored_region": "covered" if options.covered_only else "circle",
-        "coverage": coverage_report(
-            weather_coverage(site, options.weather), centre, options.max_range_m
-        ),
+        "coverage": coverage_report(in_weather, centre, options.max_range_m),
         "circle": mot_circle.summary(len(record.truth)),
         "paper_table": paper_table(site, scores, centre, options.window_upstream_m),
         "alerts": alerts,

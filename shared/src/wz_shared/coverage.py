@@ -24,7 +24,7 @@ sensor geometry and the weather; nothing is fitted:
   contrast falls to :data:`CAMERA_MIN_CONTRAST` (Koschmieder: ``exp(-3.912 r / V)``; 0.77 V).
 - **radar**: within ``max_range_m`` and half the horizontal field of view of the boresight.
 
-:func:`covered` answers for points; ``wz eval`` scores the tracks inside the 150 m circle
+:class:`SiteCoverage` answers for points; ``wz eval`` scores the tracks inside the 150 m circle
 *and* the covered road (and reports the whole circle alongside); ``wz site show`` draws what
 each sensor covers.
 """
@@ -198,8 +198,3 @@ class SiteCoverage:
         for mount in self.site.sensors:
             out |= self.sensor(mount, x, y)
         return out
-
-
-def covered(site: Site, x_m: npt.ArrayLike, y_m: npt.ArrayLike) -> Bool:
-    """Whether at least one of the site's sensors can see a car at each point."""
-    return SiteCoverage(site)(x_m, y_m)
