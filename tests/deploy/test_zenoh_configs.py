@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import subprocess
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -21,6 +22,7 @@ import zenoh
 from tests.cli.procs import ROOT, free_port, port_open, stop_process, wait_for, wz_argv, wz_env
 from wz_shared.bus import zenoh_config
 from wz_shared.settings import BusSettings
+from wz_shared.trust import edge_access_control, regional_access_control
 
 ZENOH_DIR = ROOT / "deploy" / "zenoh"
 EDGE_SERVICE = ZENOH_DIR / "edge-service.json5"
@@ -45,9 +47,6 @@ def test_the_configs_are_there() -> None:
         "edge-service.json5",
         "trailer-router.json5",
         "regional-router.json5",
-        "trailer-router-tls.example.json5",
-        "regional-router-tls.example.json5",
-        "regional-router-acl.example.json5",
     } <= names
 
 
@@ -58,55 +57,61 @@ def test_config_loads_in_zenoh_without_multicast(path: Path) -> None:
     assert get(config, "mode") in {"client", "router"}
 
 
-def test_edge_service_is_a_client_of_the_trailer_router() -> None:
+def test_edge_service_is_a_tls_client_of_the_trailer_router() -> None:
     config = zenoh.Config.from_file(str(EDGE_SERVICE))
     assert get(config, "mode") == "client"
-    assert get(config, "connect/endpoints") == ["tcp/router:7447"]
+    assert get(config, "connect/endpoints") == ["tls/router:7447"]
     assert get(config, "listen/endpoints") == []
+    tls = get(config, "transport/link/tls")
+    assert tls["enable_mtls"] is True and tls["verify_name_on_connect"] is True
+    assert tls["connect_certificate"] == "/etc/wz/tls/cert.pem"
+    assert tls["connect_private_key"] == "/etc/wz/tls/key.pem"
+    assert tls["root_ca_certificate"] == "/etc/wz/tls/ca.pem"
 
 
-def test_trailer_router_listens_for_the_box_and_connects_up() -> None:
+def test_trailer_router_listens_for_the_box_over_tls_and_connects_up() -> None:
     config = zenoh.Config.from_file(str(TRAILER_ROUTER))
     assert get(config, "mode") == "router"
-    assert get(config, "listen/endpoints") == ["tcp/0.0.0.0:7447"]
+    assert get(config, "listen/endpoints") == ["tls/0.0.0.0:7447"]
     # A placeholder that never resolves, replaced at install (or by --connect).
-    assert get(config, "connect/endpoints") == ["tcp/regional.wz.invalid:7447"]
+    assert get(config, "connect/endpoints") == ["tls/regional.wz.invalid:7447"]
+    tls = get(config, "transport/link/tls")
+    assert tls["enable_mtls"] is True and tls["verify_name_on_connect"] is True
+    assert tls["listen_certificate"] == tls["connect_certificate"] == "/etc/wz/tls/cert.pem"
 
 
-def test_regional_router_listens_and_connects_to_nobody() -> None:
+def test_trailer_router_access_control_is_the_roles_table() -> None:
+    """The shipped file says what wz_shared.trust.ROLES says (regenerate it from there)."""
+    config = zenoh.Config.from_file(str(TRAILER_ROUTER))
+    expected = zenoh.Config()
+    expected.insert_json5("access_control", json.dumps(edge_access_control()))
+    assert get(config, "access_control") == get(expected, "access_control")
+
+
+def test_regional_router_listens_over_tls_and_denies_all_without_its_sites() -> None:
     config = zenoh.Config.from_file(str(REGIONAL_ROUTER))
     assert get(config, "mode") == "router"
-    assert get(config, "listen/endpoints") == ["tcp/0.0.0.0:7447"]
+    assert get(config, "listen/endpoints") == ["tls/0.0.0.0:7447"]
     assert get(config, "connect/endpoints") == []
-
-
-def test_tls_examples_use_tls_endpoints_and_certificates() -> None:
-    trailer = zenoh.Config.from_file(str(ZENOH_DIR / "trailer-router-tls.example.json5"))
-    assert all(e.startswith("tls/") for e in get(trailer, "connect/endpoints"))
-    tls = get(trailer, "transport/link/tls")
-    assert tls["enable_mtls"] is True and tls["verify_name_on_connect"] is True
-    assert tls["connect_certificate"].startswith("/etc/wz/tls/")
-    for name in ("regional-router-tls.example.json5", "regional-router-acl.example.json5"):
-        regional = zenoh.Config.from_file(str(ZENOH_DIR / name))
-        assert any(e.startswith("tls/") for e in get(regional, "listen/endpoints"))
-        tls = get(regional, "transport/link/tls")
-        assert tls["enable_mtls"] is True
-        assert tls["listen_certificate"].startswith("/etc/wz/tls/")
-        assert tls["listen_private_key"].startswith("/etc/wz/tls/")
-
-
-def test_acl_example_denies_by_default_and_its_policies_name_what_exists() -> None:
-    config = zenoh.Config.from_file(str(ZENOH_DIR / "regional-router-acl.example.json5"))
+    assert get(config, "transport/link/tls/enable_mtls") is True
     acl = get(config, "access_control")
     assert acl["enabled"] is True and acl["default_permission"] == "deny"
-    rules = {rule["id"] for rule in acl["rules"]}
-    subjects = {subject["id"] for subject in acl["subjects"]}
-    assert acl["policies"]
-    for policy in acl["policies"]:
-        assert set(policy["rules"]) <= rules and set(policy["subjects"]) <= subjects
-    for rule in acl["rules"]:
-        for key_expr in rule["key_exprs"]:
-            zenoh.KeyExpr(key_expr)  # raises for an invalid one
+    assert acl["policies"] == []
+
+
+@pytest.mark.parametrize("sites", [["a"], ["us75-lincoln", "i80-omaha"]])
+def test_generated_access_controls_load_and_name_what_exists(sites: list[str]) -> None:
+    for acl in (edge_access_control(), edge_access_control("a"), regional_access_control(sites)):
+        config = zenoh.Config()
+        config.insert_json5("access_control", json.dumps(acl))  # zenoh checks the block
+        rules = {rule["id"] for rule in acl["rules"]}
+        subjects = {subject["id"] for subject in acl["subjects"]}
+        assert acl["default_permission"] == "deny" and acl["policies"]
+        for policy in acl["policies"]:
+            assert set(policy["rules"]) <= rules and set(policy["subjects"]) <= subjects
+        for rule in acl["rules"]:
+            for key_expr in rule["key_exprs"]:
+                zenoh.KeyExpr(key_expr)  # raises for an invalid one
 
 
 def test_a_service_session_takes_the_file_and_only_explicit_overrides(
@@ -117,7 +122,7 @@ def test_a_service_session_takes_the_file_and_only_explicit_overrides(
     monkeypatch.setenv("WZ_BUS_CONFIG_FILE", str(EDGE_SERVICE))
     config = zenoh_config(BusSettings())
     assert get(config, "mode") == "client"  # the file's, not the default peer
-    assert get(config, "connect/endpoints") == ["tcp/router:7447"]
+    assert get(config, "connect/endpoints") == ["tls/router:7447"]
     monkeypatch.setenv("WZ_BUS_CONNECT_ENDPOINTS", "tcp/127.0.0.1:7999")
     config = zenoh_config(BusSettings())
     assert get(config, "mode") == "client"
@@ -130,13 +135,36 @@ def test_a_service_session_takes_the_file_and_only_explicit_overrides(
 
 # --- the mesh, with real routers ----------------------------------------------------------------
 
+SITE = "test-site"
 
-def start_router(config: Path, *extra: str) -> tuple[str, subprocess.Popen[bytes]]:
-    """`wz router --config CONFIG --listen <free loopback port> EXTRA`, accepting connections."""
+
+@pytest.fixture(scope="module")
+def credentials(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Every identity of SITE, and the regional side's (`wz credentials`)."""
+    from wz_cli.credentials import make_regional, make_site
+
+    folder = tmp_path_factory.mktemp("credentials")
+    make_site(folder, SITE)
+    make_regional(folder, names=["localhost", "127.0.0.1"])
+    return folder
+
+
+def start_router(config: Path, tls_dir: Path, *extra: str) -> tuple[str, subprocess.Popen[bytes]]:
+    """`wz router --config CONFIG --tls-dir TLS_DIR --listen <free loopback port> EXTRA`,
+    accepting connections."""
     port = free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
+    endpoint = f"tls/127.0.0.1:{port}"
     process = subprocess.Popen(
-        wz_argv("router", "--config", str(config), "--listen", endpoint, *extra),
+        wz_argv(
+            "router",
+            "--config",
+            str(config),
+            "--tls-dir",
+            str(tls_dir),
+            "--listen",
+            endpoint,
+            *extra,
+        ),
         cwd=ROOT,
         env=wz_env(),
         stderr=subprocess.PIPE,
@@ -162,19 +190,20 @@ def routers() -> Iterator[list[subprocess.Popen[bytes]]]:
         assert all(code == 0 for code in codes), codes
 
 
-def service_session(router_endpoint: str) -> zenoh.Session:
+def service_session(router_endpoint: str, tls_dir: Path) -> zenoh.Session:
     """A session opened as a service opens it: the edge-service file, the router's address
-    from WZ_BUS_CONNECT_ENDPOINTS."""
-    settings = BusSettings(config_file=EDGE_SERVICE, connect_endpoints=[router_endpoint])
+    from WZ_BUS_CONNECT_ENDPOINTS, its credentials from WZ_BUS_TLS_DIR."""
+    settings = BusSettings(
+        config_file=EDGE_SERVICE, connect_endpoints=[router_endpoint], tls_dir=tls_dir
+    )
     return zenoh.open(zenoh_config(settings))
 
 
-def client_session(router_endpoint: str) -> zenoh.Session:
-    config = zenoh.Config()
-    config.insert_json5("mode", json.dumps("client"))
-    config.insert_json5("connect/endpoints", json.dumps([router_endpoint]))
-    config.insert_json5("scouting/multicast/enabled", "false")
-    return zenoh.open(config)
+def client_session(router_endpoint: str, tls_dir: Path) -> zenoh.Session:
+    settings = BusSettings(
+        mode="client", connect_endpoints=[router_endpoint], listen_endpoints=[], tls_dir=tls_dir
+    )
+    return zenoh.open(zenoh_config(settings))
 
 
 def relay(publisher_session: zenoh.Session, subscriber_session: zenoh.Session, key: str) -> None:
@@ -209,35 +238,68 @@ def relay(publisher_session: zenoh.Session, subscriber_session: zenoh.Session, k
     subscriber.undeclare()
 
 
+def refused(publisher_session: zenoh.Session, subscriber_session: zenoh.Session, key: str) -> None:
+    """Nothing ``publisher_session`` puts on ``key`` reaches ``subscriber_session`` (2 s of
+    puts, with a subscriber that does receive others' samples on the same router)."""
+    subscriber = subscriber_session.declare_subscriber(key)
+    deadline = time.monotonic() + 2.0
+    while time.monotonic() < deadline:
+        publisher_session.put(key, "forged")
+        time.sleep(0.05)
+    assert subscriber.try_recv() is None
+    subscriber.undeclare()
+
+
 def test_trailer_router_relays_on_the_box_while_its_regional_router_is_unreachable(
-    routers: list[subprocess.Popen[bytes]],
+    routers: list[subprocess.Popen[bytes]], credentials: Path
 ) -> None:
     # The config's own uplink (the placeholder host) stays: it must not keep the router down.
-    trailer, process = start_router(TRAILER_ROUTER)
+    trailer, process = start_router(TRAILER_ROUTER, credentials / SITE / "router")
     routers.append(process)
-    with service_session(trailer) as detector, service_session(trailer) as tracker:
-        relay(detector, tracker, "wz/test-site/detections/lidar")
+    site = credentials / SITE
+    with (
+        service_session(trailer, site / "lidar-detector") as detector,
+        service_session(trailer, site / "fusion-tracker") as tracker,
+    ):
+        relay(detector, tracker, f"wz/{SITE}/detections/lidar")
 
 
 def test_trailer_router_relays_up_to_the_regional_router(
-    routers: list[subprocess.Popen[bytes]],
+    routers: list[subprocess.Popen[bytes]], credentials: Path
 ) -> None:
-    regional, process = start_router(REGIONAL_ROUTER)
+    regional, process = start_router(REGIONAL_ROUTER, credentials / "regional" / "router")
     routers.append(process)
-    trailer, process = start_router(TRAILER_ROUTER, "--connect", regional)
+    trailer, process = start_router(
+        TRAILER_ROUTER, credentials / SITE / "router", "--connect", regional
+    )
     routers.append(process)
-    with service_session(trailer) as alert_service, client_session(regional) as central:
-        relay(alert_service, central, "wz/test-site/alerts/speeding")
-        # And down: a sample published in the region reaches a service on the trailer.
-        relay(central, alert_service, "wz/test-site/config/sign")
+    central_tls = credentials / "regional" / "central-gateway"
+    alert_tls = credentials / SITE / "alert-service"
+    with (
+        service_session(trailer, alert_tls) as alert_service,
+        client_session(regional, central_tls) as central,
+    ):
+        relay(alert_service, central, f"wz/{SITE}/alerts/speeding")
+        # Not down: the region only reads; a sample it puts never reaches the trailer.
+        refused(central, alert_service, f"wz/{SITE}/config/sign")
+        # Nor another site's keys up: the trailer gives only its own site's.
+        refused(alert_service, central, "wz/other-site/alerts/speeding")
 
 
-def test_router_connect_override_replaces_the_config_endpoints() -> None:
+def test_router_overrides_replace_the_config_endpoints_and_credentials(
+    credentials: Path,
+) -> None:
     from wz_cli.router import router_config
 
-    config = router_config(["tcp/127.0.0.1:7999"], TRAILER_ROUTER, ["tcp/127.0.0.1:7998"])
-    assert get(config, "listen/endpoints") == ["tcp/127.0.0.1:7999"]
-    assert get(config, "connect/endpoints") == ["tcp/127.0.0.1:7998"]
+    config = router_config(["tls/127.0.0.1:7999"], TRAILER_ROUTER, ["tls/127.0.0.1:7998"])
+    assert get(config, "listen/endpoints") == ["tls/127.0.0.1:7999"]
+    assert get(config, "connect/endpoints") == ["tls/127.0.0.1:7998"]
     assert get(router_config(None, TRAILER_ROUTER, []), "connect/endpoints") == []
     kept = router_config(None, TRAILER_ROUTER)
-    assert get(kept, "connect/endpoints") == ["tcp/regional.wz.invalid:7447"]
+    assert get(kept, "connect/endpoints") == ["tls/regional.wz.invalid:7447"]
+    regional = credentials / "regional" / "router"
+    config = router_config(None, REGIONAL_ROUTER, None, regional)
+    assert get(config, "transport/link/tls/listen_certificate") == str(regional / "cert.pem")
+    expected = zenoh.Config()
+    expected.insert_json5("access_control", json.dumps(regional_access_control([SITE])))
+    assert get(config, "access_control") == get(expected, "access_control")

@@ -88,7 +88,32 @@ def cmd_router(args: argparse.Namespace) -> int:
     if args.config is not None:
         log.info("router config %s", args.config)
     stop = stop_on_signals()
-    return run_router(router_config(args.listen, args.config, connect), stop)
+    return run_router(router_config(args.listen, args.config, connect, args.tls_dir), stop)
+
+
+def cmd_credentials(args: argparse.Namespace) -> int:
+    from wz_cli import credentials
+
+    folder: Path = args.folder
+    if args.action == "make":
+        if not args.site:
+            raise CliError("wz credentials make needs --site SITE")
+        written = credentials.make_site(
+            folder, args.site, router_names=args.name or [], days=args.days, uid=args.uid
+        )
+    elif args.action == "regional":
+        written = credentials.make_regional(
+            folder, names=args.name or [], days=args.days, uid=args.uid
+        )
+    else:
+        written = []
+    if not folder.is_dir():
+        raise CliError(f"no credentials in {folder}", 1)
+    for path in written:
+        emit(f"wrote {path}")
+    for line in credentials.describe(folder):
+        emit(line)
+    return 0
 
 
 def cmd_up(args: argparse.Namespace) -> int:
@@ -342,7 +367,38 @@ def build_parser() -> argparse.ArgumentParser:
         help="endpoint of another router to connect to, e.g. the regional router (repeatable or "
         "comma-separated; replaces the config file's; '' for none)",
     )
+    router.add_argument(
+        "--tls-dir",
+        type=Path,
+        metavar="DIR",
+        help="the router's credentials folder (`wz credentials`): its certificate and the CA in "
+        "place of the config's TLS paths, and its access-control.json if any",
+    )
     router.set_defaults(handler=cmd_router)
+
+    creds = commands.add_parser(
+        "credentials",
+        help="make a site's bus certificates (mutual TLS, one per service)",
+        description="make: the CA (first time) and every identity of --site (its router, each "
+        "service, the operator); regional: the regional router (--name its host names), the "
+        "central gateway and its access control for every site in FOLDER; list: what is there.",
+    )
+    creds.add_argument("action", choices=["make", "regional", "list"])
+    creds.add_argument("folder", type=Path, metavar="FOLDER", help="e.g. /etc/wz/credentials")
+    creds.add_argument("--site", help="the site id (make)")
+    creds.add_argument(
+        "--name",
+        action="append",
+        metavar="HOST",
+        help="another name or address the router is reached by (repeatable)",
+    )
+    creds.add_argument(
+        "--days", type=_positive_int, default=400, help="validity of the certificates (400)"
+    )
+    creds.add_argument(
+        "--uid", type=int, help="owner of the files written (the images' user: 65534)"
+    )
+    creds.set_defaults(handler=cmd_credentials)
 
     for name, summary in (
         ("up", "run the local stack: the router, then one process per service"),

@@ -17,6 +17,7 @@ import zenoh
 
 from wz_cli.common import CliError
 from wz_shared.settings import DEFAULT_ROUTER_ENDPOINT
+from wz_shared.trust import ACL_FILE, CERT_FILE, tls_config
 
 log = logging.getLogger(__name__)
 
@@ -30,12 +31,16 @@ def router_config(
     listen: Sequence[str] | None,
     config_file: Path | None,
     connect: Sequence[str] | None = None,
+    tls_dir: Path | None = None,
 ) -> zenoh.Config:
     """The router's Zenoh config: ``config_file`` if given, else the built-in local one.
 
     ``listen`` replaces the listen endpoints of either, ``connect`` the endpoints it connects
     to (an empty list: none, e.g. a trailer router without its regional router); None keeps
-    them. Multicast scouting is forced off.
+    them. ``tls_dir``: the router's credentials folder (``wz credentials``) in place of the
+    config's TLS paths, and its ``access-control.json``, when it has one, in place of the
+    config's access control (the regional router's, which names the sites). Multicast
+    scouting is forced off.
     """
     if config_file is not None:
         try:
@@ -57,6 +62,16 @@ def router_config(
             config.insert_json5("connect/endpoints", json.dumps(list(connect)))
         except zenoh.ZError as exc:
             raise CliError(f"bad --connect endpoint in {', '.join(connect)}: {exc}") from exc
+    if tls_dir is not None:
+        if not (tls_dir / CERT_FILE).is_file():
+            raise CliError(f"{tls_dir} holds no {CERT_FILE}: make it with `wz credentials`")
+        config.insert_json5("transport/link/tls", json.dumps(tls_config(tls_dir)))
+        acl = tls_dir / ACL_FILE
+        if acl.is_file():
+            try:
+                config.insert_json5("access_control", acl.read_text())
+            except zenoh.ZError as exc:
+                raise CliError(f"cannot use the access control in {acl}: {exc}") from exc
     config.insert_json5("scouting/multicast/enabled", json.dumps(False))
     return config
 

@@ -45,6 +45,7 @@ from wz_shared import codec
 from wz_shared.keys import Keys
 from wz_shared.messages import Message
 from wz_shared.settings import BusSettings
+from wz_shared.trust import tls_config
 
 log = logging.getLogger(__name__)
 
@@ -60,7 +61,8 @@ def zenoh_config(settings: BusSettings) -> zenoh.Config:
     Without a file every setting applies, defaults included. With one (a deployment's
     ``deploy/zenoh/edge-service.json5``) only the settings given explicitly (``WZ_BUS_MODE`` ...
     in the environment) override it: the file's mode and endpoints are not replaced by
-    defaults nobody asked for.
+    defaults nobody asked for. ``tls_dir`` (``WZ_BUS_TLS_DIR``) puts that folder's
+    credentials in place of the file's TLS paths.
     """
     if settings.config_file:
         config = zenoh.Config.from_file(str(settings.config_file))
@@ -77,6 +79,8 @@ def zenoh_config(settings: BusSettings) -> zenoh.Config:
     for field_name, (path, value) in overrides.items():
         if field_name in given:
             config.insert_json5(path, json.dumps(value))
+    if settings.tls_dir is not None:
+        config.insert_json5("transport/link/tls", json.dumps(tls_config(settings.tls_dir)))
     return config
 
 

@@ -50,6 +50,10 @@ class BusSettings(BaseSettings):
     multicast_scouting: bool = False
     #: A zenoh JSON5 config file (deployments); the fields above override what it says.
     config_file: Path | None = None
+    #: This session's credentials folder (``wz credentials``: ``ca.pem``, ``cert.pem``,
+    #: ``key.pem``): mutual TLS with that certificate, whatever the config file's TLS paths
+    #: say (:func:`wz_shared.trust.tls_config`). None: the config file's, or no TLS.
+    tls_dir: Path | None = None
 
     @field_validator("connect_endpoints", "listen_endpoints", mode="before")
     @classmethod

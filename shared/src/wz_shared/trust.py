@@ -1,0 +1,281 @@
+"""Who may say what on the bus: the services' roles, the routers' access control, and the
+check every consumer makes of a message's source.
+
+Outside the development stack on loopback, every session authenticates to its router with its
+own certificate (mutual TLS, a certificate per service signed by the site's CA: ``wz
+credentials``), and the router's access control allows each one only what its role says
+(:data:`ROLES`). A session whose certificate names no role, or that has none, can do nothing:
+the router drops its declarations and its samples before any consumer sees them. So a laptop
+plugged into the trailer's switch cannot put an alert, a detection or a track batch on the
+bus.
+
+Roles (a certificate's common name is the role's name)::
+
+    simulator        raw sensor data, truth; serves the site description
+    drivers          raw sensor data, the radar-camera unit's object lists (detections)
+    lidar-detector   detections
+    camera-detector  detections
+    fusion-tracker   tracks; serves the newest batch
+    alert-service    alerts, the roadside devices' state; serves the open episodes
+    gateway          reads (and its own status)
+    operator         reads: wz status, wz tap, wz record on the box
+    regional-router  reads: the trailer router's uplink, seen from the trailer
+
+Each service also publishes its own status and liveliness token
+(``wz/<site>/status/<name>``), no other service's.
+
+The routers' rules are seen from the router: *ingress* is what a session sends to the router
+(its samples, its declarations, its replies), *egress* what the router sends to it. Keys are
+site-wildcarded (``wz/*/...``): the trailer's router serves one site and the consumers refuse
+another site's messages; the regional router's rules name each trailer's own site
+(:func:`regional_access_control`).
+
+Key expressions with a verbatim chunk (``@adv``: the history caches and liveliness tokens of
+Zenoh's advanced publishers and subscribers) are not matched by ``*`` or ``**``, so each key
+with a history is allowed with its ``/@adv/**`` too.
+
+A consumer also checks what it takes (:func:`source_problem`): a track batch whose
+``source_id`` is not the tracker's, an alert not from the alert service, a detection batch
+whose ``source_id`` is not the sensor its key names, is refused and counted
+(``wrong_source``), not used.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from wz_shared.keys import ROOT
+
+#: Every message type a Zenoh 1.x access-control rule can name.
+ALL_MESSAGES = (
+    "put",
+    "delete",
+    "declare_subscriber",
+    "query",
+    "declare_queryable",
+    "reply",
+    "liveliness_token",
+    "declare_liveliness_subscriber",
+    "liveliness_query",
+)
+#: What a session sends to take data: its interest (subscriptions, queries) ...
+INTEREST = ("declare_subscriber", "query", "declare_liveliness_subscriber", "liveliness_query")
+#: ... and what it sends to give data.
+DATA = ("put", "delete", "reply", "liveliness_token", "declare_queryable")
+
+#: The roles of the services (as in ``wz up``'s stack), by the site-relative keys each may put
+#: samples on and answer queries on.
+TRACKER = "fusion-tracker"
+ALERT_SERVICE = "alert-service"
+
+
+@dataclass(frozen=True)
+class Role:
+    """What one service may give to the bus, besides its own status.
+
+    Attributes
+    ----------
+    name : str
+        The service's name: its status key's last chunk and its certificate's common name.
+    publishes : tuple of str
+        Site-relative key expressions it puts samples on (``alerts/*``).
+    serves : tuple of str
+        Site-relative key expressions it answers queries on.
+    """
+
+    name: str
+    publishes: tuple[str, ...] = ()
+    serves: tuple[str, ...] = ()
+
+
+RAW = ("raw/lidar/*", "raw/camera/*", "raw/radar/*")
+ROLES: Mapping[str, Role] = {
+    role.name: role
+    for role in (
+        Role("simulator", publishes=(*RAW, "truth/vehicles"), serves=("config/site",)),
+        Role("drivers", publishes=(*RAW, "detections/*")),
+        Role("lidar-detector", publishes=("detections/*",)),
+        Role("camera-detector", publishes=("detections/*",)),
+        Role(TRACKER, publishes=("tracks",), serves=("tracks/latest",)),
+        Role(ALERT_SERVICE, publishes=("alerts/*", "devices/state"), serves=("alerts/active",)),
+        Role("gateway"),
+    )
+}
+#: Sessions that only read: the operator's tools on the box, and the regional router's link
+#: seen from the trailer's router.
+READERS = ("operator", "regional-router")
+
+
+def _site_keys(site: str, suffixes: Iterable[str]) -> list[str]:
+    keys: list[str] = []
+    for suffix in suffixes:
+        key = f"{ROOT}/{site}/{suffix}"
+        keys += [key, f"{key}/@adv/**"]
+    return keys
+
+
+def _rule(
+    rule_id: str, flows: list[str], messages: Iterable[str], keys: list[str]
+) -> dict[str, Any]:
+    return {
+        "id": rule_id,
+        "permission": "allow",
+        "flows": flows,
+        "messages": list(messages),
+        "key_exprs": keys,
+    }
+
+
+def _everything(site: str) -> list[str]:
+    # Wildcards stop at verbatim chunks: the advanced publishers' and subscribers' keys apart.
+    # Any site: wz/** (which a subscription on wz/** is included in; wz/*/** is not).
+    prefix = ROOT if site == "*" else f"{ROOT}/{site}"
+    return [f"{prefix}/**", f"{prefix}/**/@adv/**"]
+
+
+def edge_access_control(site: str = "*") -> dict[str, Any]:
+    """The trailer router's ``access_control`` block: each role's certificate may give what
+    :data:`ROLES` says and take everything; :data:`READERS` only take; nobody else anything.
+
+    Parameters
+    ----------
+    site : str
+        The site chunk of every key (``*``: any, the shipped config).
+    """
+    rules = [
+        _rule("take: interest", ["ingress"], INTEREST, _everything(site)),
+        _rule("take: data", ["egress"], ALL_MESSAGES, _everything(site)),
+    ]
+    policies: list[dict[str, Any]] = []
+    subjects: list[dict[str, Any]] = []
+    for role in ROLES.values():
+        give = f"{role.name}: gives"
+        keys = _site_keys(site, (*role.publishes, *role.serves, f"status/{role.name}"))
+        rules.append(_rule(give, ["ingress"], DATA, keys))
+        subjects.append({"id": role.name, "cert_common_names": [role.name]})
+        policies.append(
+            {
+                "id": role.name,
+                "rules": [give, "take: interest", "take: data"],
+                "subjects": [role.name],
+            }
+        )
+    for reader in READERS:
+        subjects.append({"id": reader, "cert_common_names": [reader]})
+        policies.append(
+            {"id": reader, "rules": ["take: interest", "take: data"], "subjects": [reader]}
+        )
+    return {
+        "enabled": True,
+        "default_permission": "deny",
+        "rules": rules,
+        "subjects": subjects,
+        "policies": policies,
+    }
+
+
+def trailer_name(site: str) -> str:
+    """The common name of a trailer router's certificate, as the regional router knows it."""
+    return f"trailer-{site}"
+
+
+#: The central side's reading sessions at the regional router.
+CENTRAL_READERS = ("central-gateway", "operator")
+
+
+def regional_access_control(sites: Iterable[str]) -> dict[str, Any]:
+    """The regional router's ``access_control`` block: each trailer gives only its own site's
+    keys and is asked only about them; the central gateway and operator take every site's.
+    """
+    rules = [
+        _rule("central: interest", ["ingress"], INTEREST, _everything("*")),
+        _rule("central: data", ["egress"], ALL_MESSAGES, _everything("*")),
+        # the central gateway's own status and liveliness
+        _rule("central: status", ["ingress"], DATA, _site_keys("*", ["status/central-gateway"])),
+    ]
+    subjects: list[dict[str, Any]] = []
+    policies: list[dict[str, Any]] = []
+    for reader in CENTRAL_READERS:
+        subjects.append({"id": reader, "cert_common_names": [reader]})
+        policies.append(
+            {
+                "id": reader,
+                "rules": ["central: interest", "central: data", "central: status"],
+                "subjects": [reader],
+            }
+        )
+    for site in sorted(set(sites)):
+        name = trailer_name(site)
+        rules += [
+            _rule(f"{name}: gives", ["ingress"], ALL_MESSAGES, _everything(site)),
+            _rule(f"{name}: is asked", ["egress"], ALL_MESSAGES, _everything(site)),
+        ]
+        subjects.append({"id": name, "cert_common_names": [name]})
+        policies.append(
+            {"id": name, "rules": [f"{name}: gives", f"{name}: is asked"], "subjects": [name]}
+        )
+    return {
+        "enabled": True,
+        "default_permission": "deny",
+        "rules": rules,
+        "subjects": subjects,
+        "policies": policies,
+    }
+
+
+# --- TLS ------------------------------------------------------------------------------------
+
+#: The files of one identity's credentials folder (``wz credentials``).
+CA_FILE, CERT_FILE, KEY_FILE = "ca.pem", "cert.pem", "key.pem"
+#: A router's generated access control, in its credentials folder (the regional router's).
+ACL_FILE = "access-control.json"
+
+
+def tls_config(folder: Path) -> dict[str, Any]:
+    """The ``transport/link/tls`` block of a session whose credentials are in ``folder``:
+    trust only the site's CA, show its own certificate when it connects and when it is
+    connected to (mutual TLS), close a link whose certificate expires."""
+    ca, cert, key = (str(folder / name) for name in (CA_FILE, CERT_FILE, KEY_FILE))
+    return {
+        "root_ca_certificate": ca,
+        "enable_mtls": True,
+        "connect_certificate": cert,
+        "connect_private_key": key,
+        "listen_certificate": cert,
+        "listen_private_key": key,
+        "verify_name_on_connect": True,
+        "close_link_on_expiration": True,
+    }
+
+
+# --- consumers ------------------------------------------------------------------------------
+
+
+def expected_source(key: str) -> str | None:
+    """The ``source_id`` a message on the concrete ``key`` must carry, or None when any may.
+
+    Raw data and detections carry their sensor's id, the key's last chunk; tracks the
+    tracker's name; alerts and the devices' state the alert service's; a status its service's.
+    """
+    parts = str(key).split("/")
+    if len(parts) < 3 or parts[0] != ROOT:
+        return None
+    rest = parts[2:]
+    if rest[0] in ("raw", "detections", "status") and len(rest) >= 2:
+        return rest[-1]
+    if rest == ["tracks"]:
+        return TRACKER
+    if (rest[0] == "alerts" and len(rest) == 2) or rest == ["devices", "state"]:
+        return ALERT_SERVICE
+    return None
+
+
+def source_problem(key: str, source_id: str) -> str | None:
+    """Why a message from ``source_id`` is not to be taken from ``key``, or None."""
+    expected = expected_source(key)
+    if expected is None or source_id == expected:
+        return None
+    return f"{key} carries {expected}'s messages, not {source_id}'s"
