@@ -20,6 +20,8 @@ from wz_cli.common import CliError
 from wz_cli.stack import STACK, StackOptions
 from wz_cli.supervisor import Supervisor
 from wz_cli.topology import load_topology
+from wz_shared.bus import zenoh_config
+from wz_shared.settings import BusSettings
 from wz_shared.site import DEFAULT_SITE_PATH
 
 EDGE_BOX = ROOT / "deploy" / "topologies" / "edge-box.yaml"
@@ -30,7 +32,7 @@ NAMES = [spec.name for spec in STACK]
 def test_edge_box_topology_names_every_service_with_the_deployed_configs() -> None:
     topology = load_topology(EDGE_BOX, NAMES)
     assert topology.router.zenoh_config == ZENOH_DIR / "trailer-router.json5"
-    assert topology.router.listen == "tcp/127.0.0.1:7447"
+    assert topology.router.listen == "tls/127.0.0.1:7447"
     assert topology.router.connect == []
     assert topology.services == {name: ZENOH_DIR / "edge-service.json5" for name in NAMES}
 
@@ -86,13 +88,13 @@ def test_bad_topologies_are_refused_with_what_is_wrong(tmp_path: Path) -> None:
             load_topology(path, NAMES)
 
 
-def _router_sessions(endpoint: str) -> list[dict[str, object]]:
-    """The sessions the router reports in its admin space (the trailer config enables it)."""
-    config = zenoh.Config()
-    config.insert_json5("mode", json.dumps("client"))
-    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
-    config.insert_json5("scouting/multicast/enabled", "false")
-    with zenoh.open(config) as session:
+def _router_sessions(endpoint: str, tls_dir: Path) -> list[dict[str, object]]:
+    """The sessions the router reports in its admin space (the trailer config enables it, for
+    the operator's certificate)."""
+    settings = BusSettings(
+        mode="client", connect_endpoints=[endpoint], listen_endpoints=[], tls_dir=tls_dir
+    )
+    with zenoh.open(zenoh_config(settings)) as session:
         me = str(session.zid())
         sessions: list[dict[str, object]] = []
         for reply in session.get("@/*/router", timeout=3.0):
@@ -101,13 +103,44 @@ def _router_sessions(endpoint: str) -> list[dict[str, object]]:
     return [s for s in sessions if s["peer"] != me]
 
 
+def test_up_with_the_edge_box_topology_needs_credentials(tmp_path: Path) -> None:
+    result = run_wz("up", "--topology", str(EDGE_BOX), "--only", "alert-service")
+    assert result.returncode == 2
+    assert "--credentials" in result.stderr and "wz credentials make" in result.stderr
+    result = run_wz(
+        "up",
+        "--topology",
+        str(EDGE_BOX),
+        "--only",
+        "alert-service",
+        "--credentials",
+        str(tmp_path),
+    )
+    assert result.returncode == 2 and "has no credentials for router" in result.stderr
+
+
 def test_up_with_the_edge_box_topology(tmp_path: Path) -> None:
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    from wz_cli.credentials import make_site
+    from wz_shared.site import load_site
+
+    credentials = tmp_path / "credentials"
+    site_id = load_site(DEFAULT_SITE_PATH).site_id
+    make_site(credentials, site_id)
+    operator = {"WZ_BUS_TLS_DIR": str(credentials / site_id / "operator")}
+    endpoint = f"tls/127.0.0.1:{free_port()}"
     log_path = tmp_path / "up.log"
     with log_path.open("wb") as log:
         up = subprocess.Popen(
             wz_argv(
-                "up", "--topology", str(EDGE_BOX), "--only", "alert-service", "--listen", endpoint
+                "up",
+                "--topology",
+                str(EDGE_BOX),
+                "--only",
+                "alert-service",
+                "--listen",
+                endpoint,
+                "--credentials",
+                str(credentials),
             ),
             cwd=ROOT,
             env=wz_env(WZ_ALERT_STATUS_PERIOD_S="0.5"),
@@ -117,7 +150,9 @@ def test_up_with_the_edge_box_topology(tmp_path: Path) -> None:
         with running(up):
 
             def alert_service_alive() -> bool:
-                result = run_wz("status", "--json", "--timeout", "2", "--connect", endpoint)
+                result = run_wz(
+                    "status", "--json", "--timeout", "2", "--connect", endpoint, **operator
+                )
                 if result.returncode != 0:
                     return False
                 services = json.loads(result.stdout)["services"]
@@ -125,7 +160,7 @@ def test_up_with_the_edge_box_topology(tmp_path: Path) -> None:
 
             wait_for(alert_service_alive, 45.0, "the alert service alive in `wz status`")
             # The service joined as the edge-service config says: a client of the router.
-            sessions = _router_sessions(endpoint)
+            sessions = _router_sessions(endpoint, credentials / site_id / "operator")
             assert [s["whatami"] for s in sessions] == ["client"], sessions
             up.send_signal(signal.SIGINT)
             assert up.wait(30) == 0

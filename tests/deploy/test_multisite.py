@@ -7,6 +7,10 @@ The centre runs the regional router (``regional-router.json5``) and a central ga
 serves both sites. Both alert services name their episodes alike (same id prefix): the centre
 must keep them apart by site.
 
+Every link is the deployed one: mutual TLS with a certificate per service and per router
+(``wz credentials``), the routers' access control (each trailer gives only its own site's
+keys, the centre only reads).
+
 What it shows (the deployment issue's must-show):
 - trailer A's uplink cut for 10 s and trailer B's for 25 s (past Zenoh's 10 s lease, so B's
   session to the centre is closed and opened again): nothing reaches the centre from a cut
@@ -39,6 +43,7 @@ import yaml
 
 from tests.deploy.netns import Cable, Host, Network, require_namespaces
 from tests.gateway.helpers import READ_KEY
+from wz_cli.credentials import make_regional, make_site
 
 ROOT = Path(__file__).resolve().parents[2]
 ZENOH = ROOT / "deploy" / "zenoh"
@@ -88,12 +93,13 @@ class Trailer:
     stop_file: Path
     uplink: str  # the regional router's endpoint, as this trailer reaches it
     log_dir: Path
+    credentials: Path  # wz credentials make: <folder>/<site>
     router: subprocess.Popen[bytes] | None = None
 
     def service_env(self, **extra: str) -> dict[str, str]:
         return base_env(
             WZ_BUS_CONFIG_FILE=str(ZENOH / "edge-service.json5"),
-            WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{ROUTER_PORT}",
+            WZ_BUS_CONNECT_ENDPOINTS=f"tls/127.0.0.1:{ROUTER_PORT}",
             WZ_SITE_FILE=str(self.site_file),
             **extra,
         )
@@ -108,9 +114,11 @@ class Trailer:
                 "--config",
                 str(ZENOH / "trailer-router.json5"),
                 "--listen",
-                f"tcp/127.0.0.1:{ROUTER_PORT}",
+                f"tls/127.0.0.1:{ROUTER_PORT}",
                 "--connect",
                 self.uplink,
+                "--tls-dir",
+                str(self.credentials / "router"),
             ],
             env=base_env(),
             cwd=ROOT,
@@ -186,10 +194,20 @@ def test_link_cuts_and_a_router_restart_lose_and_duplicate_no_alert(
                 site_file=_site_file(tmp_path, site),
                 data_dir=tmp_path / site,
                 stop_file=tmp_path / f"{site}.stop",
-                uplink=f"tcp/{centre_host.addresses[-1]}:{ROUTER_PORT}",
+                uplink=f"tls/{centre_host.addresses[-1]}:{ROUTER_PORT}",
                 log_dir=logs,
+                credentials=tmp_path,  # set below, once the centre's addresses are known
             )
         )
+    # The DOT's credentials: one CA, each trailer's identities, the centre's (named by every
+    # address the trailers and this test reach it by).
+    credentials = tmp_path / "credentials"
+    for site in SITES:
+        make_site(credentials, site)
+    make_regional(credentials, names=[*centre_host.addresses, centre_address, "127.0.0.1"])
+    for trailer in trailers:
+        trailer.credentials = credentials / trailer.site
+    regional = credentials / "regional"
     processes: list[subprocess.Popen[bytes]] = []
 
     def start(host: Host, name: str, argv: list[str], env: dict[str, str]) -> None:
@@ -206,6 +224,8 @@ def test_link_cuts_and_a_router_restart_lose_and_duplicate_no_alert(
                 "router",
                 "--config",
                 str(ZENOH / "regional-router.json5"),
+                "--tls-dir",
+                str(regional / "router"),
             ],
             base_env(),
         )
@@ -215,7 +235,8 @@ def test_link_cuts_and_a_router_restart_lose_and_duplicate_no_alert(
             [sys.executable, "-m", "wz_gateway.node"],
             base_env(
                 WZ_BUS_CONFIG_FILE=str(ZENOH / "edge-service.json5"),
-                WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{ROUTER_PORT}",
+                WZ_BUS_CONNECT_ENDPOINTS=f"tls/127.0.0.1:{ROUTER_PORT}",
+                WZ_BUS_TLS_DIR=str(regional / "central-gateway"),
                 WZ_GATEWAY_SITE_FILES=",".join(str(t.site_file) for t in trailers),
                 WZ_GATEWAY_HOST="0.0.0.0",
                 WZ_GATEWAY_PORT=str(HTTP_PORT),
@@ -229,14 +250,19 @@ def test_link_cuts_and_a_router_restart_lose_and_duplicate_no_alert(
                 trailer.host,
                 f"{trailer.site}-alert-service",
                 [sys.executable, "-m", "wz_alert_service.node"],
-                trailer.service_env(WZ_ALERT_EPISODE_ID_PREFIX="run1"),
+                trailer.service_env(
+                    WZ_ALERT_EPISODE_ID_PREFIX="run1",
+                    WZ_BUS_TLS_DIR=str(trailer.credentials / "alert-service"),
+                ),
             )
             start(
                 trailer.host,
                 f"{trailer.site}-gateway",
                 [sys.executable, "-m", "wz_gateway.node"],
                 trailer.service_env(
-                    WZ_GATEWAY_DEV_MODE="true", WZ_GATEWAY_DATA_DIR=str(trailer.data_dir)
+                    WZ_GATEWAY_DEV_MODE="true",
+                    WZ_GATEWAY_DATA_DIR=str(trailer.data_dir),
+                    WZ_BUS_TLS_DIR=str(trailer.credentials / "gateway"),
                 ),
             )
             start(
@@ -249,7 +275,7 @@ def test_link_cuts_and_a_router_restart_lose_and_duplicate_no_alert(
                     str(trailer.site_file),
                     str(trailer.stop_file),
                 ],
-                trailer.service_env(),
+                trailer.service_env(WZ_BUS_TLS_DIR=str(trailer.credentials / "fusion-tracker")),
             )
         tap_log = logs / "centre-tap.out"
         # A plain subscription (no recovery), once the regional router listens (the tap, a
@@ -269,10 +295,10 @@ def test_link_cuts_and_a_router_restart_lose_and_duplicate_no_alert(
                             "wz/trailer-b/alerts/*",
                             "--json",
                             "--connect",
-                            f"tcp/127.0.0.1:{ROUTER_PORT}",
+                            f"tls/127.0.0.1:{ROUTER_PORT}",
                         ]
                     ),
-                    env=base_env(),
+                    env=base_env(WZ_BUS_TLS_DIR=str(regional / "operator")),
                     cwd=ROOT,
                     stdout=out,
                     stderr=err,

@@ -20,7 +20,7 @@ from wz_shared.site import DEFAULT_SITE_PATH, SiteFileError, load_site
 
 log = logging.getLogger(__name__)
 
-_TCP_ENDPOINT = re.compile(r"^tcp/(?P<host>\[[^\]]+\]|[^:/\[\]]+):(?P<port>\d{1,5})$")
+_TCP_ENDPOINT = re.compile(r"^(?:tcp|tls)/(?P<host>\[[^\]]+\]|[^:/\[\]]+):(?P<port>\d{1,5})$")
 
 
 class CliError(Exception):
@@ -38,7 +38,8 @@ class CliError(Exception):
 
 
 def tcp_address(endpoint: str) -> tuple[str, int] | None:
-    """``"tcp/127.0.0.1:7447"`` -> ``("127.0.0.1", 7447)``; None for other protocols.
+    """``"tcp/127.0.0.1:7447"`` (or ``tls/...``, TLS over TCP) -> ``("127.0.0.1", 7447)``;
+    None for other protocols.
 
     Zenoh endpoint metadata after ``#`` or ``?`` is ignored.
     """

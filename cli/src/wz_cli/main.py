@@ -9,6 +9,7 @@ its output (tables, tapped messages, children's lines), so it can be piped.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import importlib.util
 import logging
 import os
@@ -159,7 +160,33 @@ def cmd_up(args: argparse.Namespace) -> int:
         )
         if topology is not None:
             options = topology.configure(options)
+        if args.credentials is not None:
+            options = dataclasses.replace(
+                options, credentials=_site_credentials(args.credentials, site.site_id)
+            )
+        elif endpoint.startswith("tls/"):
+            raise CliError(
+                f"the router listens on {endpoint} (mutual TLS): give the site's credentials "
+                f"with --credentials DIR (make them with `wz credentials make DIR --site "
+                f"{site.site_id}`)"
+            )
         return Supervisor(services, options, stop).run()
+
+
+def _site_credentials(folder: Path, site_id: str) -> Path:
+    """``folder/<site>``, checked: a router and every service of the stack have theirs."""
+    from wz_cli.stack import ROUTER, STACK
+
+    site_dir = folder / site_id
+    missing = [
+        name for name in (ROUTER.name, *(s.name for s in STACK)) if not (site_dir / name).is_dir()
+    ]
+    if missing:
+        raise CliError(
+            f"{site_dir} has no credentials for {', '.join(missing)}: run "
+            f"`wz credentials make {folder} --site {site_id}`"
+        )
+    return site_dir
 
 
 def _demo_banner(site_id: str, endpoint: str) -> None:
@@ -439,6 +466,14 @@ def build_parser() -> argparse.ArgumentParser:
             help="which zenoh config the router and each service use, e.g. "
             "deploy/topologies/edge-box.yaml (the edge box of docker-compose.yml, without "
             "containers); default: the router and loopback peers",
+        )
+        up.add_argument(
+            "--credentials",
+            type=Path,
+            metavar="DIR",
+            help="the credentials folder of `wz credentials make` (its <site>/ subfolder): "
+            "every process joins the bus with its own certificate; needed by a topology whose "
+            "router listens on tls/",
         )
         up.set_defaults(handler=cmd_up)
 

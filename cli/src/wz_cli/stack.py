@@ -54,6 +54,10 @@ class StackOptions:
     service_configs: Mapping[str, Path] = field(default_factory=dict)
     #: Where services keep their ``state_files`` for this run (None: they keep none).
     state_dir: Path | None = None
+    #: The site's credentials folder (``wz credentials``: ``DIR/<site>``): each process gets
+    #: its own identity's (``WZ_BUS_TLS_DIR=<credentials>/<name>``), the router
+    #: ``--tls-dir <credentials>/router``. None: no TLS (the open loopback stack).
+    credentials: Path | None = None
 
 
 @dataclass(frozen=True)
@@ -118,6 +122,8 @@ class ServiceSpec:
                 "PYTHONUNBUFFERED": "1",
             }
         )
+        if options.credentials is not None:
+            env["WZ_BUS_TLS_DIR"] = str(options.credentials.resolve() / self.name)
         if options.realtime_factor is not None and "realtime_factor" in self.takes:
             env[f"{self.env_prefix}REALTIME_FACTOR"] = repr(options.realtime_factor)
         if options.seed is not None and "seed" in self.takes:

@@ -384,7 +384,7 @@ class Supervisor:
         address = tcp_address(options.router_endpoint)
         if address is None:
             raise CliError(
-                f"the router endpoint must be tcp/<host>:<port>, got {options.router_endpoint!r}"
+                f"the router endpoint must be tcp/ or tls/<host>:<port>, got {options.router_endpoint!r}"
             )
         self.router_address = address
         self.options = options
@@ -397,6 +397,8 @@ class Supervisor:
             router_argv += ["--config", str(options.router_config)]
         if options.router_connect is not None:
             router_argv += ["--connect", ",".join(options.router_connect)]
+        if options.credentials is not None:
+            router_argv += ["--tls-dir", str(options.credentials.resolve() / ROUTER.name)]
         self.router = Child(
             ROUTER,
             router_argv,

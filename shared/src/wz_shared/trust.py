@@ -163,10 +163,19 @@ def edge_access_control(site: str = "*") -> dict[str, Any]:
                 "subjects": [role.name],
             }
         )
+    # The operator also reads the router's admin space (which sessions and links are up).
+    rules.append(
+        _rule("operator: admin space", ["ingress", "egress"], ("query", "reply"), ["@/**"])
+    )
     for reader in READERS:
         subjects.append({"id": reader, "cert_common_names": [reader]})
+        extra = ["operator: admin space"] if reader == "operator" else []
         policies.append(
-            {"id": reader, "rules": ["take: interest", "take: data"], "subjects": [reader]}
+            {
+                "id": reader,
+                "rules": ["take: interest", "take: data", *extra],
+                "subjects": [reader],
+            }
         )
     return {
         "enabled": True,
