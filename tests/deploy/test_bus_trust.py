@@ -1,0 +1,253 @@
+"""The deployed bus refuses forged messages at the router: one test per role, on network hosts.
+
+Two hosts (network namespaces) on one cable, as the trailer's box and a device plugged into
+its switch:
+
+- the *box* runs the trailer's router from the deployed config as shipped
+  (``deploy/zenoh/trailer-router.json5``: mutual TLS, access control by role) with the site's
+  credentials (``wz credentials make``), and the authorised pipeline downstream of the
+  tracker: a stand-in tracker (:mod:`tests.deploy.track_source`, with the tracker's
+  certificate), the real alert service and the real gateway, each with its own certificate
+  and the deployed service config (``edge-service.json5``);
+- the *yard* runs :mod:`tests.deploy.bus_probe`, once per role's certificate (and with none,
+  and with one from another CA): it puts a forged alert, detection batch, track batch,
+  devices' state, LiDAR frame and the alert service's status, and answers the open-alerts
+  query with a forged reply.
+
+This test's own session (the operator's certificate, over a third cable) is a raw subscriber
+of every key of the site, so what it sees is what the router let through, before any
+consumer's own checks. Each role must get through exactly what its row of the issue's table
+says, nothing more; a session without the CA's certificate must not connect at all; and the
+authorised pipeline, running all along, stores the alert service's alerts in the gateway.
+"""
+
+from __future__ import annotations
+
+import os
+import sqlite3
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from tests.deploy.bus_probe import KINDS
+from tests.deploy.netns import Host, Network, require_namespaces
+from wz_cli.credentials import make_site
+from wz_shared.bus import zenoh_config
+from wz_shared.settings import BusSettings
+from wz_shared.site import load_site
+
+ROOT = Path(__file__).resolve().parents[2]
+ZENOH = ROOT / "deploy" / "zenoh"
+SITE_FILE = ROOT / "deploy" / "sites" / "us75-lincoln.yaml"
+SITE = load_site(SITE_FILE).site_id
+PORT = 7447
+
+#: What each role's forged messages may get through the router: the issue's table (only the
+#: alert service alerts, only detectors detections, only the tracker tracks, the gateway only
+#: reads), plus raw data from the sensors' side, and each service its own status only.
+ALLOWED: dict[str, set[str]] = {
+    "simulator": {"raw"},
+    "drivers": {"raw", "detection"},
+    "lidar-detector": {"detection"},
+    "camera-detector": {"detection"},
+    "fusion-tracker": {"tracks"},
+    "alert-service": {"alert", "devices", "status", "active reply"},
+    "gateway": set(),
+    "operator": set(),
+}
+
+
+@dataclass
+class Box:
+    network: Network
+    box: Host
+    yard: Host
+    router_endpoint: str  # as the yard reaches it
+    credentials: Path
+    stranger: Path  # another CA's credentials for the same site
+    data_dir: Path
+    seen: list[tuple[str, bytes]] = field(default_factory=list)
+    lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def forged_seen(self) -> set[str]:
+        with self.lock:
+            return {payload.decode() for _, payload in self.seen if payload.decode() in KINDS}
+
+
+def _env(**extra: str) -> dict[str, str]:
+    env = {k: v for k, v in os.environ.items() if not k.startswith("WZ_")}
+    env.update({"WZ_LOG_FORMAT": "json", "PYTHONUNBUFFERED": "1", **extra})
+    return env
+
+
+def _wait(probe: object, what: str, timeout_s: float) -> None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if probe():  # type: ignore[operator]
+            return
+        time.sleep(0.2)
+    pytest.fail(f"timed out after {timeout_s:.0f} s waiting for {what}")
+
+
+@pytest.fixture(scope="module")
+def box(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Box]:
+    require_namespaces()
+    tmp = tmp_path_factory.mktemp("trust")
+    network = Network(f"wzt{os.getpid() % 10000}")
+    processes: list[subprocess.Popen[bytes]] = []
+    stop_file = tmp / "stop"
+    try:
+        box_host, yard = network.host("box"), network.host("yard")
+        network.cable(box_host, yard)
+        watch_address = network.root_cable(box_host)
+        credentials, stranger = tmp / "credentials", tmp / "stranger"
+        names = [*box_host.addresses, watch_address]
+        make_site(credentials, SITE, router_names=names)
+        make_site(stranger, SITE, router_names=names)
+        site = credentials / SITE
+        logs = tmp / "logs"
+        logs.mkdir()
+
+        def start(name: str, argv: list[str], **env: str) -> None:
+            log = logs / f"{name}.log"
+            processes.append(box_host.popen(argv, env=_env(**env), cwd=ROOT, log=log))
+
+        start(
+            "router",
+            [sys.executable, "-m", "wz_cli.main", "router", "--config",
+             str(ZENOH / "trailer-router.json5"), "--tls-dir", str(site / "router")],
+        )  # fmt: skip
+        service = {
+            "WZ_BUS_CONFIG_FILE": str(ZENOH / "edge-service.json5"),
+            "WZ_BUS_CONNECT_ENDPOINTS": f"tls/127.0.0.1:{PORT}",
+            "WZ_SITE_FILE": str(SITE_FILE),
+        }
+        data_dir = tmp / "gateway"
+        start(
+            "gateway",
+            [sys.executable, "-m", "wz_gateway.node"],
+            **service,
+            WZ_BUS_TLS_DIR=str(site / "gateway"),
+            WZ_GATEWAY_DEV_MODE="true",
+            WZ_GATEWAY_DATA_DIR=str(data_dir),
+        )
+        start(
+            "alert-service",
+            [sys.executable, "-m", "wz_alert_service.node"],
+            **service,
+            WZ_BUS_TLS_DIR=str(site / "alert-service"),
+        )
+        start(
+            "tracks",
+            [sys.executable, "-m", "tests.deploy.track_source", str(SITE_FILE), str(stop_file)],
+            **service,
+            WZ_BUS_TLS_DIR=str(site / "fusion-tracker"),
+        )
+        result = Box(
+            network, box_host, yard, f"tls/{box_host.addresses[0]}:{PORT}", credentials,
+            stranger, data_dir,
+        )  # fmt: skip
+        settings = BusSettings(
+            mode="client",
+            connect_endpoints=[f"tls/{watch_address}:{PORT}"],
+            listen_endpoints=[],
+            tls_dir=site / "operator",
+        )
+        _wait(lambda: _opens(settings), "the router, for the operator", 30.0)
+        with zenoh.open(zenoh_config(settings)) as session:
+
+            def on_sample(sample: zenoh.Sample) -> None:
+                with result.lock:
+                    result.seen.append((str(sample.key_expr), sample.payload.to_bytes()))
+
+            session.declare_subscriber(f"wz/{SITE}/**", on_sample)
+            result.session = session  # type: ignore[attr-defined]
+            yield result
+    finally:
+        stop_file.touch()
+        for process in processes:
+            process.terminate()
+        for process in processes:
+            try:
+                process.wait(10)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()
+        network.close()
+
+
+def _opens(settings: BusSettings) -> bool:
+    try:
+        zenoh.open(zenoh_config(settings)).close()  # type: ignore[no-untyped-call]
+    except zenoh.ZError:
+        return False
+    return True
+
+
+def _probe(box: Box, tls_dir: Path, *extra: str) -> tuple[str, set[str]]:
+    """Run the probe in the yard; its first line, and the forged kinds the router let by."""
+    with box.lock:
+        box.seen.clear()
+    argv = [sys.executable, "-m", "tests.deploy.bus_probe", box.router_endpoint, SITE,
+            str(tls_dir), *extra]  # fmt: skip
+    process = subprocess.Popen(
+        box.yard.argv(argv), env=_env(), cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    assert process.stdout is not None
+    first = process.stdout.readline().decode().strip()
+    replies: list[bytes] = []
+    if first == "connected":
+        time.sleep(1.0)  # its queryable declared and routed
+        session: zenoh.Session = box.session  # type: ignore[attr-defined]
+        for reply in session.get(f"wz/{SITE}/alerts/active", timeout=2.0):
+            if reply.ok is not None:
+                replies.append(reply.ok.payload.to_bytes())
+    _, err = process.communicate(timeout=30)
+    time.sleep(0.5)  # the last samples in flight
+    seen = box.forged_seen()
+    if b"forged" in replies:
+        seen.add("active reply")
+    assert process.returncode in (0, 3), err.decode()[-2000:]
+    return first, seen
+
+
+@pytest.mark.parametrize("role", list(ALLOWED))
+def test_a_role_gets_through_the_router_only_what_it_may_give(box: Box, role: str) -> None:
+    first, seen = _probe(box, box.credentials / SITE / role)
+    assert first == "connected"
+    assert seen == ALLOWED[role]
+
+
+def test_the_router_lets_the_authorised_pipeline_run(box: Box) -> None:
+    """Tracks from the tracker's certificate, alerts from the alert service's, stored by the
+    gateway: all along the probes' forgeries, none of which is among them."""
+    database = box.data_dir / "gateway.sqlite3"
+
+    def stored() -> list[tuple[str, str]]:
+        if not database.exists():
+            return []
+        with sqlite3.connect(f"file:{database}?mode=ro", uri=True) as db:
+            return db.execute("SELECT source_id, alert_type FROM alerts").fetchall()
+
+    _wait(lambda: len(stored()) >= 3, "alerts stored by the gateway", 60.0)
+    assert {source for source, _ in stored()} == {"alert-service"}
+    with box.lock:
+        keys = {key for key, _ in box.seen}
+    assert f"wz/{SITE}/tracks" in keys and f"wz/{SITE}/status/gateway" in keys
+
+
+@pytest.mark.parametrize("how", ["no certificate", "another CA's certificate"])
+def test_a_session_without_the_sites_certificate_cannot_connect(box: Box, how: str) -> None:
+    if how == "no certificate":
+        first, seen = _probe(box, box.credentials / SITE / "alert-service", "--no-cert")
+    else:
+        first, seen = _probe(box, box.stranger / SITE / "alert-service")
+    assert first.startswith("refused"), first
+    assert seen == set()
