@@ -142,10 +142,10 @@ class Peer:
     It writes JSON lines on stdout (read here by a thread) and stops when its stdin closes.
     """
 
-    def __init__(self, *args: str) -> None:
+    def __init__(self, *args: str, module: str = "benchmarks.peer") -> None:
         self.args = args
         self._process = subprocess.Popen(
-            [sys.executable, "-m", "benchmarks.peer", *args],
+            [sys.executable, "-m", module, *args],
             cwd=ROOT,
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
@@ -175,6 +175,12 @@ class Peer:
         if report.get("event") != event:
             raise RuntimeError(f"peer {self.args}: expected {event!r}, got {report}")
         return report
+
+    def send(self, line: str) -> None:
+        """Write one line to the peer's stdin."""
+        assert self._process.stdin is not None
+        self._process.stdin.write(line + "\n")
+        self._process.stdin.flush()
 
     def finish(self, timeout_s: float = TIMEOUT_S) -> None:
         """Close the peer's stdin (its signal to stop) and require a clean exit."""

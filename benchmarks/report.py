@@ -14,6 +14,7 @@ from benchmarks.report_bus import (
     alert_latency,
     bus_latency,
     bus_throughput,
+    bus_trust,
     gateway_live,
     recovery,
     webhook_latency,
@@ -186,6 +187,18 @@ def _summary(benchmarks: dict[str, Any]) -> list[str]:
             f"{busy['tracks_per_batch']} tracks a batch {fmt_ms(busy['latency_ms']['p50'])} "
             f"median, p99 {fmt_ms(busy['latency_ms']['p99'])}."
         )
+    trust = benchmarks.get("bus_trust", {}).get("result")
+    if trust:
+        deployed, plain = trust["variants"]["tls+acl"], trust["variants"]["plain"]
+        ratios = trust["ratios"]["tls+acl"]
+        lines.append(
+            f"- The deployed bus (mutual TLS and access control, through the router) against "
+            f"the plain one: latency **{fmt_latency(deployed['latency_us']['p50'])}** vs "
+            f"{fmt_latency(plain['latency_us']['p50'])} median (x{ratios['latency_p50']:.2f}); "
+            f"200 B messages **{fmt_rate(deployed['small']['msg_per_s'])}**/s vs "
+            f"{fmt_rate(plain['small']['msg_per_s'])}/s (x{ratios['small_msg_per_s']:.2f}); "
+            f"2 MB frames x{ratios['frames_msg_per_s']:.2f}."
+        )
     hooks = benchmarks.get("webhook_latency", {}).get("result")
     if hooks:
         one, four = hooks["variants"]["one_subscription"], hooks["variants"]["four_subscriptions"]
@@ -253,6 +266,7 @@ def _summary(benchmarks: dict[str, Any]) -> list[str]:
 SECTIONS: dict[str, tuple[str, Callable[[dict[str, Any]], list[str]]]] = {
     "bus_latency": ("one-way latency between two processes", bus_latency),
     "bus_throughput": ("messages per second between two processes", bus_throughput),
+    "bus_trust": ("the bus's mutual TLS and access control against the plain bus", bus_trust),
     "sumo_step": ("the simulator's SUMO step", sumo_step),
     "sensors": ("the simulator's sensor models and the whole simulator", sensors),
     "lidar_detection": ("the LiDAR detector's two paths: accuracy and speed", lidar_detection),

@@ -312,3 +312,68 @@ def recovery(result: dict[str, Any]) -> list[str]:
         )
     lines.append("")
     return lines
+
+
+def bus_trust(result: dict[str, Any]) -> list[str]:
+    lines = [
+        "Three processes on loopback as on the trailer's box: `wz router`, this process and a "
+        "peer, both clients of the router (every sample crosses it twice). The router runs "
+        "`plain` (TCP, no access control: the bus before the trust issue), `tls` (mutual TLS, "
+        "a certificate per session, no access control) or `tls+acl` (the deployed "
+        "`trailer-router.json5`: mutual TLS and the access control by role, each session "
+        "holding the role whose keys it uses). Plain Zenoh sessions, bytes, Python callbacks: "
+        f"the transport and the router, not the codec. {result['rounds']} rounds, round-robin "
+        "over the variants, fresh processes each; latency over every round's "
+        f"{result['pings_per_round']} pings (200 B, one in flight, one-way = round trip / 2), "
+        "rates of the median round (each round beside it); every sample counted, in order.",
+        "",
+    ]
+    rows = []
+    for name, v in result["variants"].items():
+        small, frames = v["small"], v["frames"]
+        rows.append(
+            [
+                f"`{name}`",
+                fmt_ms(v["open_ms"]["p50"]),
+                f"**{fmt_latency(v['latency_us']['p50'])}**",
+                fmt_round_range(v["latency_round_p50_us"]),
+                fmt_latency(v["latency_us"]["p99"]),
+                f"**{fmt_rate(small['msg_per_s'])}** ({', '.join(fmt_rate(r) for r in small['rounds'])})",
+                f"{fmt_rate(frames['msg_per_s'])} ({frames['mb_per_s']:,.0f} MB/s)",
+                "yes" if small["in_order"] and frames["in_order"] else "**no**",
+            ]
+        )
+    lines += md_table(
+        [
+            "Router",
+            "Session opening p50",
+            "Latency p50",
+            "p50 of each round",
+            "p99",
+            "200 B msg/s (rounds)",
+            "2 MB frames/s",
+            "All, in order",
+        ],
+        rows,
+    )
+    lines += ["", "### Ratios", ""]
+    ratio_rows = []
+    for name, r in result["ratios"].items():
+        if name == "acl_over_tls":
+            ratio_rows += [
+                [
+                    "tls+acl / tls: latency p50 (the access control alone)",
+                    f"{r['latency_p50']:.2f}",
+                ],
+                ["tls+acl / tls: 200 B msg/s", f"{r['small_msg_per_s']:.2f}"],
+            ]
+            continue
+        ratio_rows += [
+            [f"{name} / plain: latency p50", f"{r['latency_p50']:.2f}"],
+            [f"{name} / plain: latency p99", f"{r['latency_p99']:.2f}"],
+            [f"{name} / plain: 200 B msg/s", f"{r['small_msg_per_s']:.2f}"],
+            [f"{name} / plain: 2 MB frames/s", f"{r['frames_msg_per_s']:.2f}"],
+            [f"{name} / plain: session opening", f"{r['open_p50']:.2f}"],
+        ]
+    lines += md_table(["Ratio", "Value"], ratio_rows)
+    return [*lines, ""]

@@ -31,6 +31,7 @@ from benchmarks import (
     alert_latency,
     bus_latency,
     bus_throughput,
+    bus_trust,
     camera_detection,
     gateway_live,
     generated_sites,
@@ -49,6 +50,7 @@ log = logging.getLogger("benchmarks")
 BENCHMARKS: dict[str, Callable[[bool], dict[str, Any]]] = {
     "bus_latency": bus_latency.run,
     "bus_throughput": bus_throughput.run,
+    "bus_trust": bus_trust.run,
     "sumo_step": sumo_step.run,
     "sensors": sensors.run,
     "lidar_detection": lidar_detection.run,

@@ -53,7 +53,7 @@ def make_track(
 def batch(stamp: float, tracks: Iterable[Track], cycle_index: int = 0) -> TrackBatch:
     return TrackBatch(
         site=SITE.site_id,
-        source_id="tracker",
+        source_id="fusion-tracker",
         stamp=stamp,
         cycle_index=cycle_index,
         tracks=list(tracks),

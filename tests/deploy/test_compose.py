@@ -496,14 +496,14 @@ def test_router_probe_targets_the_port_it_listens_on(services: dict[str, Service
     assert "--listen" not in command  # the config file says it
     (listen,) = _zenoh_endpoints(_mounted(router, command[command.index("--config") + 1]), "listen")
     port = int(listen.rsplit(":", 1)[1])
-    assert listen == f"tcp/0.0.0.0:{port}"
+    assert listen == f"tls/0.0.0.0:{port}"
     assert f"('127.0.0.1', {port})" in _probe(router)[2]
     assert any(str(p).endswith(f":{port}") for p in router.config["ports"])
     for service in services.values():
         if service.name != ROUTER.name:
             assert not {"WZ_BUS_MODE", "WZ_BUS_CONNECT_ENDPOINTS"} & set(service.environment)
             config = _mounted(service, service.environment["WZ_BUS_CONFIG_FILE"])
-            assert _zenoh_endpoints(config, "connect") == [f"tcp/{ROUTER.name}:{port}"]
+            assert _zenoh_endpoints(config, "connect") == [f"tls/{ROUTER.name}:{port}"]
             assert json.loads(zenoh.Config.from_file(str(config)).get_json("mode")) == "client"
 
 
@@ -777,12 +777,48 @@ def test_variable_check_catches_a_misspelling() -> None:
     assert not is_setting("WZ_BUS_CONNECT", BusSettings)
 
 
+#: Where a container finds its bus credentials (the deployed zenoh configs' TLS paths).
+TLS_MOUNT = "/etc/wz/tls"
+
+
+def _credentials_source(service: Service) -> str:
+    """The folder a service mounts at TLS_MOUNT, with the compose defaults put in."""
+    (entry,) = [str(v) for v in service.config["volumes"] if f":{TLS_MOUNT}:" in str(v)]
+    assert entry.endswith(f":{TLS_MOUNT}:ro"), f"{service.name}: credentials not read-only"
+    interpolated = interpolate({"v": entry}, STAND_IN_ENV)["v"]
+    return str(interpolated).rsplit(":", 2)[0]
+
+
 def test_mounted_files_exist(services: dict[str, Service]) -> None:
+    """What the repository ships exists; the credentials are the site's own (made with
+    `wz credentials make`, never in git), checked in the next test."""
     for service in services.values():
         for entry in service.config.get("volumes", []):
             source = str(entry).split(":")[0]
-            if source.startswith("."):
+            if source.startswith(".") and f":{TLS_MOUNT}:" not in str(entry):
                 assert (COMPOSE_FILE.parent / source).exists(), f"{service.name}: {source}"
+
+
+def test_each_container_mounts_its_own_credentials_that_wz_credentials_makes(
+    services: dict[str, Service], tmp_path: Path
+) -> None:
+    """Every service, and the router, mounts its own identity's folder read-only at the path
+    the deployed zenoh configs read, and only that one; `wz credentials make` writes each."""
+    from wz_cli.credentials import make_site
+
+    sources = {name: _credentials_source(service) for name, service in services.items()}
+    site = "us75-lincoln"
+    assert sources == {name: f"./credentials/{site}/{name}" for name in services}
+    make_site(tmp_path, site)
+    for name in services:
+        folder = tmp_path / site / name
+        assert sorted(p.name for p in folder.iterdir()) == ["ca.pem", "cert.pem", "key.pem"]
+    for path in (ROOT / "deploy" / "zenoh").glob("*.json5"):
+        tls = json.loads(zenoh.Config.from_file(str(path)).get_json("transport/link/tls"))
+        for value in tls.values():
+            if isinstance(value, str) and value:
+                assert value.startswith(f"{TLS_MOUNT}/"), f"{path.name}: {value}"
+    assert _ignored("credentials/us75-lincoln/router/key.pem", _dockerignore())
 
 
 def _ignored(path: str, patterns: list[str]) -> bool:
@@ -802,11 +838,15 @@ def _ignored(path: str, patterns: list[str]) -> bool:
     return ignored
 
 
+def _dockerignore() -> list[str]:
+    lines = (ROOT / ".dockerignore").read_text(encoding="utf-8").splitlines()
+    return [line.strip() for line in lines if line.strip() and not line.startswith("#")]
+
+
 def test_build_context_holds_what_the_images_copy_and_no_secrets(
     services: dict[str, Service],
 ) -> None:
-    lines = (ROOT / ".dockerignore").read_text(encoding="utf-8").splitlines()
-    patterns = [line.strip() for line in lines if line.strip() and not line.startswith("#")]
+    patterns = _dockerignore()
     for service in services.values():
         for stage in service.dockerfile.stages:
             for instruction, rest in stage:

@@ -98,7 +98,9 @@ def test_service_unit_runs_its_module_on_the_router(spec: ServiceSpec) -> None:
     assert one(unit, "Unit", "After") == unit_name(ROUTER.name)
     env = environment(unit)
     # The session config of the edge box, pointed at the router on this host.
-    assert env["WZ_BUS_CONNECT_ENDPOINTS"] == "tcp/127.0.0.1:7447"
+    assert env["WZ_BUS_CONNECT_ENDPOINTS"] == "tls/127.0.0.1:7447"
+    # Its own certificate, as `wz credentials make` names the folder.
+    assert env["WZ_BUS_TLS_DIR"] == f"/etc/wz/credentials/{spec.name}"
     config_file = env["WZ_BUS_CONFIG_FILE"]
     assert config_file == "/etc/wz/zenoh/edge-service.json5"
     assert (INSTALLED["/etc/wz/zenoh/"] / Path(config_file).name).is_file()
@@ -116,6 +118,7 @@ def test_router_unit_runs_the_trailer_router_config() -> None:
     config = argv[argv.index("--config") + 1]
     assert config == "/etc/wz/zenoh/trailer-router.json5"
     assert (INSTALLED["/etc/wz/zenoh/"] / Path(config).name).is_file()
+    assert argv[argv.index("--tls-dir") + 1] == "/etc/wz/credentials/router"
     # The regional endpoint comes from wz.env; empty means none (`--connect ''`).
     assert argv[argv.index("--connect") + 1] == "${WZ_REGIONAL_ENDPOINT}"
     env_example = (SYSTEMD_DIR / "wz.env.example").read_text()

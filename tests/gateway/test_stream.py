@@ -154,7 +154,7 @@ def test_close_ends_every_stream_and_the_client_limit_holds() -> None:
 def test_compact_tracks_keeps_what_a_view_draws_rounded() -> None:
     track = make_track(7, 912.3456, 27.123456, offset_m=1.834567, length_m=4.56789)
     batch = TrackBatch(
-        site=SITE.site_id, source_id="tracker", stamp=12.5, cycle_index=250, tracks=[track]
+        site=SITE.site_id, source_id="fusion-tracker", stamp=12.5, cycle_index=250, tracks=[track]
     )
     data = compact_tracks(batch, received_at=1_750_000_000.12345)
     assert data == {

@@ -68,7 +68,7 @@ def json_samples(i: int = 0) -> list[Message]:
     )
     alert = Alert(
         site=SITE,
-        source_id="alerts",
+        source_id="alert-service",
         stamp=stamp,
         alert_id=f"al{i}",
         alert_type="speeding",
@@ -111,7 +111,7 @@ def json_samples(i: int = 0) -> list[Message]:
         DetectionBatch(
             site=SITE, source_id="lidar-mast", stamp=stamp, frame_index=i, detections=[detection]
         ),
-        TrackBatch(site=SITE, source_id="tracker", stamp=stamp, cycle_index=i, tracks=[track]),
+        TrackBatch(site=SITE, source_id="fusion-tracker", stamp=stamp, cycle_index=i, tracks=[track]),
         alert,
         devices,
         ActiveAlerts(
@@ -119,9 +119,9 @@ def json_samples(i: int = 0) -> list[Message]:
         ),
         ServiceStatus(
             site=SITE,
-            source_id="tracker",
+            source_id="fusion-tracker",
             stamp=stamp,
-            service="tracker",
+            service="fusion-tracker",
             state=ServiceState.RUNNING,
             uptime_s=1.0,
             pid=1,

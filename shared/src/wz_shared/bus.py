@@ -18,7 +18,11 @@ Bad input
 ---------
 A payload that fails to decode is counted under ``(key, reason)``, logged once per key and
 reason, and dropped; it never raises into Zenoh's callback thread and never stops the service.
-A callback that raises is logged and counted the same way.
+A callback that raises is logged and counted the same way. So is a message whose
+``source_id`` is not the one its key carries (``wrong_source``, :func:`wz_shared.trust.
+source_problem`): a track batch not from the tracker, an alert not from the alert service, a
+detection batch not from the sensor its key names. The routers' access control already keeps
+other sessions from putting them (:mod:`wz_shared.trust`); this is the consumer's own check.
 
 Shutdown
 --------
@@ -45,7 +49,7 @@ from wz_shared import codec
 from wz_shared.keys import Keys
 from wz_shared.messages import Message
 from wz_shared.settings import BusSettings
-from wz_shared.trust import tls_config
+from wz_shared.trust import source_problem, tls_config
 
 log = logging.getLogger(__name__)
 
@@ -328,7 +332,9 @@ class Subscription(Generic[T]):
                 return None
             key, payload = item
             try:
-                return Received(key, self._decoder(payload))
+                value = self._decoder(payload)
+                _source_checked(key, value)
+                return Received(key, value)
             except codec.DecodeError as exc:
                 self._stats.count_invalid(self.key, exc.reason, exc.detail)
 
@@ -420,6 +426,7 @@ class CallbackSubscription(Generic[T]):
         self._stats.count_received(self.key)
         try:
             value = self._decoder(sample.payload.to_bytes())
+            _source_checked(str(sample.key_expr), value)
         except codec.DecodeError as exc:
             self._stats.count_invalid(self.key, exc.reason, exc.detail)
             return
@@ -504,6 +511,17 @@ class _CacheRefetch:
         with self._cond:
             self._closed = True
             self._cond.notify()
+
+
+def _source_checked(key: str, value: object) -> object:
+    """``value`` if its ``source_id`` is the one ``key`` carries; else a DecodeError."""
+    meta = getattr(value, "meta", value)  # a frame's source is in its metadata
+    source = getattr(meta, "source_id", None)
+    if isinstance(source, str):
+        problem = source_problem(key, source)
+        if problem is not None:
+            raise codec.DecodeError("wrong_source", problem)
+    return value
 
 
 def json_decoder(cls: type[M]) -> Decoder[M]:
