@@ -124,6 +124,8 @@ class ApiKeyInfo(_Model):
     origin: KeyOrigin
     created_at: FiniteFloat
     revoked_at: FiniteFloat | None = None
+    #: Made while the gateway ran in dev mode: revoked when it starts outside dev mode.
+    dev_mode: bool = False
 
 
 class NewApiKey(_Model):
