@@ -306,8 +306,10 @@ def test_settings_refuse_to_run_open(tmp_path: Path, monkeypatch: pytest.MonkeyP
         GatewaySettings(data_dir=tmp_path, dev_mode=True, host="0.0.0.0")
     with pytest.raises(ValidationError, match="at least 24 are needed"):
         GatewaySettings(data_dir=tmp_path, api_keys=["admin:short"])
-    with pytest.raises(ValidationError, match="placeholder"):
+    with pytest.raises(ValidationError, match="too repetitive"):
         GatewaySettings(data_dir=tmp_path, api_keys=["admin:" + "ab" * 20])
+    with pytest.raises(ValidationError, match="placeholder"):
+        GatewaySettings(data_dir=tmp_path, api_keys=["admin:<your-api-key-here>"])
     with pytest.raises(ValidationError, match="scope 'root'"):
         GatewaySettings(data_dir=tmp_path, api_keys=["root:" + READ_KEY])
     monkeypatch.setenv("WZ_GATEWAY_API_KEYS", f"read:{READ_KEY}, admin:{ADMIN_KEY}")

@@ -9,9 +9,11 @@ from pathlib import Path
 
 import httpx
 import pytest
+from pydantic import ValidationError
 from sqlalchemy import create_engine, insert
 
 from tests.gateway.helpers import ADMIN_KEY, gateway_settings, live_server, open_storage
+from wz_gateway.auth import check_secret, new_secret
 from wz_gateway.key_store import KeyStore
 from wz_gateway.node import prepare_keys
 from wz_gateway.settings import GatewaySettings
@@ -121,3 +123,38 @@ def test_making_a_key_beyond_the_limit_gets_409(tmp_path: Path) -> None:
         assert httpx.delete(f"{url}/v1/admin/api-keys/{key_id}", headers=ADMIN).status_code == 204
         assert mint(url, ADMIN).status_code == 201
     storage.close()
+
+
+@pytest.mark.parametrize(
+    "secret",
+    [
+        "changeme",
+        " CHANGE-ME ",
+        "Change_Me!",
+        "'changeme'",
+        "<your-key-here>",
+        "<Your API Key>",
+        "[YOUR_SECRET_HERE]",
+        "{{ placeholder }}",
+        "change-me-change-me-change-me",
+        "Please-ChangeMe-0123456789",
+        "replace-me-with-a-real-key-123",
+        "wzk_XXXXXXXXXXXXXXXXXXXXXXXXXXXXXXXXXXXXXXXXXXX",
+        "xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx",
+        "a" * 40,
+        "ab" * 20,
+        "secretsecretsecretsecret",
+        "abc123abc123abc123abc123x",  # a part repeated, then one more: still too repetitive
+        "PASSWORD",
+        "wzk_short",
+        "0123456701234567012345670",
+    ],
+)
+def test_placeholder_and_weak_secrets_are_refused(secret: str) -> None:
+    with pytest.raises(ValidationError, match=r"placeholder|characters|repetitive"):
+        GatewaySettings(data_dir=Path("/nonexistent"), api_keys=[f"admin:{secret}"])
+
+
+@pytest.mark.parametrize("secret", [ADMIN_KEY, new_secret(), "Tr0ub4dor-and-3-horses-9x"])
+def test_real_secrets_pass(secret: str) -> None:
+    check_secret(secret)
