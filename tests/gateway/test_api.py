@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import io
+import re
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -258,9 +259,17 @@ def test_alerts_with_filters(api: Api) -> None:
         ("/v1/trajectories", {"limit": 501}, ("query parameter 'limit'", "at most 500 per page")),
         ("/v1/trajectories", {"start": 5, "end": 1}, ("start (5.0) is greater than end (1.0)",)),
         ("/v1/trajectories", {"start": "nan"}, ("query parameter 'start'",)),
-        ("/v1/trajectories", {"bbox": "1,2,3"}, ("query parameter 'bbox'", "four numbers")),
+        ("/v1/trajectories", {"bbox": "1,2,3"}, ("query parameter 'bbox'", "pattern")),
+        ("/v1/trajectories", {"bbox": "1e999,0,1,1"}, ("query parameter 'bbox'", "pattern")),
+        ("/v1/trajectories", {"bbox": "nan,0,1,1"}, ("query parameter 'bbox'", "pattern")),
+        ("/v1/trajectories", {"bbox": "1,2,3,4,5"}, ("query parameter 'bbox'", "pattern")),
         ("/v1/trajectories", {"bbox": "10,50,5,60"}, ("minLon <= maxLon",)),
+        ("/v1/trajectories", {"bbox": "200,0,300,1"}, ("-180 <= minLon",)),
         ("/v1/trajectories", {"cursor": "bogus"}, ("query parameter 'cursor'", "next_cursor")),
+        ("/v1/trajectories", {"cursor": "a b+c"}, ("query parameter 'cursor'", "pattern")),
+        ("/v1/trajectories", {"cursor": "\x00"}, ("query parameter 'cursor'", "pattern")),
+        ("/v1/trajectories", {"cursor": "A" * 129}, ("query parameter 'cursor'", "at most 128")),
+        ("/v1/alerts", {"cursor": "x=="}, ("query parameter 'cursor'", "pattern")),
         ("/v1/trajectories", {"format": "xml"}, ("query parameter 'format'", "'csv'")),
         ("/v1/trajectories", {"area": "parking"}, ("query parameter 'area'", "'buffer'")),
         ("/v1/trajectories", {"min_speed": 30, "max_speed": 10}, ("min_speed (30.0)",)),
@@ -274,6 +283,33 @@ def test_bad_input_gets_a_clear_422(
 ) -> None:
     body = assert_problem(api.get(path, **params), 422, *fragments)
     assert body["errors"] and body["instance"] == path
+
+
+def _string_schema(schema: dict[str, Any]) -> dict[str, Any]:
+    """The string branch of an ``X | None`` schema (or the schema itself)."""
+    return next((s for s in schema.get("anyOf", [schema]) if s.get("type") == "string"), schema)
+
+
+def test_openapi_states_the_cursor_bbox_and_webhook_url_formats(api: Api) -> None:
+    """The served document carries the patterns and lengths clients (and fuzzers) go by."""
+    spec = api.get("/openapi.json", headers=None).json()
+    for path in ("/v1/trajectories", "/v1/alerts"):
+        operation = spec["paths"][path]["get"]
+        params = {p["name"]: _string_schema(p["schema"]) for p in operation["parameters"]}
+        assert params["cursor"]["pattern"] == "^[A-Za-z0-9_-]+$"
+        assert params["cursor"]["maxLength"] == 128
+    bbox = {
+        p["name"]: _string_schema(p["schema"])
+        for p in spec["paths"]["/v1/trajectories"]["get"]["parameters"]
+    }["bbox"]
+    assert bbox["maxLength"] == 83
+    assert re.fullmatch(bbox["pattern"], "-84.40,33.74,-84.38,33.76")
+    assert not re.fullmatch(bbox["pattern"], "inf,0,1,1")
+    url = spec["components"]["schemas"]["NewWebhook"]["properties"]["url"]
+    assert url["maxLength"] == 2000 and url["pattern"].startswith("^[Hh][Tt][Tt][Pp][Ss]?://")
+    assert re.fullmatch(url["pattern"], "https://alerts.example/hook?a=1")
+    assert not re.fullmatch(url["pattern"], "ftp://alerts.example/")
+    assert not re.fullmatch(url["pattern"], "https://alerts.example/a b")
 
 
 def test_operations_endpoints_need_no_key(api: Api) -> None:
@@ -306,8 +342,10 @@ def test_settings_refuse_to_run_open(tmp_path: Path, monkeypatch: pytest.MonkeyP
         GatewaySettings(data_dir=tmp_path, dev_mode=True, host="0.0.0.0")
     with pytest.raises(ValidationError, match="at least 24 are needed"):
         GatewaySettings(data_dir=tmp_path, api_keys=["admin:short"])
-    with pytest.raises(ValidationError, match="placeholder"):
+    with pytest.raises(ValidationError, match="too repetitive"):
         GatewaySettings(data_dir=tmp_path, api_keys=["admin:" + "ab" * 20])
+    with pytest.raises(ValidationError, match="placeholder"):
+        GatewaySettings(data_dir=tmp_path, api_keys=["admin:<your-api-key-here>"])
     with pytest.raises(ValidationError, match="scope 'root'"):
         GatewaySettings(data_dir=tmp_path, api_keys=["root:" + READ_KEY])
     monkeypatch.setenv("WZ_GATEWAY_API_KEYS", f"read:{READ_KEY}, admin:{ADMIN_KEY}")

@@ -155,6 +155,11 @@ def test_private_and_internal_addresses_are_refused(
         ("93.184.215.14/hook", "must be http:// or https://"),
         ("https://admin:hunter2@93.184.215.14/hook", "no user or password"),
         ("http://no-such-host.invalid/hook", "does not resolve"),
+        ("https://93.184.215.14/a hook", "should match pattern"),  # what OpenAPI states
+        ("https://93.184.215.14/\x01", "should match pattern"),
+        ("HTTP://\u0080", "should match pattern"),  # was a 500: getaddrinfo's idna codec
+        ("http://" + "a" * 64 + ".example/hook", "does not resolve"),  # idna: label too long
+        ("https://93.184.215.14/" + "h" * 2000, "at most 2000 characters"),
     ],
 )
 def test_other_schemes_credentials_and_unknown_hosts_are_refused(

@@ -34,6 +34,11 @@ COVARIANCE2 = st.tuples(st.floats(1e-3, 1e6), st.floats(1e-3, 1e6), st.floats(-0
     lambda v: [v[0], v[2] * (v[0] * v[1]) ** 0.5, v[2] * (v[0] * v[1]) ** 0.5, v[1]]
 )
 
+#: A track's 4x4 covariance (Covariance4: symmetric positive semi-definite): its variances.
+COVARIANCE4 = st.tuples(*[st.floats(0.0, 1e6)] * 4).map(
+    lambda v: [v[i] if i == j else 0.0 for i in range(4) for j in range(4)]
+)
+
 
 def _has_pattern(annotation: object) -> bool:
     return "pattern=" in repr(annotation)
@@ -54,6 +59,8 @@ def _strategy_for(cls: type[BaseModel]) -> st.SearchStrategy[BaseModel]:
             overrides[name] = IDENT
         elif name == "covariance_m2":
             overrides[name] = COVARIANCE2
+        elif name == "covariance":  # a track's: positive semi-definite
+            overrides[name] = COVARIANCE4
         elif isinstance(field.annotation, type) and issubclass(field.annotation, BaseModel):
             overrides[name] = _strategy_for(field.annotation)
         elif get_origin(field.annotation) is list:

@@ -14,6 +14,7 @@ import math
 from enum import StrEnum
 from typing import Annotated, Literal
 
+import numpy as np
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 
 from wz_shared.motion import ProcessNoise
@@ -24,36 +25,107 @@ FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 NonNegFloat = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
 PosFloat = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
 Identifier = Annotated[str, Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9_.:-]{0,127}$")]
-#: The largest variance a position covariance may hold [m^2]: a standard deviation of 1000 km,
-#: beyond any site, so a larger one is a producer's fault (an information matrix inverted near
-#: zero), not a measurement. It also keeps the trackers' products (``H P H^T + R``, its
-#: determinant, Mahalanobis distances) far from overflowing.
-MAX_VARIANCE_M2 = 1e12
+#: The largest variance a position covariance may hold [m^2]: a standard deviation of 10 km.
+#: A site spans a few km and its sensors reach a few hundred metres, so a detection or track
+#: that uncertain places the vehicle nowhere on the site: a producer's fault (an information
+#: matrix inverted near zero, a filter that diverged), not a measurement. The bound also keeps
+#: the trackers' products (``H P H^T + R``, Mahalanobis distances, smoothing gains) far from
+#: overflowing.
+MAX_VARIANCE_M2 = 1e8
+#: The largest variance a velocity may hold [m^2/s^2]: a standard deviation of 1 km/s, thirty
+#: times any road speed (tracks start at 15 m/s).
+MAX_VELOCITY_VARIANCE_M2PS2 = 1e6
 #: How far the two off-diagonal entries may differ, relative to the larger (or 1 m^2) [-].
 SYMMETRY_TOLERANCE = 1e-9
+#: A track covariance may be singular (zero: tracks from ground truth) but not indefinite:
+#: its correlation matrix's smallest eigenvalue must be above minus this [-].
+SEMIDEFINITE_TOLERANCE = 1e-9
 
 
-def _symmetric_positive_definite(values: list[float]) -> list[float]:
-    """``[sxx, sxy, syx, syy]`` unchanged if symmetric positive definite, else ValueError.
+def _check_covariance(
+    values: list[float], max_variances: tuple[float, ...], *, definite: bool
+) -> list[float]:
+    """``values`` (an n x n matrix, row-major) unchanged if a covariance, else ValueError.
 
-    A 2x2 symmetric matrix is positive definite when both diagonal entries are positive and
-    ``sxy^2 < sxx syy``. That is tested as ``|sxy| < sqrt(sxx) sqrt(syy)``: the product of the
-    square roots cannot overflow where ``sxx syy`` (or a determinant) can, and an overflowing
-    determinant (``1e308 * 1e308 = inf > 0``) would pass a matrix that is not a covariance.
+    Checked, in this order: finite entries; variances (the diagonal) positive (``definite``)
+    or non-negative, and at most ``max_variances``; symmetric within
+    :data:`SYMMETRY_TOLERANCE`; then positive definite (Cholesky) or semi-definite
+    (eigenvalues), tested on the correlation matrix ``C = D^-1/2 P D^-1/2``, whose entries
+    are those of ``P`` over ``sqrt(P_ii) sqrt(P_jj)``: no product of two variances is formed,
+    so ``1e308`` cannot overflow into a determinant that passes (``inf > 0``).
     """
+    n = len(max_variances)
+    matrix = np.asarray(values, dtype=np.float64).reshape(n, n)
+    if not np.all(np.isfinite(matrix)):
+        raise ValueError(f"covariance {values}: every entry must be finite")
+    diagonal = np.diag(matrix)
+    low_ok = diagonal > 0.0 if definite else diagonal >= 0.0
+    if not np.all(low_ok & (diagonal <= np.asarray(max_variances))):
+        bounds = ", ".join(f"{b:g}" for b in max_variances)
+        raise ValueError(
+            f"covariance {values}: the variances (the diagonal) must be "
+            f"{'positive' if definite else 'non-negative'} and at most {bounds}"
+        )
+    with np.errstate(over="ignore", invalid="ignore"):
+        asymmetry = np.abs(matrix - matrix.T)
+        scale = np.maximum(1.0, np.maximum(np.abs(matrix), np.abs(matrix.T)))
+    if not np.all(asymmetry <= SYMMETRY_TOLERANCE * scale):
+        raise ValueError(f"covariance {values}: not symmetric")
+    std = np.sqrt(diagonal)
+    shown = std > 0.0
+    if np.any(matrix[~shown, :]) or np.any(matrix[:, ~shown]):
+        raise ValueError(
+            f"covariance {values}: not positive semi-definite (a zero variance with a "
+            "non-zero covariance)"
+        )
+    kept = np.flatnonzero(shown)
+    sub = matrix[np.ix_(kept, kept)]
+    sub = 0.5 * sub + 0.5 * sub.T  # no overflow
+    with np.errstate(over="ignore", invalid="ignore"):
+        correlation = sub / std[kept][:, None] / std[kept][None, :]
+    if not np.all(np.isfinite(correlation)):
+        raise ValueError(
+            f"covariance {values}: not positive definite (|P_ij| above sqrt(P_ii P_jj))"
+        )
+    if definite:
+        try:
+            np.linalg.cholesky(correlation)
+        except np.linalg.LinAlgError:
+            raise ValueError(
+                f"covariance {values}: not positive definite (no Cholesky factor; "
+                "|sxy| must be below sqrt(sxx*syy))"
+            ) from None
+    elif kept.size and np.linalg.eigvalsh(correlation)[0] < -SEMIDEFINITE_TOLERANCE:
+        raise ValueError(f"covariance {values}: not positive semi-definite")
+    return values
+
+
+def _detection_covariance(values: list[float]) -> list[float]:
+    """The 2x2 case of :func:`_check_covariance` in scalars (detections are many: ~2 us, not
+    ~90): the Cholesky factor of the correlation matrix [[1, r], [r, 1]] exists when the
+    pivot ``1 - r^2`` is positive, ``r = sxy / (sqrt(sxx) sqrt(syy))``."""
     sxx, sxy, syx, syy = values
+    if not all(math.isfinite(v) for v in values):
+        raise ValueError(f"covariance {values}: every entry must be finite")
     if not (0.0 < sxx <= MAX_VARIANCE_M2 and 0.0 < syy <= MAX_VARIANCE_M2):
         raise ValueError(
-            f"covariance {values}: the variances (entries 0 and 3) must be positive and at "
-            f"most {MAX_VARIANCE_M2:g} m^2"
+            f"covariance {values}: the variances (the diagonal) must be positive and at most "
+            f"{MAX_VARIANCE_M2:g}, {MAX_VARIANCE_M2:g}"
         )
-    if abs(sxy - syx) > SYMMETRY_TOLERANCE * max(1.0, abs(sxy), abs(syx)):
-        raise ValueError(f"covariance {values}: not symmetric (entries 1 and 2 differ)")
-    if not abs(0.5 * sxy + 0.5 * syx) < math.sqrt(sxx) * math.sqrt(syy):
+    if not abs(sxy - syx) <= SYMMETRY_TOLERANCE * max(1.0, abs(sxy), abs(syx)):
+        raise ValueError(f"covariance {values}: not symmetric")
+    r = (0.5 * sxy + 0.5 * syx) / math.sqrt(sxx) / math.sqrt(syy)
+    if not 1.0 - r * r > 0.0:
         raise ValueError(
-            f"covariance {values}: not positive definite (|sxy| must be below sqrt(sxx*syy))"
+            f"covariance {values}: not positive definite (no Cholesky factor; "
+            "|sxy| must be below sqrt(sxx*syy))"
         )
     return values
+
+
+def _track_covariance(values: list[float]) -> list[float]:
+    position, velocity = MAX_VARIANCE_M2, MAX_VELOCITY_VARIANCE_M2PS2
+    return _check_covariance(values, (position, position, velocity, velocity), definite=False)
 
 
 #: A 2x2 covariance [[sxx, sxy], [syx, syy]] in the site frame [m^2], flattened row-major:
@@ -61,7 +133,15 @@ def _symmetric_positive_definite(values: list[float]) -> list[float]:
 Covariance2 = Annotated[
     list[FiniteFloat],
     Field(min_length=4, max_length=4),
-    AfterValidator(_symmetric_positive_definite),
+    AfterValidator(_detection_covariance),
+]
+#: A track's 4x4 covariance of (x, y, vx, vy) [m^2, m^2/s, m^2/s^2], flattened row-major:
+#: finite, symmetric, positive semi-definite (all zero: not known, e.g. from ground truth),
+#: variances at most :data:`MAX_VARIANCE_M2` and :data:`MAX_VELOCITY_VARIANCE_M2PS2`.
+Covariance4 = Annotated[
+    list[FiniteFloat],
+    Field(min_length=16, max_length=16),
+    AfterValidator(_track_covariance),
 ]
 
 
@@ -236,7 +316,7 @@ class Track(BaseModel):
     y_m: FiniteFloat
     vx_mps: FiniteFloat
     vy_mps: FiniteFloat
-    covariance: Annotated[list[FiniteFloat], Field(min_length=16, max_length=16)]  # 4x4, x y vx vy
+    covariance: Covariance4
     station_m: FiniteFloat
     offset_m: FiniteFloat
     speed_mps: NonNegFloat

@@ -27,10 +27,52 @@ _RANK: dict[Scope, int] = {"read": 1, "admin": 2}
 #: Keys the gateway makes: this prefix, then 43 URL-safe characters (256 random bits).
 KEY_PREFIX = "wzk_"
 MIN_SECRET_CHARS = 24
-# Secrets that appear in examples and templates: never accepted, however long.
+#: Fewest different characters a secret must hold (``wzk_`` keys hold about 30).
+MIN_DISTINCT_CHARS = 8
+# Words of examples and templates, compared once case, separators and brackets are gone
+# (``<Your-API-Key>`` is ``yourapikey``): never accepted, however long.
 _KNOWN_SECRETS = frozenset(
-    {"changeme", "change-me", "secret", "password", "admin", "default", "example", "test"}
+    [
+        "changeme",
+        "secret",
+        "password",
+        "passwd",
+        "admin",
+        "default",
+        "example",
+        "test",
+        "token",
+        "apikey",
+        "key",
+        "placeholder",
+        "replaceme",
+        "yourkeyhere",
+        "yourapikey",
+        "yourapikeyhere",
+        "yoursecret",
+        "yoursecrethere",
+        "yourtoken",
+        "yourpassword",
+        "secretkey",
+        "mysecret",
+        "insertkeyhere",
+        "dummy",
+        "sample",
+        "todo",
+        "fixme",
+        "null",
+        "none",
+        "letmein",
+        "qwerty",
+        "123456",
+        "12345678",
+        "1234567890",
+    ]
 )
+# Parts that only a template holds, wherever they are in it (eight x: one random key in about
+# a billion holds them).
+_TEMPLATE_MARKERS = ("changeme", "replaceme", "placeholder", "yourkey", "yoursecret", "x" * 8)
+_SEPARATORS = str.maketrans("", "", " \t-_.:;,/|'\"`<>[](){}*#$!?")
 # scrypt cost: n = 2^14, r = 8 (16 MiB, about 30 ms): a stolen database does not give up a
 # hand-made key quickly; each verified key is cached by the app, so requests do not pay it.
 _SCRYPT_N = 1 << 14
@@ -81,22 +123,49 @@ def verify_secret(secret: str, salt_hex: str, expected_hex: str) -> bool:
 
 
 def check_secret(secret: str, where: str = "API key") -> None:
-    """Refuse a secret too short or well known to guard anything.
+    """Refuse a secret that is a placeholder, too short, or too repetitive to guard anything.
+
+    A placeholder in any dress: case, separators, brackets or quotes around it
+    (``" Change_Me! "``, ``<your-key-here>``), a template marker inside it (``xxxx``,
+    ``changeme-changeme-...``); too repetitive: fewer than :data:`MIN_DISTINCT_CHARS` distinct
+    characters, or one short part repeated (``abc123abc123...``).
 
     Raises
     ------
     ValueError
         Naming ``where`` and what is wrong.
     """
+    folded = secret.casefold()
+    normal = folded.translate(_SEPARATORS)
+    if (
+        normal in _KNOWN_SECRETS
+        or any(marker in normal for marker in _TEMPLATE_MARKERS)
+        or (folded.strip().startswith("<") and folded.strip().endswith(">"))
+    ):
+        raise ValueError(
+            f"{where}: the secret is a placeholder; make a real one "
+            "(`python -m wz_gateway.keys` makes one)"
+        )
     if len(secret) < MIN_SECRET_CHARS:
         raise ValueError(
             f"{where}: the secret has {len(secret)} characters, at least {MIN_SECRET_CHARS} are "
             "needed (`python -m wz_gateway.keys` makes one)"
         )
-    if secret.strip().lower() in _KNOWN_SECRETS or len(set(secret)) < 6:
-        raise ValueError(f"{where}: the secret is a placeholder or too repetitive; make a real one")
+    if len(set(folded)) < MIN_DISTINCT_CHARS or _repeats(folded):
+        raise ValueError(
+            f"{where}: the secret is too repetitive (fewer than {MIN_DISTINCT_CHARS} different "
+            "characters, or one part repeated); make a real one"
+        )
     if any(ch.isspace() or ch == "," for ch in secret):
         raise ValueError(f"{where}: the secret may not hold spaces or commas")
+
+
+def _repeats(text: str) -> bool:
+    """Whether ``text`` is one part of at most a third of its length, repeated."""
+    return any(
+        text == (text[:size] * (len(text) // size + 1))[: len(text)]
+        for size in range(1, len(text) // 3 + 1)
+    )
 
 
 def parse_configured_key(entry: str, where: str = "API key") -> tuple[Scope, str]:

@@ -81,7 +81,7 @@ def check_url(url: str, policy: webhooks.AddressPolicy, resolve: Resolve = resol
     destination = webhooks.parse_destination(url)
     try:
         addresses = resolve(destination.host, destination.port)
-    except OSError as exc:
+    except (OSError, UnicodeError) as exc:  # UnicodeError: a label empty or over 63 characters
         raise webhooks.RefusedDestinationError(
             f"the host {destination.host} does not resolve ({exc})"
         ) from exc

@@ -3,8 +3,10 @@
 A key's secret never reaches the disk: each row holds its ``key_id``, ``fingerprint``, salt and
 scrypt hash (see :mod:`wz_gateway.auth`). Keys come from three places (``origin``): the
 settings (kept in step with them at each start by :meth:`KeyStore.sync_configured`), the
-admin routes (``api``) and dev mode (``dev``). The same database as :class:`Storage`: build
-it on ``storage.engine``.
+admin routes (``api``) and dev mode (``dev``). Every key made while the gateway runs in dev
+mode (the dev admin key, and keys made through the API then) is marked ``dev_mode``, and
+:meth:`KeyStore.revoke_dev_mode` revokes them all when the gateway starts outside dev mode. The
+same database as :class:`Storage`: build it on ``storage.engine``.
 
 Usage::
 
@@ -21,7 +23,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from sqlalchemy import Engine, insert, select, update
+from sqlalchemy import Engine, func, insert, select, update
 
 from wz_gateway import auth
 from wz_gateway.models import ApiKeyInfo, KeyOrigin
@@ -31,6 +33,10 @@ from wz_gateway.tables import api_keys
 KEY_CACHE_S = 30.0
 
 
+class KeyLimitError(Exception):
+    """The live keys are at the limit: revoke one before making another."""
+
+
 class KeyStore:
     """Add, find, list and revoke API keys. Thread-safe (a connection per call)."""
 
@@ -38,14 +44,40 @@ class KeyStore:
         self.engine = engine
 
     def add(
-        self, scope: auth.Scope, secret: str, *, name: str, origin: KeyOrigin, now: float
+        self,
+        scope: auth.Scope,
+        secret: str,
+        *,
+        name: str,
+        origin: KeyOrigin,
+        now: float,
+        dev_mode: bool = False,
+        max_live: int | None = None,
     ) -> ApiKeyInfo:
-        """Store a key's hash; the secret itself is not kept."""
+        """Store a key's hash; the secret itself is not kept.
+
+        Raises
+        ------
+        KeyLimitError
+            If ``max_live`` keys (or more) are live already; nothing is stored.
+        """
         salt = auth.new_salt()
         info = ApiKeyInfo(
-            key_id=auth.new_key_id(), scope=scope, name=name, origin=origin, created_at=now
+            key_id=auth.new_key_id(),
+            scope=scope,
+            name=name,
+            origin=origin,
+            created_at=now,
+            dev_mode=dev_mode,
         )
         with self.engine.begin() as connection:
+            if max_live is not None:
+                live = self._count_live(connection)
+                if live >= max_live:
+                    raise KeyLimitError(
+                        f"{live} API keys are live, the most allowed is {max_live} "
+                        "(WZ_GATEWAY_MAX_API_KEYS): revoke keys no longer used first"
+                    )
             connection.execute(
                 insert(api_keys).values(
                     key_id=info.key_id,
@@ -56,9 +88,31 @@ class KeyStore:
                     name=name,
                     origin=origin,
                     created_at=now,
+                    dev_mode=dev_mode,
                 )
             )
         return info
+
+    def count_live(self) -> int:
+        """How many keys are not revoked."""
+        with self.engine.connect() as connection:
+            return self._count_live(connection)
+
+    @staticmethod
+    def _count_live(connection: Any) -> int:
+        stmt = select(func.count()).select_from(api_keys).where(api_keys.c.revoked_at.is_(None))
+        return int(connection.execute(stmt).scalar_one())
+
+    def revoke_dev_mode(self, now: float) -> int:
+        """Revoke every live key made in dev mode; how many were."""
+        c = api_keys.c
+        with self.engine.begin() as connection:
+            outcome = connection.execute(
+                update(api_keys)
+                .where(c.dev_mode.is_(True), c.revoked_at.is_(None))
+                .values(revoked_at=now)
+            )
+        return int(outcome.rowcount)
 
     def find(self, secret: str) -> ApiKeyInfo | None:
         """The live (not revoked) key whose secret this is, or None."""
@@ -173,4 +227,5 @@ def _key_info(row: Any) -> ApiKeyInfo:
         origin=row.origin,
         created_at=row.created_at,
         revoked_at=row.revoked_at,
+        dev_mode=bool(row.dev_mode),
     )

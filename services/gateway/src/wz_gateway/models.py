@@ -124,6 +124,8 @@ class ApiKeyInfo(_Model):
     origin: KeyOrigin
     created_at: FiniteFloat
     revoked_at: FiniteFloat | None = None
+    #: Made while the gateway ran in dev mode: revoked when it starts outside dev mode.
+    dev_mode: bool = False
 
 
 class NewApiKey(_Model):
@@ -172,6 +174,10 @@ class Problem(_Model):
 
 #: A subscription's public id: ``wh_`` and 16 hex digits.
 WEBHOOK_ID_PATTERN = r"^wh_[0-9a-f]{16}$"
+#: A receiver's URL: http:// or https:// (any case), then printable ASCII without spaces (an
+#: international host name in its ``xn--`` form).
+WEBHOOK_URL_PATTERN = r"^[Hh][Tt][Tt][Pp][Ss]?://[!-~]+$"
+WEBHOOK_URL_MAX_CHARS = 2000
 
 
 class NewWebhook(_Model):
@@ -182,7 +188,8 @@ class NewWebhook(_Model):
         str,
         Field(
             min_length=1,
-            max_length=2000,
+            max_length=WEBHOOK_URL_MAX_CHARS,
+            pattern=WEBHOOK_URL_PATTERN,
             description="http(s) URL the "
             "events are POSTed to; its host must resolve to public "
             "addresses unless the settings allow others",
@@ -201,6 +208,14 @@ class NewWebhook(_Model):
     #: Only these episode phases (start, update, clear); None or empty: every phase.
     phases: Annotated[list[AlertPhase], Field(max_length=3)] | None = None
     description: Annotated[str, Field(max_length=200, pattern=r"^[^\x00-\x1f]*$")] = ""
+
+    @field_validator("url", mode="before")
+    @classmethod
+    def _url_scheme(cls, value: object) -> object:
+        """The scheme and credentials first, with what is wrong (the pattern says less)."""
+        if isinstance(value, str) and len(value) <= WEBHOOK_URL_MAX_CHARS:
+            webhooks.parse_destination(value)
+        return value
 
     @field_validator("event_types")
     @classmethod

@@ -212,19 +212,24 @@ class Writer:
 
 
 def prepare_keys(storage: Storage, settings: GatewaySettings, now: float) -> str | None:
-    """Make the stored ``settings`` keys match the configuration; in dev mode without an
-    admin key, make one for this run. The dev key's secret, or None."""
+    """Make the stored ``settings`` keys match the configuration; outside dev mode, revoke
+    every key made in dev mode; in dev mode without an admin key, make one for this run (the
+    previous run's is revoked). The dev key's secret, or None."""
     configured = [parse_configured_key(entry) for entry in settings.api_keys]
     keys = KeyStore(storage.engine)
     added, revoked = keys.sync_configured(configured, now)
     if added or revoked:
         log.info("API keys from the settings: %d added, %d revoked", added, revoked)
+    if not settings.dev_mode:
+        revoked = keys.revoke_dev_mode(now)
+        if revoked:
+            log.warning("dev mode is off: %d API keys made in dev mode revoked", revoked)
     for info in keys.all():
         if info.origin == "dev":
             keys.revoke(info.key_id, now)
     if settings.dev_mode and not any(scope == "admin" for scope, _ in configured):
         secret = new_secret()
-        keys.add("admin", secret, name="dev mode admin key", origin="dev", now=now)
+        keys.add("admin", secret, name="dev mode admin key", origin="dev", now=now, dev_mode=True)
         return secret
     return None
 

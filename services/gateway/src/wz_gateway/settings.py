@@ -69,7 +69,12 @@ class GatewaySettings(ServiceSettings):
     #: comma-separated; stored hashed. Keys made through the API live in the database.
     api_keys: Annotated[list[str], NoDecode] = Field(default_factory=list, repr=False)
     #: A development machine: reads need no key, loopback only, an admin key is made and logged.
+    #: Keys made in dev mode (that one, and those made through the API) are revoked when the
+    #: gateway starts with dev mode off.
     dev_mode: bool = False
+    #: Most keys live at once; making one more through the API gets 409 (revoke some first).
+    #: Keys from the settings are not refused, but count.
+    max_api_keys: Annotated[int, Field(ge=1, le=1_000_000)] = 1000
     #: Origins allowed to call the API from a browser (CORS); empty: none.
     cors_origins: Annotated[list[str], NoDecode] = Field(default_factory=list)
     #: Largest request body [bytes]; larger ones get 413.

@@ -36,6 +36,7 @@ from sqlalchemy import (
     Table,
     Text,
     UniqueConstraint,
+    false,
     inspect,
     text,
 )
@@ -195,6 +196,9 @@ api_keys = Table(
     Column("origin", String(16), nullable=False),
     Column("created_at", Double, nullable=False),
     Column("revoked_at", Double, nullable=True),
+    # Migration 6: made while the gateway ran in dev mode (the dev admin key, and keys made
+    # through the API then); revoked when the gateway starts outside dev mode.
+    Column("dev_mode", Boolean, nullable=False, server_default=false()),
 )
 
 webhook_subscriptions = Table(
@@ -359,9 +363,28 @@ _v1_alerts.append_constraint(UniqueConstraint("alert_id"))
 _v1_alerts.indexes.discard(next(i for i in _v1_alerts.indexes if i.name == "ux_alerts_site_alert"))
 
 
+# api_keys as migration 1 made it (migration 6 adds ``dev_mode``).
+_v1_api_keys = Table(
+    "api_keys",
+    _v1_metadata,
+    Column("id", RowId, primary_key=True, autoincrement=True),
+    Column("key_id", String(32), nullable=False, unique=True),
+    Column("fingerprint", String(16), nullable=False, index=True),
+    Column("salt", String(64), nullable=False),
+    Column("secret_hash", String(128), nullable=False),
+    Column("scope", String(8), nullable=False),
+    Column("name", String(100), nullable=False),
+    Column("origin", String(16), nullable=False),
+    Column("created_at", Double, nullable=False),
+    Column("revoked_at", Double, nullable=True),
+)
+
+
 def _v1_initial(connection: Connection) -> None:
-    metadata.create_all(connection, tables=[device_states, latest, api_keys])
-    _v1_metadata.create_all(connection, tables=[_v1_alerts, _v1_track_points, *_v1_webhook_tables])
+    metadata.create_all(connection, tables=[device_states, latest])
+    _v1_metadata.create_all(
+        connection, tables=[_v1_api_keys, _v1_alerts, _v1_track_points, *_v1_webhook_tables]
+    )
 
 
 def _add_columns(connection: Connection, table: Table, names: list[str]) -> None:
@@ -434,6 +457,22 @@ def _v5_track_process_noise(connection: Connection) -> None:
     )
 
 
+def _v6_dev_mode_keys(connection: Connection) -> None:
+    _add_columns(connection, api_keys, ["dev_mode"])
+    # Which older keys were made in dev mode is not recorded; a dev run made its admin key
+    # (origin ``dev``) at start and the next start revoked it, so a key made through the API
+    # while a dev key was live was made in a dev run.
+    connection.execute(
+        text(
+            "UPDATE api_keys SET dev_mode = :yes WHERE origin = 'dev' OR (origin = 'api' AND "
+            "EXISTS (SELECT 1 FROM api_keys AS d WHERE d.origin = 'dev' "
+            "AND d.created_at <= api_keys.created_at "
+            "AND (d.revoked_at IS NULL OR api_keys.created_at <= d.revoked_at)))"
+        ),
+        {"yes": True},
+    )
+
+
 #: Every migration, in order; the last one's version is the schema this code reads and writes.
 MIGRATIONS: tuple[Migration, ...] = (
     Migration(1, "trajectories, alerts, device states, latest, API keys, webhooks", _v1_initial),
@@ -448,6 +487,11 @@ MIGRATIONS: tuple[Migration, ...] = (
         5,
         "track lives: the process noise of their track batches, smoothed with it",
         _v5_track_process_noise,
+    ),
+    Migration(
+        6,
+        "API keys: marked when made in dev mode (revoked when dev mode is off)",
+        _v6_dev_mode_keys,
     ),
 )
 SCHEMA_VERSION = MIGRATIONS[-1].version

@@ -29,8 +29,28 @@ Limit = Annotated[
         description="Items per page (default 1000 points or 100 alerts, at most max_page_size)",
     ),
 ]
+#: A cursor is URL-safe base64 without padding of ``[stamp, row id]`` (at most ~48 bytes).
+CURSOR_PATTERN = r"^[A-Za-z0-9_-]+$"
+CURSOR_MAX_CHARS = 128
 Cursor = Annotated[
-    str | None, Query(max_length=200, description="`next_cursor` of the previous page")
+    str | None,
+    Query(
+        min_length=1,
+        max_length=CURSOR_MAX_CHARS,
+        pattern=CURSOR_PATTERN,
+        description="`next_cursor` of the previous page",
+    ),
+]
+_DEGREES = r"-?(?:[0-9]{1,3}(?:\.[0-9]{0,15})?|\.[0-9]{1,15})"
+#: ``minLon,minLat,maxLon,maxLat`` [deg]: four plain decimal numbers (no exponent, no inf).
+BBOX_PATTERN = rf"^{_DEGREES},{_DEGREES},{_DEGREES},{_DEGREES}$"
+BBox = Annotated[
+    str | None,
+    Query(
+        max_length=4 * 20 + 3,
+        pattern=BBOX_PATTERN,
+        description="minLon,minLat,maxLon,maxLat [deg], e.g. `-84.40,33.74,-84.38,33.76`",
+    ),
 ]
 Format = Annotated[OutputFormat, Query(alias="format", description="json, csv, geojson or parquet")]
 Speed = Annotated[

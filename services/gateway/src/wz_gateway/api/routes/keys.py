@@ -13,6 +13,7 @@ from starlette.exceptions import HTTPException
 from wz_gateway import auth
 from wz_gateway.api.deps import Admin, Ctx
 from wz_gateway.api.errors import V1_RESPONSES, problem_response
+from wz_gateway.key_store import KeyLimitError
 from wz_gateway.models import ApiKeyInfo, CreatedApiKey, NewApiKey
 
 log = logging.getLogger(__name__)
@@ -28,13 +29,29 @@ def list_keys(
     return context.key_store.all(include_revoked=include_revoked)
 
 
-@router.post("/admin/api-keys", response_model=CreatedApiKey, status_code=201, tags=["admin"])
+@router.post(
+    "/admin/api-keys",
+    response_model=CreatedApiKey,
+    status_code=201,
+    tags=["admin"],
+    responses={409: problem_response("As many keys are live as max_api_keys allows")},
+)
 def create_key(context: Ctx, principal: Admin, request_body: NewApiKey) -> CreatedApiKey:
-    """Make a key. Its secret is in this answer only; the gateway keeps its hash."""
+    """Make a key. Its secret is in this answer only; the gateway keeps its hash. A key made
+    in dev mode is revoked when the gateway next starts outside dev mode."""
     secret = auth.new_secret()
-    info = context.key_store.add(
-        request_body.scope, secret, name=request_body.name, origin="api", now=context.clock()
-    )
+    try:
+        info = context.key_store.add(
+            request_body.scope,
+            secret,
+            name=request_body.name,
+            origin="api",
+            now=context.clock(),
+            dev_mode=context.settings.dev_mode,
+            max_live=context.settings.max_api_keys,
+        )
+    except KeyLimitError as exc:
+        raise HTTPException(409, str(exc)) from exc
     log.info("API key %s (%s, %r) made by %s", info.key_id, info.scope, info.name, principal.key_id)
     return CreatedApiKey(**info.model_dump(), secret=secret)
 

@@ -16,6 +16,7 @@ from wz_gateway.api.deps import SITE_RESPONSES, Ctx, Reader, SiteParam
 from wz_gateway.api.errors import V1_RESPONSES, InputError, problem_response
 from wz_gateway.api.params import (
     MAX_ID,
+    BBox,
     Cursor,
     Format,
     Limit,
@@ -183,9 +184,7 @@ def get_trajectories(
     ] = None,
     station_min: Station = None,
     station_max: Station = None,
-    bbox: Annotated[
-        str | None, Query(max_length=200, description="minLon,minLat,maxLon,maxLat [deg]")
-    ] = None,
+    bbox: BBox = None,
     lane: Annotated[
         int | None,
         Query(ge=-1, le=64, description="Lane index (0: the rightmost; -1: between lanes)"),
