@@ -199,7 +199,7 @@ def test_up_refuses_a_taken_port_and_unknown_services() -> None:
 def test_up_needs_a_tcp_router_endpoint(endpoint: str) -> None:
     result = run_wz("up", "--listen", endpoint)
     assert result.returncode == 2
-    assert "tcp/<host>:<port>" in result.stderr
+    assert "tcp/ or tls/<host>:<port>" in result.stderr
 
 
 def test_supervisor_backs_off_and_kills_what_ignores_sigterm(
