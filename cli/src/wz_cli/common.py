@@ -119,10 +119,17 @@ def open_bus(connect: Sequence[str] | None, *, site: str, service: str) -> Bus:
     try:
         return Bus.open(settings, site=site, service=service)
     except zenoh.ZError as exc:
+        tls = any(e.startswith("tls/") for e in settings.connect_endpoints)
+        hint = (
+            " A tls/ router takes a certificate of the site's CA: set WZ_BUS_TLS_DIR to your "
+            "credentials folder (`wz credentials make`: <site>/operator)."
+            if tls
+            else ""
+        )
         raise CliError(
             f"cannot reach the bus at {', '.join(settings.connect_endpoints)}: is the stack "
             "running (`wz up`)? Point at another router with --connect or "
-            f"WZ_BUS_CONNECT_ENDPOINTS ({exc})",
+            f"WZ_BUS_CONNECT_ENDPOINTS ({exc}).{hint}",
             1,
         ) from exc
 
