@@ -206,15 +206,21 @@ def client_session(router_endpoint: str, tls_dir: Path) -> zenoh.Session:
     return zenoh.open(zenoh_config(settings))
 
 
-def relay(publisher_session: zenoh.Session, subscriber_session: zenoh.Session, key: str) -> None:
+def relay(
+    publisher_session: zenoh.Session,
+    subscriber_session: zenoh.Session,
+    key: str,
+    subscribed: str | None = None,
+) -> None:
     """Once a probe has crossed the mesh, N_SAMPLES published on ``key`` all arrive, in order.
 
     The publisher's matching status alone is not enough: under load in CI it turned true while
     a router on the path had no route yet, and all five samples put at once were lost. So the
     probe is put every 50 ms until one arrives; probes come before the samples from one
-    publisher, and are left out of the comparison.
+    publisher, and are left out of the comparison. ``subscribed``: the subscriber's key
+    expression, when not ``key`` itself (a central gateway's ``wz/*/alerts/*``).
     """
-    subscriber = subscriber_session.declare_subscriber(key)
+    subscriber = subscriber_session.declare_subscriber(subscribed or key)
     publisher = publisher_session.declare_publisher(key)
     wait_for(lambda: publisher.matching_status.matching, 15.0, f"a subscriber of {key}")
     received: list[str] = []
@@ -279,7 +285,8 @@ def test_trailer_router_relays_up_to_the_regional_router(
         service_session(trailer, alert_tls) as alert_service,
         client_session(regional, central_tls) as central,
     ):
-        relay(alert_service, central, f"wz/{SITE}/alerts/speeding")
+        # As the central gateway subscribes: every site's alerts at once.
+        relay(alert_service, central, f"wz/{SITE}/alerts/speeding", "wz/*/alerts/*")
         # Not down: the region only reads; a sample it puts never reaches the trailer.
         refused(central, alert_service, f"wz/{SITE}/config/sign")
         # Nor another site's keys up: the trailer gives only its own site's.

@@ -197,13 +197,18 @@ CENTRAL_READERS = ("central-gateway", "operator")
 
 def regional_access_control(sites: Iterable[str]) -> dict[str, Any]:
     """The regional router's ``access_control`` block: each trailer gives only its own site's
-    keys and is asked only about them; the central gateway and operator take every site's.
+    keys (samples, tokens, replies) and gets only the centre's interest, no samples; the
+    central gateway and operator take every site's.
     """
     rules = [
         _rule("central: interest", ["ingress"], INTEREST, _everything("*")),
         _rule("central: data", ["egress"], ALL_MESSAGES, _everything("*")),
         # the central gateway's own status and liveliness
         _rule("central: status", ["ingress"], DATA, _site_keys("*", ["status/central-gateway"])),
+        # The centre's interest reaches every trailer: its subscriptions and queries name
+        # every site at once (wz/*/alerts/*), and a rule's keys must include what is declared.
+        # Interest only: nothing the region puts reaches a trailer.
+        _rule("trailers: are asked", ["egress"], INTEREST, _everything("*")),
     ]
     subjects: list[dict[str, Any]] = []
     policies: list[dict[str, Any]] = []
@@ -218,13 +223,10 @@ def regional_access_control(sites: Iterable[str]) -> dict[str, Any]:
         )
     for site in sorted(set(sites)):
         name = trailer_name(site)
-        rules += [
-            _rule(f"{name}: gives", ["ingress"], ALL_MESSAGES, _everything(site)),
-            _rule(f"{name}: is asked", ["egress"], ALL_MESSAGES, _everything(site)),
-        ]
+        rules.append(_rule(f"{name}: gives", ["ingress"], ALL_MESSAGES, _everything(site)))
         subjects.append({"id": name, "cert_common_names": [name]})
         policies.append(
-            {"id": name, "rules": [f"{name}: gives", f"{name}: is asked"], "subjects": [name]}
+            {"id": name, "rules": [f"{name}: gives", "trailers: are asked"], "subjects": [name]}
         )
     return {
         "enabled": True,
