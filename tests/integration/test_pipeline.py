@@ -1,7 +1,10 @@
 """The whole stack as `wz up` runs it: router, simulator, LiDAR and camera-radar detectors, the
 fusion tracker, the alert service and the gateway, each its own process on real Zenoh; fused
 tracks of the simulated vehicles come out on `wz/<site>/tracks`, fed by both detectors, near
-the truth, and the gateway serves them over HTTP."""
+the truth, and the gateway serves them over HTTP. Twice: as the development stack runs (open
+loopback peers), and as the edge box runs (``--topology deploy/topologies/edge-box.yaml``: each
+process a client of the trailer router's deployed config, mutual TLS with its own certificate
+and the router's access control by role), where it must run unchanged."""
 
 from __future__ import annotations
 
@@ -10,8 +13,10 @@ import time
 from pathlib import Path
 
 import httpx
+import pytest
 
-from tests.cli.procs import free_port, port_open, running, start_wz_up, wait_for
+from tests.cli.procs import ROOT, free_port, port_open, running, start_wz_up, wait_for
+from wz_cli.credentials import make_site
 from wz_shared.bus import Bus
 from wz_shared.messages import GroundTruth, TrackBatch
 from wz_shared.settings import BusSettings
@@ -20,12 +25,26 @@ from wz_shared.site import DEFAULT_SITE_PATH, load_site
 SITE = load_site(DEFAULT_SITE_PATH)
 
 
-def test_wz_up_runs_the_pipeline_from_sensors_to_fused_tracks(tmp_path: Path) -> None:
+@pytest.mark.parametrize("stack", ["loopback", "deployed"])
+def test_wz_up_runs_the_pipeline_from_sensors_to_fused_tracks(tmp_path: Path, stack: str) -> None:
     port = free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
     http_port = free_port()
-    up = start_wz_up(tmp_path, endpoint, http_port, "--seed", "3")
-    settings = BusSettings(mode="client", connect_endpoints=[endpoint], listen_endpoints=[])
+    if stack == "loopback":
+        endpoint = f"tcp/127.0.0.1:{port}"
+        up = start_wz_up(tmp_path, endpoint, http_port, "--seed", "3")
+        tls_dir = None
+    else:
+        endpoint = f"tls/127.0.0.1:{port}"
+        make_site(tmp_path / "credentials", SITE.site_id)
+        topology = ROOT / "deploy" / "topologies" / "edge-box.yaml"
+        up = start_wz_up(
+            tmp_path, endpoint, http_port, "--seed", "3", "--topology", str(topology),
+            "--credentials", str(tmp_path / "credentials"),
+        )  # fmt: skip
+        tls_dir = tmp_path / "credentials" / SITE.site_id / "operator"
+    settings = BusSettings(
+        mode="client", connect_endpoints=[endpoint], listen_endpoints=[], tls_dir=tls_dir
+    )
     with running(up):
         wait_for(lambda: port_open(port), 30.0, "the router to listen")
         with Bus.open(settings, site=SITE.site_id, service="pipeline-test") as bus:
