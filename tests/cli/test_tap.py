@@ -56,6 +56,12 @@ def test_status_without_a_router_says_so_and_exits_1() -> None:
 
 
 def test_status_with_no_service_alive_exits_1(router: str) -> None:
+    """Every service `wz up` runs is expected: each is listed as down."""
     result = run_wz("status", "--connect", router, "--timeout", "0.5")
     assert result.returncode == 1
-    assert "site us75-lincoln: 0 of 0 service(s) alive" in result.stdout
+    assert "site us75-lincoln: 0 of 6 service(s) up" in result.stdout
+    for name in ("simulator", "fusion-tracker", "alert-service", "gateway"):
+        assert f"{name}: down (not running)" in result.stdout
+    result = run_wz("status", "--connect", router, "--timeout", "0.5", "--expect", "")
+    assert result.returncode == 1
+    assert "0 of 0 service(s) up" in result.stdout

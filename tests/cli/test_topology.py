@@ -151,7 +151,15 @@ def test_up_with_the_edge_box_topology(tmp_path: Path) -> None:
 
             def alert_service_alive() -> bool:
                 result = run_wz(
-                    "status", "--json", "--timeout", "2", "--connect", endpoint, **operator
+                    "status",
+                    "--json",
+                    "--timeout",
+                    "2",
+                    "--connect",
+                    endpoint,
+                    "--expect",
+                    "alert-service",
+                    **operator,
                 )
                 if result.returncode != 0:
                     return False

@@ -71,11 +71,13 @@ def _children(pid: int) -> list[int]:
 
 def _status(endpoint: str) -> dict[str, Any]:
     """`wz status --json`; no service at all while the router is not up yet."""
-    result = run_wz("status", "--json", "--timeout", "3", "--connect", endpoint)
+    result = run_wz(
+        "status", "--json", "--timeout", "3", "--connect", endpoint, "--expect", "simulator"
+    )
     if result.returncode == 1 and "cannot reach the bus" in result.stderr:
         return {"alive": 0, "services": []}
     report: dict[str, Any] = json.loads(result.stdout)
-    assert result.returncode == (0 if report["alive"] else 1), result.stderr
+    assert result.returncode == (0 if report["ok"] else 1), result.stderr
     return report
 
 
@@ -116,13 +118,13 @@ def test_up_status_tap_restart_and_stop(tmp_path: Path) -> None:
 
         def truth_rate_shown() -> bool:
             # The first status may come before the first truth message (a loaded machine).
-            table = run_wz("status", "--connect", endpoint)
+            table = run_wz("status", "--connect", endpoint, "--expect", "simulator")
             assert table.returncode == 0, table.stderr
             tables[:] = [table.stdout]
             return "wz/us75-lincoln/truth/vehicles" in table.stdout
 
         wait_for(truth_rate_shown, 60.0, "the truth key in `wz status`")
-        assert re.search(rf"\nsimulator +yes +running +{first_pid} ", tables[0]), tables[0]
+        assert re.search(rf"\nsimulator +up +[\d.]+ s +running +{first_pid} ", tables[0]), tables[0]
 
         lines: list[str] = []
 

@@ -209,17 +209,24 @@ def _demo_banner(site_id: str, endpoint: str) -> None:
 
 
 def cmd_status(args: argparse.Namespace) -> int:
-    from wz_cli.status import collect, render_json, render_table
+    from wz_cli.stack import select
+    from wz_cli.status import collect, problems, render_json, render_table
 
     site = args.site or default_site_id()
+    if args.expect is None:
+        expected = [spec.name for spec in select(None)]  # what `wz up` runs
+    else:
+        expected = [name.strip() for name in args.expect.split(",") if name.strip()]
     with open_bus(args.connect, site=site, service="wz-status") as bus:
-        views = collect(bus, site, args.timeout)
+        views = collect(bus, site, args.timeout, expected)
     if args.json:
         emit(render_json(site, views))
     else:
         for line in render_table(site, views):
             emit(line)
-    return 0 if any(view.alive for view in views) else 1
+    if not expected:
+        return 0 if any(view.alive for view in views) else 1
+    return 1 if problems(views) else 0
 
 
 def cmd_tap(args: argparse.Namespace) -> int:
@@ -482,7 +489,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="which services are alive, with their rates and drops",
         description="Query the services' liveliness tokens under wz/<site>/status/* and listen "
         "to their status messages.",
-        epilog="Exit code: 0 if at least one service is alive, 1 if none is.",
+        epilog="Exit code: 0 when every expected service is up (its loop goes round), 1 when "
+        "one is down, silent or stalled; with --expect '': 0 if any service is alive.",
     )
     status.add_argument("--site", help="site id (default: the site of WZ_SITE_FILE / default)")
     status.add_argument(
@@ -493,6 +501,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="how long to wait for status messages [s] (default 3)",
     )
     status.add_argument("--json", action="store_true", help="one JSON object instead of a table")
+    status.add_argument(
+        "--expect",
+        metavar="NAME[,NAME...]",
+        help="the services that must be up (default: those `wz up` runs; a field box: e.g. "
+        "drivers,lidar-detector,camera-detector,fusion-tracker,alert-service,gateway)",
+    )
     _add_connect(status)
     status.set_defaults(handler=cmd_status)
 

@@ -1,22 +1,34 @@
-"""``wz status``: which services of a site are alive, and how their traffic looks.
+"""``wz status``: is every service of a site up and working, and how its traffic looks.
 
 Alive means the service's liveliness token ``wz/<site>/status/<service>`` is declared now (it
 disappears when the process exits or loses the bus). The rest comes from the
 :class:`ServiceStatus` each service publishes on that key every second or so: pid, uptime,
-message rates per key, invalid and dropped counts.
+its loop's progress, message rates per key, invalid and dropped counts.
+
+Each expected service (by default those ``wz up`` runs) gets a health:
+
+- ``up``: its status came, and its loop goes round;
+- ``stalled``: its status says its loop has not gone round for longer than its limit (the
+  process is alive, its work is not);
+- ``silent``: its token is there but no status came while listening (a stopped process, whose
+  session the router has not yet given up);
+- ``down``: neither token nor status (not running).
+
+The command exits 1 when an expected service is anything but up.
 """
 
 from __future__ import annotations
 
 import json
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
 from wz_cli.common import format_duration, format_table
 from wz_shared.bus import Bus
 from wz_shared.keys import Keys
-from wz_shared.messages import ServiceStatus
+from wz_shared.messages import ServiceState, ServiceStatus
 
 
 @dataclass(frozen=True)
@@ -28,23 +40,36 @@ class ServiceView:
     status: ServiceStatus | None
     #: Seconds between receiving ``status`` and the end of collection.
     status_age_s: float | None
+    #: Whether ``wz status`` was told to expect it.
+    expected: bool = False
+
+    @property
+    def health(self) -> str:
+        """``up``, ``stalled``, ``silent`` or ``down`` (see the module)."""
+        if self.status is not None:
+            return "stalled" if self.status.state == ServiceState.STALLED else "up"
+        return "silent" if self.alive else "down"
 
 
 def _name(key: str) -> str:
     return key.rsplit("/", 1)[-1]
 
 
-def collect(bus: Bus, site: str, timeout_s: float) -> list[ServiceView]:
-    """Ask who is alive at ``site`` and listen to status messages for up to ``timeout_s``.
+def collect(
+    bus: Bus, site: str, timeout_s: float, expected: Iterable[str] = ()
+) -> list[ServiceView]:
+    """Ask who is alive at ``site`` and listen to status messages for up to ``timeout_s``;
+    one view per service alive, heard or ``expected``.
 
-    Returns early once every alive service has reported.
+    Returns early once every alive and expected service has reported.
     """
+    wanted = set(expected)
     keys = Keys(site)
     deadline = time.monotonic() + timeout_s
     statuses = bus.subscribe(keys.status_all, ServiceStatus, mode="fifo", capacity=1024)
     alive = {_name(key) for key in bus.alive(keys.status_all, timeout_s=min(timeout_s, 2.0))}
     latest: dict[str, tuple[ServiceStatus, float]] = {}
-    while not (alive and alive <= latest.keys()):
+    while not ((alive or wanted) and alive | wanted <= latest.keys()):
         remaining = deadline - time.monotonic()
         if remaining <= 0:
             break
@@ -59,9 +84,26 @@ def collect(bus: Bus, site: str, timeout_s: float) -> list[ServiceView]:
             alive=name in alive,
             status=latest[name][0] if name in latest else None,
             status_age_s=end - latest[name][1] if name in latest else None,
+            expected=name in wanted,
         )
-        for name in sorted(alive | latest.keys())
+        for name in sorted(alive | latest.keys() | wanted)
     ]
+
+
+def problems(views: list[ServiceView]) -> list[str]:
+    """One line per expected service that is not up."""
+    out = []
+    for view in views:
+        if not view.expected or view.health == "up":
+            continue
+        if view.health == "stalled" and view.status is not None:
+            age = view.status.loop_age_s
+            out.append(f"{view.name}: stalled (its loop has not gone round for {age:.1f} s)")
+        elif view.health == "silent":
+            out.append(f"{view.name}: silent (alive on the bus, but no status: stopped or hung)")
+        else:
+            out.append(f"{view.name}: down (not running)")
+    return out
 
 
 def _per_key(status: ServiceStatus) -> list[tuple[str, str, str, str, str]]:
@@ -98,14 +140,15 @@ def _per_key(status: ServiceStatus) -> list[tuple[str, str, str, str, str]]:
 
 def render_table(site: str, views: list[ServiceView]) -> list[str]:
     """The human-readable report: one block of rows per service, one row per key."""
-    alive = sum(view.alive for view in views)
-    lines = [f"site {site}: {alive} of {len(views)} service(s) alive"]
+    up = sum(view.health == "up" for view in views)
+    lines = [f"site {site}: {up} of {len(views)} service(s) up"]
     if not views:
         lines.append("no service answered (is the stack running? `wz up`)")
         return lines
     header = (
         "SERVICE",
-        "ALIVE",
+        "HEALTH",
+        "LOOP AGE",
         "STATE",
         "PID",
         "UPTIME",
@@ -118,9 +161,11 @@ def render_table(site: str, views: list[ServiceView]) -> list[str]:
     rows: list[tuple[str, ...]] = []
     for view in views:
         status = view.status
+        loop_age = status.loop_age_s if status else None
         ident: tuple[str, ...] = (
             view.name,
-            "yes" if view.alive else "no",
+            view.health,
+            "-" if loop_age is None else f"{loop_age:.1f} s",
             status.state.value if status else "-",
             str(status.pid) if status else "-",
             format_duration(status.uptime_s) if status else "-",
@@ -131,9 +176,7 @@ def render_table(site: str, views: list[ServiceView]) -> list[str]:
         for i, key_row in enumerate(per_key):
             rows.append((*(ident if i == 0 else ("",) * len(ident)), *key_row))
     lines.extend(format_table(header, rows))
-    silent = [view.name for view in views if view.alive and view.status is None]
-    if silent:
-        lines.append(f"no status message received from: {', '.join(silent)}")
+    lines.extend(problems(views))
     return lines
 
 
@@ -142,10 +185,14 @@ def render_json(site: str, views: list[ServiceView]) -> str:
     report: dict[str, Any] = {
         "site": site,
         "alive": sum(view.alive for view in views),
+        "ok": not problems(views),
+        "problems": problems(views),
         "services": [
             {
                 "service": view.name,
                 "alive": view.alive,
+                "expected": view.expected,
+                "health": view.health,
                 "status": view.status.model_dump(mode="json") if view.status else None,
                 "status_age_s": (
                     None if view.status_age_s is None else round(view.status_age_s, 3)

@@ -1,9 +1,11 @@
-"""A container health probe: is the service's heartbeat file fresh?
+"""A container health probe: has the service's loop gone round lately?
 
 A node run with ``WZ_HEALTH_FILE`` set (``ServiceSettings.health_file``) has its
-:class:`~wz_shared.service.ServiceRuntime` touch that file each time it has published a
-:class:`~wz_shared.messages.ServiceStatus` (every ``WZ_STATUS_PERIOD_S``), and remove it on a
-clean stop. A container's healthcheck then runs::
+:class:`~wz_shared.service.ServiceRuntime` set that file's modification time, each time it
+has published a :class:`~wz_shared.messages.ServiceStatus` (every ``WZ_STATUS_PERIOD_S``), to
+the time its loop last went round (:meth:`~wz_shared.service.ServiceRuntime.beat`), and remove
+it on a clean stop. A blocked loop, a stopped process (SIGSTOP) or a dead status thread all age
+the file. A container's healthcheck then runs::
 
     python -m wz_shared.health /tmp/wz-health --max-age-s 10
 
@@ -25,11 +27,12 @@ from pathlib import Path
 DEFAULT_MAX_AGE_S = 10.0
 
 
-def touch(path: Path) -> None:
-    """Mark the service alive now: create ``path`` (and its folder) or update its mtime."""
+def touch(path: Path, at_s: float | None = None) -> None:
+    """Mark the service alive at ``at_s`` (wall-clock seconds; default now): create ``path``
+    (and its folder) and set its modification time to that."""
     path.parent.mkdir(parents=True, exist_ok=True)
     path.touch(exist_ok=True)
-    os.utime(path)
+    os.utime(path, None if at_s is None else (at_s, at_s))
 
 
 def heartbeat_problem(path: Path, max_age_s: float, now_s: float | None = None) -> str | None:

@@ -485,6 +485,8 @@ class ServiceState(StrEnum):
     STARTING = "starting"
     RUNNING = "running"
     DEGRADED = "degraded"
+    #: The process is alive but its loop has not moved for longer than its stall limit.
+    STALLED = "stalled"
     STOPPING = "stopping"
 
 
@@ -501,6 +503,11 @@ class ServiceStatus(Message):
     latency_p50_ms: dict[str, NonNegFloat] = Field(default_factory=dict)
     invalid_counts: dict[str, Annotated[int, Field(ge=0)]] = Field(default_factory=dict)
     dropped_counts: dict[str, Annotated[int, Field(ge=0)]] = Field(default_factory=dict)
+    #: Seconds since the service's own loop last went round (None: not yet started); past
+    #: its stall limit the state is ``stalled``, whatever the status thread still says.
+    loop_age_s: NonNegFloat | None = None
+    #: Seconds since it last processed an input (a frame, a batch, a message; None: none yet).
+    input_age_s: NonNegFloat | None = None
 
 
 def kind_of(cls: type[Message]) -> str:

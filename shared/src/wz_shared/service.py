@@ -8,9 +8,16 @@ A node's ``main()`` reads its settings, then::
 
 On entry the runtime declares the liveliness token ``wz/<site>/status/<service>`` and starts
 publishing a :class:`ServiceStatus` there every ``status_period_s`` (message rates per key,
-invalid and dropped counts). With a ``health_file`` (``WZ_HEALTH_FILE``), each status published
-also touches that file, which a container healthcheck reads (``python -m wz_shared.health``).
-SIGTERM and SIGINT set ``stop``; leaving the block closes the bus.
+invalid and dropped counts). SIGTERM and SIGINT set ``stop``; leaving the block closes the bus.
+
+Liveness comes from the work, not from the status thread: the node's loop calls
+:meth:`ServiceRuntime.beat` each time it goes round (``processed=True`` when it handled an
+input), and each status message says how old that is (``loop_age_s``, ``input_age_s``); past
+``stall_after_s`` the state is ``stalled``. With a ``health_file`` (``WZ_HEALTH_FILE``), each
+status published also sets that file's modification time to the loop's last round, so a
+container healthcheck (``python -m wz_shared.health``) and ``wz up``'s supervisor see a blocked
+loop even while the status thread goes on. Until the loop's first round (start-up: models
+loading, the simulator warming up) the file is touched with the current time.
 
 :class:`NodeApp` is the rest of every ``main()``: settings read (or the process stops saying
 what is wrong), the site file read, logging configured with site/service/sensor, start-up
@@ -64,6 +71,7 @@ class ServiceRuntime:
         status_period_s: float = 1.0,
         clock_stamp: Any = None,
         health_file: Path | None = None,
+        stall_after_s: float = 5.0,
     ) -> None:
         self.service = service
         self.site = site
@@ -73,6 +81,12 @@ class ServiceRuntime:
         self.health_file = health_file
         self.stop = threading.Event()
         self.state = ServiceState.STARTING
+        #: A loop not gone round for this long is stalled [s].
+        self.stall_after_s = stall_after_s
+        #: Wall-clock times of the loop's last round and last processed input (None: not yet).
+        self._loop_at: float | None = None
+        self._input_at: float | None = None
+        self._stalled = False
         #: Callable returning the stamp to put on status messages (simulation time in sim).
         self._clock_stamp = clock_stamp or time.time
         self._started = time.monotonic()
@@ -106,6 +120,20 @@ class ServiceRuntime:
             self.health_file.unlink(missing_ok=True)
         log.info("service %s stopped", self.service)
 
+    def beat(self, processed: bool = False) -> None:
+        """The node's loop went round (call it each time, also when it waited for input and
+        got none); ``processed``: it handled an input this time."""
+        now = time.time()
+        self._loop_at = now
+        if processed:
+            self._input_at = now
+
+    def loop_age_s(self, now: float | None = None) -> float | None:
+        """Seconds since the loop's last round; None before its first."""
+        if self._loop_at is None:
+            return None
+        return max(0.0, (time.time() if now is None else now) - self._loop_at)
+
     def _install_signal_handlers(self) -> None:
         if threading.current_thread() is threading.main_thread():
             stop_on_signals(self.stop)  # (wz_shared.signals: no lock taken in the handler)
@@ -117,19 +145,38 @@ class ServiceRuntime:
         dt_s: float,
     ) -> tuple[ServiceStatus, dict[str, dict[str, int]]]:
         snap = stats.snapshot()
+        now = time.time()
+        loop_age_s = self.loop_age_s(now)
+        input_age_s = None if self._input_at is None else max(0.0, now - self._input_at)
+        state = self.state
+        if state != ServiceState.STOPPING and (loop_age_s or 0.0) > self.stall_after_s:
+            state = ServiceState.STALLED
         status = ServiceStatus(
             site=self.site,
             source_id=self.service,
             stamp=max(0.0, float(self._clock_stamp())),
             service=self.service,
-            state=self.state,
+            state=state,
             uptime_s=time.monotonic() - self._started,
             pid=os.getpid(),
             published_hz=_rates(snap["published"], previous.get("published", {}), dt_s),
             received_hz=_rates(snap["received"], previous.get("received", {}), dt_s),
             invalid_counts=snap["invalid"],
             dropped_counts=snap["dropped"],
+            loop_age_s=None if loop_age_s is None else round(loop_age_s, 3),
+            input_age_s=None if input_age_s is None else round(input_age_s, 3),
         )
+        stalled = state == ServiceState.STALLED
+        if stalled and not self._stalled:
+            log.error(
+                "the %s loop has not gone round for %.1f s (limit %.1f s): stalled",
+                self.service,
+                loop_age_s,
+                self.stall_after_s,
+            )
+        elif self._stalled and not stalled:
+            log.warning("the %s loop goes round again", self.service)
+        self._stalled = stalled
         return status, snap
 
     def _report_health(self) -> None:
@@ -143,7 +190,8 @@ class ServiceRuntime:
                 status, previous = self.status_message(bus.stats, previous, max(now - last, 1e-3))
                 publisher.put(status)
                 if self.health_file is not None:
-                    health.touch(self.health_file)
+                    # The loop's last round, not now: a blocked loop ages the file.
+                    health.touch(self.health_file, self._loop_at)
             except Exception:
                 if bus.closed:
                     return
@@ -244,5 +292,6 @@ class NodeApp(Generic[SettingsT]):
             status_period_s=settings.status_period_s,
             clock_stamp=self.clock.now if sim_clock else None,
             health_file=settings.health_file if health_file else None,
+            stall_after_s=settings.stall_after_s,
         ) as runtime:
             return loop(runtime)

@@ -78,3 +78,6 @@ class ServiceSettings(BaseSettings):
     #: Heartbeat file touched with each status message, for a container healthcheck
     #: (``python -m wz_shared.health``); None: no file (the local stack).
     health_file: Path | None = Field(default=None, validation_alias="WZ_HEALTH_FILE")
+    #: A loop that has not gone round for this long is stalled [s]: every node's loop waits
+    #: for its input at most 1 s at a time, so 5 s is five missed rounds, not a quiet road.
+    stall_after_s: Annotated[float, Field(gt=0.0, validation_alias="WZ_STALL_AFTER_S")] = 5.0

@@ -204,6 +204,7 @@ def run(
     runs = core.runs
     while not runtime.stop.is_set():
         batch = batches.recv(0.1)
+        runtime.beat(processed=batch is not None)
         if batch is None:
             continue
         outputs = core.add(batch)

@@ -538,6 +538,7 @@ def run(
     runtime.state = detector.state
     while not runtime.stop.is_set():
         frame: Frame[CameraFrameMeta] | None = frames.recv(0.25)
+        runtime.beat(processed=frame is not None)
         if scans is not None:
             while (scan := scans.recv(0.0)) is not None:
                 detector.radar_scan(scan)

@@ -84,7 +84,8 @@ def run(runtime: ServiceRuntime, field_log: FieldLog, settings: DriversSettings)
             runtime.bus, field_log, rate=rate, stop=runtime.stop, loop=settings.loop
         )
         log.info("replayed %s: %s; %d records skipped", field_log.folder, dict(sent), len(problems))
-        runtime.stop.wait()  # stay alive (and healthy) until stopped
+        while not runtime.stop.wait(1.0):  # stay alive (and healthy) until stopped
+            runtime.beat()
         return
     threads = [
         threading.Thread(
@@ -98,7 +99,10 @@ def run(runtime: ServiceRuntime, field_log: FieldLog, settings: DriversSettings)
     for thread in threads:
         thread.start()
     log.info("reading %s", ", ".join(f"{s.sensor_id} ({s.path})" for s in field_log.sources))
-    runtime.stop.wait()
+    # The readers are threads of their own (a silent sensor is no stalled loop): this loop
+    # goes round while the process's main thread is free.
+    while not runtime.stop.wait(1.0):
+        runtime.beat()
     for thread in threads:
         thread.join(timeout=5.0)
 

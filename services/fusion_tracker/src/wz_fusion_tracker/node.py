@@ -291,6 +291,7 @@ def run(
     clock_restarts = False
     while not runtime.stop.is_set():
         batch = batches.recv(0.1)
+        runtime.beat(processed=batch is not None)
         now = time.monotonic()
         if batch is not None:
             outputs = core.add(batch)

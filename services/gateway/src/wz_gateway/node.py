@@ -9,10 +9,15 @@ Run it as ``python -m wz_gateway.node`` (settings ``WZ_GATEWAY_*``, bus ``WZ_BUS
   to ``wz/*/...`` and keeps the sites it was given. Alerts and device states are subscribed
   with recovery: what the alert service published while this gateway was away (its link
   down, or itself restarting) is fetched from the alert service's history when it comes back,
-  and stored once (by ``alert_id``). Zenoh's
-  callbacks only queue the decoded messages; one writer thread (the main one) stores them, a
-  group per transaction. A full queue holds the callbacks (back-pressure, as a FIFO
-  subscription does): nothing is dropped for being slow;
+  and stored once (by ``alert_id``). One writer thread (the main one) stores what arrives, a
+  group per transaction, **alerts first**: alerts, device states and statuses are decoded in
+  Zenoh's callbacks into the writer's queue (a full queue holds the callbacks: back-pressure,
+  nothing dropped), and every round of the writer stores all of them before it takes any
+  track batch. Track batches, the bulk, wait undecoded in a ring of their own
+  (``queue_capacity`` batches, latest wins: a flood drops the oldest, counted in the status's
+  ``dropped_counts``), decoded by the writer in groups of at most ``MAX_TRACK_GROUP``; so a
+  flood of track batches never holds Zenoh's receive thread, which also carries the alerts,
+  and an alert waits for at most one track transaction;
 - serves the API (:func:`wz_gateway.app.create_app`) with uvicorn in a thread of the same
   process, on ``WZ_GATEWAY_HOST:WZ_GATEWAY_PORT`` (127.0.0.1:8000 by default);
 - delivers the webhooks the stored alerts queued (:mod:`wz_gateway.delivery`: a thread and a
@@ -49,6 +54,7 @@ from wz_gateway.sites import Sites, load_sites
 from wz_gateway.storage import Storage, StorageError
 from wz_gateway.track_ends import SiteFinishers, TrackFinisher
 from wz_gateway.webhook_store import WebhookStore
+from wz_shared.bus import Subscription
 from wz_shared.keys import site_of_key
 from wz_shared.messages import Alert, Message, RoadsideDeviceState, ServiceStatus, TrackBatch
 from wz_shared.service import NodeApp, ServiceRuntime
@@ -60,6 +66,10 @@ Report = Callable[[str, str, str], None]  # key, reason, detail
 
 #: Most messages stored in one transaction.
 MAX_GROUP = 256
+#: Most track batches stored in one transaction: an alert that comes meanwhile waits for it.
+MAX_TRACK_GROUP = 64
+#: How long the writer waits for an alert before it looks at the track ring again [s].
+TRACKS_POLL_S = 0.02
 _WRITE_ATTEMPTS = 3
 #: Smoothing of ended tracks still done at a stop [s].
 _STOP_SMOOTHING_S = 2.0
@@ -88,6 +98,10 @@ class Writer:
         Records track lives and smooths those that end, between groups.
     webhooks : WebhookDeliverer, optional
         Woken when a group queued webhook events.
+    tracks : Subscription of TrackBatch, optional
+        The node's ring of track batches (bulk: stored after everything in the queue).
+    beat : callable, optional
+        ``beat(processed)`` each round of :meth:`run` (the node's liveness).
     """
 
     storage: Storage
@@ -102,12 +116,16 @@ class Writer:
     live: Broadcaster | None = None
     finisher: TrackFinisher | SiteFinishers | None = None
     webhooks: WebhookDeliverer | None = None
+    tracks: Subscription[TrackBatch] | None = None
+    beat: Callable[[bool], None] = lambda _processed: None
 
     def __post_init__(self) -> None:
         self.sites = Sites.of(self.sites)
         self._geo = {site.site_id: site.geo_frame for site in self.sites}
         self.queue: queue.Queue[Message] = queue.Queue(self.settings.queue_capacity)
         self._next_purge = 0.0
+        #: When each site's newest track batch was taken [monotonic s].
+        self._tracks_at: dict[str, float] = {}
 
     def offer(self, key: str, message: Message) -> None:
         """Queue a decoded message (Zenoh's thread); waits while the queue is full."""
@@ -116,6 +134,8 @@ class Writer:
                 key, "wrong_site", f"{type(message).__name__} of site {message.site} on {key}"
             )
             return
+        if isinstance(message, TrackBatch):
+            self._tracks_at[message.site] = time.monotonic()
         while not self.stop.is_set():
             try:
                 self.queue.put(message, timeout=0.1)
@@ -123,11 +143,52 @@ class Writer:
             except queue.Full:
                 continue
 
+    def _track_group(self) -> list[Message]:
+        """Up to MAX_TRACK_GROUP track batches from the ring, without waiting."""
+        group: list[Message] = []
+        while self.tracks is not None and len(group) < MAX_TRACK_GROUP:
+            received = self.tracks.recv_with_key(0.0)
+            if received is None:
+                break
+            batch = received.value
+            if batch.site not in self.sites or site_of_key(received.key) != batch.site:
+                self.report(
+                    received.key,
+                    "wrong_site",
+                    f"TrackBatch of site {batch.site} on {received.key}",
+                )
+                continue
+            group.append(batch)
+            self._tracks_at[batch.site] = time.monotonic()
+        return group
+
+    def stale_tracks(self, limit_s: float) -> str | None:
+        """What is wrong when a site's newest track batch is older than ``limit_s`` (the
+        tracker publishes even with no vehicle, every 0.1 s), or None; a site whose tracks
+        never came is not judged (a gateway may start first)."""
+        now = time.monotonic()
+        old = {site: now - at for site, at in self._tracks_at.items() if now - at > limit_s}
+        if not old:
+            return None
+        return "; ".join(
+            f"{site}: newest track batch {age:.0f} s old (is the tracker running?)"
+            for site, age in sorted(old.items())
+        )
+
     def _group(self, timeout_s: float) -> list[Message]:
+        """The next group: the queue's (alerts first), else track batches from the ring,
+        else the queue's first within ``timeout_s``."""
         try:
-            group = [self.queue.get(timeout=timeout_s)]
+            group = [self.queue.get_nowait()]
         except queue.Empty:
-            return []
+            tracks = self._track_group()
+            if tracks or timeout_s <= 0.0:
+                return tracks
+            try:
+                wait_s = timeout_s if self.tracks is None else min(timeout_s, TRACKS_POLL_S)
+                group = [self.queue.get(timeout=wait_s)]
+            except queue.Empty:
+                return []
         while len(group) < MAX_GROUP:
             try:
                 group.append(self.queue.get_nowait())
@@ -203,7 +264,8 @@ class Writer:
             group = self._group(0.1)
             if group:
                 self.write(group)
-            if self.finisher is not None:
+            self.beat(bool(group))
+            if self.finisher is not None and self.queue.empty():
                 self.finisher.work()
         while group := self._group(0.0):  # what the bus delivered before the stop
             self.write(group)
@@ -264,6 +326,11 @@ def run(
         if sites.several
         else TrackFinisher.of(storage, sites.default, settings, metrics)
     )
+    # Track batches, the bulk: a ring read (and decoded) by the writer thread, never a hold
+    # on Zenoh's receive thread, which also carries the alerts.
+    tracks = bus.subscribe(
+        sites.key("tracks"), TrackBatch, mode="ring", capacity=settings.queue_capacity
+    )
     writer = Writer(
         storage,
         sites,
@@ -274,13 +341,14 @@ def run(
         live=broadcaster_for(settings, metrics.registry),
         finisher=finisher,
         webhooks=deliverer,
+        tracks=tracks,
+        beat=lambda processed: runtime.beat(processed=processed),
     )
-    bus.on(sites.key("tracks"), TrackBatch, writer.offer)
     bus.on(sites.key("alerts/*"), Alert, writer.offer, recover=True)
     bus.on(sites.key("devices/state"), RoadsideDeviceState, writer.offer, recover=True)
     bus.on(sites.key("status/*"), ServiceStatus, writer.offer)
     metrics.watch_bus(bus.stats.snapshot)
-    metrics.watch_queue(writer.queue.qsize)
+    metrics.watch_queue(lambda: writer.queue.qsize() + tracks.pending)
     metrics.watch_webhooks(deliverer.store.pending_count)
 
     def readiness() -> dict[str, str]:
@@ -288,8 +356,14 @@ def run(
             "bus": "closed" if bus.closed else "ok",
             "writer": "ok" if writer.last_error is None else writer.last_error,
         }
+        loop_age_s = runtime.loop_age_s()
+        if loop_age_s is not None and loop_age_s > settings.stall_after_s:
+            checks["writer"] = f"its loop has not gone round for {loop_age_s:.1f} s: stalled"
         if writer.queue.qsize() >= 0.9 * settings.queue_capacity:
             checks["queue"] = f"{writer.queue.qsize()} of {settings.queue_capacity} waiting"
+        stale = writer.stale_tracks(settings.stale_after_s)
+        if stale:
+            checks["tracks"] = stale
         return checks
 
     app = create_app(

@@ -468,6 +468,7 @@ def run(
     runtime.state = detector.state
     while not runtime.stop.is_set():
         frame: Frame[LidarFrameMeta] | None = frames.recv(0.25)
+        runtime.beat(processed=frame is not None)
         if frame is None:
             continue
         taken_s = time.monotonic()

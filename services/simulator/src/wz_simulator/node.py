@@ -91,8 +91,10 @@ def run_loop(
     stop: threading.Event,
     rig: SensorRig | None = None,
     publish_sensor: Callable[[SensorOutput], None] | None = None,
+    beat: Callable[[], None] = lambda: None,
 ) -> int:
-    """Step the world until ``stop`` or its duration; publish truth and due sensor frames.
+    """Step the world until ``stop`` or its duration; publish truth and due sensor frames;
+    ``beat()`` after each step (the node's liveness).
 
     Returns the number of steps taken.
     """
@@ -115,6 +117,7 @@ def run_loop(
             for output in rig.fire(vehicles, now_s):
                 publish_sensor(output)
         steps += 1
+        beat()
         pacer.wait_until(now_s, stop)
     return steps
 
@@ -191,6 +194,7 @@ def simulate(
         runtime.stop,
         rig,
         publish_sensor,
+        beat=lambda: runtime.beat(processed=True),
     )
     log.info(
         "simulation ended after %d steps (%.1f s simulated): %s",
