@@ -470,6 +470,9 @@ def test_every_service_has_a_real_health_probe(services: dict[str, Service]) -> 
             max_age_s = float(probe[probe.index("--max-age-s") + 1])
             status_period_s = float(service.environment.get("WZ_STATUS_PERIOD_S", "1.0"))
             assert max_age_s >= 3 * status_period_s, f"{service.name}: a late status is unhealthy"
+            stall_after_s = float(service.environment.get("WZ_STALL_AFTER_S", "5.0"))
+            # A blocked loop unhealthy within 10 s (the trust issue), a slow one not at all.
+            assert stall_after_s < max_age_s <= 10.0, service.name
         else:
             assert probe[1] == "-c", service.name
             compile(probe[2], f"<{service.name} healthcheck>", "exec")

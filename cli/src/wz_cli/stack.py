@@ -133,6 +133,10 @@ class ServiceSpec:
         if options.state_dir is not None:
             for name, file_name in self.state_files.items():
                 env.setdefault(name, str(options.state_dir.resolve() / self.name / file_name))
+            # Its loop's last round, for the supervisor's stall check (wz_cli.supervisor).
+            env.setdefault(
+                "WZ_HEALTH_FILE", str(options.state_dir.resolve() / self.name / "health")
+            )
         env.update(self.env)
         return env
 

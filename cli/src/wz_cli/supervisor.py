@@ -18,6 +18,13 @@ started one at a time, ``STANDBY_STAGGER_S`` apart, not to take the CPU from the
 all at once; a standby that exits by itself is not replaced (the service restarts the plain
 way); they are stopped with the stack.
 
+Stalled loops. Each service of a run with a state folder has a health file
+(``WZ_HEALTH_FILE``, :mod:`wz_shared.health`) whose modification time is its loop's last
+round. A child whose file is older than ``STALL_RESTART_S`` (its loop blocked while the process
+lives: a hung call, a lock never released) is killed (SIGKILL: a blocked loop cannot honour
+SIGTERM) and restarted like a crashed one, with the reason in the log. A child's stale file is
+removed when it starts, and a child is not judged before its first file (start-up).
+
 No child outlives the supervisor: on Linux each child (standbys too) asks the kernel for SIGTERM
 when its parent dies (``PR_SET_PDEATHSIG``), so even ``kill -9`` of the supervisor stops the
 stack. The signal is tied to the thread that started the child: children are started from the
@@ -37,6 +44,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import IO
 
 from wz_cli.common import CliError, emit, port_accepts, tcp_address, wait_for_port
@@ -56,6 +64,9 @@ POLL_PERIOD_S = 0.1
 STANDBY_AFTER_S = 20.0
 #: At most one standby is started per this long [s].
 STANDBY_STAGGER_S = 2.0
+#: A child whose loop has not gone round for this long is killed and restarted [s]: twice
+#: the services' own stall limit (5 s), so a loop that is only slow is not killed for it.
+STALL_RESTART_S = 10.0
 
 _PR_SET_PDEATHSIG = 1
 
@@ -151,6 +162,10 @@ class Child:
         self._spare_failed = not spec.standby
         #: Set once the standby has imported its module (its reader saw the line).
         self.spare_ready = threading.Event()
+        #: The child's health file (its loop's last round), when it has one.
+        health = env.get("WZ_HEALTH_FILE")
+        self.health_file = Path(health) if health else None
+        self.stalls = 0
 
     @property
     def running(self) -> bool:
@@ -188,6 +203,8 @@ class Child:
         else a new one; on failure schedule a retry."""
         self.restart_at = None
         self.started_at = time.monotonic()
+        if self.health_file is not None:  # the last process's, aged: not this one's
+            self.health_file.unlink(missing_ok=True)
         if self._wake_spare():
             return
         try:
@@ -304,10 +321,41 @@ class Child:
                     continue
                 self.output.write(self.name, line)
 
+    def loop_age_s(self) -> float | None:
+        """Seconds since the child's loop last went round (its health file), or None."""
+        if self.health_file is None:
+            return None
+        try:
+            return time.time() - self.health_file.stat().st_mtime
+        except FileNotFoundError:
+            return None
+
+    def _kill_if_stalled(self) -> None:
+        age_s = self.loop_age_s()
+        if age_s is None or age_s <= STALL_RESTART_S or self.process is None:
+            return
+        self.stalls += 1
+        log.warning(
+            "%s (pid %d) stalled: its loop has not gone round for %.1f s (limit %.0f s); "
+            "killing it to restart",
+            self.name,
+            self.process.pid,
+            age_s,
+            STALL_RESTART_S,
+            extra={"child": self.name, "pid": self.process.pid, "stalled_s": round(age_s, 1)},
+        )
+        with contextlib.suppress(ProcessLookupError):
+            self.process.kill()
+        self.process.wait()
+
     def supervise(self, now: float) -> None:
-        """Notice an exit and schedule the restart; restart when its time has come."""
+        """Notice an exit (or a stalled loop, killed) and schedule the restart; restart when
+        its time has come."""
         if self.process is not None:
             returncode = self.process.poll()
+            if returncode is None:
+                self._kill_if_stalled()
+                returncode = self.process.poll()
             if returncode is None:
                 return
             uptime_s = now - self.started_at

@@ -7,7 +7,7 @@ the time its loop last went round (:meth:`~wz_shared.service.ServiceRuntime.beat
 it on a clean stop. A blocked loop, a stopped process (SIGSTOP) or a dead status thread all age
 the file. A container's healthcheck then runs::
 
-    python -m wz_shared.health /tmp/wz-health --max-age-s 10
+    python -m wz_shared.health /tmp/wz-health --max-age-s 6
 
 which exits 0 when the file was touched within the last ``max_age_s`` seconds, else 1 with one
 line on stderr saying why. It reads one file's modification time: no bus session, no import of
@@ -23,8 +23,10 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-#: Default age beyond which a heartbeat is stale [s]: several status periods of 1 s.
-DEFAULT_MAX_AGE_S = 10.0
+#: Default age beyond which a heartbeat is stale [s]: the 5 s stall limit of a loop
+#: (``WZ_STALL_AFTER_S``) plus a status period of 1 s, so a blocked loop is unhealthy within
+#: 6 s and a loop that is only slow is not.
+DEFAULT_MAX_AGE_S = 6.0
 
 
 def touch(path: Path, at_s: float | None = None) -> None:

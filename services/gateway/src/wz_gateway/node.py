@@ -421,11 +421,11 @@ def main() -> None:
         dev_secret = prepare_keys(storage, settings, time.time())
         if dev_secret is not None:
             log.warning("dev mode: reads need no key; admin key for this run: %s", dev_secret)
-        # Status on the wall clock; its health is /readyz, not a file.
+        # Status on the wall clock; its health is /readyz, and the health file where one is
+        # asked for (WZ_HEALTH_FILE: `wz up`'s stall check of the writer loop).
         written = node.serve(
             lambda runtime: run(runtime, sites, settings, storage, GatewayMetrics()),
             sim_clock=False,
-            health_file=False,
         )
         log.info("stopped after storing %d messages", written)
     finally:
