@@ -196,6 +196,8 @@ STACK: tuple[ServiceSpec, ...] = (
         "intrusion) and the beacon and sign",
         env_prefix="WZ_ALERT_",
         standby=True,
+        # Its open episodes, continued or cleared by the next process (not started twice).
+        state_files={"WZ_ALERT_STATE_FILE": "open-episodes.json"},
     ),
     ServiceSpec(
         name="drivers",

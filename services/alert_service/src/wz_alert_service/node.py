@@ -27,11 +27,12 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from wz_alert_service.devices import roadside_devices
 from wz_alert_service.engine import AlertEngine
+from wz_alert_service.recovery import EpisodeRecovery, load_open_episodes, save_open_episodes
 from wz_alert_service.settings import AlertServiceSettings
 from wz_shared.codec import encode_json
 from wz_shared.messages import ActiveAlerts, Alert, AlertType, RoadsideDeviceState, TrackBatch
@@ -79,7 +80,13 @@ class AlertCore:
     """
 
     def __init__(
-        self, site: Site, report: Report, *, id_prefix: str = "", source_id: str = SERVICE
+        self,
+        site: Site,
+        report: Report,
+        *,
+        id_prefix: str = "",
+        source_id: str = SERVICE,
+        recovered: Sequence[Alert] = (),
     ) -> None:
         self.site = site
         self.report = report
@@ -88,6 +95,10 @@ class AlertCore:
         self.engine = AlertEngine(site, id_prefix=id_prefix)
         self.devices: RoadsideDeviceState | None = None
         self._newest: dict[str, Alert] = {}  # episode id -> its newest start or update
+        #: The episodes a previous process left open (:mod:`wz_alert_service.recovery`).
+        self.recovery = EpisodeRecovery(site, recovered)
+        for alert in recovered:
+            self._newest[str(alert.episode_id)] = alert
         self._stamp_s = 0.0
         #: The tracker's stamps going back for good (a restarted simulation or replay): a new
         #: run, whose batches would otherwise all be ignored as out of order.
@@ -114,7 +125,10 @@ class AlertCore:
         if batch.site != self.site.site_id:
             self.report("wrong_site", f"track batch of site {batch.site} from {batch.source_id}")
             return AlertOutputs(accepted=False)
+        ended: list[Alert] = []
         if self._run.observe(batch.stamp) == "new_run":
+            if self.recovery.active:
+                ended = self.recovery.clear_all(batch.stamp, "a new run")
             self._start_new_run(batch)
         out_of_order = self.engine.counters.batches_out_of_order
         events = self.engine.update(batch)
@@ -126,6 +140,9 @@ class AlertCore:
             return AlertOutputs(accepted=False)
         self._stamp_s = batch.stamp
         alerts = [event.to_message(self.site.site_id, self.source_id) for event in events]
+        if self.recovery.active:
+            alerts = self.recovery.rewrite(alerts, batch.stamp)
+        alerts = ended + alerts
         for alert in alerts:
             assert alert.episode_id is not None  # the engine names every episode
             if alert.phase == "clear":
@@ -140,14 +157,16 @@ class AlertCore:
         self.devices = devices
         return AlertOutputs(accepted=True, alerts=alerts, devices=devices)
 
+    def open_episodes(self) -> list[Alert]:
+        """Each open episode's newest published event (what a restart recovers)."""
+        return list(self._newest.values())
+
     def active(self) -> ActiveAlerts:
         """The open episodes (their newest events) and the devices, as of the last batch."""
         devices = self.devices or roadside_devices(
             [], self.engine.zone, self._stamp_s, source_id=self.source_id
         )
-        alerts = [
-            self._newest[a.episode_id] for a in self.engine.active() if a.episode_id in self._newest
-        ]
+        alerts = list(self._newest.values())
         return ActiveAlerts(
             site=self.site.site_id,
             source_id=self.source_id,
@@ -189,7 +208,9 @@ def run(
     def report(reason: str, detail: str) -> None:
         bus.stats.count_invalid(tracks_key, reason, detail)
 
-    core = AlertCore(site, report, id_prefix=id_prefix)
+    state_file = settings.state_file
+    recovered = [] if state_file is None else load_open_episodes(state_file)
+    core = AlertCore(site, report, id_prefix=id_prefix, recovered=recovered)
     publishers = {
         t: bus.publisher(bus.keys.alerts(t.value), Alert, history=settings.history_per_type)
         for t in AlertType
@@ -215,6 +236,11 @@ def run(
             published += 1
         for alert in outputs.alerts:
             _log_alert(alert)
+        if outputs.alerts and state_file is not None:
+            try:
+                save_open_episodes(state_file, core.open_episodes())
+            except OSError as exc:  # a full or read-only disk: alerts go on, unsaved
+                log.error("cannot save the open episodes to %s: %s", state_file, exc)
         if outputs.devices is not None:
             devices_publisher.put(outputs.devices)
             log.info(

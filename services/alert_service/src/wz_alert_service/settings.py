@@ -7,6 +7,7 @@ The rules' thresholds are not here: they are the ``alerts:`` section of the site
 from __future__ import annotations
 
 import re
+from pathlib import Path
 from typing import Annotated
 
 from pydantic import Field, field_validator
@@ -31,6 +32,9 @@ class AlertServiceSettings(ServiceSettings):
     #: a central gateway whose link to the trailer was down fetches them when it comes back).
     #: About 2 kB each; 2000 of each type is hours of alerts at a busy site.
     history_per_type: Annotated[int, Field(ge=1, le=100_000)] = 2000
+    #: Where the open episodes are kept across restarts (:mod:`wz_alert_service.recovery`);
+    #: None: a restart forgets them (the development stack without a state folder).
+    state_file: Path | None = None
 
     @field_validator("episode_id_prefix")
     @classmethod
