@@ -88,7 +88,7 @@ class _Receiver:
 def _alert(site_id: str, number: int) -> Alert:
     return Alert(
         site=site_id,
-        source_id="bench",
+        source_id="alert-service",
         stamp=0.1 * number,
         alert_id=f"bench-{number}",
         alert_type=AlertType.SPEEDING,
@@ -108,7 +108,10 @@ def _alert(site_id: str, number: int) -> Alert:
 
 
 @contextmanager
-def _gateway(bus_port: int, http_port: int, data_dir: Path) -> Iterator[httpx.Client]:
+def _gateway(
+    bus_port: int, http_port: int, data_dir: Path, *, log_path: Path | None = None
+) -> Iterator[httpx.Client]:
+    """The gateway node connected to ``bus_port``, ready; its output in ``log_path``."""
     env = {k: v for k, v in os.environ.items() if not k.startswith("WZ_")}
     env.update(
         WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{bus_port}",
@@ -120,7 +123,14 @@ def _gateway(bus_port: int, http_port: int, data_dir: Path) -> Iterator[httpx.Cl
         WZ_GATEWAY_API_KEYS=f"admin:{ADMIN_KEY}",
         WZ_GATEWAY_WEBHOOK_ALLOWED_NETWORKS="127.0.0.1/32",
     )
-    node = subprocess.Popen([sys.executable, "-m", "wz_gateway.node"], cwd=ROOT, env=env)
+    out = None if log_path is None else log_path.open("ab")
+    node = subprocess.Popen(
+        [sys.executable, "-m", "wz_gateway.node"],
+        cwd=ROOT,
+        env=env,
+        stdout=out,
+        stderr=None if out is None else subprocess.STDOUT,
+    )
     http = httpx.Client(
         base_url=f"http://127.0.0.1:{http_port}",
         timeout=TIMEOUT_S,
@@ -142,6 +152,8 @@ def _gateway(bus_port: int, http_port: int, data_dir: Path) -> Iterator[httpx.Cl
         http.close()
         node.terminate()
         node.wait(TIMEOUT_S)
+        if out is not None:
+            out.close()
 
 
 def _measure(

@@ -40,9 +40,17 @@ class _BusCollector(Collector):
         )
         for key, n in snap.get("gaps", {}).items():
             gaps.add_metric([key], n)
+        dropped = CounterMetricFamily(
+            "wz_gateway_bus_dropped",
+            "Samples a full ring dropped (the oldest first), per key: track batches of a flood",
+            labels=["key"],
+        )
+        for key, n in snap.get("dropped", {}).items():
+            dropped.add_metric([key], n)
         yield received
         yield invalid
         yield gaps
+        yield dropped
 
 
 class GatewayMetrics:

@@ -68,6 +68,11 @@ Report = Callable[[str, str, str], None]  # key, reason, detail
 MAX_GROUP = 256
 #: Most track batches stored in one transaction: an alert that comes meanwhile waits for it.
 MAX_TRACK_GROUP = 64
+#: After a transaction of track batches the writer stores no other for this share of the time
+#: it took (alerts still go at once): under a flood the database stays free a third of the
+#: time for the webhook deliverer's transactions and the API, instead of the writer's track
+#: transactions following each other and holding them off. At a normal 10 Hz it never waits.
+TRACK_PAUSE_SHARE = 0.5
 #: How long the writer waits for an alert before it looks at the track ring again [s].
 TRACKS_POLL_S = 0.02
 _WRITE_ATTEMPTS = 3
@@ -126,6 +131,8 @@ class Writer:
         self._next_purge = 0.0
         #: When each site's newest track batch was taken [monotonic s].
         self._tracks_at: dict[str, float] = {}
+        #: No track transaction before this [monotonic s] (:data:`TRACK_PAUSE_SHARE`).
+        self._tracks_after = 0.0
 
     def offer(self, key: str, message: Message) -> None:
         """Queue a decoded message (Zenoh's thread); waits while the queue is full."""
@@ -181,7 +188,8 @@ class Writer:
         try:
             group = [self.queue.get_nowait()]
         except queue.Empty:
-            tracks = self._track_group()
+            paused = time.monotonic() < self._tracks_after and timeout_s > 0.0
+            tracks = [] if paused else self._track_group()
             if tracks or timeout_s <= 0.0:
                 return tracks
             try:
@@ -263,7 +271,11 @@ class Writer:
             self.purge_if_due()
             group = self._group(0.1)
             if group:
+                started = time.monotonic()
                 self.write(group)
+                if isinstance(group[0], TrackBatch) and self.tracks is not None:
+                    took = time.monotonic() - started
+                    self._tracks_after = time.monotonic() + TRACK_PAUSE_SHARE * took
             self.beat(bool(group))
             if self.finisher is not None and self.queue.empty():
                 self.finisher.work()
