@@ -11,6 +11,7 @@ from collections.abc import Callable
 from typing import Any
 
 from benchmarks.report_bus import (
+    alert_flood,
     alert_latency,
     bus_latency,
     bus_throughput,
@@ -199,6 +200,14 @@ def _summary(benchmarks: dict[str, Any]) -> list[str]:
             f"{fmt_rate(plain['small']['msg_per_s'])}/s (x{ratios['small_msg_per_s']:.2f}); "
             f"2 MB frames x{ratios['frames_msg_per_s']:.2f}."
         )
+    flood = benchmarks.get("alert_flood", {}).get("result")
+    if flood:
+        lines.append(
+            f"- Alerts first: during {flood['flood']['rate_hz']:,.0f} track batches a second, "
+            f"an alert stored **{fmt_ms(1e3 * flood['stored']['max'])}** and webhooked "
+            f"**{fmt_ms(1e3 * flood['webhooked']['max'])}** after its publication at worst "
+            f"(bound {flood['bound_s']:.0f} s); {flood['locked_count']} locked-database errors."
+        )
     hooks = benchmarks.get("webhook_latency", {}).get("result")
     if hooks:
         one, four = hooks["variants"]["one_subscription"], hooks["variants"]["four_subscriptions"]
@@ -279,6 +288,10 @@ SECTIONS: dict[str, tuple[str, Callable[[dict[str, Any]], list[str]]]] = {
         tracker_cycle,
     ),
     "alert_latency": ("the alert service: track batch to alert on the bus", alert_latency),
+    "alert_flood": (
+        "alerts first: an alert stored and webhooked during a flood of track batches",
+        alert_flood,
+    ),
     "webhook_latency": (
         "gateway webhooks: alert on the bus to the signed POST at the receiver",
         webhook_latency,

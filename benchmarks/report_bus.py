@@ -377,3 +377,43 @@ def bus_trust(result: dict[str, Any]) -> list[str]:
         ]
     lines += md_table(["Ratio", "Value"], ratio_rows)
     return [*lines, ""]
+
+
+def alert_flood(result: dict[str, Any]) -> list[str]:
+    flood = result["flood"]
+    lines = [
+        "Four processes on loopback: `wz router`; the gateway node (SQLite, a webhook "
+        "subscription to an `http.server` in this process); a flooding tracker putting one-track "
+        f"batches (~600 B) at a target of {result['target_rate_hz']:,.0f} a second for "
+        f"{result['flood_s']:.0f} s (blocking congestion control); and this process, putting an "
+        "alert every 0.5 s from the flood's second second on. *Stored*: from just before the "
+        "alert's `put_bytes` to the `received_at` the writer stamped on its row; *webhooked*: "
+        "to the receiver having read its signed POST (signature checked). The issue's bound: "
+        f"{result['bound_s']:.0f} s for both.",
+        "",
+    ]
+    stored, hooked = result["stored"], result["webhooked"]
+    rows = [
+        [
+            f"{flood['rate_hz']:,.0f} msg/s ({flood['sent']:,} in {flood['seconds']:.1f} s)",
+            f"{result['batches_stored']:,} / {result['batches_dropped']:,}",
+            f"{len(result['stored_s'])} of {result['alerts']}",
+            f"**{fmt_ms(1e3 * stored['p50'])}** (max {fmt_ms(1e3 * stored['max'])})",
+            f"**{fmt_ms(1e3 * hooked['p50'])}** (max {fmt_ms(1e3 * hooked['max'])})",
+            f"{result['status_max_gap_s']:.2f} s",
+            str(result["locked_count"]),
+        ]
+    ]
+    lines += md_table(
+        [
+            "Flood reached",
+            "Track batches stored / dropped",
+            "Alerts stored",
+            "Stored p50",
+            "Webhooked p50",
+            "Longest gap in the gateway's status",
+            "`database is locked`",
+        ],
+        rows,
+    )
+    return [*lines, ""]

@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks import (
+    alert_flood,
     alert_latency,
     bus_latency,
     bus_throughput,
@@ -57,6 +58,7 @@ BENCHMARKS: dict[str, Callable[[bool], dict[str, Any]]] = {
     "camera_detection": camera_detection.run,
     "tracker_cycle": tracker_cycle.run,
     "alert_latency": alert_latency.run,
+    "alert_flood": alert_flood.run,
     "gateway_live": gateway_live.run,
     "webhook_latency": webhook_latency.run,
     "recovery": recovery.run,
