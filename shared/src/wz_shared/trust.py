@@ -129,6 +129,19 @@ def _rule(
     }
 
 
+def _deny_but(
+    rules: list[dict[str, Any]], subjects: list[dict[str, Any]], policies: list[dict[str, Any]]
+) -> dict[str, Any]:
+    """An ``access_control`` block: whatever no policy allows is denied."""
+    return {
+        "enabled": True,
+        "default_permission": "deny",
+        "rules": rules,
+        "subjects": subjects,
+        "policies": policies,
+    }
+
+
 def _everything(site: str) -> list[str]:
     # Wildcards stop at verbatim chunks: the advanced publishers' and subscribers' keys apart.
     # Any site: wz/** (which a subscription on wz/** is included in; wz/*/** is not).
@@ -177,13 +190,7 @@ def edge_access_control(site: str = "*") -> dict[str, Any]:
                 "subjects": [reader],
             }
         )
-    return {
-        "enabled": True,
-        "default_permission": "deny",
-        "rules": rules,
-        "subjects": subjects,
-        "policies": policies,
-    }
+    return _deny_but(rules, subjects, policies)
 
 
 def trailer_name(site: str) -> str:
@@ -228,13 +235,7 @@ def regional_access_control(sites: Iterable[str]) -> dict[str, Any]:
         policies.append(
             {"id": name, "rules": [f"{name}: gives", "trailers: are asked"], "subjects": [name]}
         )
-    return {
-        "enabled": True,
-        "default_permission": "deny",
-        "rules": rules,
-        "subjects": subjects,
-        "policies": policies,
-    }
+    return _deny_but(rules, subjects, policies)
 
 
 # --- TLS ------------------------------------------------------------------------------------

@@ -112,26 +112,27 @@ class EpisodeRecovery:
         rule = getattr(self.site.alerts, alert_type.value)
         return float(rule.hold_s + rule.clear_s) + HISTORY_S
 
-    def _as(self, alert: Alert, recovered: Alert, phase: str) -> Alert:
+    def _next_alert_id(self, recovered: Alert) -> str:
+        """The recovered episode's next event id (``<episode>-<n>``, counting on)."""
         episode = str(recovered.episode_id)
         sequence = self._next[episode]
         self._next[episode] = sequence + 1
+        return f"{episode}-{sequence}"
+
+    def _as(self, alert: Alert, recovered: Alert, phase: str) -> Alert:
         return alert.model_copy(
             update={
-                "episode_id": episode,
-                "alert_id": f"{episode}-{sequence}",
+                "episode_id": recovered.episode_id,
+                "alert_id": self._next_alert_id(recovered),
                 "phase": phase,
                 "onset_stamp": recovered.onset_stamp,
             }
         )
 
     def _cleared(self, recovered: Alert, stamp: float, why: str) -> Alert:
-        episode = str(recovered.episode_id)
-        sequence = self._next[episode]
-        self._next[episode] = sequence + 1
         return recovered.model_copy(
             update={
-                "alert_id": f"{episode}-{sequence}",
+                "alert_id": self._next_alert_id(recovered),
                 "phase": "clear",
                 "stamp": max(stamp, recovered.stamp),
                 "description": f"{recovered.description} (cleared: {why})"[:500],
