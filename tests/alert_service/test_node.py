@@ -64,7 +64,9 @@ def test_a_speeder_gives_one_start_then_a_clear_and_the_devices_follow() -> None
 def test_batches_of_another_site_or_from_the_past_are_reported_and_ignored() -> None:
     core, reports = core_and_reports()
     assert core.add(batch(1.0, [make_track(1, 500.0, FAST_MPS)])).accepted
-    other = TrackBatch(site="elsewhere", source_id="fusion-tracker", stamp=2.0, cycle_index=0, tracks=[])
+    other = TrackBatch(
+        site="elsewhere", source_id="fusion-tracker", stamp=2.0, cycle_index=0, tracks=[]
+    )
     assert core.add(other) == AlertOutputs(accepted=False)
     assert not core.add(batch(0.5, [])).accepted
     assert [reason for reason, _ in reports] == ["wrong_site", "out_of_order"]

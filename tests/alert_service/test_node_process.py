@@ -136,7 +136,11 @@ def test_node_process_alerts_once_drives_the_beacon_and_survives_bad_input(port:
             tracks.put_bytes(b"\x00\x01 not a track batch")
             tracks.put(
                 TrackBatch(
-                    site="elsewhere", source_id="fusion-tracker", stamp=3.0, cycle_index=30, tracks=[]
+                    site="elsewhere",
+                    source_id="fusion-tracker",
+                    stamp=3.0,
+                    cycle_index=30,
+                    tracks=[],
                 )
             )
             tracks.put(batch(0.5, [make_track(9, 500.0, FAST_MPS)], 31))  # from the past

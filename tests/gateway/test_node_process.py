@@ -99,7 +99,11 @@ def test_node_stores_the_bus_serves_it_and_keeps_it_across_restarts(
             tracks.put_bytes(b"\x00 not a track batch")
             tracks.put(
                 TrackBatch(
-                    site="elsewhere", source_id="fusion-tracker", stamp=9.0, cycle_index=90, tracks=[]
+                    site="elsewhere",
+                    source_id="fusion-tracker",
+                    stamp=9.0,
+                    cycle_index=90,
+                    tracks=[],
                 )
             )
             key = bus.keys.tracks

@@ -111,7 +111,9 @@ def json_samples(i: int = 0) -> list[Message]:
         DetectionBatch(
             site=SITE, source_id="lidar-mast", stamp=stamp, frame_index=i, detections=[detection]
         ),
-        TrackBatch(site=SITE, source_id="fusion-tracker", stamp=stamp, cycle_index=i, tracks=[track]),
+        TrackBatch(
+            site=SITE, source_id="fusion-tracker", stamp=stamp, cycle_index=i, tracks=[track]
+        ),
         alert,
         devices,
         ActiveAlerts(
