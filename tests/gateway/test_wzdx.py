@@ -28,7 +28,7 @@ from tests.gateway.helpers import (
 from wz_gateway import views, wzdx
 from wz_gateway.storage import Storage
 from wz_shared.keys import Keys
-from wz_shared.messages import AlertType, Message
+from wz_shared.messages import AlertType, Message, ServiceState
 
 KEYS = Keys(SITE.site_id)
 T0_UNIX = 1_750_000_000.0  # wall clock at stamp 0 in these tests
@@ -267,3 +267,19 @@ def test_multi_strings() -> None:
     assert wzdx.multi("MERGE\nRIGHT NOW") == "MERGE[nl]RIGHT NOW"
     assert wzdx.multi("[X]") == "[[X]]"
     assert wzdx.multi("") == ""
+
+
+def test_a_stalled_alert_service_puts_its_sign_and_beacon_in_error(storage: Storage) -> None:
+    """A status that still comes but says the loop stopped going round (issue 26): the
+    devices it drives are in error, saying so, not ok."""
+    traffic_day(storage)
+    stalled = service_status("alert-service", 300.0, {}).model_copy(
+        update={"state": ServiceState.STALLED, "loop_age_s": 12.0}
+    )
+    store(storage, [stalled], T0_UNIX + 300.0)
+    feed = feed_of(storage, T0_UNIX + 301.0)
+    assert_valid(feed)
+    for device_type in ("flashing-beacon", "dynamic-message-sign"):
+        core = features_by_type(feed)[device_type]["properties"]["core_details"]
+        assert core["device_status"] == "error", core
+        assert "alert-service stalled: no work for 12 s" in core["status_messages"], core

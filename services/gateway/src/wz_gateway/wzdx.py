@@ -24,7 +24,7 @@ from datetime import UTC, datetime
 from typing import Any, Literal
 
 from wz_gateway.traffic import TrafficSummary
-from wz_shared.messages import AlertType, RoadsideDeviceState, ServiceStatus
+from wz_shared.messages import AlertType, RoadsideDeviceState, ServiceState, ServiceStatus
 from wz_shared.site import AreaKind, SensorMount, Site
 
 WZDX_VERSION = "4.2"
@@ -77,10 +77,15 @@ def combine(*healths: DeviceHealth) -> DeviceHealth:
 def service_health(
     service: str, status: tuple[ServiceStatus, float] | None, now: float, stale_after_s: float
 ) -> DeviceHealth:
-    """Whether ``service`` reports its status (``status`` is the newest and its arrival)."""
-    return freshness(
+    """Whether ``service`` reports its status (``status`` is the newest and its arrival) and
+    its loop goes round (a ``stalled`` status: the process lives, its work does not)."""
+    health = freshness(
         f"status from {service}", None if status is None else status[1], now, stale_after_s
     )
+    if health.status == "ok" and status is not None and status[0].state == ServiceState.STALLED:
+        age_s = status[0].loop_age_s or 0.0
+        return DeviceHealth("error", (f"{service} stalled: no work for {age_s:.0f} s",), status[1])
+    return health
 
 
 def frames_health(
