@@ -76,7 +76,10 @@ def test_unit_runs_sandboxed_as_wz_and_restarts(path: Path) -> None:
     unit = read_unit(path)
     assert set(unit) == {"Unit", "Service", "Install"}
     assert one(unit, "Unit", "Description")
-    assert one(unit, "Service", "User") == "wz"
+    # Each service its own user (its bus key readable by it alone), the group wz for the
+    # shared settings (/etc/wz/wz.env, the site file).
+    assert one(unit, "Service", "User") == path.stem
+    assert one(unit, "Service", "Group") == "wz"
     assert one(unit, "Service", "EnvironmentFile") == "/etc/wz/wz.env"
     assert one(unit, "Service", "Restart") == "on-failure"
     assert one(unit, "Service", "NoNewPrivileges") == "yes"
