@@ -11,8 +11,9 @@
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Annotated, Any
 
 from fastapi import Depends, Query, Request, Security
@@ -51,6 +52,8 @@ class GatewayContext:
     live: Broadcaster
     readiness: Callable[[], dict[str, str]] | None
     clock: Callable[[], float]
+    #: When this gateway began serving [Unix s] (the WorkZoneFeed's start date).
+    started_at: float = field(default_factory=time.time)
 
     @property
     def site(self) -> Site:

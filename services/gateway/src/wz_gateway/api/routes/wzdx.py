@@ -1,5 +1,7 @@
 """``GET /v1/wzdx/device-feed``: the WZDx 4.2 DeviceFeed of one site or of every site
-(:mod:`wz_gateway.views` reads the devices' state, :mod:`wz_gateway.wzdx` writes the feed)."""
+(:mod:`wz_gateway.views` reads the devices' state, :mod:`wz_gateway.wzdx` writes the feed);
+``GET /v1/wzdx/work-zone-feed``: the WorkZoneFeed, the work zone of each site as a road event
+(:mod:`wz_gateway.wzdx_workzone`)."""
 
 from __future__ import annotations
 
@@ -8,7 +10,7 @@ from typing import Annotated
 from fastapi import APIRouter, Query
 from fastapi.responses import JSONResponse
 
-from wz_gateway import views
+from wz_gateway import views, wzdx_workzone
 from wz_gateway.api.deps import SITE_PATTERN, SITE_RESPONSES, Ctx, Reader, site_of
 from wz_gateway.api.errors import V1_RESPONSES
 
@@ -56,3 +58,50 @@ def get_device_feed(
         for one in served
     ]
     return JSONResponse(views.merge_device_feeds(feeds))
+
+
+@router.get(
+    "/wzdx/work-zone-feed",
+    tags=["wzdx"],
+    responses={
+        200: {
+            "description": "A WZDx 4.2 WorkZoneFeed (GeoJSON): one work-zone road event a site",
+            "content": {
+                "application/json": {
+                    "schema": {"type": "object", "required": ["feed_info", "type", "features"]}
+                }
+            },
+        },
+        **SITE_RESPONSES,
+    },
+)
+def get_work_zone_feed(
+    context: Ctx,
+    _: Reader,
+    site: Annotated[
+        str | None,
+        Query(
+            pattern=SITE_PATTERN, description="Only this site's work zone (default: every site's)"
+        ),
+    ] = None,
+) -> JSONResponse:
+    """The WZDx 4.2 WorkZoneFeed: each site's work zone (extent from the taper to the end of
+    the termination area, lanes with the closed one, the reduced speed limit), from its site
+    file; its devices are in the DeviceFeed."""
+    settings = context.settings
+    served = [site_of(context, site)] if site is not None else list(context.sites)
+    feeds = [
+        wzdx_workzone.work_zone_feed(
+            one,
+            now=context.clock(),
+            served_since=context.started_at,
+            publisher=settings.publisher,
+            contact_email=settings.contact_email,
+        )
+        for one in served
+    ]
+    merged = feeds[0]
+    for extra in feeds[1:]:
+        merged["features"] += extra["features"]
+        merged["feed_info"]["data_sources"] += extra["feed_info"]["data_sources"]
+    return JSONResponse(merged)
