@@ -13,7 +13,9 @@ import httpx
 import pytest
 
 from tests.gateway.helpers import READ_KEY, SITE, gateway_settings, live_server, open_storage
+from tests.gateway.test_wzdx import feed_of as device_feed_of
 from tests.gateway.test_wzdx import wzdx_validator
+from wz_gateway.storage import Storage
 from wz_gateway.wzdx_workzone import extent_m, work_zone_event_id, work_zone_feed
 from wz_shared.site import Site
 from wz_shared.site_generator import generate_site
@@ -110,3 +112,14 @@ def test_the_gateway_serves_the_feed(tmp_path: Path) -> None:
     assert_valid(response.json())
     assert response.json()["features"][0]["id"] == work_zone_event_id(SITE)
     assert refused.status_code == 401 and unknown.status_code == 404
+
+
+def test_every_device_names_the_work_zone(tmp_path: Path) -> None:
+    """The DeviceFeed's devices and the WorkZoneFeed's event are tied by the event's id."""
+    store: Storage = open_storage(gateway_settings(tmp_path))
+    devices = device_feed_of(store, T0_UNIX)
+    store.close()
+    assert devices["features"]
+    for feature in devices["features"]:
+        core = feature["properties"]["core_details"]
+        assert core["road_event_ids"] == [work_zone_event_id(SITE)], core

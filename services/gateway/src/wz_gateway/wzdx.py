@@ -36,6 +36,7 @@ MPS_TO_KPH = 3.6
 #: The sign and beacon stand this far right of the right lane's edge [m].
 SHOULDER_OFFSET_M = 3.0
 _NAMESPACE = uuid.UUID("6f0f3a3e-5b7e-4c55-9d0a-2a7f4f1c9b21")
+_WORK_ZONE_NAMESPACE = uuid.UUID("0b1e9a57-61c3-4d0e-8a8e-5c1f7b3d2a90")
 
 DeviceStatus = Literal["ok", "warning", "error", "unknown"]
 _RANK: dict[DeviceStatus, int] = {"ok": 0, "unknown": 1, "warning": 2, "error": 3}
@@ -139,6 +140,12 @@ def device_id(site: Site, name: str) -> str:
     return str(uuid.uuid5(_NAMESPACE, f"{site.site_id}/{name}"))
 
 
+def work_zone_event_id(site: Site) -> str:
+    """The id of the site's work-zone road event (the WorkZoneFeed's,
+    :mod:`wz_gateway.wzdx_workzone`), which every device names: stable, a UUID (RFC 4122)."""
+    return str(uuid.uuid5(_WORK_ZONE_NAMESPACE, f"{site.site_id}/work-zone"))
+
+
 def data_source_id(site: Site) -> str:
     return str(uuid.uuid5(_NAMESPACE, f"{site.site_id}/gateway"))
 
@@ -162,6 +169,7 @@ def _core(
         "name": name,
         "description": description,
         "is_moving": False,
+        "road_event_ids": [work_zone_event_id(site)],
     }
     if health.messages:
         core["status_messages"] = list(health.messages)

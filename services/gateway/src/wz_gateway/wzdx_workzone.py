@@ -20,7 +20,6 @@ The DeviceFeed's devices name this event in their ``road_event_ids``
 
 from __future__ import annotations
 
-import uuid
 from typing import Any
 
 import numpy as np
@@ -32,6 +31,7 @@ from wz_gateway.wzdx import (
     _lane_order,
     data_source_id,
     rfc3339,
+    work_zone_event_id,
 )
 from wz_shared.site import AreaKind, Site
 
@@ -39,14 +39,8 @@ MPS_TO_KPH = 3.6
 #: Spacing of the event's geometry along the road [m]: a curve's chord error stays under
 #: a decimetre for radii above 300 m.
 STEP_M = 50.0
-_NAMESPACE = uuid.UUID("0b1e9a57-61c3-4d0e-8a8e-5c1f7b3d2a90")
 #: A day [s].
 DAY_S = 86400.0
-
-
-def work_zone_event_id(site: Site) -> str:
-    """The road event's id: stable for a site, a UUID (RFC 4122) as WZDx recommends."""
-    return str(uuid.uuid5(_NAMESPACE, f"{site.site_id}/work-zone"))
 
 
 def extent_m(site: Site) -> tuple[float, float]:
