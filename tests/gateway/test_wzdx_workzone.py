@@ -16,7 +16,8 @@ from tests.gateway.helpers import READ_KEY, SITE, gateway_settings, live_server,
 from tests.gateway.test_wzdx import feed_of as device_feed_of
 from tests.gateway.test_wzdx import wzdx_validator
 from wz_gateway.storage import Storage
-from wz_gateway.wzdx_workzone import extent_m, work_zone_event_id, work_zone_feed
+from wz_gateway.wzdx import work_zone_event_id
+from wz_gateway.wzdx_workzone import extent_m, work_zone_feed
 from wz_shared.site import Site
 from wz_shared.site_generator import generate_site
 
