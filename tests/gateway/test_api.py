@@ -247,6 +247,29 @@ def test_alerts_with_filters(api: Api) -> None:
     assert page.json()["count"] == 3 and "next" in page.links
 
 
+def test_alerts_as_csv_and_geojson(api: Api) -> None:
+    """`?format=csv` is CSV (it was JSON before), `geojson` a FeatureCollection of Points on
+    the road where each vehicle was; both keep the page's filters and its next link."""
+    response = api.get("/v1/alerts", format="csv", type="speeding", order="oldest")
+    assert response.status_code == 200 and response.headers["content-type"].startswith("text/csv")
+    rows = list(csv.DictReader(io.StringIO(response.text)))
+    assert [r["alert_id"] for r in rows] == ["a1", "a4"]
+    assert rows[0]["alert_type"] == "speeding" and float(rows[0]["station_m"]) == 700.0
+    (queue,) = csv.DictReader(io.StringIO(api.get("/v1/alerts", format="csv", type="queue").text))
+    assert queue["alert_type"] == "queue" and queue["track_id"] == ""  # no track: empty cell
+    geo = api.get("/v1/alerts", format="geojson", limit=3)
+    assert geo.headers["content-type"].startswith("application/geo+json")
+    body = geo.json()
+    assert body["type"] == "FeatureCollection" and len(body["features"]) == 3
+    assert "next" in geo.links and body["next_cursor"]
+    point = body["features"][-1]["geometry"]  # a2, at station 700 m of the default site
+    x, y = SITE.road_frame.to_site(700.0, -1.83)
+    latitude, longitude, _ = SITE.geo_frame.to_wgs84(float(x), float(y))
+    assert point["coordinates"] == pytest.approx([float(longitude), float(latitude)], abs=1e-6)
+    bad = api.get("/v1/alerts", format="xml")
+    assert bad.status_code == 422
+
+
 @pytest.mark.parametrize(
     ("path", "params", "fragments"),
     [

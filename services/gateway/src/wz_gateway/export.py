@@ -1,4 +1,4 @@
-"""Track points as CSV, GeoJSON and Parquet: pure, no I/O.
+"""Track points as CSV, GeoJSON and Parquet, alert events as CSV and GeoJSON: pure, no I/O.
 
 CSV: one row per point, the columns of :data:`~wz_gateway.models.TRACK_POINT_FIELDS` (units in
 the names), an empty cell for a missing value. GeoJSON (RFC 7946): positions are
@@ -13,13 +13,15 @@ from __future__ import annotations
 
 import csv
 import io
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import pyarrow as pa
 import pyarrow.parquet as pq
 
 from wz_gateway.models import TRACK_POINT_FIELDS, TrackPoint
+from wz_shared.messages import Alert
+from wz_shared.site import Site
 
 _PROPERTY_FIELDS = tuple(
     f for f in TRACK_POINT_FIELDS if f not in ("latitude_deg", "longitude_deg")
@@ -119,3 +121,68 @@ def trajectory_geojson(
             }
         )
     return {"type": "FeatureCollection", "features": features, "next_cursor": next_cursor}
+
+
+#: The columns of an alert page as CSV, units in the names (the evidence and the track are left
+#: to JSON: nested, and per rule).
+ALERT_FIELDS = (
+    "site",
+    "alert_id",
+    "episode_id",
+    "alert_type",
+    "severity",
+    "phase",
+    "stamp",
+    "onset_stamp",
+    "track_id",
+    "station_m",
+    "offset_m",
+    "speed_mps",
+    "measured_value",
+    "threshold_value",
+    "value_unit",
+    "description",
+)
+
+
+def alerts_csv(alerts: Sequence[Alert]) -> str:
+    """A header line, then one line per alert event (``\\r\\n`` line ends, RFC 4180)."""
+    out = io.StringIO()
+    writer = csv.writer(out)
+    writer.writerow(ALERT_FIELDS)
+    for alert in alerts:
+        row = alert.model_dump(mode="json")
+        writer.writerow("" if row.get(name) is None else row[name] for name in ALERT_FIELDS)
+    return out.getvalue()
+
+
+def alerts_geojson(
+    alerts: Sequence[Alert], sites: Mapping[str, Site], *, next_cursor: str | None = None
+) -> dict[str, Any]:
+    """A FeatureCollection of Point features, one per alert event where the vehicle was (its
+    station and offset on its site's road; a site-wide event, such as a queue's, at its
+    station on the centreline), the CSV's columns as properties."""
+    features = []
+    for alert in alerts:
+        site = sites.get(alert.site)
+        geometry = None
+        if site is not None and alert.station_m is not None:
+            x, y = site.road_frame.to_site(alert.station_m, alert.offset_m or 0.0)
+            latitude, longitude, _ = site.geo_frame.to_wgs84(float(x), float(y))
+            geometry = {
+                "type": "Point",
+                "coordinates": [round(float(longitude), 7), round(float(latitude), 7)],
+            }
+        row = alert.model_dump(mode="json")
+        features.append(
+            {
+                "type": "Feature",
+                "id": alert.alert_id,
+                "geometry": geometry,
+                "properties": {name: row.get(name) for name in ALERT_FIELDS},
+            }
+        )
+    collection: dict[str, Any] = {"type": "FeatureCollection", "features": features}
+    if next_cursor is not None:
+        collection["next_cursor"] = next_cursor
+    return collection

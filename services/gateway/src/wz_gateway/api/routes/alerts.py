@@ -3,11 +3,12 @@ phase, time, track and episode, of one site or of every site (``site=*``)."""
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Query, Request
-from fastapi.responses import Response
+from fastapi.responses import JSONResponse, Response
 
+from wz_gateway import export
 from wz_gateway.api.deps import SITE_RESPONSES, Ctx, Reader, site_of
 from wz_gateway.api.errors import V1_RESPONSES
 from wz_gateway.api.params import MAX_ID, Cursor, Limit, Stamp, check_order, next_link, page_limit
@@ -18,7 +19,29 @@ from wz_shared.messages import AlertSeverity, AlertType
 router = APIRouter(prefix="/v1", responses=V1_RESPONSES)
 
 
-@router.get("/alerts", response_model=AlertPage, tags=["alerts"], responses=SITE_RESPONSES)
+_ALERT_EXPORTS: dict[int | str, dict[str, Any]] = {
+    200: {
+        "content": {
+            "text/csv": {"schema": {"type": "string"}},
+            "application/geo+json": {
+                "schema": {
+                    "type": "object",
+                    "required": ["type", "features"],
+                    "properties": {
+                        "type": {"const": "FeatureCollection"},
+                        "features": {"type": "array"},
+                    },
+                }
+            },
+        },
+        "description": "JSON by default; CSV or GeoJSON (a Point where the vehicle was) with "
+        "`format`",
+    },
+    **SITE_RESPONSES,
+}
+
+
+@router.get("/alerts", response_model=AlertPage, tags=["alerts"], responses=_ALERT_EXPORTS)
 def get_alerts(
     request: Request,
     response: Response,
@@ -43,8 +66,13 @@ def get_alerts(
     order: Annotated[Literal["newest", "oldest"], Query()] = "newest",
     limit: Limit = None,
     cursor: Cursor = None,
-) -> AlertPage:
-    """Alert events (start, update, clear), newest first unless ``order=oldest``."""
+    output: Annotated[
+        Literal["json", "csv", "geojson"],
+        Query(alias="format", description="json, csv or geojson"),
+    ] = "json",
+) -> AlertPage | Response:
+    """Alert events (start, update, clear), newest first unless ``order=oldest``; as CSV or
+    GeoJSON with ``format``."""
     check_order(start, end, "start", "end")
     site_id = site if site == "*" else site_of(context, site).site_id
     page = context.storage.alerts(
@@ -62,7 +90,15 @@ def get_alerts(
             cursor=cursor,
         )
     )
-    for name, value in next_link(request, page.next_cursor).items():
+    links = next_link(request, page.next_cursor)
+    if output == "csv":
+        headers = {**links, "Content-Disposition": 'attachment; filename="alerts.csv"'}
+        return Response(export.alerts_csv(page.items), media_type="text/csv", headers=headers)
+    if output == "geojson":
+        sites = {one.site_id: one for one in context.sites}
+        body = export.alerts_geojson(page.items, sites, next_cursor=page.next_cursor)
+        return JSONResponse(body, media_type="application/geo+json", headers=links)
+    for name, value in links.items():
         response.headers[name] = value
     return AlertPage(
         site=site_id, count=len(page.items), next_cursor=page.next_cursor, alerts=page.items
