@@ -5,7 +5,10 @@ data, so pages, exports and the feed are not trivially empty."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -16,6 +19,7 @@ from schemathesis.specs.openapi.checks import positive_data_acceptance
 
 from tests.gateway.helpers import (
     ADMIN_KEY,
+    ROOT,
     SITE,
     car_batches,
     devices_state,
@@ -89,3 +93,16 @@ def test_every_operation_conforms_and_never_fails_on_the_server(
         check()
         checked += 1
     assert checked >= 6
+
+
+def test_the_committed_document_is_what_the_app_serves(tmp_path: Path) -> None:
+    """services/gateway/openapi.json (what a client generator or a dashboard team reads) is
+    the app's own document; a stale copy is caught with what to run."""
+    committed = ROOT / "services" / "gateway" / "openapi.json"
+    check = [sys.executable, "-m", "wz_gateway.openapi_doc", "--check"]
+    result = subprocess.run([*check, str(committed)], capture_output=True, text=True, check=False)
+    assert result.returncode == 0, result.stderr
+    stale = tmp_path / "openapi.json"
+    stale.write_text(committed.read_text().replace('"/v1/alerts"', '"/v1/alarms"'))
+    result = subprocess.run([*check, str(stale)], capture_output=True, text=True, check=False)
+    assert result.returncode == 1 and "--write" in result.stderr
