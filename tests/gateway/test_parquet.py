@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import csv
 import io
+import json
+import struct
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -79,15 +81,28 @@ def test_trajectories_as_parquet_hold_the_csv_columns_typed_and_the_json_values(
             io.StringIO(http.get("/v1/trajectories", params={"format": "csv", "limit": 1}).text)
         )
     )
-    assert table.column_names == header == list(TRACK_POINT_FIELDS)
+    assert table.column_names == [*header, "geometry"] == [*TRACK_POINT_FIELDS, "geometry"]
     assert table.schema.equals(PARQUET_SCHEMA)
     types = {field.name: field.type for field in table.schema}
     assert types["track_id"] == pa.int64() and types["stamp"] == pa.float64()
     assert types["lane_index"] == pa.int16() and types["smoothed"] == pa.bool_()
     assert types["object_class"] == pa.string() and types["speed_mps"] == pa.float64()
-    rows: list[dict[str, Any]] = table.to_pylist()
+    rows: list[dict[str, Any]] = table.drop_columns(["geometry"]).to_pylist()
     expected = http.get("/v1/trajectories", params={"limit": 100}).json()["points"]
     assert rows == expected  # the same numbers to the last bit, None where JSON has null
+    # GeoParquet 1.1: each row's point as WKB (lon, lat), the file's metadata says so.
+    geo = json.loads(table.schema.metadata[b"geo"])
+    assert geo["version"] == "1.1.0" and geo["primary_column"] == "geometry"
+    column = geo["columns"]["geometry"]
+    assert column["encoding"] == "WKB" and column["geometry_types"] == ["Point"]
+    assert "crs" not in column  # the default: OGC:CRS84, longitude and latitude
+    for row, wkb in zip(rows, table.column("geometry").to_pylist(), strict=True):
+        order, kind, x, y = struct.unpack("<BIdd", wkb)
+        assert (order, kind) == (1, 1)
+        assert (x, y) == (row["longitude_deg"], row["latitude_deg"])
+    lons = [r["longitude_deg"] for r in rows]
+    lats = [r["latitude_deg"] for r in rows]
+    assert column["bbox"] == [min(lons), min(lats), max(lons), max(lats)]
     assert {r["length_m"] for r in rows if r["track_id"] == 1} == {None, 4.5}
 
 
@@ -97,7 +112,7 @@ def test_parquet_pages_carry_the_cursor_in_the_headers(http: httpx.Client) -> No
     pages = 0
     while True:
         response = http.get("/v1/trajectories", params=params)
-        collected += read_parquet(response).to_pylist()
+        collected += read_parquet(response).drop_columns(["geometry"]).to_pylist()
         pages += 1
         cursor = response.headers.get("x-next-cursor")
         if cursor is None:
@@ -129,4 +144,4 @@ def test_an_empty_page_is_a_parquet_file_with_the_columns_and_no_rows(
     assert table.num_rows == 0 and table.schema.equals(PARQUET_SCHEMA)
     path = tmp_path / "empty.parquet"  # a file other tools open as such
     path.write_bytes(points_parquet([]))
-    assert pq.read_schema(path).names == list(TRACK_POINT_FIELDS)
+    assert pq.read_schema(path).names == [*TRACK_POINT_FIELDS, "geometry"]

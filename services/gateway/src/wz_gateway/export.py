@@ -5,14 +5,19 @@ the names), an empty cell for a missing value. GeoJSON (RFC 7946): positions are
 ``[longitude, latitude]`` in WGS84; a page of points is a FeatureCollection of Point features
 whose properties are the other columns; one track's trajectory is a LineString feature.
 Parquet: the CSV's columns, typed (:data:`PARQUET_SCHEMA`: 64-bit floats, integers, strings
-for the class and status, a boolean ``smoothed``, nulls for a missing size), zstd-compressed;
-the bytes of one file per page.
+for the class and status, a boolean ``smoothed``, nulls for a missing size), then a
+``geometry`` column (each point as WKB, longitude and latitude) with the GeoParquet 1.1 ``geo``
+metadata (encoding WKB, Point, the page's bounding box; no ``crs``: GeoParquet's default,
+OGC:CRS84, longitude and latitude on WGS 84), so GIS tools (GeoPandas, QGIS, DuckDB spatial)
+open it as points; zstd-compressed; the bytes of one file per page.
 """
 
 from __future__ import annotations
 
 import csv
 import io
+import json
+import struct
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -39,8 +44,12 @@ def points_csv(points: Sequence[TrackPoint]) -> str:
     return out.getvalue()
 
 
-#: The Parquet columns: those of the CSV, in its order, with their types; only the size may be
-#: missing (null).
+#: The GeoParquet geometry column: each point as WKB.
+GEOMETRY_COLUMN = "geometry"
+GEOPARQUET_VERSION = "1.1.0"
+
+#: The Parquet columns: those of the CSV, in its order, with their types (only the size may be
+#: missing: null), then the geometry.
 PARQUET_SCHEMA = pa.schema(
     [
         pa.field(
@@ -56,14 +65,36 @@ PARQUET_SCHEMA = pa.schema(
         )
         for name in TRACK_POINT_FIELDS
     ]
+    + [pa.field(GEOMETRY_COLUMN, pa.binary(), nullable=False)]
 )
+
+
+def _wkb_point(longitude_deg: float, latitude_deg: float) -> bytes:
+    """A WKB Point (ISO/OGC simple features): little-endian, type 1, x = lon, y = lat."""
+    return struct.pack("<BIdd", 1, 1, longitude_deg, latitude_deg)
+
+
+def geo_metadata(points: Sequence[TrackPoint]) -> dict[str, Any]:
+    """The GeoParquet 1.1 ``geo`` file metadata of a page of points."""
+    column: dict[str, Any] = {"encoding": "WKB", "geometry_types": ["Point"]}
+    if points:
+        lons = [p.longitude_deg for p in points]
+        lats = [p.latitude_deg for p in points]
+        column["bbox"] = [min(lons), min(lats), max(lons), max(lats)]
+    return {
+        "version": GEOPARQUET_VERSION,
+        "primary_column": GEOMETRY_COLUMN,
+        "columns": {GEOMETRY_COLUMN: column},
+    }
 
 
 def points_parquet(points: Sequence[TrackPoint]) -> bytes:
     """One Parquet file of the points (a row group; no rows for no points)."""
     rows = [point.model_dump(mode="json") for point in points]
     columns = {name: [row[name] for row in rows] for name in TRACK_POINT_FIELDS}
+    columns[GEOMETRY_COLUMN] = [_wkb_point(p.longitude_deg, p.latitude_deg) for p in points]
     table = pa.Table.from_pydict(columns, schema=PARQUET_SCHEMA)
+    table = table.replace_schema_metadata({"geo": json.dumps(geo_metadata(points))})
     sink = pa.BufferOutputStream()
     pq.write_table(table, sink, compression="zstd")
     data: bytes = sink.getvalue().to_pybytes()

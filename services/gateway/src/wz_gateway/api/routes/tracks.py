@@ -52,8 +52,8 @@ _EXPORT_RESPONSES: dict[int | str, dict[str, Any]] = {
                 }
             },
         },
-        "description": "JSON by default; CSV, GeoJSON or Parquet (the CSV's columns, typed) "
-        "with `format`",
+        "description": "JSON by default; CSV, GeoJSON or GeoParquet (the CSV's columns, typed, "
+        "and a WKB point geometry with GeoParquet 1.1 metadata) with `format`",
     }
 }
 
