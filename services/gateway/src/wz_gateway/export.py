@@ -33,15 +33,29 @@ _PROPERTY_FIELDS = tuple(
 )
 
 
-def points_csv(points: Sequence[TrackPoint]) -> str:
-    """A header line, then one line per point (``\\r\\n`` line ends, as RFC 4180 asks)."""
+#: The GeoJSON FeatureCollection an export answers, for the OpenAPI document.
+FEATURE_COLLECTION_SCHEMA: dict[str, Any] = {
+    "type": "object",
+    "required": ["type", "features"],
+    "properties": {"type": {"const": "FeatureCollection"}, "features": {"type": "array"}},
+}
+
+
+def _csv(fields: Sequence[str], models: Sequence[Any]) -> str:
+    """A header line of ``fields``, then one line per model, an empty cell for a missing value
+    (``\\r\\n`` line ends, as RFC 4180 asks)."""
     out = io.StringIO()
     writer = csv.writer(out)
-    writer.writerow(TRACK_POINT_FIELDS)
-    for point in points:
-        row = point.model_dump(mode="json")
-        writer.writerow("" if row[name] is None else row[name] for name in TRACK_POINT_FIELDS)
+    writer.writerow(fields)
+    for model in models:
+        row = model.model_dump(mode="json")
+        writer.writerow("" if row.get(name) is None else row[name] for name in fields)
     return out.getvalue()
+
+
+def points_csv(points: Sequence[TrackPoint]) -> str:
+    """The points as CSV, the columns of :data:`TRACK_POINT_FIELDS`."""
+    return _csv(TRACK_POINT_FIELDS, points)
 
 
 #: The GeoParquet geometry column: each point as WKB.
@@ -177,14 +191,8 @@ ALERT_FIELDS = (
 
 
 def alerts_csv(alerts: Sequence[Alert]) -> str:
-    """A header line, then one line per alert event (``\\r\\n`` line ends, RFC 4180)."""
-    out = io.StringIO()
-    writer = csv.writer(out)
-    writer.writerow(ALERT_FIELDS)
-    for alert in alerts:
-        row = alert.model_dump(mode="json")
-        writer.writerow("" if row.get(name) is None else row[name] for name in ALERT_FIELDS)
-    return out.getvalue()
+    """The alert events as CSV, the columns of :data:`ALERT_FIELDS`."""
+    return _csv(ALERT_FIELDS, alerts)
 
 
 def alerts_geojson(

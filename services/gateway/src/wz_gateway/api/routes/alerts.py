@@ -23,16 +23,7 @@ _ALERT_EXPORTS: dict[int | str, dict[str, Any]] = {
     200: {
         "content": {
             "text/csv": {"schema": {"type": "string"}},
-            "application/geo+json": {
-                "schema": {
-                    "type": "object",
-                    "required": ["type", "features"],
-                    "properties": {
-                        "type": {"const": "FeatureCollection"},
-                        "features": {"type": "array"},
-                    },
-                }
-            },
+            "application/geo+json": {"schema": export.FEATURE_COLLECTION_SCHEMA},
         },
         "description": "JSON by default; CSV or GeoJSON (a Point where the vehicle was) with "
         "`format`",

@@ -41,16 +41,7 @@ _EXPORT_RESPONSES: dict[int | str, dict[str, Any]] = {
         "content": {
             CSV: {"schema": {"type": "string"}},
             PARQUET: {"schema": {"type": "string", "format": "binary"}},
-            GEOJSON: {
-                "schema": {
-                    "type": "object",
-                    "required": ["type", "features"],
-                    "properties": {
-                        "type": {"const": "FeatureCollection"},
-                        "features": {"type": "array"},
-                    },
-                }
-            },
+            GEOJSON: {"schema": export.FEATURE_COLLECTION_SCHEMA},
         },
         "description": "JSON by default; CSV, GeoJSON or GeoParquet (the CSV's columns, typed, "
         "and a WKB point geometry with GeoParquet 1.1 metadata) with `format`",
