@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.common import ROOT, TIMEOUT_S, free_port, summarize
-from benchmarks.webhook_latency import ADMIN_KEY, _alert, _gateway, _Receiver
+from benchmarks.webhook_latency import _alert, _gateway, _Receiver
 from wz_gateway import webhooks
 from wz_shared.bus import Bus
 from wz_shared.codec import encode_json
@@ -178,5 +178,3 @@ def run(quick: bool) -> dict[str, Any]:
         "webhooked": summarize(result["webhooked_s"]) if result["webhooked_s"] else None,
     }
 
-
-__all__ = ["ADMIN_KEY", "flood_run", "run"]

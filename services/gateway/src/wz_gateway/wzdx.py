@@ -194,7 +194,7 @@ def detector_station_m(site: Site, override_m: float | None = None) -> float:
     return max(0.0, float(station) - 30.0)
 
 
-def _lane_order(site: Site, lane_index: int) -> int:
+def lane_order(site: Site, lane_index: int) -> int:
     """WZDx numbers lanes from 1 at the left; the site from 0 at the right."""
     return len(site.lanes) - lane_index
 
@@ -233,9 +233,9 @@ def traffic_sensor_feature(inputs: FeedInputs) -> dict[str, Any] | None:
         properties["volume_vph"] = _round(summary.volume_vph)
         properties["occupancy_percent"] = _round(summary.occupancy_percent)
         lane_data = []
-        for lane in sorted(summary.lanes, key=lambda lane: _lane_order(site, lane.lane_index)):
+        for lane in sorted(summary.lanes, key=lambda lane: lane_order(site, lane.lane_index)):
             entry: dict[str, Any] = {
-                "lane_order": _lane_order(site, lane.lane_index),
+                "lane_order": lane_order(site, lane.lane_index),
                 "volume_vph": _round(lane.volume_vph),
                 "occupancy_percent": _round(lane.occupancy_percent),
             }

@@ -26,16 +26,16 @@ import numpy as np
 
 from wz_gateway.wzdx import (
     CC0_LICENSE,
+    MPS_TO_KPH,
     UPDATE_FREQUENCY_S,
     WZDX_VERSION,
-    _lane_order,
     data_source_id,
+    lane_order,
     rfc3339,
     work_zone_event_id,
 )
 from wz_shared.site import AreaKind, Site
 
-MPS_TO_KPH = 3.6
 #: Spacing of the event's geometry along the road [m]: a curve's chord error stays under
 #: a decimetre for radii above 300 m.
 STEP_M = 50.0
@@ -72,8 +72,8 @@ def geometry(site: Site) -> dict[str, Any]:
 def lanes(site: Site) -> list[dict[str, Any]]:
     """WZDx lanes, left to right: the closed one ``closed``, the others ``open``."""
     out = []
-    for lane in sorted(site.lanes, key=lambda lane: _lane_order(site, lane.index)):
-        order = _lane_order(site, lane.index)
+    for lane in sorted(site.lanes, key=lambda lane: lane_order(site, lane.index)):
+        order = lane_order(site, lane.index)
         out.append(
             {
                 "order": order,
@@ -129,7 +129,7 @@ def work_zone_feed(
             "direction": site.road_direction,
             "name": site.name,
             "description": (
-                f"Lane {_lane_order(site, site.closed_lane_index)} closed (from the left); "
+                f"Lane {lane_order(site, site.closed_lane_index)} closed (from the left); "
                 "monitored by a trailer-mounted sensor mast upstream of the taper"
             ),
             "update_date": rfc3339(now),
