@@ -177,4 +177,3 @@ def run(quick: bool) -> dict[str, Any]:
         "stored": summarize(result["stored_s"]) if result["stored_s"] else None,
         "webhooked": summarize(result["webhooked_s"]) if result["webhooked_s"] else None,
     }
-
