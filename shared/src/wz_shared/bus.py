@@ -49,7 +49,7 @@ from wz_shared import codec
 from wz_shared.keys import Keys
 from wz_shared.messages import Message
 from wz_shared.settings import BusSettings
-from wz_shared.trust import source_problem, tls_config
+from wz_shared.trust import expected_source, source_problem, tls_config
 
 log = logging.getLogger(__name__)
 
@@ -234,7 +234,14 @@ class Publisher(Generic[M]):
 class _SampleQueue:
     """A ring or a bounded FIFO of raw payloads, fed from Zenoh's thread."""
 
-    def __init__(self, mode: QueueMode, capacity: int, key: str, stats: BusStats) -> None:
+    def __init__(
+        self,
+        mode: QueueMode,
+        capacity: int,
+        key: str,
+        stats: BusStats,
+        on_push: Callable[[], None] | None = None,
+    ) -> None:
         if capacity < 1:
             raise ValueError("queue capacity must be at least 1")
         self.mode = mode
@@ -244,6 +251,8 @@ class _SampleQueue:
         self._closed = False
         self._key = key
         self._stats = stats
+        #: Called after each sample queued (a consumer that waits on several sources).
+        self._on_push = on_push
 
     def push(self, key: str, payload: bytes) -> None:
         with self._cond:
@@ -259,6 +268,8 @@ class _SampleQueue:
                     return
             self._items.append((key, payload))
             self._cond.notify_all()
+        if self._on_push is not None:
+            self._on_push()
 
     def pop(self, timeout_s: float | None) -> tuple[str, bytes] | None:
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
@@ -305,11 +316,12 @@ class Subscription(Generic[T]):
         decoder: Decoder[T],
         mode: QueueMode,
         capacity: int,
+        on_push: Callable[[], None] | None = None,
     ) -> None:
         self.key = key
         self._decoder = decoder
         self._stats = bus.stats
-        self._queue = _SampleQueue(mode, capacity, key, bus.stats)
+        self._queue = _SampleQueue(mode, capacity, key, bus.stats, on_push)
         self._subscriber = bus.session.declare_subscriber(key, self._on_sample)
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
@@ -515,12 +527,15 @@ class _CacheRefetch:
 
 def _source_checked(key: str, value: object) -> object:
     """``value`` if its ``source_id`` is the one ``key`` carries; else a DecodeError."""
-    meta = getattr(value, "meta", value)  # a frame's source is in its metadata
-    source = getattr(meta, "source_id", None)
-    if isinstance(source, str):
-        problem = source_problem(key, source)
-        if problem is not None:
-            raise codec.DecodeError("wrong_source", problem)
+    if isinstance(value, codec.Frame):
+        value_source = value.meta.source_id  # a frame's source is in its metadata
+    elif isinstance(value, Message):
+        value_source = value.source_id
+    else:  # raw bytes: not decoded, not checked
+        return value
+    expected = expected_source(key)
+    if expected is not None and value_source != expected:
+        raise codec.DecodeError("wrong_source", str(source_problem(key, value_source)))
     return value
 
 
@@ -607,9 +622,13 @@ class Bus:
         *,
         mode: QueueMode = "fifo",
         capacity: int = 4096,
+        on_push: Callable[[], None] | None = None,
     ) -> Subscription[M]:
-        """Queue JSON messages of ``cls`` from ``key`` (may hold wildcards)."""
-        return self._keep(lambda: Subscription(self, key, json_decoder(cls), mode, capacity))
+        """Queue JSON messages of ``cls`` from ``key`` (may hold wildcards); ``on_push()``
+        after each sample queued, on Zenoh's thread (keep it short: set an event)."""
+        return self._keep(
+            lambda: Subscription(self, key, json_decoder(cls), mode, capacity, on_push)
+        )
 
     def subscribe_frames(
         self,

@@ -42,6 +42,7 @@ whose ``source_id`` is not the sensor its key names, is refused and counted
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -266,6 +267,7 @@ def tls_config(folder: Path) -> dict[str, Any]:
 # --- consumers ------------------------------------------------------------------------------
 
 
+@functools.lru_cache(maxsize=4096)
 def expected_source(key: str) -> str | None:
     """The ``source_id`` a message on the concrete ``key`` must carry, or None when any may.
 

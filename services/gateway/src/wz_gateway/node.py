@@ -68,13 +68,12 @@ Report = Callable[[str, str, str], None]  # key, reason, detail
 MAX_GROUP = 256
 #: Most track batches stored in one transaction: an alert that comes meanwhile waits for it.
 MAX_TRACK_GROUP = 64
-#: After a transaction of track batches the writer stores no other for this share of the time
-#: it took (alerts still go at once): under a flood the database stays free a third of the
-#: time for the webhook deliverer's transactions and the API, instead of the writer's track
-#: transactions following each other and holding them off. At a normal 10 Hz it never waits.
+#: After a full transaction of track batches (a backlog: the writer is behind, a flood) the
+#: writer stores no other for this share of the time it took (alerts still go at once), so the
+#: database stays free a third of the time for the webhook deliverer's transactions and the
+#: API instead of back-to-back track transactions holding them off. A group that is not full
+#: (the tracker's 10 Hz, several sites') never waits.
 TRACK_PAUSE_SHARE = 0.5
-#: How long the writer waits for an alert before it looks at the track ring again [s].
-TRACKS_POLL_S = 0.02
 _WRITE_ATTEMPTS = 3
 #: Smoothing of ended tracks still done at a stop [s].
 _STOP_SMOOTHING_S = 2.0
@@ -104,7 +103,8 @@ class Writer:
     webhooks : WebhookDeliverer, optional
         Woken when a group queued webhook events.
     tracks : Subscription of TrackBatch, optional
-        The node's ring of track batches (bulk: stored after everything in the queue).
+        The node's ring of track batches (bulk: stored after everything in the queue); its
+        ``on_push`` must be :meth:`wake`.
     beat : callable, optional
         ``beat(processed)`` each round of :meth:`run` (the node's liveness).
     """
@@ -133,6 +133,12 @@ class Writer:
         self._tracks_at: dict[str, float] = {}
         #: No track transaction before this [monotonic s] (:data:`TRACK_PAUSE_SHARE`).
         self._tracks_after = 0.0
+        #: Set when something arrives (the queue or the track ring): the writer's wait.
+        self._wake = threading.Event()
+
+    def wake(self) -> None:
+        """Something arrived (Zenoh's thread): the writer looks again."""
+        self._wake.set()
 
     def offer(self, key: str, message: Message) -> None:
         """Queue a decoded message (Zenoh's thread); waits while the queue is full."""
@@ -146,6 +152,7 @@ class Writer:
         while not self.stop.is_set():
             try:
                 self.queue.put(message, timeout=0.1)
+                self._wake.set()
                 return
             except queue.Full:
                 continue
@@ -182,27 +189,34 @@ class Writer:
             for site, age in sorted(old.items())
         )
 
-    def _group(self, timeout_s: float) -> list[Message]:
-        """The next group: the queue's (alerts first), else track batches from the ring,
-        else the queue's first within ``timeout_s``."""
-        try:
-            group = [self.queue.get_nowait()]
-        except queue.Empty:
-            paused = time.monotonic() < self._tracks_after and timeout_s > 0.0
-            tracks = [] if paused else self._track_group()
-            if tracks or timeout_s <= 0.0:
-                return tracks
-            try:
-                wait_s = timeout_s if self.tracks is None else min(timeout_s, TRACKS_POLL_S)
-                group = [self.queue.get(timeout=wait_s)]
-            except queue.Empty:
-                return []
+    def _queued(self) -> list[Message]:
+        """Up to MAX_GROUP messages of the queue, without waiting."""
+        group: list[Message] = []
         while len(group) < MAX_GROUP:
             try:
                 group.append(self.queue.get_nowait())
             except queue.Empty:
                 break
         return group
+
+    def _group(self, timeout_s: float) -> list[Message]:
+        """The next group: the queue's (alerts first), else track batches from the ring
+        (unless paused), waiting up to ``timeout_s`` for either."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            self._wake.clear()  # before looking: what comes after wakes the wait below
+            group = self._queued()
+            if group:
+                return group
+            now = time.monotonic()
+            if now >= self._tracks_after or timeout_s <= 0.0:
+                group = self._track_group()
+                if group:
+                    return group
+            if now >= deadline:
+                return []
+            until = deadline if now >= self._tracks_after else min(deadline, self._tracks_after)
+            self._wake.wait(until - now)
 
     def write(self, group: list[Message]) -> bool:
         """Store one group, retrying a refused transaction; False if it was given up."""
@@ -273,7 +287,8 @@ class Writer:
             if group:
                 started = time.monotonic()
                 self.write(group)
-                if isinstance(group[0], TrackBatch) and self.tracks is not None:
+                backlog = len(group) >= MAX_TRACK_GROUP and isinstance(group[0], TrackBatch)
+                if backlog and self.tracks is not None:
                     took = time.monotonic() - started
                     self._tracks_after = time.monotonic() + TRACK_PAUSE_SHARE * took
             self.beat(bool(group))
@@ -338,11 +353,6 @@ def run(
         if sites.several
         else TrackFinisher.of(storage, sites.default, settings, metrics)
     )
-    # Track batches, the bulk: a ring read (and decoded) by the writer thread, never a hold
-    # on Zenoh's receive thread, which also carries the alerts.
-    tracks = bus.subscribe(
-        sites.key("tracks"), TrackBatch, mode="ring", capacity=settings.queue_capacity
-    )
     writer = Writer(
         storage,
         sites,
@@ -353,9 +363,18 @@ def run(
         live=broadcaster_for(settings, metrics.registry),
         finisher=finisher,
         webhooks=deliverer,
-        tracks=tracks,
         beat=lambda processed: runtime.beat(processed=processed),
     )
+    # Track batches, the bulk: a ring read (and decoded) by the writer thread, never a hold
+    # on Zenoh's receive thread, which also carries the alerts; each one wakes the writer.
+    tracks = bus.subscribe(
+        sites.key("tracks"),
+        TrackBatch,
+        mode="ring",
+        capacity=settings.queue_capacity,
+        on_push=writer.wake,
+    )
+    writer.tracks = tracks
     bus.on(sites.key("alerts/*"), Alert, writer.offer, recover=True)
     bus.on(sites.key("devices/state"), RoadsideDeviceState, writer.offer, recover=True)
     bus.on(sites.key("status/*"), ServiceStatus, writer.offer)
