@@ -2,12 +2,20 @@
 
 from __future__ import annotations
 
+import os
 import socket
 from collections.abc import Iterator
 
 import pytest
+from hypothesis import settings
 
 from wz_shared.settings import BusSettings
+
+# Property tests draw the same examples on every run (a CI result is reproducible); set
+# HYPOTHESIS_PROFILE=explore to draw new ones when hunting for counter-examples.
+settings.register_profile("reproducible", derandomize=True)
+settings.register_profile("explore", derandomize=False, max_examples=2000)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "reproducible"))
 
 
 def free_port() -> int:

@@ -82,7 +82,10 @@ def _check_covariance(
     sub = matrix[np.ix_(kept, kept)]
     sub = 0.5 * sub + 0.5 * sub.T  # no overflow
     with np.errstate(over="ignore", invalid="ignore"):
-        correlation = sub / std[kept][:, None] / std[kept][None, :]
+        upper = np.triu(sub / std[kept][:, None] / std[kept][None, :], 1)
+    # A correlation matrix's diagonal is 1 exactly; sqrt(P_ii)^2 is not always P_ii, and a
+    # diagonal a rounding off 1 would move the Cholesky pivot of a nearly singular P.
+    correlation = upper + upper.T + np.eye(kept.size)
     if not np.all(np.isfinite(correlation)):
         raise ValueError(
             f"covariance {values}: not positive definite (|P_ij| above sqrt(P_ii P_jj))"
