@@ -51,6 +51,7 @@ SETTINGS_CLASSES = {
     "alert-service": "wz_alert_service.settings:AlertServiceSettings",
     "gateway": "wz_gateway.settings:GatewaySettings",
     "drivers": "wz_drivers.settings:DriversSettings",
+    "device-driver": "wz_drivers.device_driver:DeviceDriverSettings",
 }
 
 #: Users that are root inside a container.
@@ -609,6 +610,8 @@ def test_profiles_separate_simulation_from_the_field(
         assert used <= set(declared), f"{service.name}: undeclared profile {used - set(declared)}"
         if service.name == "drivers":  # the field's sensors, in the simulator's place
             assert used == {"field"}
+        elif service.name == "device-driver":  # a trailer with a message sign on its network
+            assert used == {"sign"}
         elif service.name != "simulator":
             # The router and the pipeline run whatever feeds them.
             assert not used, f"{service.name} would not run in the field"

@@ -208,6 +208,14 @@ STACK: tuple[ServiceSpec, ...] = (
         optional=True,
     ),
     ServiceSpec(
+        name="device-driver",
+        module="wz_drivers.device_driver",
+        summary="the portable message sign over NTCIP 1203 (SNMP at WZ_SIGN_HOST:WZ_SIGN_PORT) "
+        "showing the alert service's message; `python -m wz_drivers.sign_sim` is a bench sign",
+        env_prefix="WZ_SIGN_",
+        optional=True,
+    ),
+    ServiceSpec(
         name="gateway",
         module="wz_gateway.node",
         summary="trajectories, alerts and devices into SQLite; REST API and WZDx device feed on "

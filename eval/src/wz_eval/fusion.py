@@ -93,6 +93,7 @@ from wz_eval.fusion_report import (
     must_show,
     table_summary,
 )
+from wz_eval.lane_counts import lane_volume_report
 from wz_eval.metrics import AxisErrors, TruthIndex, in_range, match, score_instant
 from wz_eval.pipeline import PipelineOptions, PipelineRecord, run_pipeline
 from wz_fusion_tracker.calibration import (
@@ -527,6 +528,11 @@ def evaluate(
         "alerts": alerts,
         "alerts_all_in_range": alerts_all_in_range,
         "fused_by_station": by_station.report(),
+        "lane_volumes": (
+            lane_volume_report(site, alert_batches, record.truth, *_scored_interval(record))
+            if record.truth
+            else None
+        ),
         "dropouts": [
             _dropout_report(d, options.warmup_s, fused_samples, mot, mot_times)
             for d in options.dropouts
@@ -551,6 +557,11 @@ def evaluate(
 
         report["plots"] = write_plots(plots_dir, site, record, scores, report)
     return report
+
+
+def _scored_interval(record: PipelineRecord) -> tuple[float, float]:
+    """First and last truth stamp: the scored interval, after the warm-up."""
+    return record.truth[0][0], record.truth[-1][0]
 
 
 def _sensor_errors(

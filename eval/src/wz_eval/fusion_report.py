@@ -108,6 +108,22 @@ def must_show(report: dict[str, Any]) -> list[dict[str, Any]]:
             else vehicles >= TARGETS["paper_table_vehicles"]
             and share >= TARGETS["paper_table_share"],
         )
+    lane_volumes = report.get("lane_volumes")
+    if lane_volumes:
+        worst = max(
+            (
+                abs(row["volume_error"])
+                for row in lane_volumes["lanes"]
+                if row["volume_error"] is not None
+            ),
+            default=None,
+        )
+        add(
+            "lane volume at the WZDx traffic detector, worst lane's error vs truth (issue 27)",
+            worst,
+            f"<= {lane_volumes['tolerance']:g}",
+            lane_volumes["holds"],
+        )
     for dropout in report["dropouts"]:
         name = f"{dropout['sensor_id']} silent {dropout['duration_s']:g} s"
         lon, lat = dropout["fused_rmse_longitudinal_m"], dropout["fused_rmse_lateral_m"]
@@ -213,6 +229,7 @@ def markdown(report: dict[str, Any]) -> str:
         value = row["value"]
         shown = str(value) if isinstance(value, int) else ratio(value)
         lines.append(f"| {row['check']} | {shown} | {row['target']} | {holds} |")
+    lines += _lane_volume_lines(report.get("lane_volumes"))
     coverage, circle = report.get("coverage"), report.get("circle")
     if coverage is not None and circle is not None:
         reach = ", ".join(
@@ -273,3 +290,30 @@ def markdown(report: dict[str, Any]) -> str:
     for plot in report.get("plots", []):
         lines.append(f"![{plot}]({plot})")
     return "\n".join(lines) + "\n"
+
+
+def _lane_volume_lines(lane_volumes: dict[str, Any] | None) -> list[str]:
+    """The WZDx traffic detector's counts per lane against the truth (empty without them)."""
+    if not lane_volumes:
+        return []
+    lines = [
+        "",
+        f"Lane volumes at the WZDx traffic detector (station "
+        f"{lane_volumes['detector_station_m']:g} m, {lane_volumes['interval_s']:g} s; lanes "
+        "in WZDx order, 1 at the left; tolerance "
+        f"{100 * lane_volumes['tolerance']:g} % of the truth):",
+        "",
+        "| lane | truth vehicles | track vehicles | error | truth / track veh/h | "
+        "speed difference [m/s] |",
+        "|---|---|---|---|---|---|",
+    ]
+    for row in [*lane_volumes["lanes"], lane_volumes["station"]]:
+        error = row["volume_error"]
+        speed = row["speed_difference_mps"]
+        lines.append(
+            f"| {row['lane_order'] or 'all'} | {row['truth_vehicles']} | "
+            f"{row['track_vehicles']} | {'-' if error is None else f'{100 * error:+.1f} %'} | "
+            f"{row['truth_volume_vph']:g} / {row['track_volume_vph']:g} | "
+            f"{'-' if speed is None else f'{speed:+.2f}'} |"
+        )
+    return lines

@@ -493,6 +493,23 @@ class ServiceState(StrEnum):
     STOPPING = "stopping"
 
 
+class DeviceLink(BaseModel):
+    """Whether a service reaches a field device it drives (a message sign, a beacon relay).
+
+    ``reachable`` is None until the first exchange; ``shows`` is what the device itself last
+    reported showing (a sign's message, ``on``/``off`` for a beacon), read back from it.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    address: Annotated[str, Field(max_length=256)]
+    reachable: bool | None = None
+    detail: Annotated[str, Field(max_length=512)] = ""
+    shows: Annotated[str, Field(max_length=512)] | None = None
+    #: Seconds since the device last answered (None: never).
+    answer_age_s: NonNegFloat | None = None
+
+
 class ServiceStatus(Message):
     """Periodic health of a service: message rates, latencies and drops per kind."""
 
@@ -511,6 +528,8 @@ class ServiceStatus(Message):
     loop_age_s: NonNegFloat | None = None
     #: Seconds since it last processed an input (a frame, a batch, a message; None: none yet).
     input_age_s: NonNegFloat | None = None
+    #: The field devices the service drives, by name (``dynamic-message-sign``).
+    devices: dict[Identifier, DeviceLink] = Field(default_factory=dict)
 
 
 def kind_of(cls: type[Message]) -> str:

@@ -46,7 +46,7 @@ from pydantic import ValidationError
 from wz_shared import health
 from wz_shared.bus import Bus, BusStats
 from wz_shared.logs import configure_logging
-from wz_shared.messages import ServiceState, ServiceStatus
+from wz_shared.messages import DeviceLink, ServiceState, ServiceStatus
 from wz_shared.settings import BusSettings, ServiceSettings
 from wz_shared.signals import stop_on_signals
 from wz_shared.site import Site, SiteFileError, load_site
@@ -92,6 +92,9 @@ class ServiceRuntime:
         self._started = time.monotonic()
         self._bus: Bus | None = None
         self._health: threading.Thread | None = None
+        #: The field devices the node drives, as it last found them (replaced whole by the
+        #: node; read by the status thread): one it cannot reach makes the state ``degraded``.
+        self.devices: dict[str, DeviceLink] = {}
 
     @property
     def bus(self) -> Bus:
@@ -149,8 +152,13 @@ class ServiceRuntime:
         loop_age_s = self.loop_age_s(now)
         input_age_s = None if self._input_at is None else max(0.0, now - self._input_at)
         state = self.state
+        devices = dict(self.devices)
         if state != ServiceState.STOPPING and (loop_age_s or 0.0) > self.stall_after_s:
             state = ServiceState.STALLED
+        elif state == ServiceState.RUNNING and any(
+            link.reachable is False for link in devices.values()
+        ):
+            state = ServiceState.DEGRADED
         status = ServiceStatus(
             site=self.site,
             source_id=self.service,
@@ -165,6 +173,7 @@ class ServiceRuntime:
             dropped_counts=snap["dropped"],
             loop_age_s=None if loop_age_s is None else round(loop_age_s, 3),
             input_age_s=None if input_age_s is None else round(input_age_s, 3),
+            devices=devices,
         )
         stalled = state == ServiceState.STALLED
         if stalled and not self._stalled:

@@ -27,6 +27,7 @@ from wz_gateway.wzdx import (
     frames_health,
     freshness,
     service_health,
+    sign_link_health,
     traffic_mast,
 )
 from wz_shared.keys import Keys
@@ -41,6 +42,7 @@ UNIX_STAMP_MIN = 1e9
 LIDAR_SERVICE = "lidar-detector"
 CAMERA_SERVICE = "camera-detector"
 ALERT_SERVICE = "alert-service"
+DEVICE_DRIVER = "device-driver"
 #: Points this far either side of the detector are read to find crossings [m].
 _CROSSING_REACH_M = 60.0
 
@@ -184,6 +186,9 @@ def device_feed_of(
         devices=devices,
         devices_health=service_health(
             ALERT_SERVICE, statuses.get(ALERT_SERVICE), now, stale_after_s
+        ),
+        sign_health=sign_link_health(
+            DEVICE_DRIVER, statuses.get(DEVICE_DRIVER), now, stale_after_s
         ),
         stamp_offset_s=stamp_offset_s(tracks),
         traffic_interval_s=traffic_interval_s,

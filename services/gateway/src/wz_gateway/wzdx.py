@@ -28,6 +28,8 @@ from wz_shared.messages import AlertType, RoadsideDeviceState, ServiceState, Ser
 from wz_shared.site import AreaKind, SensorMount, Site
 
 WZDX_VERSION = "4.2"
+#: The message sign's name in a device driver's status (``ServiceStatus.devices``).
+SIGN_DEVICE = "dynamic-message-sign"
 CC0_LICENSE = "https://creativecommons.org/publicdomain/zero/1.0/"
 #: How often the feed's content changes [s] (it is computed on each request; the traffic
 #: sensor's interval moves with every tracker cycle).
@@ -89,6 +91,28 @@ def service_health(
     return health
 
 
+def sign_link_health(
+    service: str, status: tuple[ServiceStatus, float] | None, now: float, stale_after_s: float
+) -> DeviceHealth | None:
+    """Whether the real sign answers its driver (``service``'s status names it under
+    ``dynamic-message-sign``); None where no driver reports one (the sign is the alert
+    service's state alone, as in simulation)."""
+    if status is None or SIGN_DEVICE not in status[0].devices:
+        return None
+    alive = service_health(service, status, now, stale_after_s)
+    if alive.status != "ok":
+        return alive
+    link = status[0].devices[SIGN_DEVICE]
+    if link.reachable is False:
+        since = "" if link.answer_age_s is None else f" (last answer {link.answer_age_s:.0f} s ago)"
+        return DeviceHealth(
+            "error", (f"sign at {link.address} not answering: {link.detail}{since}",), status[1]
+        )
+    if link.reachable is None:
+        return DeviceHealth("unknown", (f"sign at {link.address} not contacted yet",), status[1])
+    return alive
+
+
 def frames_health(
     service: str,
     status: tuple[ServiceStatus, float] | None,
@@ -125,6 +149,8 @@ class FeedInputs:
     cameras: dict[str, DeviceHealth]
     devices: RoadsideDeviceState | None
     devices_health: DeviceHealth
+    #: The real sign's link, from its driver's status (None: no driver reports one).
+    sign_health: DeviceHealth | None = None
     stamp_offset_s: float = 0.0
     traffic_interval_s: float = 300.0
     contact_email: str | None = None
@@ -321,6 +347,7 @@ def roadside_features(inputs: FeedInputs) -> list[dict[str, Any]]:
         },
         "geometry": geometry,
     }
+    sign_health = health if inputs.sign_health is None else combine(health, inputs.sign_health)
     sign = {
         "id": device_id(site, "dynamic-message-sign"),
         "type": "Feature",
@@ -329,7 +356,7 @@ def roadside_features(inputs: FeedInputs) -> list[dict[str, Any]]:
                 site,
                 "dynamic-message-sign",
                 "Portable message sign",
-                health,
+                sign_health,
                 "Shows the warning of the highest-priority open alert",
             ),
             "message_multi_string": multi(devices.sign_text) if devices is not None else "",
