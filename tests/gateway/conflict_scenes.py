@@ -19,6 +19,7 @@ import math
 import numpy as np
 
 from wz_gateway.conflicts import Trajectories, trajectories
+from wz_shared.messages import Track
 
 DT_S = 0.05
 LENGTH_M = 4.5
@@ -87,4 +88,29 @@ def as_trajectories(rows: list[Row]) -> Trajectories:
         length_m=[LENGTH_M] * len(rows),
         width_m=[WIDTH_M] * len(rows),
         lane_index=lane,
+    )
+
+
+def scene_track(
+    track_id: int, x: float, y: float, vx: float, vy: float, heading: float, lane: int
+) -> Track:
+    """A scene's vehicle as a published track (station and offset: y and -x)."""
+    return Track(
+        track_id=track_id,
+        x_m=x,
+        y_m=y,
+        vx_mps=vx,
+        vy_mps=vy,
+        covariance=[0.0] * 16,
+        station_m=y,
+        offset_m=-x,
+        speed_mps=math.hypot(vx, vy),
+        heading_rad=heading,
+        lane_index=lane,
+        age_s=1.0,
+        hits=10,
+        confirmed=True,
+        sources=["lidar-mast"],
+        length_m=LENGTH_M,
+        width_m=WIDTH_M,
     )

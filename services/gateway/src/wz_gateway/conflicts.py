@@ -143,6 +143,8 @@ DEFAULT_WIDTH_M = 1.8
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
+#: Values that may be missing: an array (NaN) or a sequence (None).
+MaybeFloats = npt.ArrayLike | Sequence[float | None]
 
 
 @dataclass(frozen=True)
@@ -248,15 +250,15 @@ def trajectories(
     vx_mps: npt.ArrayLike,
     vy_mps: npt.ArrayLike,
     heading_rad: npt.ArrayLike,
-    length_m: npt.ArrayLike | None = None,
-    width_m: npt.ArrayLike | None = None,
+    length_m: MaybeFloats | None = None,
+    width_m: MaybeFloats | None = None,
     lane_index: npt.ArrayLike | None = None,
-    accel_mps2: npt.ArrayLike | None = None,
+    accel_mps2: MaybeFloats | None = None,
 ) -> Trajectories:
     """:class:`Trajectories` from columns, None (or a None value) for what is unknown."""
     n = len(vehicle_id)
 
-    def floats(values: npt.ArrayLike | None) -> FloatArray:
+    def floats(values: MaybeFloats | None) -> FloatArray:
         if values is None:
             return np.full(n, np.nan)
         return np.array(
