@@ -12,6 +12,7 @@ import pytest
 
 from wz_eval.fusion import SOURCES, Dropout, EvalOptions, pipeline_options
 from wz_fusion_tracker.calibration import load_bias_map
+from wz_gateway.conflicts import SSAM_COLUMNS
 
 ROOT = Path(__file__).resolve().parents[2]
 BIAS_MAP = ROOT / "deploy" / "sites" / "us75-lincoln.bias-map.json"
@@ -78,6 +79,14 @@ def test_wz_eval_writes_the_report_json_markdown_and_plots(tmp_path: Path) -> No
     assert coverage["covered_share_upstream"] > 0.95 > coverage["covered_share_downstream"]
     assert coverage["per_sensor_reach_m"]["camera-mast"][1] < 0.0  # it faces the approach
     assert report["id_switches"] >= 0
+    # SSAM's conflicts on the tracks and the truth, by type, each table beside the report
+    conflicts = report["conflicts"]
+    for side in ("tracks", "truth"):
+        assert set(conflicts[side]["by_type"]) == {"rear end", "lane change", "crossing"}
+        assert sum(conflicts[side]["by_type"].values()) == conflicts[side]["count"]
+        table = (out / conflicts["ssam_csv"][side]).read_text().splitlines()
+        assert tuple(table[0].split(",")) == SSAM_COLUMNS
+        assert len(table) == 1 + conflicts[side]["count"]
     fused = report["sources"]["fused"]
     assert fused["rmse_longitudinal_m"] < 1.5 and fused["rmse_lateral_m"] < 1.0
     assert report["rmse_speed_mps"]["fused"] < 2.0

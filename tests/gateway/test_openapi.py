@@ -68,7 +68,7 @@ def test_every_operation_conforms_and_never_fails_on_the_server(
     operations = [
         op for op in (result.ok() for result in api.get_all_operations()) if op.path != "/v1/stream"
     ]
-    assert len(operations) == 14 + 7  # 7: /v1/webhooks
+    assert len(operations) == 15 + 7  # 7: /v1/webhooks
     checked = 0
     for operation in operations:
         has_input = any(True for _ in operation.iter_parameters()) or bool(

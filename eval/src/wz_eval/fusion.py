@@ -64,7 +64,8 @@ run, it would be scored on its own training data. The sources scored alone (``ca
 (a dropout); the report then gives, per dropout, the fused error and identity switches inside
 the window.
 
-Writes ``DIR/eval.json`` (or ``--json``), ``DIR/eval.md`` and PNG plots in ``DIR``.
+Writes ``DIR/eval.json`` (or ``--json``), ``DIR/eval.md``, PNG plots and SSAM's conflict tables of
+the tracks and of the truth within the alerts' range (:mod:`wz_eval.conflicts_report`) in ``DIR``.
 """
 
 from __future__ import annotations
@@ -86,6 +87,7 @@ import numpy as np
 from wz_camera_detector.settings import camera_mount
 from wz_eval.alerts import observed_truth, run_alert_engine, score_alerts, track_follows
 from wz_eval.by_station import StationBreakdown
+from wz_eval.conflicts_report import conflict_report
 from wz_eval.coverage_report import coverage_report, weather_coverage
 from wz_eval.fusion_report import (
     ALERT_TRUTH_RANGE_M,
@@ -527,6 +529,8 @@ def evaluate(
         "paper_table": paper_table(site, scores, centre, options.window_upstream_m),
         "alerts": alerts,
         "alerts_all_in_range": alerts_all_in_range,
+        # SSAM's conflicts on the published tracks and the same truth (CSV tables beside)
+        "conflicts": conflict_report(alert_batches, alert_truth, plots_dir),
         "fused_by_station": by_station.report(),
         "lane_volumes": (
             lane_volume_report(site, alert_batches, record.truth, *_scored_interval(record))

@@ -13,6 +13,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from wz_gateway import webhooks
 from wz_gateway.auth import Scope
+from wz_gateway.conflicts import Conflict
 from wz_shared.messages import (
     Alert,
     AlertPhase,
@@ -73,6 +74,20 @@ class Trajectory(_Model):
     count: int
     next_cursor: str | None
     points: list[TrackPoint]
+
+
+class ConflictPage(_Model):
+    """Conflicts of a window (:mod:`wz_gateway.conflicts`), by the time of their minimum TTC;
+    ``next_cursor`` fetches the next page."""
+
+    site: str
+    start: float
+    end: float
+    max_ttc_s: float
+    max_pet_s: float
+    count: int
+    next_cursor: str | None
+    conflicts: list[Conflict]
 
 
 class LiveTrack(Track):

@@ -50,6 +50,8 @@ from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import ArgumentError
 
+from wz_gateway.conflicts import Trajectories
+from wz_gateway.conflicts import trajectories as conflict_trajectories
 from wz_gateway.models import TrackPoint
 from wz_gateway.tables import (
     COVARIANCE_FORMAT,
@@ -638,6 +640,34 @@ class Storage:
                 [math.nan if r.length_m is None else r.length_m for r in rows], dtype=np.float64
             ),
         )
+
+    def trajectories(
+        self, site: str, start_stamp: float, end_stamp: float, *, smoothed: bool = False
+    ) -> Trajectories:
+        """Every fused (or smoothed) point of a stamp window, as the arrays
+        :func:`~wz_gateway.conflicts.find_conflicts` takes (vehicle ids: the track ids)."""
+        c = track_points.c
+        stmt = select(
+            c.track_id,
+            c.stamp,
+            c.x_m,
+            c.y_m,
+            c.vx_mps,
+            c.vy_mps,
+            c.heading_rad,
+            c.length_m,
+            c.width_m,
+            c.lane_index,
+        ).where(
+            c.site == site,
+            c.stamp >= start_stamp,
+            c.stamp <= end_stamp,
+            c.smoothed.is_(smoothed),
+        )
+        with self.engine.connect() as connection:
+            rows = connection.execute(stmt).all()
+        columns = list(zip(*rows, strict=True)) if rows else [()] * 10
+        return conflict_trajectories([str(track_id) for track_id in columns[0]], *columns[1:])
 
     def count(self, table_name: str) -> int:
         """Rows in one of the gateway's tables (for tests and metrics)."""

@@ -5,12 +5,24 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
-from wz_gateway.api.routes import alerts, health, keys, live, metrics, sites, tracks, webhooks, wzdx
+from wz_gateway.api.routes import (
+    alerts,
+    conflicts,
+    health,
+    keys,
+    live,
+    metrics,
+    sites,
+    tracks,
+    webhooks,
+    wzdx,
+)
 
 api_router = APIRouter()
 for _router in (
     sites.router,
     tracks.router,
+    conflicts.router,
     alerts.router,
     wzdx.router,
     keys.router,
