@@ -1,6 +1,6 @@
 """The ``wz`` command: run the local stack, watch it, record and replay the bus.
 
-Subcommands: ``router``, ``up``, ``demo``, ``status``, ``tap``, ``alerts``, ``record``, ``replay``, and the
+Subcommands: ``router``, ``up``, ``demo``, ``status``, ``tap``, ``alerts``, ``record``, ``replay``, ``recording``, and the
 services' tools ``dataset``, ``pictures``, ``detect-lidar``, ``detect-camera``, ``eval`` and ``eval-camera`` (``wz <command> --help`` for each).
 The command's own logs go to stderr (structured, see :mod:`wz_shared.logs`); stdout carries only
 its output (tables, tapped messages, children's lines), so it can be piped.
@@ -32,7 +32,7 @@ from wz_cli.common import (
 from wz_shared.logs import configure_logging
 from wz_shared.settings import DEFAULT_ROUTER_ENDPOINT
 from wz_shared.signals import stop_on_signals
-from wz_shared.site import SiteFileError, load_site
+from wz_shared.site import Site, SiteFileError, load_site
 
 log = logging.getLogger("wz_cli")
 
@@ -267,9 +267,10 @@ def cmd_alerts(args: argparse.Namespace) -> int:
 def cmd_record(args: argparse.Namespace) -> int:
     from wz_cli.record import run_record
 
+    site = _foxglove_site(args) if args.foxglove else None  # a bad site file fails first
     stop = stop_on_signals()
     with open_bus(args.connect, site=ANY_SITE, service="wz-record") as bus:
-        return run_record(
+        code = run_record(
             bus,
             args.out,
             args.key_exprs or ["wz/**"],
@@ -279,6 +280,51 @@ def cmd_record(args: argparse.Namespace) -> int:
             stop=stop,
             connect=args.connect or [],
         )
+    if not args.foxglove:
+        return code
+    from wz_cli.foxglove import run_convert
+
+    # The finished recording, then the same with Foxglove channels in its place.
+    converted = args.out.with_name(f".{args.out.name}.foxglove")
+    code = run_convert(args.out, converted, site, overwrite=True)
+    converted.replace(args.out)
+    return code
+
+
+def _foxglove_site(args: argparse.Namespace) -> Site | None:
+    """The site whose geometry a Foxglove conversion draws (None with --no-site)."""
+    if args.no_site:
+        return None
+    path: Path = args.site or site_file_from_env()
+    try:
+        return load_site(path)
+    except SiteFileError as exc:
+        raise CliError(
+            f"{exc}\n(give the recording's site file with --site, or --no-site)", 1
+        ) from exc
+
+
+def cmd_recording(args: argparse.Namespace) -> int:
+    from wz_cli.foxglove import run_convert
+
+    if not args.recording.is_file():
+        raise CliError(f"no such recording: {args.recording}", 1)
+    return run_convert(args.recording, args.out, _foxglove_site(args), overwrite=args.overwrite)
+
+
+def _add_foxglove_site(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--site",
+        type=Path,
+        metavar="SITE.yaml",
+        help="the recording's site file: road, work zone, sensor poses and geodetic origin "
+        "(default: WZ_SITE_FILE or the default site)",
+    )
+    parser.add_argument(
+        "--no-site",
+        action="store_true",
+        help="no site geometry: frames, tracks and truth only",
+    )
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
@@ -559,8 +605,31 @@ def build_parser() -> argparse.ArgumentParser:
         "--max-messages", type=_positive_int, metavar="N", help="stop after N messages"
     )
     record.add_argument("--overwrite", action="store_true", help="replace OUT.mcap if it exists")
+    record.add_argument(
+        "--foxglove",
+        action="store_true",
+        help="when done, add channels in Foxglove's schemas (as `wz recording foxglove`)",
+    )
+    _add_foxglove_site(record)
     _add_connect(record)
     record.set_defaults(handler=cmd_record)
+
+    recording = commands.add_parser(
+        "recording",
+        help="work on a recording: `foxglove` adds channels Foxglove can show",
+        description="foxglove: copy IN.mcap into OUT.mcap with, beside every recorded channel, "
+        "LiDAR point clouds, camera images, tracks, alerts, the road and work zone, sensor "
+        "transforms and location fixes in Foxglove's schemas (protobuf). Open OUT.mcap in "
+        "Foxglove with deploy/foxglove/layout.json.",
+        epilog="Exit code: 3 if IN.mcap was cut short (everything readable was converted), "
+        "1 if it cannot be read, else 0.",
+    )
+    recording.add_argument("action", choices=["foxglove"])
+    recording.add_argument("recording", type=Path, metavar="IN.mcap")
+    recording.add_argument("out", type=Path, metavar="OUT.mcap")
+    recording.add_argument("--overwrite", action="store_true", help="replace OUT.mcap if it exists")
+    _add_foxglove_site(recording)
+    recording.set_defaults(handler=cmd_recording)
 
     replay = commands.add_parser(
         "replay",

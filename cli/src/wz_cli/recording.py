@@ -198,6 +198,40 @@ class RecordingWriter:
             self.invalid[(key, classified.invalid_reason)] += 1
         return classified
 
+    def add_encoded(
+        self,
+        topic: str,
+        schema: Schema,
+        message_encoding: str,
+        data: bytes,
+        *,
+        log_time_ns: int,
+        publish_time_ns: int,
+    ) -> None:
+        """Write a message that is no bus payload (a Foxglove view of one, say) on its own
+        channel: ``schema``'s name, encoding and data are registered once per name."""
+        schema_key = (schema.encoding, schema.name)
+        if schema_key not in self._schemas:
+            self._schemas[schema_key] = self._writer.register_schema(
+                name=schema.name, encoding=schema.encoding, data=schema.data
+            )
+        channel = (topic, message_encoding, schema.name)
+        if channel not in self._channels:
+            self._channels[channel] = self._writer.register_channel(
+                topic=topic,
+                message_encoding=message_encoding,
+                schema_id=self._schemas[schema_key],
+            )
+        channel_id = self._channels[channel]
+        self._sequence[channel_id] += 1
+        self._writer.add_message(
+            channel_id=channel_id,
+            log_time=log_time_ns,
+            data=data,
+            publish_time=publish_time_ns,
+            sequence=self._sequence[channel_id] & 0xFFFFFFFF,
+        )
+
     def flush(self) -> None:
         """Close the chunk in progress and push it to the file (bounds what a crash loses)."""
         self._writer.flush()  # type: ignore[no-untyped-call]
