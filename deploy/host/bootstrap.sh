@@ -6,10 +6,11 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 
 # System packages. open3d (LiDAR detector, sensor simulation) needs libusb-1.0-0 to import;
+# prometheus (and its promtool) checks and runs the monitoring profile's config and rules;
 # chromium drives the gateway page's browser tests; postgresql is the gateway's second database
 # (its tests start a throwaway cluster); iproute2 makes the multi-host test networks; systemd
 # gives systemd-analyze, which checks the no-container units in deploy/systemd.
-APT_PACKAGES=(ca-certificates libusb-1.0-0 libgl1 libgomp1 iproute2 procps chromium postgresql systemd)
+APT_PACKAGES=(ca-certificates libusb-1.0-0 libgl1 libgomp1 iproute2 procps chromium postgresql systemd prometheus)
 missing=()
 for pkg in "${APT_PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")

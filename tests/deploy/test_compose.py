@@ -237,12 +237,44 @@ def image_of(compose_file: Path, name: str, config: Mapping[str, Any]) -> Docker
     return Dockerfile.read(path, {key: str(value) for key, value in args.items()})
 
 
+#: Third-party services of the monitoring profile (published images, not ours to build).
+MONITORING = ("prometheus", "grafana")
+
+
 @pytest.fixture(scope="module")
 def services(compose: dict[str, Any]) -> dict[str, Service]:
+    """The project's own services (built from deploy/Dockerfile)."""
     return {
         name: Service(name, config, image_of(COMPOSE_FILE, name, config))
         for name, config in compose["services"].items()
+        if name not in MONITORING
     }
+
+
+def test_the_monitoring_profile_runs_prometheus_and_grafana_on_the_shipped_files(
+    compose: dict[str, Any],
+) -> None:
+    """Pinned images, loopback ports, the shipped config, rules and dashboard mounted (each
+    file there), limits; every other service scrapes on WZ_METRICS_PORT."""
+    assert "monitoring" in compose["x-profiles"]
+    for name in MONITORING:
+        config = compose["services"][name]
+        assert config["profiles"] == ["monitoring"]
+        image = config["image"]
+        assert ":" in image and not image.endswith(":latest"), f"{name}: pin the image"
+        assert all(str(port).startswith("127.0.0.1:") for port in config["ports"])
+        assert config["deploy"]["resources"]["limits"]["memory"]
+        for volume in config["volumes"]:
+            source = volume.split(":")[0]
+            if source.startswith("./"):
+                assert (ROOT / source).exists(), f"{name}: {source} is not in the repository"
+    prometheus_mounts = " ".join(compose["services"]["prometheus"]["volumes"])
+    assert "deploy/monitoring/prometheus.yml" in prometheus_mounts
+    assert "deploy/monitoring/rules.yml" in prometheus_mounts
+    for name, config in compose["services"].items():
+        if name in MONITORING or name in ("router", "gateway"):
+            continue
+        assert config["environment"]["WZ_METRICS_PORT"] == "9464", name
 
 
 def schema_errors(document: Any) -> list[str]:

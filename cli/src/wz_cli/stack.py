@@ -86,6 +86,9 @@ class ServiceSpec:
     env: Mapping[str, str] = field(default_factory=dict)
     #: Keep a warm standby (imports done) to restart it from (see :mod:`wz_cli.supervisor`).
     standby: bool = False
+    #: Its Prometheus metrics' port on loopback (``WZ_METRICS_PORT``); None: it serves none of
+    #: its own (the gateway's are on its API, ``/metrics``). deploy/monitoring/ scrapes these.
+    metrics_port: int | None = None
     #: Started only when named (``wz up --only drivers,...``): the field sensors' drivers,
     #: which need a manifest of devices (``WZ_DRIVERS_SOURCES``) and replace the simulator.
     optional: bool = False
@@ -137,6 +140,10 @@ class ServiceSpec:
             env.setdefault(
                 "WZ_HEALTH_FILE", str(options.state_dir.resolve() / self.name / "health")
             )
+        if self.metrics_port is not None:
+            env["WZ_METRICS_PORT"] = str(self.metrics_port)
+        else:
+            env.pop("WZ_METRICS_PORT", None)
         env.update(self.env)
         return env
 
@@ -155,6 +162,7 @@ ROUTER = ServiceSpec(
 STACK: tuple[ServiceSpec, ...] = (
     ServiceSpec(
         name="simulator",
+        metrics_port=9471,
         module="wz_simulator.node",
         summary="SUMO work zone with LiDAR, camera and radar models; raw frames and truth",
         env_prefix="WZ_SIM_",
@@ -167,6 +175,7 @@ STACK: tuple[ServiceSpec, ...] = (
     ),
     ServiceSpec(
         name="lidar-detector",
+        metrics_port=9472,
         module="wz_lidar_detector.node",
         summary="LiDAR frames to vehicle detections (background-model fast path or the paper's)",
         env_prefix="WZ_LIDAR_",
@@ -176,6 +185,7 @@ STACK: tuple[ServiceSpec, ...] = (
     ),
     ServiceSpec(
         name="camera-detector",
+        metrics_port=9473,
         module="wz_camera_detector.node",
         summary="camera frames (+ radar) to vehicle detections (YOLO on ONNX Runtime, radar "
         "fusion)",
@@ -184,6 +194,7 @@ STACK: tuple[ServiceSpec, ...] = (
     ),
     ServiceSpec(
         name="fusion-tracker",
+        metrics_port=9474,
         module="wz_fusion_tracker.node",
         summary="every sensor's detections to fused tracks (Kalman, GNN, life cycle)",
         env_prefix="WZ_FUSION_",
@@ -191,6 +202,7 @@ STACK: tuple[ServiceSpec, ...] = (
     ),
     ServiceSpec(
         name="alert-service",
+        metrics_port=9475,
         module="wz_alert_service.node",
         summary="fused tracks to alerts (speeding, hard braking, late merge, TTC, queue, "
         "intrusion) and the beacon and sign",
@@ -201,6 +213,7 @@ STACK: tuple[ServiceSpec, ...] = (
     ),
     ServiceSpec(
         name="drivers",
+        metrics_port=9476,
         module="wz_drivers.node",
         summary="the field sensors (Ouster, RTSP camera, radar-camera unit over UDP) or a field "
         "log onto the bus, in place of the simulator (WZ_DRIVERS_SOURCES: their manifest)",
@@ -209,6 +222,7 @@ STACK: tuple[ServiceSpec, ...] = (
     ),
     ServiceSpec(
         name="device-driver",
+        metrics_port=9477,
         module="wz_drivers.device_driver",
         summary="the portable message sign over NTCIP 1203 (SNMP at WZ_SIGN_HOST:WZ_SIGN_PORT) "
         "showing the alert service's message; `python -m wz_drivers.sign_sim` is a bench sign",

@@ -101,8 +101,14 @@ class BusStats:
     dropped: collections.Counter[str] = field(default_factory=collections.Counter)
     #: Gaps a recovering subscription found and re-fetched (:class:`CallbackSubscription`).
     gaps: collections.Counter[str] = field(default_factory=collections.Counter)
+    #: When the newest message a consumer took from a queue had arrived (monotonic [s]): the
+    #: node's processing latency is measured from there (:meth:`ServiceRuntime.beat`).
+    last_taken_arrival: float | None = None
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
     _logged: set[tuple[str, str]] = field(default_factory=set, repr=False)
+
+    def taken(self, arrived: float) -> None:
+        self.last_taken_arrival = arrived  # one float: atomic under the GIL
 
     def count_published(self, key: str) -> None:
         with self._lock:
@@ -246,7 +252,8 @@ class _SampleQueue:
             raise ValueError("queue capacity must be at least 1")
         self.mode = mode
         self.capacity = capacity
-        self._items: collections.deque[tuple[str, bytes]] = collections.deque()
+        #: (key, payload, arrival on the monotonic clock)
+        self._items: collections.deque[tuple[str, bytes, float]] = collections.deque()
         self._cond = threading.Condition()
         self._closed = False
         self._key = key
@@ -266,7 +273,7 @@ class _SampleQueue:
                     self._cond.wait(0.1)
                 if self._closed:
                     return
-            self._items.append((key, payload))
+            self._items.append((key, payload, time.monotonic()))
             self._cond.notify_all()
         if self._on_push is not None:
             self._on_push()
@@ -281,9 +288,10 @@ class _SampleQueue:
                 if remaining is not None and remaining <= 0:
                     return None
                 self._cond.wait(remaining)
-            item = self._items.popleft()
+            key, payload, arrived = self._items.popleft()
             self._cond.notify_all()
-            return item
+        self._stats.taken(arrived)
+        return key, payload
 
     def __len__(self) -> int:
         with self._cond:
@@ -373,6 +381,10 @@ class Subscription(Generic[T]):
     @property
     def pending(self) -> int:
         return len(self._queue)
+
+    @property
+    def capacity(self) -> int:
+        return self._queue.capacity
 
     def undeclare(self) -> None:
         self._queue.close()
@@ -599,6 +611,12 @@ class Bus:
             entity = declare()
             self._declared.append(entity)
         return entity
+
+    def queue_depths(self) -> dict[str, tuple[int, int]]:
+        """Per subscription key: the samples queued for the consumer now, and the capacity."""
+        with self._lock:
+            subscriptions = [d for d in self._declared if isinstance(d, Subscription)]
+        return {s.key: (s.pending, s.capacity) for s in subscriptions}
 
     # publishing
     def publisher(

@@ -47,6 +47,7 @@ from wz_shared import health
 from wz_shared.bus import Bus, BusStats
 from wz_shared.logs import configure_logging
 from wz_shared.messages import DeviceLink, ServiceState, ServiceStatus
+from wz_shared.metrics import RuntimeView, ServiceMetrics
 from wz_shared.settings import BusSettings, ServiceSettings
 from wz_shared.signals import stop_on_signals
 from wz_shared.site import Site, SiteFileError, load_site
@@ -72,6 +73,8 @@ class ServiceRuntime:
         clock_stamp: Any = None,
         health_file: Path | None = None,
         stall_after_s: float = 5.0,
+        metrics_port: int | None = None,
+        metrics_host: str = "127.0.0.1",
     ) -> None:
         self.service = service
         self.site = site
@@ -95,6 +98,10 @@ class ServiceRuntime:
         #: The field devices the node drives, as it last found them (replaced whole by the
         #: node; read by the status thread): one it cannot reach makes the state ``degraded``.
         self.devices: dict[str, DeviceLink] = {}
+        self.metrics_port = metrics_port
+        self.metrics_host = metrics_host
+        self.metrics: ServiceMetrics | None = None
+        self._observed_arrival: float | None = None
 
     @property
     def bus(self) -> Bus:
@@ -107,6 +114,9 @@ class ServiceRuntime:
         self._bus = Bus.open(self.bus_settings, site=self.site, service=self.service)
         self._bus.declare_alive()
         self.state = ServiceState.RUNNING
+        if self.metrics_port is not None:
+            self.metrics = ServiceMetrics(self._metrics_view(self._bus))
+            self.metrics.serve(self.metrics_host, self.metrics_port)
         self._health = threading.Thread(target=self._report_health, name="health", daemon=True)
         self._health.start()
         log.info("service %s up at site %s (pid %d)", self.service, self.site, os.getpid())
@@ -119,6 +129,8 @@ class ServiceRuntime:
             self._health.join(timeout=2.0)
         if self._bus is not None:
             self._bus.close()
+        if self.metrics is not None:
+            self.metrics.close()
         if self.health_file is not None:
             self.health_file.unlink(missing_ok=True)
         log.info("service %s stopped", self.service)
@@ -130,6 +142,42 @@ class ServiceRuntime:
         self._loop_at = now
         if processed:
             self._input_at = now
+            arrived = None if self._bus is None else self._bus.stats.last_taken_arrival
+            fresh = arrived is not None and arrived != self._observed_arrival  # each input once
+            if self.metrics is not None and arrived is not None and fresh:
+                self._observed_arrival = arrived
+                self.metrics.processing.observe(max(0.0, time.monotonic() - arrived))
+
+    def input_age_s(self, now: float | None = None) -> float | None:
+        """Seconds since the loop last processed an input; None before its first."""
+        if self._input_at is None:
+            return None
+        return max(0.0, (time.time() if now is None else now) - self._input_at)
+
+    def current_state(self, loop_age_s: float | None = None) -> ServiceState:
+        """The state to report: ``stalled`` past the stall limit, ``degraded`` while a field
+        device it drives does not answer, else the runtime's own."""
+        loop_age_s = self.loop_age_s() if loop_age_s is None else loop_age_s
+        if self.state != ServiceState.STOPPING and (loop_age_s or 0.0) > self.stall_after_s:
+            return ServiceState.STALLED
+        if self.state == ServiceState.RUNNING and any(
+            link.reachable is False for link in self.devices.values()
+        ):
+            return ServiceState.DEGRADED
+        return self.state
+
+    def _metrics_view(self, bus: Bus) -> RuntimeView:
+        return RuntimeView(
+            service=self.service,
+            site=self.site,
+            bus_snapshot=bus.stats.snapshot,
+            queue_depths=bus.queue_depths,
+            loop_age_s=self.loop_age_s,
+            input_age_s=self.input_age_s,
+            state=self.current_state,
+            uptime_s=lambda: time.monotonic() - self._started,
+            devices=lambda: dict(self.devices),
+        )
 
     def loop_age_s(self, now: float | None = None) -> float | None:
         """Seconds since the loop's last round; None before its first."""
@@ -150,15 +198,9 @@ class ServiceRuntime:
         snap = stats.snapshot()
         now = time.time()
         loop_age_s = self.loop_age_s(now)
-        input_age_s = None if self._input_at is None else max(0.0, now - self._input_at)
-        state = self.state
+        input_age_s = self.input_age_s(now)
         devices = dict(self.devices)
-        if state != ServiceState.STOPPING and (loop_age_s or 0.0) > self.stall_after_s:
-            state = ServiceState.STALLED
-        elif state == ServiceState.RUNNING and any(
-            link.reachable is False for link in devices.values()
-        ):
-            state = ServiceState.DEGRADED
+        state = self.current_state(loop_age_s)
         status = ServiceStatus(
             site=self.site,
             source_id=self.service,
@@ -302,5 +344,7 @@ class NodeApp(Generic[SettingsT]):
             clock_stamp=self.clock.now if sim_clock else None,
             health_file=settings.health_file if health_file else None,
             stall_after_s=settings.stall_after_s,
+            metrics_port=settings.metrics_port,
+            metrics_host=settings.metrics_host,
         ) as runtime:
             return loop(runtime)

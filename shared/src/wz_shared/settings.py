@@ -81,3 +81,9 @@ class ServiceSettings(BaseSettings):
     #: A loop that has not gone round for this long is stalled [s]: every node's loop waits
     #: for its input at most 1 s at a time, so 5 s is five missed rounds, not a quiet road.
     stall_after_s: Annotated[float, Field(gt=0.0, validation_alias="WZ_STALL_AFTER_S")] = 5.0
+    #: Serve Prometheus metrics (:mod:`wz_shared.metrics`) on this port; None: none.
+    metrics_port: Annotated[int, Field(ge=1, le=65535)] | None = Field(
+        default=None, validation_alias="WZ_METRICS_PORT"
+    )
+    #: ... on this address (a container: 0.0.0.0, for the monitoring profile's Prometheus).
+    metrics_host: str = Field(default="127.0.0.1", validation_alias="WZ_METRICS_HOST")
