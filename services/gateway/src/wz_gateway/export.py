@@ -37,7 +37,10 @@ _PROPERTY_FIELDS = tuple(
 FEATURE_COLLECTION_SCHEMA: dict[str, Any] = {
     "type": "object",
     "required": ["type", "features"],
-    "properties": {"type": {"const": "FeatureCollection"}, "features": {"type": "array"}},
+    "properties": {
+        "type": {"const": "FeatureCollection"},
+        "features": {"type": "array", "items": {"type": "object"}},
+    },
 }
 
 

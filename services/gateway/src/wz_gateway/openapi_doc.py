@@ -56,7 +56,21 @@ def _document() -> dict[str, Any]:
 
 def render(doc: dict[str, Any]) -> str:
     """Stable text: sorted keys, two-space indent, a final newline (diffs stay readable)."""
-    return json.dumps(doc, indent=2, sort_keys=True, ensure_ascii=False) + "\n"
+    return json.dumps(_ordered(doc), indent=2, ensure_ascii=False) + "\n"
+
+
+def _ordered(value: Any, parent: str | None = None) -> Any:
+    """Keys sorted (a stable diff), except a response's media types: ``application/json``
+    first, the one a generated client parses a response as (it takes the first)."""
+    if isinstance(value, list):
+        return [_ordered(item) for item in value]
+    if not isinstance(value, dict):
+        return value
+    keys = sorted(value)
+    if parent == "content" and "application/json" in value:
+        keys.remove("application/json")
+        keys.insert(0, "application/json")
+    return {key: _ordered(value[key], key) for key in keys}
 
 
 def main(argv: Sequence[str] | None = None) -> int:

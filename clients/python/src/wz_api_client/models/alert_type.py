@@ -1,0 +1,13 @@
+from enum import StrEnum
+
+class AlertType(StrEnum):
+    AGGRESSIVE_APPROACH = "aggressive_approach"
+    HARD_BRAKING = "hard_braking"
+    INTRUSION = "intrusion"
+    LATE_MERGE = "late_merge"
+    QUEUE = "queue"
+    SHORT_TTC = "short_ttc"
+    SPEEDING = "speeding"
+
+    def __str__(self) -> str:
+        return str(self.value)

@@ -1,0 +1,10 @@
+from enum import StrEnum
+
+class GetTrackV1TracksTrackIdGetFormat(StrEnum):
+    CSV = "csv"
+    GEOJSON = "geojson"
+    JSON = "json"
+    PARQUET = "parquet"
+
+    def __str__(self) -> str:
+        return str(self.value)
