@@ -66,6 +66,25 @@ def test_summary_against_the_closed_forms() -> None:
         summarize(crossings, 5.0, 5.0, [0], 950.0)
 
 
+def test_a_loop_counts_a_truck_split_in_two_tracks_once_and_close_cars_twice() -> None:
+    """A trailer tracked apart from its cab crosses 0.32 s after it at 19 m/s (6 m behind its
+    centre, inside the truck): the zone is still occupied, one presence. Two cars 1 s apart
+    at the same speed leave the zone between them: two."""
+    crossings = traffic.Crossings(
+        track_id=np.arange(4, dtype=np.int64),
+        stamp=np.array([10.0, 10.32, 20.0, 21.0]),
+        lane_index=np.zeros(4, dtype=np.int64),
+        speed_mps=np.array([19.0, 19.0, 19.0, 19.0]),
+        length_m=np.full(4, traffic.DEFAULT_VEHICLE_LENGTH_M),  # lengths unknown
+    )
+    summary = summarize(crossings, 0.0, 60.0, [0], 950.0)
+    assert summary.vehicles == 3 and summary.lanes[0].average_speed_mps == pytest.approx(19.0)
+    # Occupied time: the truck's union [10 - 2.25/19, 10.32 + (2.25 + 1.83)/19], and the cars'.
+    truck = (0.32 + (4.5 + 1.83) / 19) / 60
+    cars = 2 * (4.5 + 1.83) / 19 / 60
+    assert summary.lanes[0].occupancy_percent == pytest.approx(100 * (truck + cars))
+
+
 @settings(max_examples=60, deadline=None)
 @given(
     speeds=st.lists(st.floats(0.0, 60.0), min_size=0, max_size=40),
@@ -81,8 +100,11 @@ def test_summary_invariants(speeds: list[float], duration_s: float) -> None:
         length_m=np.full(n, 4.5),
     )
     summary = summarize(crossings, 0.0, duration_s, [0, 1], 950.0)
-    assert summary.vehicles == n
-    assert summary.volume_vph == pytest.approx(3600.0 * n / duration_s)
+    # A presence holds the zone for (L + zone) / v: crossings closer than that are one vehicle.
+    pace = np.maximum(np.array(speeds), traffic.MIN_OCCUPANCY_SPEED_MPS)
+    apart = n < 2 or duration_s / (n - 1) > float(np.max((4.5 + 1.83) / pace))
+    assert summary.vehicles <= n and (summary.vehicles == n or not apart)
+    assert summary.volume_vph == pytest.approx(3600.0 * summary.vehicles / duration_s)
     for lane in summary.lanes:
         assert 0.0 <= lane.occupancy_percent <= 100.0
     assert summary.lanes[1].vehicles == 0 and summary.lanes[1].average_speed_mps is None

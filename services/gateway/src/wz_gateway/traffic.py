@@ -4,8 +4,16 @@ The WZDx traffic sensor reports, per collection interval and lane, a volume, an 
 and an occupancy, as an inductive loop would. Here the loop is virtual: a detection zone of
 ``zone_length_m`` at ``detector_station_m`` across the road. A track *crosses* it between two
 consecutive points with ``s_k < s_0 <= s_{k+1}``; the crossing's time and speed are linear
-interpolations between the two, its lane that of the point nearer ``s_0``. Each track counts
-once (its first crossing in the interval).
+interpolations between the two, its lane that of the point nearer ``s_0``. Each track crosses
+once (its first crossing).
+
+As a loop does, the lane counts *presences*, not tracks: the zone is occupied from a vehicle's
+front reaching it, ``t - L / (2 v)``, to its rear leaving it, ``t + (L / 2 + L_zone) / v`` (``t``
+the centre's crossing); a crossing whose front arrives while the zone is still occupied in its
+lane is the same presence. A vehicle cannot overlap the one ahead, so two tracks that do are one
+vehicle seen twice (a truck's trailer split from its cab); two vehicles following each other
+never merge, however close, as long as their tracks keep them apart. Counting the truth the
+same way leaves every vehicle counted.
 
 Per lane, over an interval of ``T`` seconds with ``n`` crossings at speeds ``v_i`` by vehicles
 of length ``L_i``:
@@ -17,8 +25,8 @@ of length ``L_i``:
 
     o = \\frac{100}{T} \\sum \\frac{L_i + L_{zone}}{\\max(v_i, v_{min})}  \\quad \\text{[\\%]}
 
-(a vehicle covers the zone for the time it takes to travel its own length plus the zone's),
-clipped to 100 %. Station-wide: the volumes add up, the speed is the mean over every crossing
+(a vehicle covers the zone for the time it takes to travel its own length plus the zone's; the
+sum is over the presences' union, clipped to the interval), at most 100 %. Station-wide: the volumes add up, the speed is the mean over every crossing
 and the occupancy is the mean of the lanes'.
 """
 
@@ -151,17 +159,25 @@ def summarize(
     speeds: list[npt.NDArray[np.float64]] = []
     for lane_index in lane_indices:
         mine = inside & (crossings.lane_index == lane_index)
-        v = crossings.speed_mps[mine]
-        dwell_s = (crossings.length_m[mine] + zone_length_m) / np.maximum(
-            v, MIN_OCCUPANCY_SPEED_MPS
+        order = np.argsort(crossings.stamp[mine], kind="stable")
+        t = crossings.stamp[mine][order]
+        v = crossings.speed_mps[mine][order]
+        length = crossings.length_m[mine][order]
+        pace = np.maximum(v, MIN_OCCUPANCY_SPEED_MPS)
+        first, occupied_s = presences(
+            t - length / 2.0 / pace,
+            t + (length / 2.0 + zone_length_m) / pace,
+            start_stamp,
+            end_stamp,
         )
+        v = v[first]
         lanes.append(
             LaneTraffic(
                 lane_index=lane_index,
                 vehicles=int(v.size),
                 volume_vph=3600.0 * v.size / duration_s,
                 average_speed_mps=float(v.mean()) if v.size else None,
-                occupancy_percent=min(100.0, 100.0 * float(dwell_s.sum()) / duration_s),
+                occupancy_percent=min(100.0, 100.0 * occupied_s / duration_s),
             )
         )
         speeds.append(v)
@@ -178,3 +194,31 @@ def summarize(
             sum(lane.occupancy_percent for lane in lanes) / len(lanes) if lanes else 0.0
         ),
     )
+
+
+def presences(
+    on_s: npt.NDArray[np.float64],
+    off_s: npt.NDArray[np.float64],
+    start_stamp: float,
+    end_stamp: float,
+) -> tuple[npt.NDArray[np.bool_], float]:
+    """Which of a lane's occupancy intervals ``[on, off]`` (ordered by crossing time) start a
+    new presence, and how long the zone was occupied within ``[start_stamp, end_stamp]`` [s].
+
+    An interval that begins while the zone is still occupied (``on <= off`` of what came
+    before) continues that presence; the occupied time is the intervals' union.
+    """
+    first = np.zeros(on_s.size, dtype=bool)
+    occupied_s = 0.0
+    busy_from, busy_until = -np.inf, -np.inf
+    for k in range(on_s.size):
+        if on_s[k] > busy_until:  # vacant: a new vehicle
+            first[k] = True
+            if busy_until > busy_from:
+                occupied_s += max(0.0, min(busy_until, end_stamp) - max(busy_from, start_stamp))
+            busy_from, busy_until = on_s[k], off_s[k]
+        else:
+            busy_until = max(busy_until, off_s[k])
+    if busy_until > busy_from:
+        occupied_s += max(0.0, min(busy_until, end_stamp) - max(busy_from, start_stamp))
+    return first, occupied_s
