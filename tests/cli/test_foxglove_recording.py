@@ -377,3 +377,26 @@ def test_a_bad_site_file_is_refused_before_anything_is_written(
     assert result.returncode == 1 and "Traceback" not in result.stderr
     assert "not valid YAML" in result.stderr and "--no-site" in result.stderr
     assert not out.exists()
+
+
+def test_the_conversion_in_process_writes_what_the_command_wrote(
+    recording: Path, converted: Path, site_file: Path
+) -> None:
+    """``convert_stream`` (the command's core, here in this process) adds the same Foxglove
+    messages per topic as `wz recording foxglove` did, and copies every bus message."""
+    from collections import Counter
+
+    from wz_cli.foxglove import convert_stream
+    from wz_shared.site import load_site
+
+    with recording.open("rb") as source:
+        report, reader = convert_stream(source, io.BytesIO(), load_site(site_file))
+    assert reader.report.complete
+    assert set(report.not_shown) <= {"lidar_frame (truncated)"}  # the fixture's cut frames
+    assert report.copied == len(list(RecordingReader(recording.open("rb")).messages()))
+    written = Counter(
+        m.topic
+        for m in RecordingReader(converted.open("rb")).messages()
+        if m.topic.startswith("/foxglove/")
+    )
+    assert report.foxglove == written and sum(written.values()) > 0

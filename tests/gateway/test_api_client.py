@@ -11,6 +11,7 @@ import math
 import shutil
 import subprocess
 import sys
+import warnings
 from collections import defaultdict
 from collections.abc import Iterator
 from pathlib import Path
@@ -134,6 +135,10 @@ def test_the_committed_client_is_what_the_generator_makes(tmp_path: Path) -> Non
     assert result.returncode == 0, result.stdout + result.stderr
     assert "Warning" not in result.stdout, result.stdout
     committed = CLIENT / "src" / "wz_api_client"
+    for source in committed.rglob("*.py"):  # compiles without a warning (a SyntaxWarning is
+        with warnings.catch_warnings():  # an error here)
+            warnings.simplefilter("error")
+            compile(source.read_text(), str(source), "exec")
     differ = _differences(filecmp.dircmp(out, committed, ignore=["__pycache__"]))
     assert not differ, f"regenerate clients/python (README): {differ[:5]}"
 

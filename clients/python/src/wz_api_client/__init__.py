@@ -1,5 +1,5 @@
+"""A client library for accessing Work-zone gateway"""
 
-""" A client library for accessing Work-zone gateway """
 from .client import AuthenticatedClient, Client
 
 __all__ = (

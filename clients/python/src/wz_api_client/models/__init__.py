@@ -1,4 +1,4 @@
-""" Contains all the data models used in inputs/outputs """
+"""Contains all the data models used in inputs/outputs"""
 
 from .aggressive_approach_rule import AggressiveApproachRule
 from .alert import Alert
@@ -25,13 +25,23 @@ from .device_rules import DeviceRules
 from .geo_origin import GeoOrigin
 from .get_alerts_v1_alerts_get_format import GetAlertsV1AlertsGetFormat
 from .get_alerts_v1_alerts_get_order import GetAlertsV1AlertsGetOrder
-from .get_alerts_v1_alerts_get_phase_type_0_item import GetAlertsV1AlertsGetPhaseType0Item
+from .get_alerts_v1_alerts_get_phase_type_0_item import (
+    GetAlertsV1AlertsGetPhaseType0Item,
+)
 from .get_conflicts_v1_conflicts_get_format import GetConflictsV1ConflictsGetFormat
-from .get_device_feed_v1_wzdx_device_feed_get_response_200 import GetDeviceFeedV1WzdxDeviceFeedGetResponse200
-from .get_stream_v1_stream_get_event_type_0_item import GetStreamV1StreamGetEventType0Item
+from .get_device_feed_v1_wzdx_device_feed_get_response_200 import (
+    GetDeviceFeedV1WzdxDeviceFeedGetResponse200,
+)
+from .get_stream_v1_stream_get_event_type_0_item import (
+    GetStreamV1StreamGetEventType0Item,
+)
 from .get_track_v1_tracks_track_id_get_format import GetTrackV1TracksTrackIdGetFormat
-from .get_trajectories_v1_trajectories_get_format import GetTrajectoriesV1TrajectoriesGetFormat
-from .get_work_zone_feed_v1_wzdx_work_zone_feed_get_response_200 import GetWorkZoneFeedV1WzdxWorkZoneFeedGetResponse200
+from .get_trajectories_v1_trajectories_get_format import (
+    GetTrajectoriesV1TrajectoriesGetFormat,
+)
+from .get_work_zone_feed_v1_wzdx_work_zone_feed_get_response_200 import (
+    GetWorkZoneFeedV1WzdxWorkZoneFeedGetResponse200,
+)
 from .hard_braking_rule import HardBrakingRule
 from .health import Health
 from .intrusion_rule import IntrusionRule

@@ -12,17 +12,12 @@ from ..types import UNSET, Unset
 from typing import cast
 
 
-
-
-
-
 T = TypeVar("T", bound="AggressiveApproachRule")
-
 
 
 @_attrs_define
 class AggressiveApproachRule:
-    """ Too fast, too close to the taper: the deceleration still needed, or not slowing at all.
+    """Too fast, too close to the taper: the deceleration still needed, or not slowing at all.
 
     Required deceleration to reach the zone limit ``v_zone`` by the taper start, ``D`` metres
     ahead: ``a = (v^2 - v_zone^2) / (2 D)`` [m/s^2]. Starts at ``a >= comfortable_decel_mps2``
@@ -43,7 +38,7 @@ class AggressiveApproachRule:
             not_slowing_decel_mps2 (float | Unset):  Default: 0.3.
             speed_margin_mph (float | Unset):  Default: 5.0.
             trend_window_s (float | Unset):  Default: 1.0.
-     """
+    """
 
     advance_warning_station_m: float | None | Unset = UNSET
     clear_s: float | Unset = 2.0
@@ -56,10 +51,6 @@ class AggressiveApproachRule:
     not_slowing_decel_mps2: float | Unset = 0.3
     speed_margin_mph: float | Unset = 5.0
     trend_window_s: float | Unset = 1.0
-
-
-
-
 
     def to_dict(self) -> dict[str, Any]:
         advance_warning_station_m: float | None | Unset
@@ -88,11 +79,9 @@ class AggressiveApproachRule:
 
         trend_window_s = self.trend_window_s
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-        })
+        field_dict.update({})
         if advance_warning_station_m is not UNSET:
             field_dict["advance_warning_station_m"] = advance_warning_station_m
         if clear_s is not UNSET:
@@ -118,11 +107,10 @@ class AggressiveApproachRule:
 
         return field_dict
 
-
-
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
         d = dict(src_dict)
+
         def _parse_advance_warning_station_m(data: object) -> float | None | Unset:
             if data is None:
                 return data
@@ -130,8 +118,9 @@ class AggressiveApproachRule:
                 return data
             return cast(float | None | Unset, data)
 
-        advance_warning_station_m = _parse_advance_warning_station_m(d.pop("advance_warning_station_m", UNSET))
-
+        advance_warning_station_m = _parse_advance_warning_station_m(
+            d.pop("advance_warning_station_m", UNSET)
+        )
 
         clear_s = d.pop("clear_s", UNSET)
 
@@ -168,4 +157,3 @@ class AggressiveApproachRule:
         )
 
         return aggressive_approach_rule
-

@@ -16,20 +16,16 @@ from typing import cast
 from typing import Literal, cast
 
 if TYPE_CHECKING:
-  from ..models.alert_evidence import AlertEvidence
-  from ..models.track import Track
-
-
-
+    from ..models.alert_evidence import AlertEvidence
+    from ..models.track import Track
 
 
 T = TypeVar("T", bound="Alert")
 
 
-
 @_attrs_define
 class Alert:
-    """ One event of an alert episode: its start, an update (severity rose) or its clear.
+    """One event of an alert episode: its start, an update (severity rose) or its clear.
 
     An episode is one stretch of time over which one rule's condition held for one track (or,
     for a queue, for the site: ``track_id`` None). Its messages share ``episode_id``; each has
@@ -64,7 +60,7 @@ class Alert:
             track (None | Track | Unset):
             track_id (int | None | Unset):
             value_unit (str | Unset):  Default: ''.
-     """
+    """
 
     alert_id: str
     alert_type: AlertType
@@ -79,22 +75,19 @@ class Alert:
     threshold_value: float
     episode_id: None | str | Unset = UNSET
     evidence: AlertEvidence | Unset = UNSET
-    kind: Literal['alert'] | Unset = 'alert'
+    kind: Literal["alert"] | Unset = "alert"
     onset_stamp: float | None | Unset = UNSET
     phase: AlertPhase | Unset = AlertPhase.START
     schema_version: Literal[1] | Unset = 1
     speed_mps: float | None | Unset = UNSET
     track: None | Track | Unset = UNSET
     track_id: int | None | Unset = UNSET
-    value_unit: str | Unset = ''
-
-
-
-
+    value_unit: str | Unset = ""
 
     def to_dict(self) -> dict[str, Any]:
-        from ..models.alert_evidence import AlertEvidence # noqa: PLC0415
-        from ..models.track import Track # noqa: PLC0415
+        from ..models.alert_evidence import AlertEvidence  # noqa: PLC0415
+        from ..models.track import Track  # noqa: PLC0415
+
         alert_id = self.alert_id
 
         alert_type = self.alert_type.value
@@ -139,7 +132,6 @@ class Alert:
         if not isinstance(self.phase, Unset):
             phase = self.phase.value
 
-
         schema_version = self.schema_version
 
         speed_mps: float | None | Unset
@@ -164,22 +156,23 @@ class Alert:
 
         value_unit = self.value_unit
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-            "alert_id": alert_id,
-            "alert_type": alert_type,
-            "description": description,
-            "measured_value": measured_value,
-            "offset_m": offset_m,
-            "severity": severity,
-            "site": site,
-            "source_id": source_id,
-            "stamp": stamp,
-            "station_m": station_m,
-            "threshold_value": threshold_value,
-        })
+        field_dict.update(
+            {
+                "alert_id": alert_id,
+                "alert_type": alert_type,
+                "description": description,
+                "measured_value": measured_value,
+                "offset_m": offset_m,
+                "severity": severity,
+                "site": site,
+                "source_id": source_id,
+                "stamp": stamp,
+                "station_m": station_m,
+                "threshold_value": threshold_value,
+            }
+        )
         if episode_id is not UNSET:
             field_dict["episode_id"] = episode_id
         if evidence is not UNSET:
@@ -203,19 +196,15 @@ class Alert:
 
         return field_dict
 
-
-
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
-        from ..models.alert_evidence import AlertEvidence # noqa: PLC0415
-        from ..models.track import Track # noqa: PLC0415
+        from ..models.alert_evidence import AlertEvidence  # noqa: PLC0415
+        from ..models.track import Track  # noqa: PLC0415
+
         d = dict(src_dict)
         alert_id = d.pop("alert_id")
 
         alert_type = AlertType(d.pop("alert_type"))
-
-
-
 
         description = d.pop("description")
 
@@ -224,9 +213,6 @@ class Alert:
         offset_m = d.pop("offset_m")
 
         severity = AlertSeverity(d.pop("severity"))
-
-
-
 
         site = d.pop("site")
 
@@ -247,19 +233,15 @@ class Alert:
 
         episode_id = _parse_episode_id(d.pop("episode_id", UNSET))
 
-
         _evidence = d.pop("evidence", UNSET)
         evidence: AlertEvidence | Unset
-        if isinstance(_evidence,  Unset):
+        if isinstance(_evidence, Unset):
             evidence = UNSET
         else:
             evidence = AlertEvidence.from_dict(_evidence)
 
-
-
-
-        kind = cast(Literal['alert'] | Unset , d.pop("kind", UNSET))
-        if kind != 'alert'and not isinstance(kind, Unset):
+        kind = cast(Literal["alert"] | Unset, d.pop("kind", UNSET))
+        if kind != "alert" and not isinstance(kind, Unset):
             raise ValueError(f"kind must match const 'alert', got '{kind}'")
 
         def _parse_onset_stamp(data: object) -> float | None | Unset:
@@ -271,20 +253,18 @@ class Alert:
 
         onset_stamp = _parse_onset_stamp(d.pop("onset_stamp", UNSET))
 
-
         _phase = d.pop("phase", UNSET)
         phase: AlertPhase | Unset
-        if isinstance(_phase,  Unset):
+        if isinstance(_phase, Unset):
             phase = UNSET
         else:
             phase = AlertPhase(_phase)
 
-
-
-
-        schema_version = cast(Literal[1] | Unset , d.pop("schema_version", UNSET))
-        if schema_version != 1and not isinstance(schema_version, Unset):
-            raise ValueError(f"schema_version must match const 1, got '{schema_version}'")
+        schema_version = cast(Literal[1] | Unset, d.pop("schema_version", UNSET))
+        if schema_version != 1 and not isinstance(schema_version, Unset):
+            raise ValueError(
+                f"schema_version must match const 1, got '{schema_version}'"
+            )
 
         def _parse_speed_mps(data: object) -> float | None | Unset:
             if data is None:
@@ -294,7 +274,6 @@ class Alert:
             return cast(float | None | Unset, data)
 
         speed_mps = _parse_speed_mps(d.pop("speed_mps", UNSET))
-
 
         def _parse_track(data: object) -> None | Track | Unset:
             if data is None:
@@ -306,15 +285,12 @@ class Alert:
                     raise TypeError()
                 track_type_0 = Track.from_dict(data)
 
-
-
                 return track_type_0
             except (TypeError, ValueError, AttributeError, KeyError):
                 pass
             return cast(None | Track | Unset, data)
 
         track = _parse_track(d.pop("track", UNSET))
-
 
         def _parse_track_id(data: object) -> int | None | Unset:
             if data is None:
@@ -324,7 +300,6 @@ class Alert:
             return cast(int | None | Unset, data)
 
         track_id = _parse_track_id(d.pop("track_id", UNSET))
-
 
         value_unit = d.pop("value_unit", UNSET)
 
@@ -353,4 +328,3 @@ class Alert:
         )
 
         return alert
-

@@ -11,19 +11,15 @@ from ..types import UNSET, Unset
 from typing import cast
 
 if TYPE_CHECKING:
-  from ..models.alert import Alert
-
-
-
+    from ..models.alert import Alert
 
 
 T = TypeVar("T", bound="AlertPage")
 
 
-
 @_attrs_define
 class AlertPage:
-    """ A page of alert events (newest first unless asked otherwise); ``site`` is ``*`` for
+    """A page of alert events (newest first unless asked otherwise); ``site`` is ``*`` for
     every site's.
 
         Attributes:
@@ -31,25 +27,20 @@ class AlertPage:
             count (int):
             next_cursor (None | str):
             site (str):
-     """
+    """
 
     alerts: list[Alert]
     count: int
     next_cursor: None | str
     site: str
 
-
-
-
-
     def to_dict(self) -> dict[str, Any]:
-        from ..models.alert import Alert # noqa: PLC0415
+        from ..models.alert import Alert  # noqa: PLC0415
+
         alerts = []
         for alerts_item_data in self.alerts:
             alerts_item = alerts_item_data.to_dict()
             alerts.append(alerts_item)
-
-
 
         count = self.count
 
@@ -58,33 +49,30 @@ class AlertPage:
 
         site = self.site
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-            "alerts": alerts,
-            "count": count,
-            "next_cursor": next_cursor,
-            "site": site,
-        })
+        field_dict.update(
+            {
+                "alerts": alerts,
+                "count": count,
+                "next_cursor": next_cursor,
+                "site": site,
+            }
+        )
 
         return field_dict
 
-
-
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
-        from ..models.alert import Alert # noqa: PLC0415
+        from ..models.alert import Alert  # noqa: PLC0415
+
         d = dict(src_dict)
         alerts = []
         _alerts = d.pop("alerts")
-        for alerts_item_data in (_alerts):
+        for alerts_item_data in _alerts:
             alerts_item = Alert.from_dict(alerts_item_data)
 
-
-
             alerts.append(alerts_item)
-
 
         count = d.pop("count")
 
@@ -94,7 +82,6 @@ class AlertPage:
             return cast(None | str, data)
 
         next_cursor = _parse_next_cursor(d.pop("next_cursor"))
-
 
         site = d.pop("site")
 
@@ -106,4 +93,3 @@ class AlertPage:
         )
 
         return alert_page
-

@@ -1,5 +1,6 @@
 from enum import StrEnum
 
+
 class AlertPhase(StrEnum):
     CLEAR = "clear"
     START = "start"

@@ -12,26 +12,22 @@ from ..types import UNSET, Unset
 from typing import cast
 
 if TYPE_CHECKING:
-  from ..models.aggressive_approach_rule import AggressiveApproachRule
-  from ..models.device_rules import DeviceRules
-  from ..models.hard_braking_rule import HardBrakingRule
-  from ..models.intrusion_rule import IntrusionRule
-  from ..models.late_merge_rule import LateMergeRule
-  from ..models.queue_rule import QueueRule
-  from ..models.short_ttc_rule import ShortTtcRule
-  from ..models.speeding_rule import SpeedingRule
-
-
-
+    from ..models.aggressive_approach_rule import AggressiveApproachRule
+    from ..models.device_rules import DeviceRules
+    from ..models.hard_braking_rule import HardBrakingRule
+    from ..models.intrusion_rule import IntrusionRule
+    from ..models.late_merge_rule import LateMergeRule
+    from ..models.queue_rule import QueueRule
+    from ..models.short_ttc_rule import ShortTtcRule
+    from ..models.speeding_rule import SpeedingRule
 
 
 T = TypeVar("T", bound="AlertRules")
 
 
-
 @_attrs_define
 class AlertRules:
-    """ Thresholds of the alert service, with units; every rule works in the road frame.
+    """Thresholds of the alert service, with units; every rule works in the road frame.
 
     The approach is the station window ``[activity end - approach_length_m, activity end)``:
     speeding, aggressive approach, hard braking, late merge, short TTC and queue look only
@@ -84,7 +80,7 @@ class AlertRules:
                 Starts at ``excess >= margin_mph``, stays open while ``excess >= margin_mph -
                 hysteresis_mph``; critical from ``critical_excess_mph``. Margins are in mph, like the posted
                 limits they are added to.
-     """
+    """
 
     aggressive_approach: AggressiveApproachRule | Unset = UNSET
     approach_length_m: float | Unset = 1500.0
@@ -96,19 +92,16 @@ class AlertRules:
     short_ttc: ShortTtcRule | Unset = UNSET
     speeding: SpeedingRule | Unset = UNSET
 
-
-
-
-
     def to_dict(self) -> dict[str, Any]:
-        from ..models.aggressive_approach_rule import AggressiveApproachRule # noqa: PLC0415
-        from ..models.device_rules import DeviceRules # noqa: PLC0415
-        from ..models.hard_braking_rule import HardBrakingRule # noqa: PLC0415
-        from ..models.intrusion_rule import IntrusionRule # noqa: PLC0415
-        from ..models.late_merge_rule import LateMergeRule # noqa: PLC0415
-        from ..models.queue_rule import QueueRule # noqa: PLC0415
-        from ..models.short_ttc_rule import ShortTtcRule # noqa: PLC0415
-        from ..models.speeding_rule import SpeedingRule # noqa: PLC0415
+        from ..models.aggressive_approach_rule import AggressiveApproachRule  # noqa: PLC0415
+        from ..models.device_rules import DeviceRules  # noqa: PLC0415
+        from ..models.hard_braking_rule import HardBrakingRule  # noqa: PLC0415
+        from ..models.intrusion_rule import IntrusionRule  # noqa: PLC0415
+        from ..models.late_merge_rule import LateMergeRule  # noqa: PLC0415
+        from ..models.queue_rule import QueueRule  # noqa: PLC0415
+        from ..models.short_ttc_rule import ShortTtcRule  # noqa: PLC0415
+        from ..models.speeding_rule import SpeedingRule  # noqa: PLC0415
+
         aggressive_approach: dict[str, Any] | Unset = UNSET
         if not isinstance(self.aggressive_approach, Unset):
             aggressive_approach = self.aggressive_approach.to_dict()
@@ -143,11 +136,9 @@ class AlertRules:
         if not isinstance(self.speeding, Unset):
             speeding = self.speeding.to_dict()
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-        })
+        field_dict.update({})
         if aggressive_approach is not UNSET:
             field_dict["aggressive_approach"] = aggressive_approach
         if approach_length_m is not UNSET:
@@ -169,100 +160,75 @@ class AlertRules:
 
         return field_dict
 
-
-
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
-        from ..models.aggressive_approach_rule import AggressiveApproachRule # noqa: PLC0415
-        from ..models.device_rules import DeviceRules # noqa: PLC0415
-        from ..models.hard_braking_rule import HardBrakingRule # noqa: PLC0415
-        from ..models.intrusion_rule import IntrusionRule # noqa: PLC0415
-        from ..models.late_merge_rule import LateMergeRule # noqa: PLC0415
-        from ..models.queue_rule import QueueRule # noqa: PLC0415
-        from ..models.short_ttc_rule import ShortTtcRule # noqa: PLC0415
-        from ..models.speeding_rule import SpeedingRule # noqa: PLC0415
+        from ..models.aggressive_approach_rule import AggressiveApproachRule  # noqa: PLC0415
+        from ..models.device_rules import DeviceRules  # noqa: PLC0415
+        from ..models.hard_braking_rule import HardBrakingRule  # noqa: PLC0415
+        from ..models.intrusion_rule import IntrusionRule  # noqa: PLC0415
+        from ..models.late_merge_rule import LateMergeRule  # noqa: PLC0415
+        from ..models.queue_rule import QueueRule  # noqa: PLC0415
+        from ..models.short_ttc_rule import ShortTtcRule  # noqa: PLC0415
+        from ..models.speeding_rule import SpeedingRule  # noqa: PLC0415
+
         d = dict(src_dict)
         _aggressive_approach = d.pop("aggressive_approach", UNSET)
         aggressive_approach: AggressiveApproachRule | Unset
-        if isinstance(_aggressive_approach,  Unset):
+        if isinstance(_aggressive_approach, Unset):
             aggressive_approach = UNSET
         else:
             aggressive_approach = AggressiveApproachRule.from_dict(_aggressive_approach)
-
-
-
 
         approach_length_m = d.pop("approach_length_m", UNSET)
 
         _devices = d.pop("devices", UNSET)
         devices: DeviceRules | Unset
-        if isinstance(_devices,  Unset):
+        if isinstance(_devices, Unset):
             devices = UNSET
         else:
             devices = DeviceRules.from_dict(_devices)
 
-
-
-
         _hard_braking = d.pop("hard_braking", UNSET)
         hard_braking: HardBrakingRule | Unset
-        if isinstance(_hard_braking,  Unset):
+        if isinstance(_hard_braking, Unset):
             hard_braking = UNSET
         else:
             hard_braking = HardBrakingRule.from_dict(_hard_braking)
 
-
-
-
         _intrusion = d.pop("intrusion", UNSET)
         intrusion: IntrusionRule | Unset
-        if isinstance(_intrusion,  Unset):
+        if isinstance(_intrusion, Unset):
             intrusion = UNSET
         else:
             intrusion = IntrusionRule.from_dict(_intrusion)
 
-
-
-
         _late_merge = d.pop("late_merge", UNSET)
         late_merge: LateMergeRule | Unset
-        if isinstance(_late_merge,  Unset):
+        if isinstance(_late_merge, Unset):
             late_merge = UNSET
         else:
             late_merge = LateMergeRule.from_dict(_late_merge)
 
-
-
-
         _queue = d.pop("queue", UNSET)
         queue: QueueRule | Unset
-        if isinstance(_queue,  Unset):
+        if isinstance(_queue, Unset):
             queue = UNSET
         else:
             queue = QueueRule.from_dict(_queue)
 
-
-
-
         _short_ttc = d.pop("short_ttc", UNSET)
         short_ttc: ShortTtcRule | Unset
-        if isinstance(_short_ttc,  Unset):
+        if isinstance(_short_ttc, Unset):
             short_ttc = UNSET
         else:
             short_ttc = ShortTtcRule.from_dict(_short_ttc)
 
-
-
-
         _speeding = d.pop("speeding", UNSET)
         speeding: SpeedingRule | Unset
-        if isinstance(_speeding,  Unset):
+        if isinstance(_speeding, Unset):
             speeding = UNSET
         else:
             speeding = SpeedingRule.from_dict(_speeding)
-
-
-
 
         alert_rules = cls(
             aggressive_approach=aggressive_approach,
@@ -277,4 +243,3 @@ class AlertRules:
         )
 
         return alert_rules
-

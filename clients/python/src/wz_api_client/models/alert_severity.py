@@ -1,5 +1,6 @@
 from enum import StrEnum
 
+
 class AlertSeverity(StrEnum):
     CRITICAL = "critical"
     INFO = "info"

@@ -1,5 +1,6 @@
 from enum import StrEnum
 
+
 class AlertType(StrEnum):
     AGGRESSIVE_APPROACH = "aggressive_approach"
     HARD_BRAKING = "hard_braking"

@@ -14,27 +14,22 @@ from ..types import UNSET, Unset
 from typing import cast
 
 
-
-
-
-
 T = TypeVar("T", bound="ApiKeyInfo")
-
 
 
 @_attrs_define
 class ApiKeyInfo:
-    """ A stored API key, without its secret.
+    """A stored API key, without its secret.
 
-        Attributes:
-            created_at (float):
-            key_id (str):
-            name (str):
-            origin (ApiKeyInfoOrigin):
-            scope (ApiKeyInfoScope):
-            dev_mode (bool | Unset):  Default: False.
-            revoked_at (float | None | Unset):
-     """
+    Attributes:
+        created_at (float):
+        key_id (str):
+        name (str):
+        origin (ApiKeyInfoOrigin):
+        scope (ApiKeyInfoScope):
+        dev_mode (bool | Unset):  Default: False.
+        revoked_at (float | None | Unset):
+    """
 
     created_at: float
     key_id: str
@@ -43,10 +38,6 @@ class ApiKeyInfo:
     scope: ApiKeyInfoScope
     dev_mode: bool | Unset = False
     revoked_at: float | None | Unset = UNSET
-
-
-
-
 
     def to_dict(self) -> dict[str, Any]:
         created_at = self.created_at
@@ -67,24 +58,23 @@ class ApiKeyInfo:
         else:
             revoked_at = self.revoked_at
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-            "created_at": created_at,
-            "key_id": key_id,
-            "name": name,
-            "origin": origin,
-            "scope": scope,
-        })
+        field_dict.update(
+            {
+                "created_at": created_at,
+                "key_id": key_id,
+                "name": name,
+                "origin": origin,
+                "scope": scope,
+            }
+        )
         if dev_mode is not UNSET:
             field_dict["dev_mode"] = dev_mode
         if revoked_at is not UNSET:
             field_dict["revoked_at"] = revoked_at
 
         return field_dict
-
-
 
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
@@ -97,13 +87,7 @@ class ApiKeyInfo:
 
         origin = ApiKeyInfoOrigin(d.pop("origin"))
 
-
-
-
         scope = ApiKeyInfoScope(d.pop("scope"))
-
-
-
 
         dev_mode = d.pop("dev_mode", UNSET)
 
@@ -116,7 +100,6 @@ class ApiKeyInfo:
 
         revoked_at = _parse_revoked_at(d.pop("revoked_at", UNSET))
 
-
         api_key_info = cls(
             created_at=created_at,
             key_id=key_id,
@@ -128,4 +111,3 @@ class ApiKeyInfo:
         )
 
         return api_key_info
-

@@ -1,5 +1,6 @@
 from enum import StrEnum
 
+
 class ApiKeyInfoOrigin(StrEnum):
     API = "api"
     DEV = "dev"

@@ -1,5 +1,6 @@
 from enum import StrEnum
 
+
 class ApiKeyInfoScope(StrEnum):
     ADMIN = "admin"
     READ = "read"

@@ -1,5 +1,6 @@
 from enum import StrEnum
 
+
 class AreaKind(StrEnum):
     ACTIVITY = "activity"
     ADVANCE_WARNING = "advance_warning"

@@ -12,33 +12,24 @@ from ..types import UNSET, Unset
 from typing import Literal, cast
 
 
-
-
-
-
 T = TypeVar("T", bound="CameraIntrinsics")
-
 
 
 @_attrs_define
 class CameraIntrinsics:
-    """ A pinhole camera given by its horizontal field of view and resolution.
+    """A pinhole camera given by its horizontal field of view and resolution.
 
-        Attributes:
-            height_px (int | Unset):  Default: 1200.
-            horizontal_fov_deg (float | Unset):  Default: 90.0.
-            kind (Literal['camera'] | Unset):  Default: 'camera'.
-            width_px (int | Unset):  Default: 1200.
-     """
+    Attributes:
+        height_px (int | Unset):  Default: 1200.
+        horizontal_fov_deg (float | Unset):  Default: 90.0.
+        kind (Literal['camera'] | Unset):  Default: 'camera'.
+        width_px (int | Unset):  Default: 1200.
+    """
 
     height_px: int | Unset = 1200
     horizontal_fov_deg: float | Unset = 90.0
-    kind: Literal['camera'] | Unset = 'camera'
+    kind: Literal["camera"] | Unset = "camera"
     width_px: int | Unset = 1200
-
-
-
-
 
     def to_dict(self) -> dict[str, Any]:
         height_px = self.height_px
@@ -49,11 +40,9 @@ class CameraIntrinsics:
 
         width_px = self.width_px
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-        })
+        field_dict.update({})
         if height_px is not UNSET:
             field_dict["height_px"] = height_px
         if horizontal_fov_deg is not UNSET:
@@ -65,8 +54,6 @@ class CameraIntrinsics:
 
         return field_dict
 
-
-
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
         d = dict(src_dict)
@@ -74,8 +61,8 @@ class CameraIntrinsics:
 
         horizontal_fov_deg = d.pop("horizontal_fov_deg", UNSET)
 
-        kind = cast(Literal['camera'] | Unset , d.pop("kind", UNSET))
-        if kind != 'camera'and not isinstance(kind, Unset):
+        kind = cast(Literal["camera"] | Unset, d.pop("kind", UNSET))
+        if kind != "camera" and not isinstance(kind, Unset):
             raise ValueError(f"kind must match const 'camera', got '{kind}'")
 
         width_px = d.pop("width_px", UNSET)
@@ -88,4 +75,3 @@ class CameraIntrinsics:
         )
 
         return camera_intrinsics
-

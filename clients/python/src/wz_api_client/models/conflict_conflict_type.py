@@ -1,5 +1,6 @@
 from enum import StrEnum
 
+
 class ConflictConflictType(StrEnum):
     CROSSING = "crossing"
     LANE_CHANGE = "lane change"

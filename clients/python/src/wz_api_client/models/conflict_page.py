@@ -11,19 +11,15 @@ from ..types import UNSET, Unset
 from typing import cast
 
 if TYPE_CHECKING:
-  from ..models.conflict import Conflict
-
-
-
+    from ..models.conflict import Conflict
 
 
 T = TypeVar("T", bound="ConflictPage")
 
 
-
 @_attrs_define
 class ConflictPage:
-    """ Conflicts of a window (:mod:`wz_gateway.conflicts`), by the time of their minimum TTC;
+    """Conflicts of a window (:mod:`wz_gateway.conflicts`), by the time of their minimum TTC;
     ``next_cursor`` fetches the next page.
 
         Attributes:
@@ -35,7 +31,7 @@ class ConflictPage:
             next_cursor (None | str):
             site (str):
             start (float):
-     """
+    """
 
     conflicts: list[Conflict]
     count: int
@@ -46,18 +42,13 @@ class ConflictPage:
     site: str
     start: float
 
-
-
-
-
     def to_dict(self) -> dict[str, Any]:
-        from ..models.conflict import Conflict # noqa: PLC0415
+        from ..models.conflict import Conflict  # noqa: PLC0415
+
         conflicts = []
         for conflicts_item_data in self.conflicts:
             conflicts_item = conflicts_item_data.to_dict()
             conflicts.append(conflicts_item)
-
-
 
         count = self.count
 
@@ -74,37 +65,34 @@ class ConflictPage:
 
         start = self.start
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-            "conflicts": conflicts,
-            "count": count,
-            "end": end,
-            "max_pet_s": max_pet_s,
-            "max_ttc_s": max_ttc_s,
-            "next_cursor": next_cursor,
-            "site": site,
-            "start": start,
-        })
+        field_dict.update(
+            {
+                "conflicts": conflicts,
+                "count": count,
+                "end": end,
+                "max_pet_s": max_pet_s,
+                "max_ttc_s": max_ttc_s,
+                "next_cursor": next_cursor,
+                "site": site,
+                "start": start,
+            }
+        )
 
         return field_dict
 
-
-
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
-        from ..models.conflict import Conflict # noqa: PLC0415
+        from ..models.conflict import Conflict  # noqa: PLC0415
+
         d = dict(src_dict)
         conflicts = []
         _conflicts = d.pop("conflicts")
-        for conflicts_item_data in (_conflicts):
+        for conflicts_item_data in _conflicts:
             conflicts_item = Conflict.from_dict(conflicts_item_data)
 
-
-
             conflicts.append(conflicts_item)
-
 
         count = d.pop("count")
 
@@ -120,7 +108,6 @@ class ConflictPage:
             return cast(None | str, data)
 
         next_cursor = _parse_next_cursor(d.pop("next_cursor"))
-
 
         site = d.pop("site")
 
@@ -138,4 +125,3 @@ class ConflictPage:
         )
 
         return conflict_page
-

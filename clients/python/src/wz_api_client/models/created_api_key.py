@@ -14,28 +14,23 @@ from ..types import UNSET, Unset
 from typing import cast
 
 
-
-
-
-
 T = TypeVar("T", bound="CreatedApiKey")
-
 
 
 @_attrs_define
 class CreatedApiKey:
-    """ A key just made: the secret is shown this once, only its hash is kept.
+    """A key just made: the secret is shown this once, only its hash is kept.
 
-        Attributes:
-            created_at (float):
-            key_id (str):
-            name (str):
-            origin (CreatedApiKeyOrigin):
-            scope (CreatedApiKeyScope):
-            secret (str):
-            dev_mode (bool | Unset):  Default: False.
-            revoked_at (float | None | Unset):
-     """
+    Attributes:
+        created_at (float):
+        key_id (str):
+        name (str):
+        origin (CreatedApiKeyOrigin):
+        scope (CreatedApiKeyScope):
+        secret (str):
+        dev_mode (bool | Unset):  Default: False.
+        revoked_at (float | None | Unset):
+    """
 
     created_at: float
     key_id: str
@@ -45,10 +40,6 @@ class CreatedApiKey:
     secret: str
     dev_mode: bool | Unset = False
     revoked_at: float | None | Unset = UNSET
-
-
-
-
 
     def to_dict(self) -> dict[str, Any]:
         created_at = self.created_at
@@ -71,25 +62,24 @@ class CreatedApiKey:
         else:
             revoked_at = self.revoked_at
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-            "created_at": created_at,
-            "key_id": key_id,
-            "name": name,
-            "origin": origin,
-            "scope": scope,
-            "secret": secret,
-        })
+        field_dict.update(
+            {
+                "created_at": created_at,
+                "key_id": key_id,
+                "name": name,
+                "origin": origin,
+                "scope": scope,
+                "secret": secret,
+            }
+        )
         if dev_mode is not UNSET:
             field_dict["dev_mode"] = dev_mode
         if revoked_at is not UNSET:
             field_dict["revoked_at"] = revoked_at
 
         return field_dict
-
-
 
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
@@ -102,13 +92,7 @@ class CreatedApiKey:
 
         origin = CreatedApiKeyOrigin(d.pop("origin"))
 
-
-
-
         scope = CreatedApiKeyScope(d.pop("scope"))
-
-
-
 
         secret = d.pop("secret")
 
@@ -123,7 +107,6 @@ class CreatedApiKey:
 
         revoked_at = _parse_revoked_at(d.pop("revoked_at", UNSET))
 
-
         created_api_key = cls(
             created_at=created_at,
             key_id=key_id,
@@ -136,4 +119,3 @@ class CreatedApiKey:
         )
 
         return created_api_key
-

@@ -1,5 +1,6 @@
 from enum import StrEnum
 
+
 class CreatedApiKeyOrigin(StrEnum):
     API = "api"
     DEV = "dev"

@@ -1,5 +1,6 @@
 from enum import StrEnum
 
+
 class CreatedApiKeyScope(StrEnum):
     ADMIN = "admin"
     READ = "read"

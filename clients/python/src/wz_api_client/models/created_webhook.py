@@ -14,31 +14,26 @@ from ..types import UNSET, Unset
 from typing import cast
 
 
-
-
-
-
 T = TypeVar("T", bound="CreatedWebhook")
-
 
 
 @_attrs_define
 class CreatedWebhook:
-    """ A subscription just made: its signing secret (``whsec_...``) is shown this once.
+    """A subscription just made: its signing secret (``whsec_...``) is shown this once.
 
-        Attributes:
-            created_at (float):
-            description (str):
-            event_types (list[str]):
-            secret (str):
-            subscription_id (str):
-            url (str):
-            disabled_at (float | None | Unset):
-            disabled_reason (None | str | Unset):
-            min_severity (AlertSeverity | None | Unset):
-            phases (list[CreatedWebhookPhasesType0Item] | None | Unset):
-            previous_secret_until (float | None | Unset):
-     """
+    Attributes:
+        created_at (float):
+        description (str):
+        event_types (list[str]):
+        secret (str):
+        subscription_id (str):
+        url (str):
+        disabled_at (float | None | Unset):
+        disabled_reason (None | str | Unset):
+        min_severity (AlertSeverity | None | Unset):
+        phases (list[CreatedWebhookPhasesType0Item] | None | Unset):
+        previous_secret_until (float | None | Unset):
+    """
 
     created_at: float
     description: str
@@ -52,18 +47,12 @@ class CreatedWebhook:
     phases: list[CreatedWebhookPhasesType0Item] | None | Unset = UNSET
     previous_secret_until: float | None | Unset = UNSET
 
-
-
-
-
     def to_dict(self) -> dict[str, Any]:
         created_at = self.created_at
 
         description = self.description
 
         event_types = self.event_types
-
-
 
         secret = self.secret
 
@@ -100,7 +89,6 @@ class CreatedWebhook:
                 phases_type_0_item = phases_type_0_item_data.value
                 phases.append(phases_type_0_item)
 
-
         else:
             phases = self.phases
 
@@ -110,17 +98,18 @@ class CreatedWebhook:
         else:
             previous_secret_until = self.previous_secret_until
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-            "created_at": created_at,
-            "description": description,
-            "event_types": event_types,
-            "secret": secret,
-            "subscription_id": subscription_id,
-            "url": url,
-        })
+        field_dict.update(
+            {
+                "created_at": created_at,
+                "description": description,
+                "event_types": event_types,
+                "secret": secret,
+                "subscription_id": subscription_id,
+                "url": url,
+            }
+        )
         if disabled_at is not UNSET:
             field_dict["disabled_at"] = disabled_at
         if disabled_reason is not UNSET:
@@ -134,8 +123,6 @@ class CreatedWebhook:
 
         return field_dict
 
-
-
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
         d = dict(src_dict)
@@ -144,7 +131,6 @@ class CreatedWebhook:
         description = d.pop("description")
 
         event_types = cast(list[str], d.pop("event_types"))
-
 
         secret = d.pop("secret")
 
@@ -161,7 +147,6 @@ class CreatedWebhook:
 
         disabled_at = _parse_disabled_at(d.pop("disabled_at", UNSET))
 
-
         def _parse_disabled_reason(data: object) -> None | str | Unset:
             if data is None:
                 return data
@@ -170,7 +155,6 @@ class CreatedWebhook:
             return cast(None | str | Unset, data)
 
         disabled_reason = _parse_disabled_reason(d.pop("disabled_reason", UNSET))
-
 
         def _parse_min_severity(data: object) -> AlertSeverity | None | Unset:
             if data is None:
@@ -182,8 +166,6 @@ class CreatedWebhook:
                     raise TypeError()
                 min_severity_type_0 = AlertSeverity(data)
 
-
-
                 return min_severity_type_0
             except (TypeError, ValueError, AttributeError, KeyError):
                 pass
@@ -191,8 +173,9 @@ class CreatedWebhook:
 
         min_severity = _parse_min_severity(d.pop("min_severity", UNSET))
 
-
-        def _parse_phases(data: object) -> list[CreatedWebhookPhasesType0Item] | None | Unset:
+        def _parse_phases(
+            data: object,
+        ) -> list[CreatedWebhookPhasesType0Item] | None | Unset:
             if data is None:
                 return data
             if isinstance(data, Unset):
@@ -202,10 +185,10 @@ class CreatedWebhook:
                     raise TypeError()
                 phases_type_0 = []
                 _phases_type_0 = data
-                for phases_type_0_item_data in (_phases_type_0):
-                    phases_type_0_item = CreatedWebhookPhasesType0Item(phases_type_0_item_data)
-
-
+                for phases_type_0_item_data in _phases_type_0:
+                    phases_type_0_item = CreatedWebhookPhasesType0Item(
+                        phases_type_0_item_data
+                    )
 
                     phases_type_0.append(phases_type_0_item)
 
@@ -216,7 +199,6 @@ class CreatedWebhook:
 
         phases = _parse_phases(d.pop("phases", UNSET))
 
-
         def _parse_previous_secret_until(data: object) -> float | None | Unset:
             if data is None:
                 return data
@@ -224,8 +206,9 @@ class CreatedWebhook:
                 return data
             return cast(float | None | Unset, data)
 
-        previous_secret_until = _parse_previous_secret_until(d.pop("previous_secret_until", UNSET))
-
+        previous_secret_until = _parse_previous_secret_until(
+            d.pop("previous_secret_until", UNSET)
+        )
 
         created_webhook = cls(
             created_at=created_at,
@@ -242,4 +225,3 @@ class CreatedWebhook:
         )
 
         return created_webhook
-

@@ -1,5 +1,6 @@
 from enum import StrEnum
 
+
 class CreatedWebhookPhasesType0Item(StrEnum):
     CLEAR = "clear"
     START = "start"

@@ -12,27 +12,18 @@ from ..types import UNSET, Unset
 from typing import cast
 
 
-
-
-
-
 T = TypeVar("T", bound="DeviceRules")
-
 
 
 @_attrs_define
 class DeviceRules:
-    """ Roadside devices driven by the alerts: a flashing beacon and a message sign.
+    """Roadside devices driven by the alerts: a flashing beacon and a message sign.
 
-        Attributes:
-            sign_station_m (float | None | Unset):
-     """
+    Attributes:
+        sign_station_m (float | None | Unset):
+    """
 
     sign_station_m: float | None | Unset = UNSET
-
-
-
-
 
     def to_dict(self) -> dict[str, Any]:
         sign_station_m: float | None | Unset
@@ -41,21 +32,18 @@ class DeviceRules:
         else:
             sign_station_m = self.sign_station_m
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-        })
+        field_dict.update({})
         if sign_station_m is not UNSET:
             field_dict["sign_station_m"] = sign_station_m
 
         return field_dict
 
-
-
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
         d = dict(src_dict)
+
         def _parse_sign_station_m(data: object) -> float | None | Unset:
             if data is None:
                 return data
@@ -65,10 +53,8 @@ class DeviceRules:
 
         sign_station_m = _parse_sign_station_m(d.pop("sign_station_m", UNSET))
 
-
         device_rules = cls(
             sign_station_m=sign_station_m,
         )
 
         return device_rules
-

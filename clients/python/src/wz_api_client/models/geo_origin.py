@@ -11,31 +11,22 @@ from ..types import UNSET, Unset
 from ..types import UNSET, Unset
 
 
-
-
-
-
 T = TypeVar("T", bound="GeoOrigin")
-
 
 
 @_attrs_define
 class GeoOrigin:
-    """ WGS84 anchor of the site frame's origin (x = y = 0, z = 0 at ``altitude_m``).
+    """WGS84 anchor of the site frame's origin (x = y = 0, z = 0 at ``altitude_m``).
 
-        Attributes:
-            latitude_deg (float):
-            longitude_deg (float):
-            altitude_m (float | Unset):  Default: 0.0.
-     """
+    Attributes:
+        latitude_deg (float):
+        longitude_deg (float):
+        altitude_m (float | Unset):  Default: 0.0.
+    """
 
     latitude_deg: float
     longitude_deg: float
     altitude_m: float | Unset = 0.0
-
-
-
-
 
     def to_dict(self) -> dict[str, Any]:
         latitude_deg = self.latitude_deg
@@ -44,19 +35,18 @@ class GeoOrigin:
 
         altitude_m = self.altitude_m
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-            "latitude_deg": latitude_deg,
-            "longitude_deg": longitude_deg,
-        })
+        field_dict.update(
+            {
+                "latitude_deg": latitude_deg,
+                "longitude_deg": longitude_deg,
+            }
+        )
         if altitude_m is not UNSET:
             field_dict["altitude_m"] = altitude_m
 
         return field_dict
-
-
 
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
@@ -74,4 +64,3 @@ class GeoOrigin:
         )
 
         return geo_origin
-

@@ -1,5 +1,6 @@
 from enum import StrEnum
 
+
 class GetAlertsV1AlertsGetFormat(StrEnum):
     CSV = "csv"
     GEOJSON = "geojson"

@@ -1,5 +1,6 @@
 from enum import StrEnum
 
+
 class GetAlertsV1AlertsGetOrder(StrEnum):
     NEWEST = "newest"
     OLDEST = "oldest"

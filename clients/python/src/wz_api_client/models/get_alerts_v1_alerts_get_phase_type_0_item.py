@@ -1,5 +1,6 @@
 from enum import StrEnum
 
+
 class GetAlertsV1AlertsGetPhaseType0Item(StrEnum):
     CLEAR = "clear"
     START = "start"

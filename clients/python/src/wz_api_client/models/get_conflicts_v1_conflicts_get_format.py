@@ -1,5 +1,6 @@
 from enum import StrEnum
 
+
 class GetConflictsV1ConflictsGetFormat(StrEnum):
     CSV = "csv"
     JSON = "json"

@@ -1,5 +1,6 @@
 from enum import StrEnum
 
+
 class GetStreamV1StreamGetEventType0Item(StrEnum):
     ALERT = "alert"
     TRACKS = "tracks"

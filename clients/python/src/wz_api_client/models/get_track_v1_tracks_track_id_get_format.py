@@ -1,5 +1,6 @@
 from enum import StrEnum
 
+
 class GetTrackV1TracksTrackIdGetFormat(StrEnum):
     CSV = "csv"
     GEOJSON = "geojson"

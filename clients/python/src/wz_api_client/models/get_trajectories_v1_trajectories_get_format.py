@@ -1,5 +1,6 @@
 from enum import StrEnum
 
+
 class GetTrajectoriesV1TrajectoriesGetFormat(StrEnum):
     CSV = "csv"
     GEOJSON = "geojson"

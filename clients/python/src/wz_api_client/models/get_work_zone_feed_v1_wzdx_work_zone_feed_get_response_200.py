@@ -9,40 +9,24 @@ from attrs import field as _attrs_field
 from ..types import UNSET, Unset
 
 
-
-
-
-
-
 T = TypeVar("T", bound="GetWorkZoneFeedV1WzdxWorkZoneFeedGetResponse200")
-
 
 
 @_attrs_define
 class GetWorkZoneFeedV1WzdxWorkZoneFeedGetResponse200:
-    
-
     additional_properties: dict[str, Any] = _attrs_field(init=False, factory=dict)
 
-
-
-
-
     def to_dict(self) -> dict[str, Any]:
-        
+
         field_dict: dict[str, Any] = {}
         field_dict.update(self.additional_properties)
 
         return field_dict
 
-
-
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
         d = dict(src_dict)
-        get_work_zone_feed_v1_wzdx_work_zone_feed_get_response_200 = cls(
-        )
-
+        get_work_zone_feed_v1_wzdx_work_zone_feed_get_response_200 = cls()
 
         get_work_zone_feed_v1_wzdx_work_zone_feed_get_response_200.additional_properties = d
         return get_work_zone_feed_v1_wzdx_work_zone_feed_get_response_200

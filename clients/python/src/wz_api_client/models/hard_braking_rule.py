@@ -11,17 +11,12 @@ from ..types import UNSET, Unset
 from ..types import UNSET, Unset
 
 
-
-
-
-
 T = TypeVar("T", bound="HardBrakingRule")
-
 
 
 @_attrs_define
 class HardBrakingRule:
-    """ Deceleration from the least-squares slope of the track's speed over ``window_s``.
+    """Deceleration from the least-squares slope of the track's speed over ``window_s``.
 
     Starts at ``-dv/dt >= decel_g * g``, stays open down to ``(decel_g - hysteresis_g) * g``;
     critical from ``critical_decel_g * g`` (g = 9.80665 m/s^2).
@@ -36,7 +31,7 @@ class HardBrakingRule:
             hysteresis_g (float | Unset):  Default: 0.05.
             min_samples (int | Unset):  Default: 5.
             window_s (float | Unset):  Default: 0.8.
-     """
+    """
 
     clear_s: float | Unset = 1.0
     cooldown_s: float | Unset = 5.0
@@ -47,10 +42,6 @@ class HardBrakingRule:
     hysteresis_g: float | Unset = 0.05
     min_samples: int | Unset = 5
     window_s: float | Unset = 0.8
-
-
-
-
 
     def to_dict(self) -> dict[str, Any]:
         clear_s = self.clear_s
@@ -71,11 +62,9 @@ class HardBrakingRule:
 
         window_s = self.window_s
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-        })
+        field_dict.update({})
         if clear_s is not UNSET:
             field_dict["clear_s"] = clear_s
         if cooldown_s is not UNSET:
@@ -96,8 +85,6 @@ class HardBrakingRule:
             field_dict["window_s"] = window_s
 
         return field_dict
-
-
 
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
@@ -133,4 +120,3 @@ class HardBrakingRule:
         )
 
         return hard_braking_rule
-

@@ -11,17 +11,12 @@ from ..types import UNSET, Unset
 from ..types import UNSET, Unset
 
 
-
-
-
-
 T = TypeVar("T", bound="IntrusionRule")
-
 
 
 @_attrs_define
 class IntrusionRule:
-    """ A vehicle in the closed lane inside the buffer or activity area.
+    """A vehicle in the closed lane inside the buffer or activity area.
 
     Starts when the track's offset is in the closed lane's band (or its lane is the closed one)
     between the buffer's start and the activity area's end at ``speed >= min_speed_mps``; stays
@@ -35,7 +30,7 @@ class IntrusionRule:
             hold_s (float | Unset):  Default: 0.3.
             lateral_hysteresis_m (float | Unset):  Default: 0.3.
             min_speed_mps (float | Unset):  Default: 4.5.
-     """
+    """
 
     clear_s: float | Unset = 1.0
     cooldown_s: float | Unset = 10.0
@@ -43,10 +38,6 @@ class IntrusionRule:
     hold_s: float | Unset = 0.3
     lateral_hysteresis_m: float | Unset = 0.3
     min_speed_mps: float | Unset = 4.5
-
-
-
-
 
     def to_dict(self) -> dict[str, Any]:
         clear_s = self.clear_s
@@ -61,11 +52,9 @@ class IntrusionRule:
 
         min_speed_mps = self.min_speed_mps
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-        })
+        field_dict.update({})
         if clear_s is not UNSET:
             field_dict["clear_s"] = clear_s
         if cooldown_s is not UNSET:
@@ -80,8 +69,6 @@ class IntrusionRule:
             field_dict["min_speed_mps"] = min_speed_mps
 
         return field_dict
-
-
 
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
@@ -108,4 +95,3 @@ class IntrusionRule:
         )
 
         return intrusion_rule
-

@@ -11,31 +11,22 @@ from ..types import UNSET, Unset
 from ..types import UNSET, Unset
 
 
-
-
-
-
 T = TypeVar("T", bound="Lane")
-
 
 
 @_attrs_define
 class Lane:
-    """ One lane of the carriageway; ``index`` 0 is the rightmost lane (SUMO's convention).
+    """One lane of the carriageway; ``index`` 0 is the rightmost lane (SUMO's convention).
 
-        Attributes:
-            center_offset_m (float):
-            index (int):
-            width_m (float | Unset):  Default: 3.66.
-     """
+    Attributes:
+        center_offset_m (float):
+        index (int):
+        width_m (float | Unset):  Default: 3.66.
+    """
 
     center_offset_m: float
     index: int
     width_m: float | Unset = 3.66
-
-
-
-
 
     def to_dict(self) -> dict[str, Any]:
         center_offset_m = self.center_offset_m
@@ -44,19 +35,18 @@ class Lane:
 
         width_m = self.width_m
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-            "center_offset_m": center_offset_m,
-            "index": index,
-        })
+        field_dict.update(
+            {
+                "center_offset_m": center_offset_m,
+                "index": index,
+            }
+        )
         if width_m is not UNSET:
             field_dict["width_m"] = width_m
 
         return field_dict
-
-
 
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
@@ -74,4 +64,3 @@ class Lane:
         )
 
         return lane
-

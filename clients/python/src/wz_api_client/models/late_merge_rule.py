@@ -11,17 +11,12 @@ from ..types import UNSET, Unset
 from ..types import UNSET, Unset
 
 
-
-
-
-
 T = TypeVar("T", bound="LateMergeRule")
-
 
 
 @_attrs_define
 class LateMergeRule:
-    """ Still in the closed lane within ``distance_m`` of the taper start (or in the taper).
+    """Still in the closed lane within ``distance_m`` of the taper start (or in the taper).
 
     Starts when the track's lane is the closed one (or its offset is in the closed lane's band)
     at ``speed >= min_speed_mps``; stays open while the offset is within the band widened by
@@ -37,7 +32,7 @@ class LateMergeRule:
             lateral_hysteresis_m (float | Unset):  Default: 0.3.
             min_speed_mps (float | Unset):  Default: 13.4.
             speed_hysteresis_mps (float | Unset):  Default: 1.0.
-     """
+    """
 
     clear_s: float | Unset = 1.0
     cooldown_s: float | Unset = 10.0
@@ -47,10 +42,6 @@ class LateMergeRule:
     lateral_hysteresis_m: float | Unset = 0.3
     min_speed_mps: float | Unset = 13.4
     speed_hysteresis_mps: float | Unset = 1.0
-
-
-
-
 
     def to_dict(self) -> dict[str, Any]:
         clear_s = self.clear_s
@@ -69,11 +60,9 @@ class LateMergeRule:
 
         speed_hysteresis_mps = self.speed_hysteresis_mps
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-        })
+        field_dict.update({})
         if clear_s is not UNSET:
             field_dict["clear_s"] = clear_s
         if cooldown_s is not UNSET:
@@ -92,8 +81,6 @@ class LateMergeRule:
             field_dict["speed_hysteresis_mps"] = speed_hysteresis_mps
 
         return field_dict
-
-
 
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
@@ -126,4 +113,3 @@ class LateMergeRule:
         )
 
         return late_merge_rule
-

@@ -12,39 +12,30 @@ from ..types import UNSET, Unset
 from typing import Literal, cast
 
 
-
-
-
-
 T = TypeVar("T", bound="LidarIntrinsics")
-
 
 
 @_attrs_define
 class LidarIntrinsics:
-    """ A spinning multi-beam LiDAR.
+    """A spinning multi-beam LiDAR.
 
-        Attributes:
-            azimuth_steps (int | Unset):  Default: 2048.
-            beams (int | Unset):  Default: 64.
-            kind (Literal['lidar'] | Unset):  Default: 'lidar'.
-            max_range_m (float | Unset):  Default: 200.0.
-            range_noise_std_m (float | Unset):  Default: 0.02.
-            vertical_max_deg (float | Unset):  Default: 11.0.
-            vertical_min_deg (float | Unset):  Default: -30.0.
-     """
+    Attributes:
+        azimuth_steps (int | Unset):  Default: 2048.
+        beams (int | Unset):  Default: 64.
+        kind (Literal['lidar'] | Unset):  Default: 'lidar'.
+        max_range_m (float | Unset):  Default: 200.0.
+        range_noise_std_m (float | Unset):  Default: 0.02.
+        vertical_max_deg (float | Unset):  Default: 11.0.
+        vertical_min_deg (float | Unset):  Default: -30.0.
+    """
 
     azimuth_steps: int | Unset = 2048
     beams: int | Unset = 64
-    kind: Literal['lidar'] | Unset = 'lidar'
+    kind: Literal["lidar"] | Unset = "lidar"
     max_range_m: float | Unset = 200.0
     range_noise_std_m: float | Unset = 0.02
     vertical_max_deg: float | Unset = 11.0
     vertical_min_deg: float | Unset = -30.0
-
-
-
-
 
     def to_dict(self) -> dict[str, Any]:
         azimuth_steps = self.azimuth_steps
@@ -61,11 +52,9 @@ class LidarIntrinsics:
 
         vertical_min_deg = self.vertical_min_deg
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-        })
+        field_dict.update({})
         if azimuth_steps is not UNSET:
             field_dict["azimuth_steps"] = azimuth_steps
         if beams is not UNSET:
@@ -83,8 +72,6 @@ class LidarIntrinsics:
 
         return field_dict
 
-
-
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
         d = dict(src_dict)
@@ -92,8 +79,8 @@ class LidarIntrinsics:
 
         beams = d.pop("beams", UNSET)
 
-        kind = cast(Literal['lidar'] | Unset , d.pop("kind", UNSET))
-        if kind != 'lidar'and not isinstance(kind, Unset):
+        kind = cast(Literal["lidar"] | Unset, d.pop("kind", UNSET))
+        if kind != "lidar" and not isinstance(kind, Unset):
             raise ValueError(f"kind must match const 'lidar', got '{kind}'")
 
         max_range_m = d.pop("max_range_m", UNSET)
@@ -115,4 +102,3 @@ class LidarIntrinsics:
         )
 
         return lidar_intrinsics
-

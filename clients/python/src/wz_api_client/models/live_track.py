@@ -14,42 +14,37 @@ from ..types import UNSET, Unset
 from typing import cast
 
 
-
-
-
-
 T = TypeVar("T", bound="LiveTrack")
-
 
 
 @_attrs_define
 class LiveTrack:
-    """ A track of the newest batch, with its WGS84 position.
+    """A track of the newest batch, with its WGS84 position.
 
-        Attributes:
-            age_s (float):
-            confirmed (bool):
-            covariance (list[float]):
-            heading_rad (float):
-            hits (int):
-            lane_index (int):
-            latitude_deg (float):
-            longitude_deg (float):
-            offset_m (float):
-            sources (list[str]):
-            speed_mps (float):
-            station_m (float):
-            track_id (int):
-            vx_mps (float):
-            vy_mps (float):
-            x_m (float):
-            y_m (float):
-            last_update_s (float | None | Unset):
-            length_m (float | None | Unset):
-            object_class (VehicleClass | Unset):
-            status (TrackStatus | Unset): Life cycle of a fused track.
-            width_m (float | None | Unset):
-     """
+    Attributes:
+        age_s (float):
+        confirmed (bool):
+        covariance (list[float]):
+        heading_rad (float):
+        hits (int):
+        lane_index (int):
+        latitude_deg (float):
+        longitude_deg (float):
+        offset_m (float):
+        sources (list[str]):
+        speed_mps (float):
+        station_m (float):
+        track_id (int):
+        vx_mps (float):
+        vy_mps (float):
+        x_m (float):
+        y_m (float):
+        last_update_s (float | None | Unset):
+        length_m (float | None | Unset):
+        object_class (VehicleClass | Unset):
+        status (TrackStatus | Unset): Life cycle of a fused track.
+        width_m (float | None | Unset):
+    """
 
     age_s: float
     confirmed: bool
@@ -74,18 +69,12 @@ class LiveTrack:
     status: TrackStatus | Unset = UNSET
     width_m: float | None | Unset = UNSET
 
-
-
-
-
     def to_dict(self) -> dict[str, Any]:
         age_s = self.age_s
 
         confirmed = self.confirmed
 
         covariance = self.covariance
-
-
 
         heading_rad = self.heading_rad
 
@@ -100,8 +89,6 @@ class LiveTrack:
         offset_m = self.offset_m
 
         sources = self.sources
-
-
 
         speed_mps = self.speed_mps
 
@@ -133,11 +120,9 @@ class LiveTrack:
         if not isinstance(self.object_class, Unset):
             object_class = self.object_class.value
 
-
         status: str | Unset = UNSET
         if not isinstance(self.status, Unset):
             status = self.status.value
-
 
         width_m: float | None | Unset
         if isinstance(self.width_m, Unset):
@@ -145,28 +130,29 @@ class LiveTrack:
         else:
             width_m = self.width_m
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-            "age_s": age_s,
-            "confirmed": confirmed,
-            "covariance": covariance,
-            "heading_rad": heading_rad,
-            "hits": hits,
-            "lane_index": lane_index,
-            "latitude_deg": latitude_deg,
-            "longitude_deg": longitude_deg,
-            "offset_m": offset_m,
-            "sources": sources,
-            "speed_mps": speed_mps,
-            "station_m": station_m,
-            "track_id": track_id,
-            "vx_mps": vx_mps,
-            "vy_mps": vy_mps,
-            "x_m": x_m,
-            "y_m": y_m,
-        })
+        field_dict.update(
+            {
+                "age_s": age_s,
+                "confirmed": confirmed,
+                "covariance": covariance,
+                "heading_rad": heading_rad,
+                "hits": hits,
+                "lane_index": lane_index,
+                "latitude_deg": latitude_deg,
+                "longitude_deg": longitude_deg,
+                "offset_m": offset_m,
+                "sources": sources,
+                "speed_mps": speed_mps,
+                "station_m": station_m,
+                "track_id": track_id,
+                "vx_mps": vx_mps,
+                "vy_mps": vy_mps,
+                "x_m": x_m,
+                "y_m": y_m,
+            }
+        )
         if last_update_s is not UNSET:
             field_dict["last_update_s"] = last_update_s
         if length_m is not UNSET:
@@ -180,8 +166,6 @@ class LiveTrack:
 
         return field_dict
 
-
-
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
         d = dict(src_dict)
@@ -190,7 +174,6 @@ class LiveTrack:
         confirmed = d.pop("confirmed")
 
         covariance = cast(list[float], d.pop("covariance"))
-
 
         heading_rad = d.pop("heading_rad")
 
@@ -205,7 +188,6 @@ class LiveTrack:
         offset_m = d.pop("offset_m")
 
         sources = cast(list[str], d.pop("sources"))
-
 
         speed_mps = d.pop("speed_mps")
 
@@ -230,7 +212,6 @@ class LiveTrack:
 
         last_update_s = _parse_last_update_s(d.pop("last_update_s", UNSET))
 
-
         def _parse_length_m(data: object) -> float | None | Unset:
             if data is None:
                 return data
@@ -240,26 +221,19 @@ class LiveTrack:
 
         length_m = _parse_length_m(d.pop("length_m", UNSET))
 
-
         _object_class = d.pop("object_class", UNSET)
         object_class: VehicleClass | Unset
-        if isinstance(_object_class,  Unset):
+        if isinstance(_object_class, Unset):
             object_class = UNSET
         else:
             object_class = VehicleClass(_object_class)
 
-
-
-
         _status = d.pop("status", UNSET)
         status: TrackStatus | Unset
-        if isinstance(_status,  Unset):
+        if isinstance(_status, Unset):
             status = UNSET
         else:
             status = TrackStatus(_status)
-
-
-
 
         def _parse_width_m(data: object) -> float | None | Unset:
             if data is None:
@@ -269,7 +243,6 @@ class LiveTrack:
             return cast(float | None | Unset, data)
 
         width_m = _parse_width_m(d.pop("width_m", UNSET))
-
 
         live_track = cls(
             age_s=age_s,
@@ -297,4 +270,3 @@ class LiveTrack:
         )
 
         return live_track
-

@@ -11,27 +11,23 @@ from ..types import UNSET, Unset
 from typing import cast
 
 if TYPE_CHECKING:
-  from ..models.live_track import LiveTrack
-
-
-
+    from ..models.live_track import LiveTrack
 
 
 T = TypeVar("T", bound="LiveTracks")
 
 
-
 @_attrs_define
 class LiveTracks:
-    """ The newest track batch the gateway received; empty before the first.
+    """The newest track batch the gateway received; empty before the first.
 
-        Attributes:
-            age_s (float | None):
-            cycle_index (int | None):
-            site (str):
-            stamp (float | None):
-            tracks (list[LiveTrack]):
-     """
+    Attributes:
+        age_s (float | None):
+        cycle_index (int | None):
+        site (str):
+        stamp (float | None):
+        tracks (list[LiveTrack]):
+    """
 
     age_s: float | None
     cycle_index: int | None
@@ -39,12 +35,9 @@ class LiveTracks:
     stamp: float | None
     tracks: list[LiveTrack]
 
-
-
-
-
     def to_dict(self) -> dict[str, Any]:
-        from ..models.live_track import LiveTrack # noqa: PLC0415
+        from ..models.live_track import LiveTrack  # noqa: PLC0415
+
         age_s: float | None
         age_s = self.age_s
 
@@ -61,27 +54,26 @@ class LiveTracks:
             tracks_item = tracks_item_data.to_dict()
             tracks.append(tracks_item)
 
-
-
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-            "age_s": age_s,
-            "cycle_index": cycle_index,
-            "site": site,
-            "stamp": stamp,
-            "tracks": tracks,
-        })
+        field_dict.update(
+            {
+                "age_s": age_s,
+                "cycle_index": cycle_index,
+                "site": site,
+                "stamp": stamp,
+                "tracks": tracks,
+            }
+        )
 
         return field_dict
 
-
-
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
-        from ..models.live_track import LiveTrack # noqa: PLC0415
+        from ..models.live_track import LiveTrack  # noqa: PLC0415
+
         d = dict(src_dict)
+
         def _parse_age_s(data: object) -> float | None:
             if data is None:
                 return data
@@ -89,14 +81,12 @@ class LiveTracks:
 
         age_s = _parse_age_s(d.pop("age_s"))
 
-
         def _parse_cycle_index(data: object) -> int | None:
             if data is None:
                 return data
             return cast(int | None, data)
 
         cycle_index = _parse_cycle_index(d.pop("cycle_index"))
-
 
         site = d.pop("site")
 
@@ -107,16 +97,12 @@ class LiveTracks:
 
         stamp = _parse_stamp(d.pop("stamp"))
 
-
         tracks = []
         _tracks = d.pop("tracks")
-        for tracks_item_data in (_tracks):
+        for tracks_item_data in _tracks:
             tracks_item = LiveTrack.from_dict(tracks_item_data)
 
-
-
             tracks.append(tracks_item)
-
 
         live_tracks = cls(
             age_s=age_s,
@@ -127,4 +113,3 @@ class LiveTracks:
         )
 
         return live_tracks
-

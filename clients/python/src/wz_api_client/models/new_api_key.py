@@ -11,46 +11,36 @@ from ..types import UNSET, Unset
 from ..models.new_api_key_scope import NewApiKeyScope
 
 
-
-
-
-
 T = TypeVar("T", bound="NewApiKey")
-
 
 
 @_attrs_define
 class NewApiKey:
-    """ Ask for a new key (admin).
+    """Ask for a new key (admin).
 
-        Attributes:
-            name (str):
-            scope (NewApiKeyScope):
-     """
+    Attributes:
+        name (str):
+        scope (NewApiKeyScope):
+    """
 
     name: str
     scope: NewApiKeyScope
-
-
-
-
 
     def to_dict(self) -> dict[str, Any]:
         name = self.name
 
         scope = self.scope.value
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-            "name": name,
-            "scope": scope,
-        })
+        field_dict.update(
+            {
+                "name": name,
+                "scope": scope,
+            }
+        )
 
         return field_dict
-
-
 
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
@@ -59,13 +49,9 @@ class NewApiKey:
 
         scope = NewApiKeyScope(d.pop("scope"))
 
-
-
-
         new_api_key = cls(
             name=name,
             scope=scope,
         )
 
         return new_api_key
-

@@ -1,5 +1,6 @@
 from enum import StrEnum
 
+
 class NewApiKeyScope(StrEnum):
     ADMIN = "admin"
     READ = "read"

@@ -14,17 +14,12 @@ from ..types import UNSET, Unset
 from typing import cast
 
 
-
-
-
-
 T = TypeVar("T", bound="NewWebhook")
-
 
 
 @_attrs_define
 class NewWebhook:
-    """ Subscribe a URL to alert events (admin). Each event is POSTed as signed JSON (Standard
+    """Subscribe a URL to alert events (admin). Each event is POSTed as signed JSON (Standard
     Webhooks); the secret to check the signatures is in the answer, once.
 
         Attributes:
@@ -34,17 +29,13 @@ class NewWebhook:
             event_types (list[str] | Unset): `alert.*` for every alert, or `alert.<type>` (`alert.speeding`...)
             min_severity (AlertSeverity | None | Unset):
             phases (list[NewWebhookPhasesType0Item] | None | Unset):
-     """
+    """
 
     url: str
-    description: str | Unset = ''
+    description: str | Unset = ""
     event_types: list[str] | Unset = UNSET
     min_severity: AlertSeverity | None | Unset = UNSET
     phases: list[NewWebhookPhasesType0Item] | None | Unset = UNSET
-
-
-
-
 
     def to_dict(self) -> dict[str, Any]:
         url = self.url
@@ -54,8 +45,6 @@ class NewWebhook:
         event_types: list[str] | Unset = UNSET
         if not isinstance(self.event_types, Unset):
             event_types = self.event_types
-
-
 
         min_severity: None | str | Unset
         if isinstance(self.min_severity, Unset):
@@ -74,16 +63,16 @@ class NewWebhook:
                 phases_type_0_item = phases_type_0_item_data.value
                 phases.append(phases_type_0_item)
 
-
         else:
             phases = self.phases
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-            "url": url,
-        })
+        field_dict.update(
+            {
+                "url": url,
+            }
+        )
         if description is not UNSET:
             field_dict["description"] = description
         if event_types is not UNSET:
@@ -95,8 +84,6 @@ class NewWebhook:
 
         return field_dict
 
-
-
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
         d = dict(src_dict)
@@ -105,7 +92,6 @@ class NewWebhook:
         description = d.pop("description", UNSET)
 
         event_types = cast(list[str], d.pop("event_types", UNSET))
-
 
         def _parse_min_severity(data: object) -> AlertSeverity | None | Unset:
             if data is None:
@@ -117,8 +103,6 @@ class NewWebhook:
                     raise TypeError()
                 min_severity_type_0 = AlertSeverity(data)
 
-
-
                 return min_severity_type_0
             except (TypeError, ValueError, AttributeError, KeyError):
                 pass
@@ -126,8 +110,9 @@ class NewWebhook:
 
         min_severity = _parse_min_severity(d.pop("min_severity", UNSET))
 
-
-        def _parse_phases(data: object) -> list[NewWebhookPhasesType0Item] | None | Unset:
+        def _parse_phases(
+            data: object,
+        ) -> list[NewWebhookPhasesType0Item] | None | Unset:
             if data is None:
                 return data
             if isinstance(data, Unset):
@@ -137,10 +122,10 @@ class NewWebhook:
                     raise TypeError()
                 phases_type_0 = []
                 _phases_type_0 = data
-                for phases_type_0_item_data in (_phases_type_0):
-                    phases_type_0_item = NewWebhookPhasesType0Item(phases_type_0_item_data)
-
-
+                for phases_type_0_item_data in _phases_type_0:
+                    phases_type_0_item = NewWebhookPhasesType0Item(
+                        phases_type_0_item_data
+                    )
 
                     phases_type_0.append(phases_type_0_item)
 
@@ -151,7 +136,6 @@ class NewWebhook:
 
         phases = _parse_phases(d.pop("phases", UNSET))
 
-
         new_webhook = cls(
             url=url,
             description=description,
@@ -161,4 +145,3 @@ class NewWebhook:
         )
 
         return new_webhook
-

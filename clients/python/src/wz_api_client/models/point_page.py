@@ -11,38 +11,31 @@ from ..types import UNSET, Unset
 from typing import cast
 
 if TYPE_CHECKING:
-  from ..models.track_point import TrackPoint
-
-
-
+    from ..models.track_point import TrackPoint
 
 
 T = TypeVar("T", bound="PointPage")
 
 
-
 @_attrs_define
 class PointPage:
-    """ A page of stored track points, oldest first; ``next_cursor`` fetches the next page.
+    """A page of stored track points, oldest first; ``next_cursor`` fetches the next page.
 
-        Attributes:
-            count (int):
-            next_cursor (None | str):
-            points (list[TrackPoint]):
-            site (str):
-     """
+    Attributes:
+        count (int):
+        next_cursor (None | str):
+        points (list[TrackPoint]):
+        site (str):
+    """
 
     count: int
     next_cursor: None | str
     points: list[TrackPoint]
     site: str
 
-
-
-
-
     def to_dict(self) -> dict[str, Any]:
-        from ..models.track_point import TrackPoint # noqa: PLC0415
+        from ..models.track_point import TrackPoint  # noqa: PLC0415
+
         count = self.count
 
         next_cursor: None | str
@@ -53,27 +46,25 @@ class PointPage:
             points_item = points_item_data.to_dict()
             points.append(points_item)
 
-
-
         site = self.site
-
 
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-            "count": count,
-            "next_cursor": next_cursor,
-            "points": points,
-            "site": site,
-        })
+        field_dict.update(
+            {
+                "count": count,
+                "next_cursor": next_cursor,
+                "points": points,
+                "site": site,
+            }
+        )
 
         return field_dict
 
-
-
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
-        from ..models.track_point import TrackPoint # noqa: PLC0415
+        from ..models.track_point import TrackPoint  # noqa: PLC0415
+
         d = dict(src_dict)
         count = d.pop("count")
 
@@ -84,16 +75,12 @@ class PointPage:
 
         next_cursor = _parse_next_cursor(d.pop("next_cursor"))
 
-
         points = []
         _points = d.pop("points")
-        for points_item_data in (_points):
+        for points_item_data in _points:
             points_item = TrackPoint.from_dict(points_item_data)
 
-
-
             points.append(points_item)
-
 
         site = d.pop("site")
 
@@ -105,4 +92,3 @@ class PointPage:
         )
 
         return point_page
-

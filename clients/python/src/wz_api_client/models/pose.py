@@ -11,17 +11,12 @@ from ..types import UNSET, Unset
 from ..types import UNSET, Unset
 
 
-
-
-
-
 T = TypeVar("T", bound="Pose")
-
 
 
 @_attrs_define
 class Pose:
-    """ Sensor pose in the site frame: position [m] and yaw/pitch/roll [deg].
+    """Sensor pose in the site frame: position [m] and yaw/pitch/roll [deg].
 
     The sensor frame has x forward, y left, z up. yaw is measured counter-clockwise from the
     site x axis (east); pitch is positive nose-up (a sensor looking down at the road has
@@ -34,7 +29,7 @@ class Pose:
             pitch_deg (float | Unset):  Default: 0.0.
             roll_deg (float | Unset):  Default: 0.0.
             yaw_deg (float | Unset):  Default: 0.0.
-     """
+    """
 
     x_m: float
     y_m: float
@@ -42,10 +37,6 @@ class Pose:
     pitch_deg: float | Unset = 0.0
     roll_deg: float | Unset = 0.0
     yaw_deg: float | Unset = 0.0
-
-
-
-
 
     def to_dict(self) -> dict[str, Any]:
         x_m = self.x_m
@@ -60,14 +51,15 @@ class Pose:
 
         yaw_deg = self.yaw_deg
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-            "x_m": x_m,
-            "y_m": y_m,
-            "z_m": z_m,
-        })
+        field_dict.update(
+            {
+                "x_m": x_m,
+                "y_m": y_m,
+                "z_m": z_m,
+            }
+        )
         if pitch_deg is not UNSET:
             field_dict["pitch_deg"] = pitch_deg
         if roll_deg is not UNSET:
@@ -76,8 +68,6 @@ class Pose:
             field_dict["yaw_deg"] = yaw_deg
 
         return field_dict
-
-
 
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
@@ -104,4 +94,3 @@ class Pose:
         )
 
         return pose
-

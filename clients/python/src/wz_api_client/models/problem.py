@@ -12,42 +12,35 @@ from ..types import UNSET, Unset
 from typing import cast
 
 if TYPE_CHECKING:
-  from ..models.problem_field import ProblemField
-
-
-
+    from ..models.problem_field import ProblemField
 
 
 T = TypeVar("T", bound="Problem")
 
 
-
 @_attrs_define
 class Problem:
-    """ An error, as RFC 9457 (RFC 7807) problem details.
+    """An error, as RFC 9457 (RFC 7807) problem details.
 
-        Attributes:
-            detail (str):
-            status (int):
-            title (str):
-            errors (list[ProblemField] | None | Unset):
-            instance (None | str | Unset):
-            type_ (str | Unset):  Default: 'about:blank'.
-     """
+    Attributes:
+        detail (str):
+        status (int):
+        title (str):
+        errors (list[ProblemField] | None | Unset):
+        instance (None | str | Unset):
+        type_ (str | Unset):  Default: 'about:blank'.
+    """
 
     detail: str
     status: int
     title: str
     errors: list[ProblemField] | None | Unset = UNSET
     instance: None | str | Unset = UNSET
-    type_: str | Unset = 'about:blank'
-
-
-
-
+    type_: str | Unset = "about:blank"
 
     def to_dict(self) -> dict[str, Any]:
-        from ..models.problem_field import ProblemField # noqa: PLC0415
+        from ..models.problem_field import ProblemField  # noqa: PLC0415
+
         detail = self.detail
 
         status = self.status
@@ -63,7 +56,6 @@ class Problem:
                 errors_type_0_item = errors_type_0_item_data.to_dict()
                 errors.append(errors_type_0_item)
 
-
         else:
             errors = self.errors
 
@@ -75,14 +67,15 @@ class Problem:
 
         type_ = self.type_
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-            "detail": detail,
-            "status": status,
-            "title": title,
-        })
+        field_dict.update(
+            {
+                "detail": detail,
+                "status": status,
+                "title": title,
+            }
+        )
         if errors is not UNSET:
             field_dict["errors"] = errors
         if instance is not UNSET:
@@ -92,11 +85,10 @@ class Problem:
 
         return field_dict
 
-
-
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
-        from ..models.problem_field import ProblemField # noqa: PLC0415
+        from ..models.problem_field import ProblemField  # noqa: PLC0415
+
         d = dict(src_dict)
         detail = d.pop("detail")
 
@@ -114,10 +106,8 @@ class Problem:
                     raise TypeError()
                 errors_type_0 = []
                 _errors_type_0 = data
-                for errors_type_0_item_data in (_errors_type_0):
+                for errors_type_0_item_data in _errors_type_0:
                     errors_type_0_item = ProblemField.from_dict(errors_type_0_item_data)
-
-
 
                     errors_type_0.append(errors_type_0_item)
 
@@ -128,7 +118,6 @@ class Problem:
 
         errors = _parse_errors(d.pop("errors", UNSET))
 
-
         def _parse_instance(data: object) -> None | str | Unset:
             if data is None:
                 return data
@@ -137,7 +126,6 @@ class Problem:
             return cast(None | str | Unset, data)
 
         instance = _parse_instance(d.pop("instance", UNSET))
-
 
         type_ = d.pop("type", UNSET)
 
@@ -151,4 +139,3 @@ class Problem:
         )
 
         return problem
-

@@ -9,47 +9,36 @@ from attrs import field as _attrs_field
 from ..types import UNSET, Unset
 
 
-
-
-
-
-
 T = TypeVar("T", bound="ProblemField")
-
 
 
 @_attrs_define
 class ProblemField:
-    """ One invalid input: where (``query.limit``) and why.
+    """One invalid input: where (``query.limit``) and why.
 
-        Attributes:
-            location (str):
-            message (str):
-     """
+    Attributes:
+        location (str):
+        message (str):
+    """
 
     location: str
     message: str
-
-
-
-
 
     def to_dict(self) -> dict[str, Any]:
         location = self.location
 
         message = self.message
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-            "location": location,
-            "message": message,
-        })
+        field_dict.update(
+            {
+                "location": location,
+                "message": message,
+            }
+        )
 
         return field_dict
-
-
 
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
@@ -64,4 +53,3 @@ class ProblemField:
         )
 
         return problem_field
-

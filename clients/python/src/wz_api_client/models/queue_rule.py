@@ -11,17 +11,12 @@ from ..types import UNSET, Unset
 from ..types import UNSET, Unset
 
 
-
-
-
-
 T = TypeVar("T", bound="QueueRule")
-
 
 
 @_attrs_define
 class QueueRule:
-    """ Slow or stopped traffic: ``min_vehicles`` slow vehicles within ``span_m`` of station.
+    """Slow or stopped traffic: ``min_vehicles`` slow vehicles within ``span_m`` of station.
 
     A vehicle is slow below ``slow_speed_mps`` (below ``slow_speed_mps + speed_hysteresis_mps``
     while a queue is open). One site-level episode, reported at the queue's tail (its most
@@ -38,7 +33,7 @@ class QueueRule:
             slow_speed_mps (float | Unset):  Default: 8.9.
             span_m (float | Unset):  Default: 100.0.
             speed_hysteresis_mps (float | Unset):  Default: 2.0.
-     """
+    """
 
     clear_s: float | Unset = 10.0
     cooldown_s: float | Unset = 30.0
@@ -49,10 +44,6 @@ class QueueRule:
     slow_speed_mps: float | Unset = 8.9
     span_m: float | Unset = 100.0
     speed_hysteresis_mps: float | Unset = 2.0
-
-
-
-
 
     def to_dict(self) -> dict[str, Any]:
         clear_s = self.clear_s
@@ -73,11 +64,9 @@ class QueueRule:
 
         speed_hysteresis_mps = self.speed_hysteresis_mps
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-        })
+        field_dict.update({})
         if clear_s is not UNSET:
             field_dict["clear_s"] = clear_s
         if cooldown_s is not UNSET:
@@ -98,8 +87,6 @@ class QueueRule:
             field_dict["speed_hysteresis_mps"] = speed_hysteresis_mps
 
         return field_dict
-
-
 
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
@@ -135,4 +122,3 @@ class QueueRule:
         )
 
         return queue_rule
-

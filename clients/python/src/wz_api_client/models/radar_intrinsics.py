@@ -12,41 +12,32 @@ from ..types import UNSET, Unset
 from typing import Literal, cast
 
 
-
-
-
-
 T = TypeVar("T", bound="RadarIntrinsics")
-
 
 
 @_attrs_define
 class RadarIntrinsics:
-    """ An automotive-style radar reporting targets (range, azimuth, radial speed, RCS).
+    """An automotive-style radar reporting targets (range, azimuth, radial speed, RCS).
 
-        Attributes:
-            azimuth_noise_std_deg (float | Unset):  Default: 0.5.
-            azimuth_resolution_deg (float | Unset):  Default: 4.0.
-            horizontal_fov_deg (float | Unset):  Default: 60.0.
-            kind (Literal['radar'] | Unset):  Default: 'radar'.
-            max_range_m (float | Unset):  Default: 200.0.
-            range_noise_std_m (float | Unset):  Default: 0.25.
-            range_resolution_m (float | Unset):  Default: 1.5.
-            speed_noise_std_mps (float | Unset):  Default: 0.1.
-     """
+    Attributes:
+        azimuth_noise_std_deg (float | Unset):  Default: 0.5.
+        azimuth_resolution_deg (float | Unset):  Default: 4.0.
+        horizontal_fov_deg (float | Unset):  Default: 60.0.
+        kind (Literal['radar'] | Unset):  Default: 'radar'.
+        max_range_m (float | Unset):  Default: 200.0.
+        range_noise_std_m (float | Unset):  Default: 0.25.
+        range_resolution_m (float | Unset):  Default: 1.5.
+        speed_noise_std_mps (float | Unset):  Default: 0.1.
+    """
 
     azimuth_noise_std_deg: float | Unset = 0.5
     azimuth_resolution_deg: float | Unset = 4.0
     horizontal_fov_deg: float | Unset = 60.0
-    kind: Literal['radar'] | Unset = 'radar'
+    kind: Literal["radar"] | Unset = "radar"
     max_range_m: float | Unset = 200.0
     range_noise_std_m: float | Unset = 0.25
     range_resolution_m: float | Unset = 1.5
     speed_noise_std_mps: float | Unset = 0.1
-
-
-
-
 
     def to_dict(self) -> dict[str, Any]:
         azimuth_noise_std_deg = self.azimuth_noise_std_deg
@@ -65,11 +56,9 @@ class RadarIntrinsics:
 
         speed_noise_std_mps = self.speed_noise_std_mps
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-        })
+        field_dict.update({})
         if azimuth_noise_std_deg is not UNSET:
             field_dict["azimuth_noise_std_deg"] = azimuth_noise_std_deg
         if azimuth_resolution_deg is not UNSET:
@@ -89,8 +78,6 @@ class RadarIntrinsics:
 
         return field_dict
 
-
-
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
         d = dict(src_dict)
@@ -100,8 +87,8 @@ class RadarIntrinsics:
 
         horizontal_fov_deg = d.pop("horizontal_fov_deg", UNSET)
 
-        kind = cast(Literal['radar'] | Unset , d.pop("kind", UNSET))
-        if kind != 'radar'and not isinstance(kind, Unset):
+        kind = cast(Literal["radar"] | Unset, d.pop("kind", UNSET))
+        if kind != "radar" and not isinstance(kind, Unset):
             raise ValueError(f"kind must match const 'radar', got '{kind}'")
 
         max_range_m = d.pop("max_range_m", UNSET)
@@ -124,4 +111,3 @@ class RadarIntrinsics:
         )
 
         return radar_intrinsics
-

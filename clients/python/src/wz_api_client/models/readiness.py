@@ -12,63 +12,50 @@ from ..models.readiness_status import ReadinessStatus
 from typing import cast
 
 if TYPE_CHECKING:
-  from ..models.readiness_checks import ReadinessChecks
-
-
-
+    from ..models.readiness_checks import ReadinessChecks
 
 
 T = TypeVar("T", bound="Readiness")
 
 
-
 @_attrs_define
 class Readiness:
-    """ ``ready`` when every check passes; each check says ``ok`` or what is wrong.
+    """``ready`` when every check passes; each check says ``ok`` or what is wrong.
 
-        Attributes:
-            checks (ReadinessChecks):
-            status (ReadinessStatus):
-     """
+    Attributes:
+        checks (ReadinessChecks):
+        status (ReadinessStatus):
+    """
 
     checks: ReadinessChecks
     status: ReadinessStatus
 
-
-
-
-
     def to_dict(self) -> dict[str, Any]:
-        from ..models.readiness_checks import ReadinessChecks # noqa: PLC0415
+        from ..models.readiness_checks import ReadinessChecks  # noqa: PLC0415
+
         checks = self.checks.to_dict()
 
         status = self.status.value
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-            "checks": checks,
-            "status": status,
-        })
+        field_dict.update(
+            {
+                "checks": checks,
+                "status": status,
+            }
+        )
 
         return field_dict
 
-
-
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
-        from ..models.readiness_checks import ReadinessChecks # noqa: PLC0415
+        from ..models.readiness_checks import ReadinessChecks  # noqa: PLC0415
+
         d = dict(src_dict)
         checks = ReadinessChecks.from_dict(d.pop("checks"))
 
-
-
-
         status = ReadinessStatus(d.pop("status"))
-
-
-
 
         readiness = cls(
             checks=checks,
@@ -76,4 +63,3 @@ class Readiness:
         )
 
         return readiness
-

@@ -1,5 +1,6 @@
 from enum import StrEnum
 
+
 class ReadinessStatus(StrEnum):
     NOT_READY = "not_ready"
     READY = "ready"

@@ -11,17 +11,12 @@ from ..types import UNSET, Unset
 from ..types import UNSET, Unset
 
 
-
-
-
-
 T = TypeVar("T", bound="ShortTtcRule")
-
 
 
 @_attrs_define
 class ShortTtcRule:
-    """ Time to collision with the nearest vehicle ahead in the same lane.
+    """Time to collision with the nearest vehicle ahead in the same lane.
 
     ``TTC = gap / (v_follower - v_leader)``, ``gap = s_leader - s_follower - (L_f + L_l) / 2``.
     Bins after SSAM (whose default conflict threshold is 1.5 s): info at ``TTC <= max_ttc_s``,
@@ -39,7 +34,7 @@ class ShortTtcRule:
             max_ttc_s (float | Unset):  Default: 1.5.
             min_closing_speed_mps (float | Unset):  Default: 0.5.
             warning_ttc_s (float | Unset):  Default: 1.0.
-     """
+    """
 
     clear_s: float | Unset = 1.0
     cooldown_s: float | Unset = 5.0
@@ -51,10 +46,6 @@ class ShortTtcRule:
     max_ttc_s: float | Unset = 1.5
     min_closing_speed_mps: float | Unset = 0.5
     warning_ttc_s: float | Unset = 1.0
-
-
-
-
 
     def to_dict(self) -> dict[str, Any]:
         clear_s = self.clear_s
@@ -77,11 +68,9 @@ class ShortTtcRule:
 
         warning_ttc_s = self.warning_ttc_s
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-        })
+        field_dict.update({})
         if clear_s is not UNSET:
             field_dict["clear_s"] = clear_s
         if cooldown_s is not UNSET:
@@ -104,8 +93,6 @@ class ShortTtcRule:
             field_dict["warning_ttc_s"] = warning_ttc_s
 
         return field_dict
-
-
 
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
@@ -144,4 +131,3 @@ class ShortTtcRule:
         )
 
         return short_ttc_rule
-

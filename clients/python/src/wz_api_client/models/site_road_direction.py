@@ -1,5 +1,6 @@
 from enum import StrEnum
 
+
 class SiteRoadDirection(StrEnum):
     EASTBOUND = "eastbound"
     INNER_LOOP = "inner-loop"

@@ -9,32 +9,22 @@ from attrs import field as _attrs_field
 from ..types import UNSET, Unset
 
 
-
-
-
-
-
 T = TypeVar("T", bound="SiteSummary")
-
 
 
 @_attrs_define
 class SiteSummary:
-    """ One site a gateway serves.
+    """One site a gateway serves.
 
-        Attributes:
-            default (bool):
-            name (str):
-            site_id (str):
-     """
+    Attributes:
+        default (bool):
+        name (str):
+        site_id (str):
+    """
 
     default: bool
     name: str
     site_id: str
-
-
-
-
 
     def to_dict(self) -> dict[str, Any]:
         default = self.default
@@ -43,18 +33,17 @@ class SiteSummary:
 
         site_id = self.site_id
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-            "default": default,
-            "name": name,
-            "site_id": site_id,
-        })
+        field_dict.update(
+            {
+                "default": default,
+                "name": name,
+                "site_id": site_id,
+            }
+        )
 
         return field_dict
-
-
 
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
@@ -72,4 +61,3 @@ class SiteSummary:
         )
 
         return site_summary
-

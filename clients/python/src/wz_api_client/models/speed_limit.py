@@ -9,32 +9,22 @@ from attrs import field as _attrs_field
 from ..types import UNSET, Unset
 
 
-
-
-
-
-
 T = TypeVar("T", bound="SpeedLimit")
-
 
 
 @_attrs_define
 class SpeedLimit:
-    """ Posted limit from ``start_station_m`` to ``end_station_m``.
+    """Posted limit from ``start_station_m`` to ``end_station_m``.
 
-        Attributes:
-            end_station_m (float):
-            speed_limit_mph (float):
-            start_station_m (float):
-     """
+    Attributes:
+        end_station_m (float):
+        speed_limit_mph (float):
+        start_station_m (float):
+    """
 
     end_station_m: float
     speed_limit_mph: float
     start_station_m: float
-
-
-
-
 
     def to_dict(self) -> dict[str, Any]:
         end_station_m = self.end_station_m
@@ -43,18 +33,17 @@ class SpeedLimit:
 
         start_station_m = self.start_station_m
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-            "end_station_m": end_station_m,
-            "speed_limit_mph": speed_limit_mph,
-            "start_station_m": start_station_m,
-        })
+        field_dict.update(
+            {
+                "end_station_m": end_station_m,
+                "speed_limit_mph": speed_limit_mph,
+                "start_station_m": start_station_m,
+            }
+        )
 
         return field_dict
-
-
 
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
@@ -72,4 +61,3 @@ class SpeedLimit:
         )
 
         return speed_limit
-

@@ -11,17 +11,12 @@ from ..types import UNSET, Unset
 from ..types import UNSET, Unset
 
 
-
-
-
-
 T = TypeVar("T", bound="SpeedingRule")
-
 
 
 @_attrs_define
 class SpeedingRule:
-    """ Speed over the posted limit at the vehicle's station, within the approach.
+    """Speed over the posted limit at the vehicle's station, within the approach.
 
     Starts at ``excess >= margin_mph``, stays open while ``excess >= margin_mph -
     hysteresis_mph``; critical from ``critical_excess_mph``. Margins are in mph, like the posted
@@ -35,7 +30,7 @@ class SpeedingRule:
             hold_s (float | Unset):  Default: 1.0.
             hysteresis_mph (float | Unset):  Default: 2.0.
             margin_mph (float | Unset):  Default: 5.0.
-     """
+    """
 
     clear_s: float | Unset = 2.0
     cooldown_s: float | Unset = 10.0
@@ -44,10 +39,6 @@ class SpeedingRule:
     hold_s: float | Unset = 1.0
     hysteresis_mph: float | Unset = 2.0
     margin_mph: float | Unset = 5.0
-
-
-
-
 
     def to_dict(self) -> dict[str, Any]:
         clear_s = self.clear_s
@@ -64,11 +55,9 @@ class SpeedingRule:
 
         margin_mph = self.margin_mph
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-        })
+        field_dict.update({})
         if clear_s is not UNSET:
             field_dict["clear_s"] = clear_s
         if cooldown_s is not UNSET:
@@ -85,8 +74,6 @@ class SpeedingRule:
             field_dict["margin_mph"] = margin_mph
 
         return field_dict
-
-
 
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
@@ -116,4 +103,3 @@ class SpeedingRule:
         )
 
         return speeding_rule
-

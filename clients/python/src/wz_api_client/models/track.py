@@ -14,40 +14,35 @@ from ..types import UNSET, Unset
 from typing import cast
 
 
-
-
-
-
 T = TypeVar("T", bound="Track")
-
 
 
 @_attrs_define
 class Track:
-    """ One fused track: state in the site frame and its road-frame projection.
+    """One fused track: state in the site frame and its road-frame projection.
 
-        Attributes:
-            age_s (float):
-            confirmed (bool):
-            covariance (list[float]):
-            heading_rad (float):
-            hits (int):
-            lane_index (int):
-            offset_m (float):
-            sources (list[str]):
-            speed_mps (float):
-            station_m (float):
-            track_id (int):
-            vx_mps (float):
-            vy_mps (float):
-            x_m (float):
-            y_m (float):
-            last_update_s (float | None | Unset):
-            length_m (float | None | Unset):
-            object_class (VehicleClass | Unset):
-            status (TrackStatus | Unset): Life cycle of a fused track.
-            width_m (float | None | Unset):
-     """
+    Attributes:
+        age_s (float):
+        confirmed (bool):
+        covariance (list[float]):
+        heading_rad (float):
+        hits (int):
+        lane_index (int):
+        offset_m (float):
+        sources (list[str]):
+        speed_mps (float):
+        station_m (float):
+        track_id (int):
+        vx_mps (float):
+        vy_mps (float):
+        x_m (float):
+        y_m (float):
+        last_update_s (float | None | Unset):
+        length_m (float | None | Unset):
+        object_class (VehicleClass | Unset):
+        status (TrackStatus | Unset): Life cycle of a fused track.
+        width_m (float | None | Unset):
+    """
 
     age_s: float
     confirmed: bool
@@ -70,18 +65,12 @@ class Track:
     status: TrackStatus | Unset = UNSET
     width_m: float | None | Unset = UNSET
 
-
-
-
-
     def to_dict(self) -> dict[str, Any]:
         age_s = self.age_s
 
         confirmed = self.confirmed
 
         covariance = self.covariance
-
-
 
         heading_rad = self.heading_rad
 
@@ -92,8 +81,6 @@ class Track:
         offset_m = self.offset_m
 
         sources = self.sources
-
-
 
         speed_mps = self.speed_mps
 
@@ -125,11 +112,9 @@ class Track:
         if not isinstance(self.object_class, Unset):
             object_class = self.object_class.value
 
-
         status: str | Unset = UNSET
         if not isinstance(self.status, Unset):
             status = self.status.value
-
 
         width_m: float | None | Unset
         if isinstance(self.width_m, Unset):
@@ -137,26 +122,27 @@ class Track:
         else:
             width_m = self.width_m
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-            "age_s": age_s,
-            "confirmed": confirmed,
-            "covariance": covariance,
-            "heading_rad": heading_rad,
-            "hits": hits,
-            "lane_index": lane_index,
-            "offset_m": offset_m,
-            "sources": sources,
-            "speed_mps": speed_mps,
-            "station_m": station_m,
-            "track_id": track_id,
-            "vx_mps": vx_mps,
-            "vy_mps": vy_mps,
-            "x_m": x_m,
-            "y_m": y_m,
-        })
+        field_dict.update(
+            {
+                "age_s": age_s,
+                "confirmed": confirmed,
+                "covariance": covariance,
+                "heading_rad": heading_rad,
+                "hits": hits,
+                "lane_index": lane_index,
+                "offset_m": offset_m,
+                "sources": sources,
+                "speed_mps": speed_mps,
+                "station_m": station_m,
+                "track_id": track_id,
+                "vx_mps": vx_mps,
+                "vy_mps": vy_mps,
+                "x_m": x_m,
+                "y_m": y_m,
+            }
+        )
         if last_update_s is not UNSET:
             field_dict["last_update_s"] = last_update_s
         if length_m is not UNSET:
@@ -170,8 +156,6 @@ class Track:
 
         return field_dict
 
-
-
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
         d = dict(src_dict)
@@ -180,7 +164,6 @@ class Track:
         confirmed = d.pop("confirmed")
 
         covariance = cast(list[float], d.pop("covariance"))
-
 
         heading_rad = d.pop("heading_rad")
 
@@ -191,7 +174,6 @@ class Track:
         offset_m = d.pop("offset_m")
 
         sources = cast(list[str], d.pop("sources"))
-
 
         speed_mps = d.pop("speed_mps")
 
@@ -216,7 +198,6 @@ class Track:
 
         last_update_s = _parse_last_update_s(d.pop("last_update_s", UNSET))
 
-
         def _parse_length_m(data: object) -> float | None | Unset:
             if data is None:
                 return data
@@ -226,26 +207,19 @@ class Track:
 
         length_m = _parse_length_m(d.pop("length_m", UNSET))
 
-
         _object_class = d.pop("object_class", UNSET)
         object_class: VehicleClass | Unset
-        if isinstance(_object_class,  Unset):
+        if isinstance(_object_class, Unset):
             object_class = UNSET
         else:
             object_class = VehicleClass(_object_class)
 
-
-
-
         _status = d.pop("status", UNSET)
         status: TrackStatus | Unset
-        if isinstance(_status,  Unset):
+        if isinstance(_status, Unset):
             status = UNSET
         else:
             status = TrackStatus(_status)
-
-
-
 
         def _parse_width_m(data: object) -> float | None | Unset:
             if data is None:
@@ -255,7 +229,6 @@ class Track:
             return cast(float | None | Unset, data)
 
         width_m = _parse_width_m(d.pop("width_m", UNSET))
-
 
         track = cls(
             age_s=age_s,
@@ -281,4 +254,3 @@ class Track:
         )
 
         return track
-

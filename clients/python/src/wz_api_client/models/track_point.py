@@ -14,38 +14,33 @@ from ..types import UNSET, Unset
 from typing import cast
 
 
-
-
-
-
 T = TypeVar("T", bound="TrackPoint")
-
 
 
 @_attrs_define
 class TrackPoint:
-    """ One stored point of a trajectory: a track at one tracker cycle.
+    """One stored point of a trajectory: a track at one tracker cycle.
 
-        Attributes:
-            heading_rad (float):
-            lane_index (int):
-            latitude_deg (float):
-            longitude_deg (float):
-            object_class (VehicleClass):
-            offset_m (float):
-            speed_mps (float):
-            stamp (float):
-            station_m (float):
-            status (TrackStatus): Life cycle of a fused track.
-            track_id (int):
-            vx_mps (float):
-            vy_mps (float):
-            x_m (float):
-            y_m (float):
-            length_m (float | None | Unset):
-            smoothed (bool | Unset):  Default: False.
-            width_m (float | None | Unset):
-     """
+    Attributes:
+        heading_rad (float):
+        lane_index (int):
+        latitude_deg (float):
+        longitude_deg (float):
+        object_class (VehicleClass):
+        offset_m (float):
+        speed_mps (float):
+        stamp (float):
+        station_m (float):
+        status (TrackStatus): Life cycle of a fused track.
+        track_id (int):
+        vx_mps (float):
+        vy_mps (float):
+        x_m (float):
+        y_m (float):
+        length_m (float | None | Unset):
+        smoothed (bool | Unset):  Default: False.
+        width_m (float | None | Unset):
+    """
 
     heading_rad: float
     lane_index: int
@@ -65,10 +60,6 @@ class TrackPoint:
     length_m: float | None | Unset = UNSET
     smoothed: bool | Unset = False
     width_m: float | None | Unset = UNSET
-
-
-
-
 
     def to_dict(self) -> dict[str, Any]:
         heading_rad = self.heading_rad
@@ -115,26 +106,27 @@ class TrackPoint:
         else:
             width_m = self.width_m
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-            "heading_rad": heading_rad,
-            "lane_index": lane_index,
-            "latitude_deg": latitude_deg,
-            "longitude_deg": longitude_deg,
-            "object_class": object_class,
-            "offset_m": offset_m,
-            "speed_mps": speed_mps,
-            "stamp": stamp,
-            "station_m": station_m,
-            "status": status,
-            "track_id": track_id,
-            "vx_mps": vx_mps,
-            "vy_mps": vy_mps,
-            "x_m": x_m,
-            "y_m": y_m,
-        })
+        field_dict.update(
+            {
+                "heading_rad": heading_rad,
+                "lane_index": lane_index,
+                "latitude_deg": latitude_deg,
+                "longitude_deg": longitude_deg,
+                "object_class": object_class,
+                "offset_m": offset_m,
+                "speed_mps": speed_mps,
+                "stamp": stamp,
+                "station_m": station_m,
+                "status": status,
+                "track_id": track_id,
+                "vx_mps": vx_mps,
+                "vy_mps": vy_mps,
+                "x_m": x_m,
+                "y_m": y_m,
+            }
+        )
         if length_m is not UNSET:
             field_dict["length_m"] = length_m
         if smoothed is not UNSET:
@@ -143,8 +135,6 @@ class TrackPoint:
             field_dict["width_m"] = width_m
 
         return field_dict
-
-
 
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
@@ -159,9 +149,6 @@ class TrackPoint:
 
         object_class = VehicleClass(d.pop("object_class"))
 
-
-
-
         offset_m = d.pop("offset_m")
 
         speed_mps = d.pop("speed_mps")
@@ -171,9 +158,6 @@ class TrackPoint:
         station_m = d.pop("station_m")
 
         status = TrackStatus(d.pop("status"))
-
-
-
 
         track_id = d.pop("track_id")
 
@@ -194,7 +178,6 @@ class TrackPoint:
 
         length_m = _parse_length_m(d.pop("length_m", UNSET))
 
-
         smoothed = d.pop("smoothed", UNSET)
 
         def _parse_width_m(data: object) -> float | None | Unset:
@@ -205,7 +188,6 @@ class TrackPoint:
             return cast(float | None | Unset, data)
 
         width_m = _parse_width_m(d.pop("width_m", UNSET))
-
 
         track_point = cls(
             heading_rad=heading_rad,
@@ -229,4 +211,3 @@ class TrackPoint:
         )
 
         return track_point
-

@@ -1,5 +1,6 @@
 from enum import StrEnum
 
+
 class TrackStatus(StrEnum):
     COASTING = "coasting"
     CONFIRMED = "confirmed"

@@ -1,5 +1,6 @@
 from enum import StrEnum
 
+
 class VehicleClass(StrEnum):
     BUS = "bus"
     CAR = "car"

@@ -13,29 +13,24 @@ from ..types import UNSET, Unset
 from typing import cast
 
 
-
-
-
-
 T = TypeVar("T", bound="WebhookEventInfo")
-
 
 
 @_attrs_define
 class WebhookEventInfo:
-    """ One event for one subscription and where its delivery stands.
+    """One event for one subscription and where its delivery stands.
 
-        Attributes:
-            attempts (int):
-            created_at (float):
-            event_id (str):
-            event_type (str):
-            state (WebhookEventInfoState):
-            finished_at (float | None | Unset):
-            last_error (None | str | Unset):
-            last_status_code (int | None | Unset):
-            next_attempt_at (float | None | Unset):
-     """
+    Attributes:
+        attempts (int):
+        created_at (float):
+        event_id (str):
+        event_type (str):
+        state (WebhookEventInfoState):
+        finished_at (float | None | Unset):
+        last_error (None | str | Unset):
+        last_status_code (int | None | Unset):
+        next_attempt_at (float | None | Unset):
+    """
 
     attempts: int
     created_at: float
@@ -46,10 +41,6 @@ class WebhookEventInfo:
     last_error: None | str | Unset = UNSET
     last_status_code: int | None | Unset = UNSET
     next_attempt_at: float | None | Unset = UNSET
-
-
-
-
 
     def to_dict(self) -> dict[str, Any]:
         attempts = self.attempts
@@ -86,16 +77,17 @@ class WebhookEventInfo:
         else:
             next_attempt_at = self.next_attempt_at
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-            "attempts": attempts,
-            "created_at": created_at,
-            "event_id": event_id,
-            "event_type": event_type,
-            "state": state,
-        })
+        field_dict.update(
+            {
+                "attempts": attempts,
+                "created_at": created_at,
+                "event_id": event_id,
+                "event_type": event_type,
+                "state": state,
+            }
+        )
         if finished_at is not UNSET:
             field_dict["finished_at"] = finished_at
         if last_error is not UNSET:
@@ -106,8 +98,6 @@ class WebhookEventInfo:
             field_dict["next_attempt_at"] = next_attempt_at
 
         return field_dict
-
-
 
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
@@ -122,9 +112,6 @@ class WebhookEventInfo:
 
         state = WebhookEventInfoState(d.pop("state"))
 
-
-
-
         def _parse_finished_at(data: object) -> float | None | Unset:
             if data is None:
                 return data
@@ -133,7 +120,6 @@ class WebhookEventInfo:
             return cast(float | None | Unset, data)
 
         finished_at = _parse_finished_at(d.pop("finished_at", UNSET))
-
 
         def _parse_last_error(data: object) -> None | str | Unset:
             if data is None:
@@ -144,7 +130,6 @@ class WebhookEventInfo:
 
         last_error = _parse_last_error(d.pop("last_error", UNSET))
 
-
         def _parse_last_status_code(data: object) -> int | None | Unset:
             if data is None:
                 return data
@@ -154,7 +139,6 @@ class WebhookEventInfo:
 
         last_status_code = _parse_last_status_code(d.pop("last_status_code", UNSET))
 
-
         def _parse_next_attempt_at(data: object) -> float | None | Unset:
             if data is None:
                 return data
@@ -163,7 +147,6 @@ class WebhookEventInfo:
             return cast(float | None | Unset, data)
 
         next_attempt_at = _parse_next_attempt_at(d.pop("next_attempt_at", UNSET))
-
 
         webhook_event_info = cls(
             attempts=attempts,
@@ -178,4 +161,3 @@ class WebhookEventInfo:
         )
 
         return webhook_event_info
-

@@ -1,5 +1,6 @@
 from enum import StrEnum
 
+
 class WebhookEventInfoState(StrEnum):
     DELIVERED = "delivered"
     EXPIRED = "expired"

@@ -14,30 +14,25 @@ from ..types import UNSET, Unset
 from typing import cast
 
 
-
-
-
-
 T = TypeVar("T", bound="WebhookInfo")
-
 
 
 @_attrs_define
 class WebhookInfo:
-    """ A subscription, without its secret.
+    """A subscription, without its secret.
 
-        Attributes:
-            created_at (float):
-            description (str):
-            event_types (list[str]):
-            subscription_id (str):
-            url (str):
-            disabled_at (float | None | Unset):
-            disabled_reason (None | str | Unset):
-            min_severity (AlertSeverity | None | Unset):
-            phases (list[WebhookInfoPhasesType0Item] | None | Unset):
-            previous_secret_until (float | None | Unset):
-     """
+    Attributes:
+        created_at (float):
+        description (str):
+        event_types (list[str]):
+        subscription_id (str):
+        url (str):
+        disabled_at (float | None | Unset):
+        disabled_reason (None | str | Unset):
+        min_severity (AlertSeverity | None | Unset):
+        phases (list[WebhookInfoPhasesType0Item] | None | Unset):
+        previous_secret_until (float | None | Unset):
+    """
 
     created_at: float
     description: str
@@ -50,18 +45,12 @@ class WebhookInfo:
     phases: list[WebhookInfoPhasesType0Item] | None | Unset = UNSET
     previous_secret_until: float | None | Unset = UNSET
 
-
-
-
-
     def to_dict(self) -> dict[str, Any]:
         created_at = self.created_at
 
         description = self.description
 
         event_types = self.event_types
-
-
 
         subscription_id = self.subscription_id
 
@@ -96,7 +85,6 @@ class WebhookInfo:
                 phases_type_0_item = phases_type_0_item_data.value
                 phases.append(phases_type_0_item)
 
-
         else:
             phases = self.phases
 
@@ -106,16 +94,17 @@ class WebhookInfo:
         else:
             previous_secret_until = self.previous_secret_until
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-            "created_at": created_at,
-            "description": description,
-            "event_types": event_types,
-            "subscription_id": subscription_id,
-            "url": url,
-        })
+        field_dict.update(
+            {
+                "created_at": created_at,
+                "description": description,
+                "event_types": event_types,
+                "subscription_id": subscription_id,
+                "url": url,
+            }
+        )
         if disabled_at is not UNSET:
             field_dict["disabled_at"] = disabled_at
         if disabled_reason is not UNSET:
@@ -129,8 +118,6 @@ class WebhookInfo:
 
         return field_dict
 
-
-
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
         d = dict(src_dict)
@@ -139,7 +126,6 @@ class WebhookInfo:
         description = d.pop("description")
 
         event_types = cast(list[str], d.pop("event_types"))
-
 
         subscription_id = d.pop("subscription_id")
 
@@ -154,7 +140,6 @@ class WebhookInfo:
 
         disabled_at = _parse_disabled_at(d.pop("disabled_at", UNSET))
 
-
         def _parse_disabled_reason(data: object) -> None | str | Unset:
             if data is None:
                 return data
@@ -163,7 +148,6 @@ class WebhookInfo:
             return cast(None | str | Unset, data)
 
         disabled_reason = _parse_disabled_reason(d.pop("disabled_reason", UNSET))
-
 
         def _parse_min_severity(data: object) -> AlertSeverity | None | Unset:
             if data is None:
@@ -175,8 +159,6 @@ class WebhookInfo:
                     raise TypeError()
                 min_severity_type_0 = AlertSeverity(data)
 
-
-
                 return min_severity_type_0
             except (TypeError, ValueError, AttributeError, KeyError):
                 pass
@@ -184,8 +166,9 @@ class WebhookInfo:
 
         min_severity = _parse_min_severity(d.pop("min_severity", UNSET))
 
-
-        def _parse_phases(data: object) -> list[WebhookInfoPhasesType0Item] | None | Unset:
+        def _parse_phases(
+            data: object,
+        ) -> list[WebhookInfoPhasesType0Item] | None | Unset:
             if data is None:
                 return data
             if isinstance(data, Unset):
@@ -195,10 +178,10 @@ class WebhookInfo:
                     raise TypeError()
                 phases_type_0 = []
                 _phases_type_0 = data
-                for phases_type_0_item_data in (_phases_type_0):
-                    phases_type_0_item = WebhookInfoPhasesType0Item(phases_type_0_item_data)
-
-
+                for phases_type_0_item_data in _phases_type_0:
+                    phases_type_0_item = WebhookInfoPhasesType0Item(
+                        phases_type_0_item_data
+                    )
 
                     phases_type_0.append(phases_type_0_item)
 
@@ -209,7 +192,6 @@ class WebhookInfo:
 
         phases = _parse_phases(d.pop("phases", UNSET))
 
-
         def _parse_previous_secret_until(data: object) -> float | None | Unset:
             if data is None:
                 return data
@@ -217,8 +199,9 @@ class WebhookInfo:
                 return data
             return cast(float | None | Unset, data)
 
-        previous_secret_until = _parse_previous_secret_until(d.pop("previous_secret_until", UNSET))
-
+        previous_secret_until = _parse_previous_secret_until(
+            d.pop("previous_secret_until", UNSET)
+        )
 
         webhook_info = cls(
             created_at=created_at,
@@ -234,4 +217,3 @@ class WebhookInfo:
         )
 
         return webhook_info
-

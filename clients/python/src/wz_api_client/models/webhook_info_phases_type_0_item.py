@@ -1,5 +1,6 @@
 from enum import StrEnum
 
+
 class WebhookInfoPhasesType0Item(StrEnum):
     CLEAR = "clear"
     START = "start"

@@ -11,31 +11,22 @@ from ..types import UNSET, Unset
 from typing import cast
 
 
-
-
-
-
 T = TypeVar("T", bound="WebhookSecret")
-
 
 
 @_attrs_define
 class WebhookSecret:
-    """ A new signing secret; the previous one also signs until ``previous_secret_until``.
+    """A new signing secret; the previous one also signs until ``previous_secret_until``.
 
-        Attributes:
-            previous_secret_until (float | None):
-            secret (str):
-            subscription_id (str):
-     """
+    Attributes:
+        previous_secret_until (float | None):
+        secret (str):
+        subscription_id (str):
+    """
 
     previous_secret_until: float | None
     secret: str
     subscription_id: str
-
-
-
-
 
     def to_dict(self) -> dict[str, Any]:
         previous_secret_until: float | None
@@ -45,29 +36,30 @@ class WebhookSecret:
 
         subscription_id = self.subscription_id
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-            "previous_secret_until": previous_secret_until,
-            "secret": secret,
-            "subscription_id": subscription_id,
-        })
+        field_dict.update(
+            {
+                "previous_secret_until": previous_secret_until,
+                "secret": secret,
+                "subscription_id": subscription_id,
+            }
+        )
 
         return field_dict
-
-
 
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
         d = dict(src_dict)
+
         def _parse_previous_secret_until(data: object) -> float | None:
             if data is None:
                 return data
             return cast(float | None, data)
 
-        previous_secret_until = _parse_previous_secret_until(d.pop("previous_secret_until"))
-
+        previous_secret_until = _parse_previous_secret_until(
+            d.pop("previous_secret_until")
+        )
 
         secret = d.pop("secret")
 
@@ -80,4 +72,3 @@ class WebhookSecret:
         )
 
         return webhook_secret
-

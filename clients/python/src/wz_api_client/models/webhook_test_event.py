@@ -9,32 +9,22 @@ from attrs import field as _attrs_field
 from ..types import UNSET, Unset
 
 
-
-
-
-
-
 T = TypeVar("T", bound="WebhookTestEvent")
-
 
 
 @_attrs_define
 class WebhookTestEvent:
-    """ A ``webhook.test`` event queued for delivery.
+    """A ``webhook.test`` event queued for delivery.
 
-        Attributes:
-            event_id (str):
-            event_type (str):
-            subscription_id (str):
-     """
+    Attributes:
+        event_id (str):
+        event_type (str):
+        subscription_id (str):
+    """
 
     event_id: str
     event_type: str
     subscription_id: str
-
-
-
-
 
     def to_dict(self) -> dict[str, Any]:
         event_id = self.event_id
@@ -43,18 +33,17 @@ class WebhookTestEvent:
 
         subscription_id = self.subscription_id
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-            "event_id": event_id,
-            "event_type": event_type,
-            "subscription_id": subscription_id,
-        })
+        field_dict.update(
+            {
+                "event_id": event_id,
+                "event_type": event_type,
+                "subscription_id": subscription_id,
+            }
+        )
 
         return field_dict
-
-
 
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
@@ -72,4 +61,3 @@ class WebhookTestEvent:
         )
 
         return webhook_test_event
-

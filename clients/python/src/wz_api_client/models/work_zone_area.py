@@ -11,31 +11,22 @@ from ..types import UNSET, Unset
 from ..models.area_kind import AreaKind
 
 
-
-
-
-
 T = TypeVar("T", bound="WorkZoneArea")
-
 
 
 @_attrs_define
 class WorkZoneArea:
-    """ A stretch of road ``[start_station_m, end_station_m)`` with one role in the work zone.
+    """A stretch of road ``[start_station_m, end_station_m)`` with one role in the work zone.
 
-        Attributes:
-            end_station_m (float):
-            kind (AreaKind): Temporary traffic control areas of a work zone (MUTCD Part 6).
-            start_station_m (float):
-     """
+    Attributes:
+        end_station_m (float):
+        kind (AreaKind): Temporary traffic control areas of a work zone (MUTCD Part 6).
+        start_station_m (float):
+    """
 
     end_station_m: float
     kind: AreaKind
     start_station_m: float
-
-
-
-
 
     def to_dict(self) -> dict[str, Any]:
         end_station_m = self.end_station_m
@@ -44,18 +35,17 @@ class WorkZoneArea:
 
         start_station_m = self.start_station_m
 
-
         field_dict: dict[str, Any] = {}
 
-        field_dict.update({
-            "end_station_m": end_station_m,
-            "kind": kind,
-            "start_station_m": start_station_m,
-        })
+        field_dict.update(
+            {
+                "end_station_m": end_station_m,
+                "kind": kind,
+                "start_station_m": start_station_m,
+            }
+        )
 
         return field_dict
-
-
 
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
@@ -63,9 +53,6 @@ class WorkZoneArea:
         end_station_m = d.pop("end_station_m")
 
         kind = AreaKind(d.pop("kind"))
-
-
-
 
         start_station_m = d.pop("start_station_m")
 
@@ -76,4 +63,3 @@ class WorkZoneArea:
         )
 
         return work_zone_area
-

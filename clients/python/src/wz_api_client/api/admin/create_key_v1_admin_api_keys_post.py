@@ -14,18 +14,11 @@ from ...models.problem import Problem
 from typing import cast
 
 
-
 def _get_kwargs(
     *,
     body: NewApiKey,
-
 ) -> dict[str, Any]:
     headers: dict[str, Any] = {}
-
-
-    
-
-    
 
     _kwargs: dict[str, Any] = {
         "method": "post",
@@ -40,68 +33,51 @@ def _get_kwargs(
     return _kwargs
 
 
-
-def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> CreatedApiKey | Problem | None:
+def _parse_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> CreatedApiKey | Problem | None:
     if response.status_code == 201:
         response_201 = CreatedApiKey.from_dict(response.json())
-
-
 
         return response_201
 
     if response.status_code == 400:
         response_400 = Problem.from_dict(response.json())
 
-
-
         return response_400
 
     if response.status_code == 401:
         response_401 = Problem.from_dict(response.json())
-
-
 
         return response_401
 
     if response.status_code == 403:
         response_403 = Problem.from_dict(response.json())
 
-
-
         return response_403
 
     if response.status_code == 409:
         response_409 = Problem.from_dict(response.json())
-
-
 
         return response_409
 
     if response.status_code == 413:
         response_413 = Problem.from_dict(response.json())
 
-
-
         return response_413
 
     if response.status_code == 422:
         response_422 = Problem.from_dict(response.json())
-
-
 
         return response_422
 
     if response.status_code == 429:
         response_429 = Problem.from_dict(response.json())
 
-
-
         return response_429
 
     if response.status_code == 503:
         response_503 = Problem.from_dict(response.json())
-
-
 
         return response_503
 
@@ -111,7 +87,9 @@ def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Res
         return None
 
 
-def _build_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> Response[CreatedApiKey | Problem]:
+def _build_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> Response[CreatedApiKey | Problem]:
     return Response(
         status_code=HTTPStatus(response.status_code),
         content=response.content,
@@ -124,9 +102,8 @@ def sync_detailed(
     *,
     client: AuthenticatedClient,
     body: NewApiKey,
-
 ) -> Response[CreatedApiKey | Problem]:
-    """ Create Key
+    """Create Key
 
      Make a key. Its secret is in this answer only; the gateway keeps its hash. A key made
     in dev mode is revoked when the gateway next starts outside dev mode.
@@ -140,12 +117,10 @@ def sync_detailed(
 
     Returns:
         Response[CreatedApiKey | Problem]
-     """
-
+    """
 
     kwargs = _get_kwargs(
         body=body,
-
     )
 
     response = client.get_httpx_client().request(
@@ -154,13 +129,13 @@ def sync_detailed(
 
     return _build_response(client=client, response=response)
 
+
 def sync(
     *,
     client: AuthenticatedClient,
     body: NewApiKey,
-
 ) -> CreatedApiKey | Problem | None:
-    """ Create Key
+    """Create Key
 
      Make a key. Its secret is in this answer only; the gateway keeps its hash. A key made
     in dev mode is revoked when the gateway next starts outside dev mode.
@@ -174,22 +149,20 @@ def sync(
 
     Returns:
         CreatedApiKey | Problem
-     """
-
+    """
 
     return sync_detailed(
         client=client,
-body=body,
-
+        body=body,
     ).parsed
+
 
 async def asyncio_detailed(
     *,
     client: AuthenticatedClient,
     body: NewApiKey,
-
 ) -> Response[CreatedApiKey | Problem]:
-    """ Create Key
+    """Create Key
 
      Make a key. Its secret is in this answer only; the gateway keeps its hash. A key made
     in dev mode is revoked when the gateway next starts outside dev mode.
@@ -203,27 +176,23 @@ async def asyncio_detailed(
 
     Returns:
         Response[CreatedApiKey | Problem]
-     """
-
+    """
 
     kwargs = _get_kwargs(
         body=body,
-
     )
 
-    response = await client.get_async_httpx_client().request(
-        **kwargs
-    )
+    response = await client.get_async_httpx_client().request(**kwargs)
 
     return _build_response(client=client, response=response)
+
 
 async def asyncio(
     *,
     client: AuthenticatedClient,
     body: NewApiKey,
-
 ) -> CreatedApiKey | Problem | None:
-    """ Create Key
+    """Create Key
 
      Make a key. Its secret is in this answer only; the gateway keeps its hash. A key made
     in dev mode is revoked when the gateway next starts outside dev mode.
@@ -237,11 +206,11 @@ async def asyncio(
 
     Returns:
         CreatedApiKey | Problem
-     """
+    """
 
-
-    return (await asyncio_detailed(
-        client=client,
-body=body,
-
-    )).parsed
+    return (
+        await asyncio_detailed(
+            client=client,
+            body=body,
+        )
+    ).parsed

@@ -14,23 +14,16 @@ from ...types import UNSET, Unset
 from typing import cast
 
 
-
 def _get_kwargs(
     *,
     include_revoked: bool | Unset = False,
-
 ) -> dict[str, Any]:
-    
-
-    
 
     params: dict[str, Any] = {}
 
     params["include_revoked"] = include_revoked
 
-
     params = {k: v for k, v in params.items() if v is not UNSET and v is not None}
-
 
     _kwargs: dict[str, Any] = {
         "method": "get",
@@ -38,19 +31,17 @@ def _get_kwargs(
         "params": params,
     }
 
-
     return _kwargs
 
 
-
-def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> Problem | list[ApiKeyInfo] | None:
+def _parse_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> Problem | list[ApiKeyInfo] | None:
     if response.status_code == 200:
         response_200 = []
         _response_200 = response.json()
-        for response_200_item_data in (_response_200):
+        for response_200_item_data in _response_200:
             response_200_item = ApiKeyInfo.from_dict(response_200_item_data)
-
-
 
             response_200.append(response_200_item)
 
@@ -59,49 +50,35 @@ def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Res
     if response.status_code == 400:
         response_400 = Problem.from_dict(response.json())
 
-
-
         return response_400
 
     if response.status_code == 401:
         response_401 = Problem.from_dict(response.json())
-
-
 
         return response_401
 
     if response.status_code == 403:
         response_403 = Problem.from_dict(response.json())
 
-
-
         return response_403
 
     if response.status_code == 413:
         response_413 = Problem.from_dict(response.json())
-
-
 
         return response_413
 
     if response.status_code == 422:
         response_422 = Problem.from_dict(response.json())
 
-
-
         return response_422
 
     if response.status_code == 429:
         response_429 = Problem.from_dict(response.json())
 
-
-
         return response_429
 
     if response.status_code == 503:
         response_503 = Problem.from_dict(response.json())
-
-
 
         return response_503
 
@@ -111,7 +88,9 @@ def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Res
         return None
 
 
-def _build_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> Response[Problem | list[ApiKeyInfo]]:
+def _build_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> Response[Problem | list[ApiKeyInfo]]:
     return Response(
         status_code=HTTPStatus(response.status_code),
         content=response.content,
@@ -124,9 +103,8 @@ def sync_detailed(
     *,
     client: AuthenticatedClient,
     include_revoked: bool | Unset = False,
-
 ) -> Response[Problem | list[ApiKeyInfo]]:
-    """ List Keys
+    """List Keys
 
      Every key (without secrets).
 
@@ -139,12 +117,10 @@ def sync_detailed(
 
     Returns:
         Response[Problem | list[ApiKeyInfo]]
-     """
-
+    """
 
     kwargs = _get_kwargs(
         include_revoked=include_revoked,
-
     )
 
     response = client.get_httpx_client().request(
@@ -153,13 +129,13 @@ def sync_detailed(
 
     return _build_response(client=client, response=response)
 
+
 def sync(
     *,
     client: AuthenticatedClient,
     include_revoked: bool | Unset = False,
-
 ) -> Problem | list[ApiKeyInfo] | None:
-    """ List Keys
+    """List Keys
 
      Every key (without secrets).
 
@@ -172,22 +148,20 @@ def sync(
 
     Returns:
         Problem | list[ApiKeyInfo]
-     """
-
+    """
 
     return sync_detailed(
         client=client,
-include_revoked=include_revoked,
-
+        include_revoked=include_revoked,
     ).parsed
+
 
 async def asyncio_detailed(
     *,
     client: AuthenticatedClient,
     include_revoked: bool | Unset = False,
-
 ) -> Response[Problem | list[ApiKeyInfo]]:
-    """ List Keys
+    """List Keys
 
      Every key (without secrets).
 
@@ -200,27 +174,23 @@ async def asyncio_detailed(
 
     Returns:
         Response[Problem | list[ApiKeyInfo]]
-     """
-
+    """
 
     kwargs = _get_kwargs(
         include_revoked=include_revoked,
-
     )
 
-    response = await client.get_async_httpx_client().request(
-        **kwargs
-    )
+    response = await client.get_async_httpx_client().request(**kwargs)
 
     return _build_response(client=client, response=response)
+
 
 async def asyncio(
     *,
     client: AuthenticatedClient,
     include_revoked: bool | Unset = False,
-
 ) -> Problem | list[ApiKeyInfo] | None:
-    """ List Keys
+    """List Keys
 
      Every key (without secrets).
 
@@ -233,11 +203,11 @@ async def asyncio(
 
     Returns:
         Problem | list[ApiKeyInfo]
-     """
+    """
 
-
-    return (await asyncio_detailed(
-        client=client,
-include_revoked=include_revoked,
-
-    )).parsed
+    return (
+        await asyncio_detailed(
+            client=client,
+            include_revoked=include_revoked,
+        )
+    ).parsed

@@ -13,11 +13,12 @@ from ...models.alert_severity import AlertSeverity
 from ...models.alert_type import AlertType
 from ...models.get_alerts_v1_alerts_get_format import GetAlertsV1AlertsGetFormat
 from ...models.get_alerts_v1_alerts_get_order import GetAlertsV1AlertsGetOrder
-from ...models.get_alerts_v1_alerts_get_phase_type_0_item import GetAlertsV1AlertsGetPhaseType0Item
+from ...models.get_alerts_v1_alerts_get_phase_type_0_item import (
+    GetAlertsV1AlertsGetPhaseType0Item,
+)
 from ...models.problem import Problem
 from ...types import UNSET, Unset
 from typing import cast
-
 
 
 def _get_kwargs(
@@ -34,11 +35,7 @@ def _get_kwargs(
     limit: int | None | Unset = UNSET,
     cursor: None | str | Unset = UNSET,
     format_: GetAlertsV1AlertsGetFormat | Unset = GetAlertsV1AlertsGetFormat.JSON,
-
 ) -> dict[str, Any]:
-    
-
-    
 
     params: dict[str, Any] = {}
 
@@ -58,7 +55,6 @@ def _get_kwargs(
             type_type_0_item = type_type_0_item_data.value
             json_type_.append(type_type_0_item)
 
-
     else:
         json_type_ = type_
     params["type"] = json_type_
@@ -72,7 +68,6 @@ def _get_kwargs(
             severity_type_0_item = severity_type_0_item_data.value
             json_severity.append(severity_type_0_item)
 
-
     else:
         json_severity = severity
     params["severity"] = json_severity
@@ -85,7 +80,6 @@ def _get_kwargs(
         for phase_type_0_item_data in phase:
             phase_type_0_item = phase_type_0_item_data.value
             json_phase.append(phase_type_0_item)
-
 
     else:
         json_phase = phase
@@ -145,9 +139,7 @@ def _get_kwargs(
 
     params["format"] = json_format_
 
-
     params = {k: v for k, v in params.items() if v is not UNSET and v is not None}
-
 
     _kwargs: dict[str, Any] = {
         "method": "get",
@@ -155,72 +147,54 @@ def _get_kwargs(
         "params": params,
     }
 
-
     return _kwargs
 
 
-
-def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> AlertPage | Problem | None:
+def _parse_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> AlertPage | Problem | None:
     if response.status_code == 200:
         response_200 = AlertPage.from_dict(response.json())
-
-
 
         return response_200
 
     if response.status_code == 400:
         response_400 = Problem.from_dict(response.json())
 
-
-
         return response_400
 
     if response.status_code == 401:
         response_401 = Problem.from_dict(response.json())
-
-
 
         return response_401
 
     if response.status_code == 403:
         response_403 = Problem.from_dict(response.json())
 
-
-
         return response_403
 
     if response.status_code == 404:
         response_404 = Problem.from_dict(response.json())
-
-
 
         return response_404
 
     if response.status_code == 413:
         response_413 = Problem.from_dict(response.json())
 
-
-
         return response_413
 
     if response.status_code == 422:
         response_422 = Problem.from_dict(response.json())
-
-
 
         return response_422
 
     if response.status_code == 429:
         response_429 = Problem.from_dict(response.json())
 
-
-
         return response_429
 
     if response.status_code == 503:
         response_503 = Problem.from_dict(response.json())
-
-
 
         return response_503
 
@@ -230,7 +204,9 @@ def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Res
         return None
 
 
-def _build_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> Response[AlertPage | Problem]:
+def _build_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> Response[AlertPage | Problem]:
     return Response(
         status_code=HTTPStatus(response.status_code),
         content=response.content,
@@ -254,9 +230,8 @@ def sync_detailed(
     limit: int | None | Unset = UNSET,
     cursor: None | str | Unset = UNSET,
     format_: GetAlertsV1AlertsGetFormat | Unset = GetAlertsV1AlertsGetFormat.JSON,
-
 ) -> Response[AlertPage | Problem]:
-    """ Get Alerts
+    """Get Alerts
 
      Alert events (start, update, clear), newest first unless ``order=oldest``; as CSV or
     GeoJSON with ``format``.
@@ -284,23 +259,21 @@ def sync_detailed(
 
     Returns:
         Response[AlertPage | Problem]
-     """
-
+    """
 
     kwargs = _get_kwargs(
         site=site,
-type_=type_,
-severity=severity,
-phase=phase,
-start=start,
-end=end,
-track_id=track_id,
-episode_id=episode_id,
-order=order,
-limit=limit,
-cursor=cursor,
-format_=format_,
-
+        type_=type_,
+        severity=severity,
+        phase=phase,
+        start=start,
+        end=end,
+        track_id=track_id,
+        episode_id=episode_id,
+        order=order,
+        limit=limit,
+        cursor=cursor,
+        format_=format_,
     )
 
     response = client.get_httpx_client().request(
@@ -308,6 +281,7 @@ format_=format_,
     )
 
     return _build_response(client=client, response=response)
+
 
 def sync(
     *,
@@ -324,9 +298,8 @@ def sync(
     limit: int | None | Unset = UNSET,
     cursor: None | str | Unset = UNSET,
     format_: GetAlertsV1AlertsGetFormat | Unset = GetAlertsV1AlertsGetFormat.JSON,
-
 ) -> AlertPage | Problem | None:
-    """ Get Alerts
+    """Get Alerts
 
      Alert events (start, update, clear), newest first unless ``order=oldest``; as CSV or
     GeoJSON with ``format``.
@@ -354,25 +327,24 @@ def sync(
 
     Returns:
         AlertPage | Problem
-     """
-
+    """
 
     return sync_detailed(
         client=client,
-site=site,
-type_=type_,
-severity=severity,
-phase=phase,
-start=start,
-end=end,
-track_id=track_id,
-episode_id=episode_id,
-order=order,
-limit=limit,
-cursor=cursor,
-format_=format_,
-
+        site=site,
+        type_=type_,
+        severity=severity,
+        phase=phase,
+        start=start,
+        end=end,
+        track_id=track_id,
+        episode_id=episode_id,
+        order=order,
+        limit=limit,
+        cursor=cursor,
+        format_=format_,
     ).parsed
+
 
 async def asyncio_detailed(
     *,
@@ -389,9 +361,8 @@ async def asyncio_detailed(
     limit: int | None | Unset = UNSET,
     cursor: None | str | Unset = UNSET,
     format_: GetAlertsV1AlertsGetFormat | Unset = GetAlertsV1AlertsGetFormat.JSON,
-
 ) -> Response[AlertPage | Problem]:
-    """ Get Alerts
+    """Get Alerts
 
      Alert events (start, update, clear), newest first unless ``order=oldest``; as CSV or
     GeoJSON with ``format``.
@@ -419,30 +390,27 @@ async def asyncio_detailed(
 
     Returns:
         Response[AlertPage | Problem]
-     """
-
+    """
 
     kwargs = _get_kwargs(
         site=site,
-type_=type_,
-severity=severity,
-phase=phase,
-start=start,
-end=end,
-track_id=track_id,
-episode_id=episode_id,
-order=order,
-limit=limit,
-cursor=cursor,
-format_=format_,
-
+        type_=type_,
+        severity=severity,
+        phase=phase,
+        start=start,
+        end=end,
+        track_id=track_id,
+        episode_id=episode_id,
+        order=order,
+        limit=limit,
+        cursor=cursor,
+        format_=format_,
     )
 
-    response = await client.get_async_httpx_client().request(
-        **kwargs
-    )
+    response = await client.get_async_httpx_client().request(**kwargs)
 
     return _build_response(client=client, response=response)
+
 
 async def asyncio(
     *,
@@ -459,9 +427,8 @@ async def asyncio(
     limit: int | None | Unset = UNSET,
     cursor: None | str | Unset = UNSET,
     format_: GetAlertsV1AlertsGetFormat | Unset = GetAlertsV1AlertsGetFormat.JSON,
-
 ) -> AlertPage | Problem | None:
-    """ Get Alerts
+    """Get Alerts
 
      Alert events (start, update, clear), newest first unless ``order=oldest``; as CSV or
     GeoJSON with ``format``.
@@ -489,22 +456,22 @@ async def asyncio(
 
     Returns:
         AlertPage | Problem
-     """
+    """
 
-
-    return (await asyncio_detailed(
-        client=client,
-site=site,
-type_=type_,
-severity=severity,
-phase=phase,
-start=start,
-end=end,
-track_id=track_id,
-episode_id=episode_id,
-order=order,
-limit=limit,
-cursor=cursor,
-format_=format_,
-
-    )).parsed
+    return (
+        await asyncio_detailed(
+            client=client,
+            site=site,
+            type_=type_,
+            severity=severity,
+            phase=phase,
+            start=start,
+            end=end,
+            track_id=track_id,
+            episode_id=episode_id,
+            order=order,
+            limit=limit,
+            cursor=cursor,
+            format_=format_,
+        )
+    ).parsed

@@ -9,28 +9,19 @@ from ...types import Response, UNSET
 from ... import errors
 
 
-
-
-def _get_kwargs(
-    
-) -> dict[str, Any]:
-    
-
-    
-
-    
+def _get_kwargs() -> dict[str, Any]:
 
     _kwargs: dict[str, Any] = {
         "method": "get",
         "url": "/metrics",
     }
 
-
     return _kwargs
 
 
-
-def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> str | None:
+def _parse_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> str | None:
     if response.status_code == 200:
         response_200 = response.text
         return response_200
@@ -41,7 +32,9 @@ def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Res
         return None
 
 
-def _build_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> Response[str]:
+def _build_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> Response[str]:
     return Response(
         status_code=HTTPStatus(response.status_code),
         content=response.content,
@@ -53,9 +46,8 @@ def _build_response(*, client: AuthenticatedClient | Client, response: httpx.Res
 def sync_detailed(
     *,
     client: AuthenticatedClient | Client,
-
 ) -> Response[str]:
-    """ Prometheus
+    """Prometheus
 
      Prometheus metrics: HTTP, ingestion, bus, queue, retention.
 
@@ -65,12 +57,9 @@ def sync_detailed(
 
     Returns:
         Response[str]
-     """
+    """
 
-
-    kwargs = _get_kwargs(
-        
-    )
+    kwargs = _get_kwargs()
 
     response = client.get_httpx_client().request(
         **kwargs,
@@ -78,12 +67,12 @@ def sync_detailed(
 
     return _build_response(client=client, response=response)
 
+
 def sync(
     *,
     client: AuthenticatedClient | Client,
-
 ) -> str | None:
-    """ Prometheus
+    """Prometheus
 
      Prometheus metrics: HTTP, ingestion, bus, queue, retention.
 
@@ -93,20 +82,18 @@ def sync(
 
     Returns:
         str
-     """
-
+    """
 
     return sync_detailed(
         client=client,
-
     ).parsed
+
 
 async def asyncio_detailed(
     *,
     client: AuthenticatedClient | Client,
-
 ) -> Response[str]:
-    """ Prometheus
+    """Prometheus
 
      Prometheus metrics: HTTP, ingestion, bus, queue, retention.
 
@@ -116,25 +103,20 @@ async def asyncio_detailed(
 
     Returns:
         Response[str]
-     """
+    """
 
+    kwargs = _get_kwargs()
 
-    kwargs = _get_kwargs(
-        
-    )
-
-    response = await client.get_async_httpx_client().request(
-        **kwargs
-    )
+    response = await client.get_async_httpx_client().request(**kwargs)
 
     return _build_response(client=client, response=response)
+
 
 async def asyncio(
     *,
     client: AuthenticatedClient | Client,
-
 ) -> str | None:
-    """ Prometheus
+    """Prometheus
 
      Prometheus metrics: HTTP, ingestion, bus, queue, retention.
 
@@ -144,10 +126,10 @@ async def asyncio(
 
     Returns:
         str
-     """
+    """
 
-
-    return (await asyncio_detailed(
-        client=client,
-
-    )).parsed
+    return (
+        await asyncio_detailed(
+            client=client,
+        )
+    ).parsed

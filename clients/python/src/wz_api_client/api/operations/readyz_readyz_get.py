@@ -12,38 +12,26 @@ from ...models.readiness import Readiness
 from typing import cast
 
 
-
-def _get_kwargs(
-    
-) -> dict[str, Any]:
-    
-
-    
-
-    
+def _get_kwargs() -> dict[str, Any]:
 
     _kwargs: dict[str, Any] = {
         "method": "get",
         "url": "/readyz",
     }
 
-
     return _kwargs
 
 
-
-def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> Readiness | None:
+def _parse_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> Readiness | None:
     if response.status_code == 200:
         response_200 = Readiness.from_dict(response.json())
-
-
 
         return response_200
 
     if response.status_code == 503:
         response_503 = Readiness.from_dict(response.json())
-
-
 
         return response_503
 
@@ -53,7 +41,9 @@ def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Res
         return None
 
 
-def _build_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> Response[Readiness]:
+def _build_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> Response[Readiness]:
     return Response(
         status_code=HTTPStatus(response.status_code),
         content=response.content,
@@ -65,9 +55,8 @@ def _build_response(*, client: AuthenticatedClient | Client, response: httpx.Res
 def sync_detailed(
     *,
     client: AuthenticatedClient | Client,
-
 ) -> Response[Readiness]:
-    """ Readyz
+    """Readyz
 
      Ready to serve: the database answers at the expected schema (and the bus is up).
 
@@ -77,12 +66,9 @@ def sync_detailed(
 
     Returns:
         Response[Readiness]
-     """
+    """
 
-
-    kwargs = _get_kwargs(
-        
-    )
+    kwargs = _get_kwargs()
 
     response = client.get_httpx_client().request(
         **kwargs,
@@ -90,12 +76,12 @@ def sync_detailed(
 
     return _build_response(client=client, response=response)
 
+
 def sync(
     *,
     client: AuthenticatedClient | Client,
-
 ) -> Readiness | None:
-    """ Readyz
+    """Readyz
 
      Ready to serve: the database answers at the expected schema (and the bus is up).
 
@@ -105,20 +91,18 @@ def sync(
 
     Returns:
         Readiness
-     """
-
+    """
 
     return sync_detailed(
         client=client,
-
     ).parsed
+
 
 async def asyncio_detailed(
     *,
     client: AuthenticatedClient | Client,
-
 ) -> Response[Readiness]:
-    """ Readyz
+    """Readyz
 
      Ready to serve: the database answers at the expected schema (and the bus is up).
 
@@ -128,25 +112,20 @@ async def asyncio_detailed(
 
     Returns:
         Response[Readiness]
-     """
+    """
 
+    kwargs = _get_kwargs()
 
-    kwargs = _get_kwargs(
-        
-    )
-
-    response = await client.get_async_httpx_client().request(
-        **kwargs
-    )
+    response = await client.get_async_httpx_client().request(**kwargs)
 
     return _build_response(client=client, response=response)
+
 
 async def asyncio(
     *,
     client: AuthenticatedClient | Client,
-
 ) -> Readiness | None:
-    """ Readyz
+    """Readyz
 
      Ready to serve: the database answers at the expected schema (and the bus is up).
 
@@ -156,10 +135,10 @@ async def asyncio(
 
     Returns:
         Readiness
-     """
+    """
 
-
-    return (await asyncio_detailed(
-        client=client,
-
-    )).parsed
+    return (
+        await asyncio_detailed(
+            client=client,
+        )
+    ).parsed

@@ -9,11 +9,12 @@ from ...types import Response, UNSET
 from ... import errors
 
 from ...models.conflict_page import ConflictPage
-from ...models.get_conflicts_v1_conflicts_get_format import GetConflictsV1ConflictsGetFormat
+from ...models.get_conflicts_v1_conflicts_get_format import (
+    GetConflictsV1ConflictsGetFormat,
+)
 from ...models.problem import Problem
 from ...types import UNSET, Unset
 from typing import cast
-
 
 
 def _get_kwargs(
@@ -25,13 +26,10 @@ def _get_kwargs(
     smoothed: bool | Unset = False,
     limit: int | None | Unset = UNSET,
     cursor: None | str | Unset = UNSET,
-    format_: GetConflictsV1ConflictsGetFormat | Unset = GetConflictsV1ConflictsGetFormat.JSON,
+    format_: GetConflictsV1ConflictsGetFormat
+    | Unset = GetConflictsV1ConflictsGetFormat.JSON,
     site: None | str | Unset = UNSET,
-
 ) -> dict[str, Any]:
-    
-
-    
 
     params: dict[str, Any] = {}
 
@@ -72,9 +70,7 @@ def _get_kwargs(
         json_site = site
     params["site"] = json_site
 
-
     params = {k: v for k, v in params.items() if v is not UNSET and v is not None}
-
 
     _kwargs: dict[str, Any] = {
         "method": "get",
@@ -82,72 +78,54 @@ def _get_kwargs(
         "params": params,
     }
 
-
     return _kwargs
 
 
-
-def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> ConflictPage | Problem | None:
+def _parse_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> ConflictPage | Problem | None:
     if response.status_code == 200:
         response_200 = ConflictPage.from_dict(response.json())
-
-
 
         return response_200
 
     if response.status_code == 400:
         response_400 = Problem.from_dict(response.json())
 
-
-
         return response_400
 
     if response.status_code == 401:
         response_401 = Problem.from_dict(response.json())
-
-
 
         return response_401
 
     if response.status_code == 403:
         response_403 = Problem.from_dict(response.json())
 
-
-
         return response_403
 
     if response.status_code == 404:
         response_404 = Problem.from_dict(response.json())
-
-
 
         return response_404
 
     if response.status_code == 413:
         response_413 = Problem.from_dict(response.json())
 
-
-
         return response_413
 
     if response.status_code == 422:
         response_422 = Problem.from_dict(response.json())
-
-
 
         return response_422
 
     if response.status_code == 429:
         response_429 = Problem.from_dict(response.json())
 
-
-
         return response_429
 
     if response.status_code == 503:
         response_503 = Problem.from_dict(response.json())
-
-
 
         return response_503
 
@@ -157,7 +135,9 @@ def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Res
         return None
 
 
-def _build_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> Response[ConflictPage | Problem]:
+def _build_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> Response[ConflictPage | Problem]:
     return Response(
         status_code=HTTPStatus(response.status_code),
         content=response.content,
@@ -176,11 +156,11 @@ def sync_detailed(
     smoothed: bool | Unset = False,
     limit: int | None | Unset = UNSET,
     cursor: None | str | Unset = UNSET,
-    format_: GetConflictsV1ConflictsGetFormat | Unset = GetConflictsV1ConflictsGetFormat.JSON,
+    format_: GetConflictsV1ConflictsGetFormat
+    | Unset = GetConflictsV1ConflictsGetFormat.JSON,
     site: None | str | Unset = UNSET,
-
 ) -> Response[ConflictPage | Problem]:
-    """ Get Conflicts
+    """Get Conflicts
 
      Conflicts (TTC, PET, DRAC, SSAM's MaxS, DeltaS, DR, MaxD, MaxDeltaV, angle and type)
     between the stored tracks of a window, ordered by the time of their minimum TTC.
@@ -205,20 +185,18 @@ def sync_detailed(
 
     Returns:
         Response[ConflictPage | Problem]
-     """
-
+    """
 
     kwargs = _get_kwargs(
         start=start,
-end=end,
-max_ttc=max_ttc,
-max_pet=max_pet,
-smoothed=smoothed,
-limit=limit,
-cursor=cursor,
-format_=format_,
-site=site,
-
+        end=end,
+        max_ttc=max_ttc,
+        max_pet=max_pet,
+        smoothed=smoothed,
+        limit=limit,
+        cursor=cursor,
+        format_=format_,
+        site=site,
     )
 
     response = client.get_httpx_client().request(
@@ -226,6 +204,7 @@ site=site,
     )
 
     return _build_response(client=client, response=response)
+
 
 def sync(
     *,
@@ -237,11 +216,11 @@ def sync(
     smoothed: bool | Unset = False,
     limit: int | None | Unset = UNSET,
     cursor: None | str | Unset = UNSET,
-    format_: GetConflictsV1ConflictsGetFormat | Unset = GetConflictsV1ConflictsGetFormat.JSON,
+    format_: GetConflictsV1ConflictsGetFormat
+    | Unset = GetConflictsV1ConflictsGetFormat.JSON,
     site: None | str | Unset = UNSET,
-
 ) -> ConflictPage | Problem | None:
-    """ Get Conflicts
+    """Get Conflicts
 
      Conflicts (TTC, PET, DRAC, SSAM's MaxS, DeltaS, DR, MaxD, MaxDeltaV, angle and type)
     between the stored tracks of a window, ordered by the time of their minimum TTC.
@@ -266,22 +245,21 @@ def sync(
 
     Returns:
         ConflictPage | Problem
-     """
-
+    """
 
     return sync_detailed(
         client=client,
-start=start,
-end=end,
-max_ttc=max_ttc,
-max_pet=max_pet,
-smoothed=smoothed,
-limit=limit,
-cursor=cursor,
-format_=format_,
-site=site,
-
+        start=start,
+        end=end,
+        max_ttc=max_ttc,
+        max_pet=max_pet,
+        smoothed=smoothed,
+        limit=limit,
+        cursor=cursor,
+        format_=format_,
+        site=site,
     ).parsed
+
 
 async def asyncio_detailed(
     *,
@@ -293,11 +271,11 @@ async def asyncio_detailed(
     smoothed: bool | Unset = False,
     limit: int | None | Unset = UNSET,
     cursor: None | str | Unset = UNSET,
-    format_: GetConflictsV1ConflictsGetFormat | Unset = GetConflictsV1ConflictsGetFormat.JSON,
+    format_: GetConflictsV1ConflictsGetFormat
+    | Unset = GetConflictsV1ConflictsGetFormat.JSON,
     site: None | str | Unset = UNSET,
-
 ) -> Response[ConflictPage | Problem]:
-    """ Get Conflicts
+    """Get Conflicts
 
      Conflicts (TTC, PET, DRAC, SSAM's MaxS, DeltaS, DR, MaxD, MaxDeltaV, angle and type)
     between the stored tracks of a window, ordered by the time of their minimum TTC.
@@ -322,27 +300,24 @@ async def asyncio_detailed(
 
     Returns:
         Response[ConflictPage | Problem]
-     """
-
+    """
 
     kwargs = _get_kwargs(
         start=start,
-end=end,
-max_ttc=max_ttc,
-max_pet=max_pet,
-smoothed=smoothed,
-limit=limit,
-cursor=cursor,
-format_=format_,
-site=site,
-
+        end=end,
+        max_ttc=max_ttc,
+        max_pet=max_pet,
+        smoothed=smoothed,
+        limit=limit,
+        cursor=cursor,
+        format_=format_,
+        site=site,
     )
 
-    response = await client.get_async_httpx_client().request(
-        **kwargs
-    )
+    response = await client.get_async_httpx_client().request(**kwargs)
 
     return _build_response(client=client, response=response)
+
 
 async def asyncio(
     *,
@@ -354,11 +329,11 @@ async def asyncio(
     smoothed: bool | Unset = False,
     limit: int | None | Unset = UNSET,
     cursor: None | str | Unset = UNSET,
-    format_: GetConflictsV1ConflictsGetFormat | Unset = GetConflictsV1ConflictsGetFormat.JSON,
+    format_: GetConflictsV1ConflictsGetFormat
+    | Unset = GetConflictsV1ConflictsGetFormat.JSON,
     site: None | str | Unset = UNSET,
-
 ) -> ConflictPage | Problem | None:
-    """ Get Conflicts
+    """Get Conflicts
 
      Conflicts (TTC, PET, DRAC, SSAM's MaxS, DeltaS, DR, MaxD, MaxDeltaV, angle and type)
     between the stored tracks of a window, ordered by the time of their minimum TTC.
@@ -383,19 +358,19 @@ async def asyncio(
 
     Returns:
         ConflictPage | Problem
-     """
+    """
 
-
-    return (await asyncio_detailed(
-        client=client,
-start=start,
-end=end,
-max_ttc=max_ttc,
-max_pet=max_pet,
-smoothed=smoothed,
-limit=limit,
-cursor=cursor,
-format_=format_,
-site=site,
-
-    )).parsed
+    return (
+        await asyncio_detailed(
+            client=client,
+            start=start,
+            end=end,
+            max_ttc=max_ttc,
+            max_pet=max_pet,
+            smoothed=smoothed,
+            limit=limit,
+            cursor=cursor,
+            format_=format_,
+            site=site,
+        )
+    ).parsed

@@ -14,15 +14,10 @@ from ...types import UNSET, Unset
 from typing import cast
 
 
-
 def _get_kwargs(
     *,
     site: None | str | Unset = UNSET,
-
 ) -> dict[str, Any]:
-    
-
-    
 
     params: dict[str, Any] = {}
 
@@ -33,9 +28,7 @@ def _get_kwargs(
         json_site = site
     params["site"] = json_site
 
-
     params = {k: v for k, v in params.items() if v is not UNSET and v is not None}
-
 
     _kwargs: dict[str, Any] = {
         "method": "get",
@@ -43,72 +36,54 @@ def _get_kwargs(
         "params": params,
     }
 
-
     return _kwargs
 
 
-
-def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> LiveTracks | Problem | None:
+def _parse_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> LiveTracks | Problem | None:
     if response.status_code == 200:
         response_200 = LiveTracks.from_dict(response.json())
-
-
 
         return response_200
 
     if response.status_code == 400:
         response_400 = Problem.from_dict(response.json())
 
-
-
         return response_400
 
     if response.status_code == 401:
         response_401 = Problem.from_dict(response.json())
-
-
 
         return response_401
 
     if response.status_code == 403:
         response_403 = Problem.from_dict(response.json())
 
-
-
         return response_403
 
     if response.status_code == 404:
         response_404 = Problem.from_dict(response.json())
-
-
 
         return response_404
 
     if response.status_code == 413:
         response_413 = Problem.from_dict(response.json())
 
-
-
         return response_413
 
     if response.status_code == 422:
         response_422 = Problem.from_dict(response.json())
-
-
 
         return response_422
 
     if response.status_code == 429:
         response_429 = Problem.from_dict(response.json())
 
-
-
         return response_429
 
     if response.status_code == 503:
         response_503 = Problem.from_dict(response.json())
-
-
 
         return response_503
 
@@ -118,7 +93,9 @@ def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Res
         return None
 
 
-def _build_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> Response[LiveTracks | Problem]:
+def _build_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> Response[LiveTracks | Problem]:
     return Response(
         status_code=HTTPStatus(response.status_code),
         content=response.content,
@@ -131,9 +108,8 @@ def sync_detailed(
     *,
     client: AuthenticatedClient,
     site: None | str | Unset = UNSET,
-
 ) -> Response[LiveTracks | Problem]:
-    """ Get Live Tracks
+    """Get Live Tracks
 
      The newest fused tracks (the tracker's last batch), with WGS84 positions.
 
@@ -146,12 +122,10 @@ def sync_detailed(
 
     Returns:
         Response[LiveTracks | Problem]
-     """
-
+    """
 
     kwargs = _get_kwargs(
         site=site,
-
     )
 
     response = client.get_httpx_client().request(
@@ -160,13 +134,13 @@ def sync_detailed(
 
     return _build_response(client=client, response=response)
 
+
 def sync(
     *,
     client: AuthenticatedClient,
     site: None | str | Unset = UNSET,
-
 ) -> LiveTracks | Problem | None:
-    """ Get Live Tracks
+    """Get Live Tracks
 
      The newest fused tracks (the tracker's last batch), with WGS84 positions.
 
@@ -179,22 +153,20 @@ def sync(
 
     Returns:
         LiveTracks | Problem
-     """
-
+    """
 
     return sync_detailed(
         client=client,
-site=site,
-
+        site=site,
     ).parsed
+
 
 async def asyncio_detailed(
     *,
     client: AuthenticatedClient,
     site: None | str | Unset = UNSET,
-
 ) -> Response[LiveTracks | Problem]:
-    """ Get Live Tracks
+    """Get Live Tracks
 
      The newest fused tracks (the tracker's last batch), with WGS84 positions.
 
@@ -207,27 +179,23 @@ async def asyncio_detailed(
 
     Returns:
         Response[LiveTracks | Problem]
-     """
-
+    """
 
     kwargs = _get_kwargs(
         site=site,
-
     )
 
-    response = await client.get_async_httpx_client().request(
-        **kwargs
-    )
+    response = await client.get_async_httpx_client().request(**kwargs)
 
     return _build_response(client=client, response=response)
+
 
 async def asyncio(
     *,
     client: AuthenticatedClient,
     site: None | str | Unset = UNSET,
-
 ) -> LiveTracks | Problem | None:
-    """ Get Live Tracks
+    """Get Live Tracks
 
      The newest fused tracks (the tracker's last batch), with WGS84 positions.
 
@@ -240,11 +208,11 @@ async def asyncio(
 
     Returns:
         LiveTracks | Problem
-     """
+    """
 
-
-    return (await asyncio_detailed(
-        client=client,
-site=site,
-
-    )).parsed
+    return (
+        await asyncio_detailed(
+            client=client,
+            site=site,
+        )
+    ).parsed

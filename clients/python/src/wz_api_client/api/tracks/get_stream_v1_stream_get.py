@@ -8,26 +8,22 @@ from ...client import AuthenticatedClient, Client
 from ...types import Response, UNSET
 from ... import errors
 
-from ...models.get_stream_v1_stream_get_event_type_0_item import GetStreamV1StreamGetEventType0Item
+from ...models.get_stream_v1_stream_get_event_type_0_item import (
+    GetStreamV1StreamGetEventType0Item,
+)
 from ...models.problem import Problem
 from ...types import UNSET, Unset
 from typing import cast
-
 
 
 def _get_kwargs(
     *,
     event: list[GetStreamV1StreamGetEventType0Item] | None | Unset = UNSET,
     last_event_id: None | str | Unset = UNSET,
-
 ) -> dict[str, Any]:
     headers: dict[str, Any] = {}
     if not isinstance(last_event_id, Unset):
         headers["last-event-id"] = last_event_id
-
-
-
-    
 
     params: dict[str, Any] = {}
 
@@ -40,14 +36,11 @@ def _get_kwargs(
             event_type_0_item = event_type_0_item_data.value
             json_event.append(event_type_0_item)
 
-
     else:
         json_event = event
     params["event"] = json_event
 
-
     params = {k: v for k, v in params.items() if v is not UNSET and v is not None}
-
 
     _kwargs: dict[str, Any] = {
         "method": "get",
@@ -55,13 +48,13 @@ def _get_kwargs(
         "params": params,
     }
 
-
     _kwargs["headers"] = headers
     return _kwargs
 
 
-
-def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> Problem | str | None:
+def _parse_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> Problem | str | None:
     if response.status_code == 200:
         response_200 = response.text
         return response_200
@@ -69,49 +62,35 @@ def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Res
     if response.status_code == 400:
         response_400 = Problem.from_dict(response.json())
 
-
-
         return response_400
 
     if response.status_code == 401:
         response_401 = Problem.from_dict(response.json())
-
-
 
         return response_401
 
     if response.status_code == 403:
         response_403 = Problem.from_dict(response.json())
 
-
-
         return response_403
 
     if response.status_code == 413:
         response_413 = Problem.from_dict(response.json())
-
-
 
         return response_413
 
     if response.status_code == 422:
         response_422 = Problem.from_dict(response.json())
 
-
-
         return response_422
 
     if response.status_code == 429:
         response_429 = Problem.from_dict(response.json())
 
-
-
         return response_429
 
     if response.status_code == 503:
         response_503 = Problem.from_dict(response.json())
-
-
 
         return response_503
 
@@ -121,7 +100,9 @@ def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Res
         return None
 
 
-def _build_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> Response[Problem | str]:
+def _build_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> Response[Problem | str]:
     return Response(
         status_code=HTTPStatus(response.status_code),
         content=response.content,
@@ -135,9 +116,8 @@ def sync_detailed(
     client: AuthenticatedClient,
     event: list[GetStreamV1StreamGetEventType0Item] | None | Unset = UNSET,
     last_event_id: None | str | Unset = UNSET,
-
 ) -> Response[Problem | str]:
-    """ Get Stream
+    """Get Stream
 
      Live events as Server-Sent Events: ``tracks`` (the newest track batch, compact, at
     most ``stream_max_hz`` a second) and ``alert`` (each alert as it is stored), each with
@@ -156,13 +136,11 @@ def sync_detailed(
 
     Returns:
         Response[Problem | str]
-     """
-
+    """
 
     kwargs = _get_kwargs(
         event=event,
-last_event_id=last_event_id,
-
+        last_event_id=last_event_id,
     )
 
     response = client.get_httpx_client().request(
@@ -171,14 +149,14 @@ last_event_id=last_event_id,
 
     return _build_response(client=client, response=response)
 
+
 def sync(
     *,
     client: AuthenticatedClient,
     event: list[GetStreamV1StreamGetEventType0Item] | None | Unset = UNSET,
     last_event_id: None | str | Unset = UNSET,
-
 ) -> Problem | str | None:
-    """ Get Stream
+    """Get Stream
 
      Live events as Server-Sent Events: ``tracks`` (the newest track batch, compact, at
     most ``stream_max_hz`` a second) and ``alert`` (each alert as it is stored), each with
@@ -197,24 +175,22 @@ def sync(
 
     Returns:
         Problem | str
-     """
-
+    """
 
     return sync_detailed(
         client=client,
-event=event,
-last_event_id=last_event_id,
-
+        event=event,
+        last_event_id=last_event_id,
     ).parsed
+
 
 async def asyncio_detailed(
     *,
     client: AuthenticatedClient,
     event: list[GetStreamV1StreamGetEventType0Item] | None | Unset = UNSET,
     last_event_id: None | str | Unset = UNSET,
-
 ) -> Response[Problem | str]:
-    """ Get Stream
+    """Get Stream
 
      Live events as Server-Sent Events: ``tracks`` (the newest track batch, compact, at
     most ``stream_max_hz`` a second) and ``alert`` (each alert as it is stored), each with
@@ -233,29 +209,25 @@ async def asyncio_detailed(
 
     Returns:
         Response[Problem | str]
-     """
-
+    """
 
     kwargs = _get_kwargs(
         event=event,
-last_event_id=last_event_id,
-
+        last_event_id=last_event_id,
     )
 
-    response = await client.get_async_httpx_client().request(
-        **kwargs
-    )
+    response = await client.get_async_httpx_client().request(**kwargs)
 
     return _build_response(client=client, response=response)
+
 
 async def asyncio(
     *,
     client: AuthenticatedClient,
     event: list[GetStreamV1StreamGetEventType0Item] | None | Unset = UNSET,
     last_event_id: None | str | Unset = UNSET,
-
 ) -> Problem | str | None:
-    """ Get Stream
+    """Get Stream
 
      Live events as Server-Sent Events: ``tracks`` (the newest track batch, compact, at
     most ``stream_max_hz`` a second) and ``alert`` (each alert as it is stored), each with
@@ -274,12 +246,12 @@ async def asyncio(
 
     Returns:
         Problem | str
-     """
+    """
 
-
-    return (await asyncio_detailed(
-        client=client,
-event=event,
-last_event_id=last_event_id,
-
-    )).parsed
+    return (
+        await asyncio_detailed(
+            client=client,
+            event=event,
+            last_event_id=last_event_id,
+        )
+    ).parsed

@@ -8,12 +8,13 @@ from ...client import AuthenticatedClient, Client
 from ...types import Response, UNSET
 from ... import errors
 
-from ...models.get_track_v1_tracks_track_id_get_format import GetTrackV1TracksTrackIdGetFormat
+from ...models.get_track_v1_tracks_track_id_get_format import (
+    GetTrackV1TracksTrackIdGetFormat,
+)
 from ...models.problem import Problem
 from ...models.trajectory import Trajectory
 from ...types import UNSET, Unset
 from typing import cast
-
 
 
 def _get_kwargs(
@@ -24,13 +25,10 @@ def _get_kwargs(
     smoothed: bool | Unset = False,
     limit: int | None | Unset = UNSET,
     cursor: None | str | Unset = UNSET,
-    format_: GetTrackV1TracksTrackIdGetFormat | Unset = GetTrackV1TracksTrackIdGetFormat.JSON,
+    format_: GetTrackV1TracksTrackIdGetFormat
+    | Unset = GetTrackV1TracksTrackIdGetFormat.JSON,
     site: None | str | Unset = UNSET,
-
 ) -> dict[str, Any]:
-    
-
-    
 
     params: dict[str, Any] = {}
 
@@ -77,82 +75,64 @@ def _get_kwargs(
         json_site = site
     params["site"] = json_site
 
-
     params = {k: v for k, v in params.items() if v is not UNSET and v is not None}
-
 
     _kwargs: dict[str, Any] = {
         "method": "get",
-        "url": "/v1/tracks/{track_id}".format(track_id=quote(str(track_id), safe=""),),
+        "url": "/v1/tracks/{track_id}".format(
+            track_id=quote(str(track_id), safe=""),
+        ),
         "params": params,
     }
-
 
     return _kwargs
 
 
-
-def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> Problem | Trajectory | None:
+def _parse_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> Problem | Trajectory | None:
     if response.status_code == 200:
         response_200 = Trajectory.from_dict(response.json())
-
-
 
         return response_200
 
     if response.status_code == 400:
         response_400 = Problem.from_dict(response.json())
 
-
-
         return response_400
 
     if response.status_code == 401:
         response_401 = Problem.from_dict(response.json())
-
-
 
         return response_401
 
     if response.status_code == 403:
         response_403 = Problem.from_dict(response.json())
 
-
-
         return response_403
 
     if response.status_code == 404:
         response_404 = Problem.from_dict(response.json())
-
-
 
         return response_404
 
     if response.status_code == 413:
         response_413 = Problem.from_dict(response.json())
 
-
-
         return response_413
 
     if response.status_code == 422:
         response_422 = Problem.from_dict(response.json())
-
-
 
         return response_422
 
     if response.status_code == 429:
         response_429 = Problem.from_dict(response.json())
 
-
-
         return response_429
 
     if response.status_code == 503:
         response_503 = Problem.from_dict(response.json())
-
-
 
         return response_503
 
@@ -162,7 +142,9 @@ def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Res
         return None
 
 
-def _build_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> Response[Problem | Trajectory]:
+def _build_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> Response[Problem | Trajectory]:
     return Response(
         status_code=HTTPStatus(response.status_code),
         content=response.content,
@@ -180,11 +162,11 @@ def sync_detailed(
     smoothed: bool | Unset = False,
     limit: int | None | Unset = UNSET,
     cursor: None | str | Unset = UNSET,
-    format_: GetTrackV1TracksTrackIdGetFormat | Unset = GetTrackV1TracksTrackIdGetFormat.JSON,
+    format_: GetTrackV1TracksTrackIdGetFormat
+    | Unset = GetTrackV1TracksTrackIdGetFormat.JSON,
     site: None | str | Unset = UNSET,
-
 ) -> Response[Problem | Trajectory]:
-    """ Get Track
+    """Get Track
 
      One track's stored trajectory, oldest first, a page at a time.
 
@@ -207,19 +189,17 @@ def sync_detailed(
 
     Returns:
         Response[Problem | Trajectory]
-     """
-
+    """
 
     kwargs = _get_kwargs(
         track_id=track_id,
-start=start,
-end=end,
-smoothed=smoothed,
-limit=limit,
-cursor=cursor,
-format_=format_,
-site=site,
-
+        start=start,
+        end=end,
+        smoothed=smoothed,
+        limit=limit,
+        cursor=cursor,
+        format_=format_,
+        site=site,
     )
 
     response = client.get_httpx_client().request(
@@ -227,6 +207,7 @@ site=site,
     )
 
     return _build_response(client=client, response=response)
+
 
 def sync(
     track_id: int,
@@ -237,11 +218,11 @@ def sync(
     smoothed: bool | Unset = False,
     limit: int | None | Unset = UNSET,
     cursor: None | str | Unset = UNSET,
-    format_: GetTrackV1TracksTrackIdGetFormat | Unset = GetTrackV1TracksTrackIdGetFormat.JSON,
+    format_: GetTrackV1TracksTrackIdGetFormat
+    | Unset = GetTrackV1TracksTrackIdGetFormat.JSON,
     site: None | str | Unset = UNSET,
-
 ) -> Problem | Trajectory | None:
-    """ Get Track
+    """Get Track
 
      One track's stored trajectory, oldest first, a page at a time.
 
@@ -264,21 +245,20 @@ def sync(
 
     Returns:
         Problem | Trajectory
-     """
-
+    """
 
     return sync_detailed(
         track_id=track_id,
-client=client,
-start=start,
-end=end,
-smoothed=smoothed,
-limit=limit,
-cursor=cursor,
-format_=format_,
-site=site,
-
+        client=client,
+        start=start,
+        end=end,
+        smoothed=smoothed,
+        limit=limit,
+        cursor=cursor,
+        format_=format_,
+        site=site,
     ).parsed
+
 
 async def asyncio_detailed(
     track_id: int,
@@ -289,11 +269,11 @@ async def asyncio_detailed(
     smoothed: bool | Unset = False,
     limit: int | None | Unset = UNSET,
     cursor: None | str | Unset = UNSET,
-    format_: GetTrackV1TracksTrackIdGetFormat | Unset = GetTrackV1TracksTrackIdGetFormat.JSON,
+    format_: GetTrackV1TracksTrackIdGetFormat
+    | Unset = GetTrackV1TracksTrackIdGetFormat.JSON,
     site: None | str | Unset = UNSET,
-
 ) -> Response[Problem | Trajectory]:
-    """ Get Track
+    """Get Track
 
      One track's stored trajectory, oldest first, a page at a time.
 
@@ -316,26 +296,23 @@ async def asyncio_detailed(
 
     Returns:
         Response[Problem | Trajectory]
-     """
-
+    """
 
     kwargs = _get_kwargs(
         track_id=track_id,
-start=start,
-end=end,
-smoothed=smoothed,
-limit=limit,
-cursor=cursor,
-format_=format_,
-site=site,
-
+        start=start,
+        end=end,
+        smoothed=smoothed,
+        limit=limit,
+        cursor=cursor,
+        format_=format_,
+        site=site,
     )
 
-    response = await client.get_async_httpx_client().request(
-        **kwargs
-    )
+    response = await client.get_async_httpx_client().request(**kwargs)
 
     return _build_response(client=client, response=response)
+
 
 async def asyncio(
     track_id: int,
@@ -346,11 +323,11 @@ async def asyncio(
     smoothed: bool | Unset = False,
     limit: int | None | Unset = UNSET,
     cursor: None | str | Unset = UNSET,
-    format_: GetTrackV1TracksTrackIdGetFormat | Unset = GetTrackV1TracksTrackIdGetFormat.JSON,
+    format_: GetTrackV1TracksTrackIdGetFormat
+    | Unset = GetTrackV1TracksTrackIdGetFormat.JSON,
     site: None | str | Unset = UNSET,
-
 ) -> Problem | Trajectory | None:
-    """ Get Track
+    """Get Track
 
      One track's stored trajectory, oldest first, a page at a time.
 
@@ -373,18 +350,18 @@ async def asyncio(
 
     Returns:
         Problem | Trajectory
-     """
+    """
 
-
-    return (await asyncio_detailed(
-        track_id=track_id,
-client=client,
-start=start,
-end=end,
-smoothed=smoothed,
-limit=limit,
-cursor=cursor,
-format_=format_,
-site=site,
-
-    )).parsed
+    return (
+        await asyncio_detailed(
+            track_id=track_id,
+            client=client,
+            start=start,
+            end=end,
+            smoothed=smoothed,
+            limit=limit,
+            cursor=cursor,
+            format_=format_,
+            site=site,
+        )
+    ).parsed

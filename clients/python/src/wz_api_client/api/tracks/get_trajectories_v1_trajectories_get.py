@@ -9,12 +9,13 @@ from ...types import Response, UNSET
 from ... import errors
 
 from ...models.area_kind import AreaKind
-from ...models.get_trajectories_v1_trajectories_get_format import GetTrajectoriesV1TrajectoriesGetFormat
+from ...models.get_trajectories_v1_trajectories_get_format import (
+    GetTrajectoriesV1TrajectoriesGetFormat,
+)
 from ...models.point_page import PointPage
 from ...models.problem import Problem
 from ...types import UNSET, Unset
 from typing import cast
-
 
 
 def _get_kwargs(
@@ -32,13 +33,10 @@ def _get_kwargs(
     smoothed: bool | Unset = False,
     limit: int | None | Unset = UNSET,
     cursor: None | str | Unset = UNSET,
-    format_: GetTrajectoriesV1TrajectoriesGetFormat | Unset = GetTrajectoriesV1TrajectoriesGetFormat.JSON,
+    format_: GetTrajectoriesV1TrajectoriesGetFormat
+    | Unset = GetTrajectoriesV1TrajectoriesGetFormat.JSON,
     site: None | str | Unset = UNSET,
-
 ) -> dict[str, Any]:
-    
-
-    
 
     params: dict[str, Any] = {}
 
@@ -143,9 +141,7 @@ def _get_kwargs(
         json_site = site
     params["site"] = json_site
 
-
     params = {k: v for k, v in params.items() if v is not UNSET and v is not None}
-
 
     _kwargs: dict[str, Any] = {
         "method": "get",
@@ -153,72 +149,54 @@ def _get_kwargs(
         "params": params,
     }
 
-
     return _kwargs
 
 
-
-def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> PointPage | Problem | None:
+def _parse_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> PointPage | Problem | None:
     if response.status_code == 200:
         response_200 = PointPage.from_dict(response.json())
-
-
 
         return response_200
 
     if response.status_code == 400:
         response_400 = Problem.from_dict(response.json())
 
-
-
         return response_400
 
     if response.status_code == 401:
         response_401 = Problem.from_dict(response.json())
-
-
 
         return response_401
 
     if response.status_code == 403:
         response_403 = Problem.from_dict(response.json())
 
-
-
         return response_403
 
     if response.status_code == 404:
         response_404 = Problem.from_dict(response.json())
-
-
 
         return response_404
 
     if response.status_code == 413:
         response_413 = Problem.from_dict(response.json())
 
-
-
         return response_413
 
     if response.status_code == 422:
         response_422 = Problem.from_dict(response.json())
-
-
 
         return response_422
 
     if response.status_code == 429:
         response_429 = Problem.from_dict(response.json())
 
-
-
         return response_429
 
     if response.status_code == 503:
         response_503 = Problem.from_dict(response.json())
-
-
 
         return response_503
 
@@ -228,7 +206,9 @@ def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Res
         return None
 
 
-def _build_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> Response[PointPage | Problem]:
+def _build_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> Response[PointPage | Problem]:
     return Response(
         status_code=HTTPStatus(response.status_code),
         content=response.content,
@@ -253,11 +233,11 @@ def sync_detailed(
     smoothed: bool | Unset = False,
     limit: int | None | Unset = UNSET,
     cursor: None | str | Unset = UNSET,
-    format_: GetTrajectoriesV1TrajectoriesGetFormat | Unset = GetTrajectoriesV1TrajectoriesGetFormat.JSON,
+    format_: GetTrajectoriesV1TrajectoriesGetFormat
+    | Unset = GetTrajectoriesV1TrajectoriesGetFormat.JSON,
     site: None | str | Unset = UNSET,
-
 ) -> Response[PointPage | Problem]:
-    """ Get Trajectories
+    """Get Trajectories
 
      Stored track points, oldest first, filtered by time window, area, speed and lane.
 
@@ -287,26 +267,24 @@ def sync_detailed(
 
     Returns:
         Response[PointPage | Problem]
-     """
-
+    """
 
     kwargs = _get_kwargs(
         start=start,
-end=end,
-track_id=track_id,
-area=area,
-station_min=station_min,
-station_max=station_max,
-bbox=bbox,
-lane=lane,
-min_speed=min_speed,
-max_speed=max_speed,
-smoothed=smoothed,
-limit=limit,
-cursor=cursor,
-format_=format_,
-site=site,
-
+        end=end,
+        track_id=track_id,
+        area=area,
+        station_min=station_min,
+        station_max=station_max,
+        bbox=bbox,
+        lane=lane,
+        min_speed=min_speed,
+        max_speed=max_speed,
+        smoothed=smoothed,
+        limit=limit,
+        cursor=cursor,
+        format_=format_,
+        site=site,
     )
 
     response = client.get_httpx_client().request(
@@ -314,6 +292,7 @@ site=site,
     )
 
     return _build_response(client=client, response=response)
+
 
 def sync(
     *,
@@ -331,11 +310,11 @@ def sync(
     smoothed: bool | Unset = False,
     limit: int | None | Unset = UNSET,
     cursor: None | str | Unset = UNSET,
-    format_: GetTrajectoriesV1TrajectoriesGetFormat | Unset = GetTrajectoriesV1TrajectoriesGetFormat.JSON,
+    format_: GetTrajectoriesV1TrajectoriesGetFormat
+    | Unset = GetTrajectoriesV1TrajectoriesGetFormat.JSON,
     site: None | str | Unset = UNSET,
-
 ) -> PointPage | Problem | None:
-    """ Get Trajectories
+    """Get Trajectories
 
      Stored track points, oldest first, filtered by time window, area, speed and lane.
 
@@ -365,28 +344,27 @@ def sync(
 
     Returns:
         PointPage | Problem
-     """
-
+    """
 
     return sync_detailed(
         client=client,
-start=start,
-end=end,
-track_id=track_id,
-area=area,
-station_min=station_min,
-station_max=station_max,
-bbox=bbox,
-lane=lane,
-min_speed=min_speed,
-max_speed=max_speed,
-smoothed=smoothed,
-limit=limit,
-cursor=cursor,
-format_=format_,
-site=site,
-
+        start=start,
+        end=end,
+        track_id=track_id,
+        area=area,
+        station_min=station_min,
+        station_max=station_max,
+        bbox=bbox,
+        lane=lane,
+        min_speed=min_speed,
+        max_speed=max_speed,
+        smoothed=smoothed,
+        limit=limit,
+        cursor=cursor,
+        format_=format_,
+        site=site,
     ).parsed
+
 
 async def asyncio_detailed(
     *,
@@ -404,11 +382,11 @@ async def asyncio_detailed(
     smoothed: bool | Unset = False,
     limit: int | None | Unset = UNSET,
     cursor: None | str | Unset = UNSET,
-    format_: GetTrajectoriesV1TrajectoriesGetFormat | Unset = GetTrajectoriesV1TrajectoriesGetFormat.JSON,
+    format_: GetTrajectoriesV1TrajectoriesGetFormat
+    | Unset = GetTrajectoriesV1TrajectoriesGetFormat.JSON,
     site: None | str | Unset = UNSET,
-
 ) -> Response[PointPage | Problem]:
-    """ Get Trajectories
+    """Get Trajectories
 
      Stored track points, oldest first, filtered by time window, area, speed and lane.
 
@@ -438,33 +416,30 @@ async def asyncio_detailed(
 
     Returns:
         Response[PointPage | Problem]
-     """
-
+    """
 
     kwargs = _get_kwargs(
         start=start,
-end=end,
-track_id=track_id,
-area=area,
-station_min=station_min,
-station_max=station_max,
-bbox=bbox,
-lane=lane,
-min_speed=min_speed,
-max_speed=max_speed,
-smoothed=smoothed,
-limit=limit,
-cursor=cursor,
-format_=format_,
-site=site,
-
+        end=end,
+        track_id=track_id,
+        area=area,
+        station_min=station_min,
+        station_max=station_max,
+        bbox=bbox,
+        lane=lane,
+        min_speed=min_speed,
+        max_speed=max_speed,
+        smoothed=smoothed,
+        limit=limit,
+        cursor=cursor,
+        format_=format_,
+        site=site,
     )
 
-    response = await client.get_async_httpx_client().request(
-        **kwargs
-    )
+    response = await client.get_async_httpx_client().request(**kwargs)
 
     return _build_response(client=client, response=response)
+
 
 async def asyncio(
     *,
@@ -482,11 +457,11 @@ async def asyncio(
     smoothed: bool | Unset = False,
     limit: int | None | Unset = UNSET,
     cursor: None | str | Unset = UNSET,
-    format_: GetTrajectoriesV1TrajectoriesGetFormat | Unset = GetTrajectoriesV1TrajectoriesGetFormat.JSON,
+    format_: GetTrajectoriesV1TrajectoriesGetFormat
+    | Unset = GetTrajectoriesV1TrajectoriesGetFormat.JSON,
     site: None | str | Unset = UNSET,
-
 ) -> PointPage | Problem | None:
-    """ Get Trajectories
+    """Get Trajectories
 
      Stored track points, oldest first, filtered by time window, area, speed and lane.
 
@@ -516,25 +491,25 @@ async def asyncio(
 
     Returns:
         PointPage | Problem
-     """
+    """
 
-
-    return (await asyncio_detailed(
-        client=client,
-start=start,
-end=end,
-track_id=track_id,
-area=area,
-station_min=station_min,
-station_max=station_max,
-bbox=bbox,
-lane=lane,
-min_speed=min_speed,
-max_speed=max_speed,
-smoothed=smoothed,
-limit=limit,
-cursor=cursor,
-format_=format_,
-site=site,
-
-    )).parsed
+    return (
+        await asyncio_detailed(
+            client=client,
+            start=start,
+            end=end,
+            track_id=track_id,
+            area=area,
+            station_min=station_min,
+            station_max=station_max,
+            bbox=bbox,
+            lane=lane,
+            min_speed=min_speed,
+            max_speed=max_speed,
+            smoothed=smoothed,
+            limit=limit,
+            cursor=cursor,
+            format_=format_,
+            site=site,
+        )
+    ).parsed

@@ -14,18 +14,11 @@ from ...models.problem import Problem
 from typing import cast
 
 
-
 def _get_kwargs(
     *,
     body: NewWebhook,
-
 ) -> dict[str, Any]:
     headers: dict[str, Any] = {}
-
-
-    
-
-    
 
     _kwargs: dict[str, Any] = {
         "method": "post",
@@ -40,61 +33,46 @@ def _get_kwargs(
     return _kwargs
 
 
-
-def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> CreatedWebhook | Problem | None:
+def _parse_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> CreatedWebhook | Problem | None:
     if response.status_code == 201:
         response_201 = CreatedWebhook.from_dict(response.json())
-
-
 
         return response_201
 
     if response.status_code == 400:
         response_400 = Problem.from_dict(response.json())
 
-
-
         return response_400
 
     if response.status_code == 401:
         response_401 = Problem.from_dict(response.json())
-
-
 
         return response_401
 
     if response.status_code == 403:
         response_403 = Problem.from_dict(response.json())
 
-
-
         return response_403
 
     if response.status_code == 413:
         response_413 = Problem.from_dict(response.json())
-
-
 
         return response_413
 
     if response.status_code == 422:
         response_422 = Problem.from_dict(response.json())
 
-
-
         return response_422
 
     if response.status_code == 429:
         response_429 = Problem.from_dict(response.json())
 
-
-
         return response_429
 
     if response.status_code == 503:
         response_503 = Problem.from_dict(response.json())
-
-
 
         return response_503
 
@@ -104,7 +82,9 @@ def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Res
         return None
 
 
-def _build_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> Response[CreatedWebhook | Problem]:
+def _build_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> Response[CreatedWebhook | Problem]:
     return Response(
         status_code=HTTPStatus(response.status_code),
         content=response.content,
@@ -117,9 +97,8 @@ def sync_detailed(
     *,
     client: AuthenticatedClient,
     body: NewWebhook,
-
 ) -> Response[CreatedWebhook | Problem]:
-    """ Create Webhook
+    """Create Webhook
 
      Subscribe a URL to alert events. Each event is POSTed as JSON
     ``{"type": "alert.<alert_type>", "timestamp": ..., "data": <the alert>}`` signed as
@@ -137,12 +116,10 @@ def sync_detailed(
 
     Returns:
         Response[CreatedWebhook | Problem]
-     """
-
+    """
 
     kwargs = _get_kwargs(
         body=body,
-
     )
 
     response = client.get_httpx_client().request(
@@ -151,13 +128,13 @@ def sync_detailed(
 
     return _build_response(client=client, response=response)
 
+
 def sync(
     *,
     client: AuthenticatedClient,
     body: NewWebhook,
-
 ) -> CreatedWebhook | Problem | None:
-    """ Create Webhook
+    """Create Webhook
 
      Subscribe a URL to alert events. Each event is POSTed as JSON
     ``{"type": "alert.<alert_type>", "timestamp": ..., "data": <the alert>}`` signed as
@@ -175,22 +152,20 @@ def sync(
 
     Returns:
         CreatedWebhook | Problem
-     """
-
+    """
 
     return sync_detailed(
         client=client,
-body=body,
-
+        body=body,
     ).parsed
+
 
 async def asyncio_detailed(
     *,
     client: AuthenticatedClient,
     body: NewWebhook,
-
 ) -> Response[CreatedWebhook | Problem]:
-    """ Create Webhook
+    """Create Webhook
 
      Subscribe a URL to alert events. Each event is POSTed as JSON
     ``{"type": "alert.<alert_type>", "timestamp": ..., "data": <the alert>}`` signed as
@@ -208,27 +183,23 @@ async def asyncio_detailed(
 
     Returns:
         Response[CreatedWebhook | Problem]
-     """
-
+    """
 
     kwargs = _get_kwargs(
         body=body,
-
     )
 
-    response = await client.get_async_httpx_client().request(
-        **kwargs
-    )
+    response = await client.get_async_httpx_client().request(**kwargs)
 
     return _build_response(client=client, response=response)
+
 
 async def asyncio(
     *,
     client: AuthenticatedClient,
     body: NewWebhook,
-
 ) -> CreatedWebhook | Problem | None:
-    """ Create Webhook
+    """Create Webhook
 
      Subscribe a URL to alert events. Each event is POSTed as JSON
     ``{"type": "alert.<alert_type>", "timestamp": ..., "data": <the alert>}`` signed as
@@ -246,11 +217,11 @@ async def asyncio(
 
     Returns:
         CreatedWebhook | Problem
-     """
+    """
 
-
-    return (await asyncio_detailed(
-        client=client,
-body=body,
-
-    )).parsed
+    return (
+        await asyncio_detailed(
+            client=client,
+            body=body,
+        )
+    ).parsed

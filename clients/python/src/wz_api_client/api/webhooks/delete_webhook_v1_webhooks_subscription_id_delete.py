@@ -12,28 +12,23 @@ from ...models.problem import Problem
 from typing import cast
 
 
-
 def _get_kwargs(
     subscription_id: str,
-
 ) -> dict[str, Any]:
-    
-
-    
-
-    
 
     _kwargs: dict[str, Any] = {
         "method": "delete",
-        "url": "/v1/webhooks/{subscription_id}".format(subscription_id=quote(str(subscription_id), safe=""),),
+        "url": "/v1/webhooks/{subscription_id}".format(
+            subscription_id=quote(str(subscription_id), safe=""),
+        ),
     }
-
 
     return _kwargs
 
 
-
-def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> Any | Problem | None:
+def _parse_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> Any | Problem | None:
     if response.status_code == 204:
         response_204 = cast(Any, None)
         return response_204
@@ -41,56 +36,40 @@ def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Res
     if response.status_code == 400:
         response_400 = Problem.from_dict(response.json())
 
-
-
         return response_400
 
     if response.status_code == 401:
         response_401 = Problem.from_dict(response.json())
-
-
 
         return response_401
 
     if response.status_code == 403:
         response_403 = Problem.from_dict(response.json())
 
-
-
         return response_403
 
     if response.status_code == 404:
         response_404 = Problem.from_dict(response.json())
-
-
 
         return response_404
 
     if response.status_code == 413:
         response_413 = Problem.from_dict(response.json())
 
-
-
         return response_413
 
     if response.status_code == 422:
         response_422 = Problem.from_dict(response.json())
-
-
 
         return response_422
 
     if response.status_code == 429:
         response_429 = Problem.from_dict(response.json())
 
-
-
         return response_429
 
     if response.status_code == 503:
         response_503 = Problem.from_dict(response.json())
-
-
 
         return response_503
 
@@ -100,7 +79,9 @@ def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Res
         return None
 
 
-def _build_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> Response[Any | Problem]:
+def _build_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> Response[Any | Problem]:
     return Response(
         status_code=HTTPStatus(response.status_code),
         content=response.content,
@@ -113,9 +94,8 @@ def sync_detailed(
     subscription_id: str,
     *,
     client: AuthenticatedClient,
-
 ) -> Response[Any | Problem]:
-    """ Delete Webhook
+    """Delete Webhook
 
      Unsubscribe: nothing more is sent; its undelivered events and its delivery log go.
 
@@ -128,12 +108,10 @@ def sync_detailed(
 
     Returns:
         Response[Any | Problem]
-     """
-
+    """
 
     kwargs = _get_kwargs(
         subscription_id=subscription_id,
-
     )
 
     response = client.get_httpx_client().request(
@@ -142,13 +120,13 @@ def sync_detailed(
 
     return _build_response(client=client, response=response)
 
+
 def sync(
     subscription_id: str,
     *,
     client: AuthenticatedClient,
-
 ) -> Any | Problem | None:
-    """ Delete Webhook
+    """Delete Webhook
 
      Unsubscribe: nothing more is sent; its undelivered events and its delivery log go.
 
@@ -161,22 +139,20 @@ def sync(
 
     Returns:
         Any | Problem
-     """
-
+    """
 
     return sync_detailed(
         subscription_id=subscription_id,
-client=client,
-
+        client=client,
     ).parsed
+
 
 async def asyncio_detailed(
     subscription_id: str,
     *,
     client: AuthenticatedClient,
-
 ) -> Response[Any | Problem]:
-    """ Delete Webhook
+    """Delete Webhook
 
      Unsubscribe: nothing more is sent; its undelivered events and its delivery log go.
 
@@ -189,27 +165,23 @@ async def asyncio_detailed(
 
     Returns:
         Response[Any | Problem]
-     """
-
+    """
 
     kwargs = _get_kwargs(
         subscription_id=subscription_id,
-
     )
 
-    response = await client.get_async_httpx_client().request(
-        **kwargs
-    )
+    response = await client.get_async_httpx_client().request(**kwargs)
 
     return _build_response(client=client, response=response)
+
 
 async def asyncio(
     subscription_id: str,
     *,
     client: AuthenticatedClient,
-
 ) -> Any | Problem | None:
-    """ Delete Webhook
+    """Delete Webhook
 
      Unsubscribe: nothing more is sent; its undelivered events and its delivery log go.
 
@@ -222,11 +194,11 @@ async def asyncio(
 
     Returns:
         Any | Problem
-     """
+    """
 
-
-    return (await asyncio_detailed(
-        subscription_id=subscription_id,
-client=client,
-
-    )).parsed
+    return (
+        await asyncio_detailed(
+            subscription_id=subscription_id,
+            client=client,
+        )
+    ).parsed

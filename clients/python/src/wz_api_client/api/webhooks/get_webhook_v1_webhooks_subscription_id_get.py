@@ -13,88 +13,65 @@ from ...models.webhook_info import WebhookInfo
 from typing import cast
 
 
-
 def _get_kwargs(
     subscription_id: str,
-
 ) -> dict[str, Any]:
-    
-
-    
-
-    
 
     _kwargs: dict[str, Any] = {
         "method": "get",
-        "url": "/v1/webhooks/{subscription_id}".format(subscription_id=quote(str(subscription_id), safe=""),),
+        "url": "/v1/webhooks/{subscription_id}".format(
+            subscription_id=quote(str(subscription_id), safe=""),
+        ),
     }
-
 
     return _kwargs
 
 
-
-def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> Problem | WebhookInfo | None:
+def _parse_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> Problem | WebhookInfo | None:
     if response.status_code == 200:
         response_200 = WebhookInfo.from_dict(response.json())
-
-
 
         return response_200
 
     if response.status_code == 400:
         response_400 = Problem.from_dict(response.json())
 
-
-
         return response_400
 
     if response.status_code == 401:
         response_401 = Problem.from_dict(response.json())
-
-
 
         return response_401
 
     if response.status_code == 403:
         response_403 = Problem.from_dict(response.json())
 
-
-
         return response_403
 
     if response.status_code == 404:
         response_404 = Problem.from_dict(response.json())
-
-
 
         return response_404
 
     if response.status_code == 413:
         response_413 = Problem.from_dict(response.json())
 
-
-
         return response_413
 
     if response.status_code == 422:
         response_422 = Problem.from_dict(response.json())
-
-
 
         return response_422
 
     if response.status_code == 429:
         response_429 = Problem.from_dict(response.json())
 
-
-
         return response_429
 
     if response.status_code == 503:
         response_503 = Problem.from_dict(response.json())
-
-
 
         return response_503
 
@@ -104,7 +81,9 @@ def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Res
         return None
 
 
-def _build_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> Response[Problem | WebhookInfo]:
+def _build_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> Response[Problem | WebhookInfo]:
     return Response(
         status_code=HTTPStatus(response.status_code),
         content=response.content,
@@ -117,9 +96,8 @@ def sync_detailed(
     subscription_id: str,
     *,
     client: AuthenticatedClient,
-
 ) -> Response[Problem | WebhookInfo]:
-    """ Get Webhook
+    """Get Webhook
 
      One subscription (``disabled_at`` is set once its receiver answered 410 Gone).
 
@@ -132,12 +110,10 @@ def sync_detailed(
 
     Returns:
         Response[Problem | WebhookInfo]
-     """
-
+    """
 
     kwargs = _get_kwargs(
         subscription_id=subscription_id,
-
     )
 
     response = client.get_httpx_client().request(
@@ -146,13 +122,13 @@ def sync_detailed(
 
     return _build_response(client=client, response=response)
 
+
 def sync(
     subscription_id: str,
     *,
     client: AuthenticatedClient,
-
 ) -> Problem | WebhookInfo | None:
-    """ Get Webhook
+    """Get Webhook
 
      One subscription (``disabled_at`` is set once its receiver answered 410 Gone).
 
@@ -165,22 +141,20 @@ def sync(
 
     Returns:
         Problem | WebhookInfo
-     """
-
+    """
 
     return sync_detailed(
         subscription_id=subscription_id,
-client=client,
-
+        client=client,
     ).parsed
+
 
 async def asyncio_detailed(
     subscription_id: str,
     *,
     client: AuthenticatedClient,
-
 ) -> Response[Problem | WebhookInfo]:
-    """ Get Webhook
+    """Get Webhook
 
      One subscription (``disabled_at`` is set once its receiver answered 410 Gone).
 
@@ -193,27 +167,23 @@ async def asyncio_detailed(
 
     Returns:
         Response[Problem | WebhookInfo]
-     """
-
+    """
 
     kwargs = _get_kwargs(
         subscription_id=subscription_id,
-
     )
 
-    response = await client.get_async_httpx_client().request(
-        **kwargs
-    )
+    response = await client.get_async_httpx_client().request(**kwargs)
 
     return _build_response(client=client, response=response)
+
 
 async def asyncio(
     subscription_id: str,
     *,
     client: AuthenticatedClient,
-
 ) -> Problem | WebhookInfo | None:
-    """ Get Webhook
+    """Get Webhook
 
      One subscription (``disabled_at`` is set once its receiver answered 410 Gone).
 
@@ -226,11 +196,11 @@ async def asyncio(
 
     Returns:
         Problem | WebhookInfo
-     """
+    """
 
-
-    return (await asyncio_detailed(
-        subscription_id=subscription_id,
-client=client,
-
-    )).parsed
+    return (
+        await asyncio_detailed(
+            subscription_id=subscription_id,
+            client=client,
+        )
+    ).parsed

@@ -8,21 +8,18 @@ from ...client import AuthenticatedClient, Client
 from ...types import Response, UNSET
 from ... import errors
 
-from ...models.get_work_zone_feed_v1_wzdx_work_zone_feed_get_response_200 import GetWorkZoneFeedV1WzdxWorkZoneFeedGetResponse200
+from ...models.get_work_zone_feed_v1_wzdx_work_zone_feed_get_response_200 import (
+    GetWorkZoneFeedV1WzdxWorkZoneFeedGetResponse200,
+)
 from ...models.problem import Problem
 from ...types import UNSET, Unset
 from typing import cast
 
 
-
 def _get_kwargs(
     *,
     site: None | str | Unset = UNSET,
-
 ) -> dict[str, Any]:
-    
-
-    
 
     params: dict[str, Any] = {}
 
@@ -33,9 +30,7 @@ def _get_kwargs(
         json_site = site
     params["site"] = json_site
 
-
     params = {k: v for k, v in params.items() if v is not UNSET and v is not None}
-
 
     _kwargs: dict[str, Any] = {
         "method": "get",
@@ -43,72 +38,56 @@ def _get_kwargs(
         "params": params,
     }
 
-
     return _kwargs
 
 
-
-def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> GetWorkZoneFeedV1WzdxWorkZoneFeedGetResponse200 | Problem | None:
+def _parse_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> GetWorkZoneFeedV1WzdxWorkZoneFeedGetResponse200 | Problem | None:
     if response.status_code == 200:
-        response_200 = GetWorkZoneFeedV1WzdxWorkZoneFeedGetResponse200.from_dict(response.json())
-
-
+        response_200 = GetWorkZoneFeedV1WzdxWorkZoneFeedGetResponse200.from_dict(
+            response.json()
+        )
 
         return response_200
 
     if response.status_code == 400:
         response_400 = Problem.from_dict(response.json())
 
-
-
         return response_400
 
     if response.status_code == 401:
         response_401 = Problem.from_dict(response.json())
-
-
 
         return response_401
 
     if response.status_code == 403:
         response_403 = Problem.from_dict(response.json())
 
-
-
         return response_403
 
     if response.status_code == 404:
         response_404 = Problem.from_dict(response.json())
-
-
 
         return response_404
 
     if response.status_code == 413:
         response_413 = Problem.from_dict(response.json())
 
-
-
         return response_413
 
     if response.status_code == 422:
         response_422 = Problem.from_dict(response.json())
-
-
 
         return response_422
 
     if response.status_code == 429:
         response_429 = Problem.from_dict(response.json())
 
-
-
         return response_429
 
     if response.status_code == 503:
         response_503 = Problem.from_dict(response.json())
-
-
 
         return response_503
 
@@ -118,7 +97,9 @@ def _parse_response(*, client: AuthenticatedClient | Client, response: httpx.Res
         return None
 
 
-def _build_response(*, client: AuthenticatedClient | Client, response: httpx.Response) -> Response[GetWorkZoneFeedV1WzdxWorkZoneFeedGetResponse200 | Problem]:
+def _build_response(
+    *, client: AuthenticatedClient | Client, response: httpx.Response
+) -> Response[GetWorkZoneFeedV1WzdxWorkZoneFeedGetResponse200 | Problem]:
     return Response(
         status_code=HTTPStatus(response.status_code),
         content=response.content,
@@ -131,9 +112,8 @@ def sync_detailed(
     *,
     client: AuthenticatedClient,
     site: None | str | Unset = UNSET,
-
 ) -> Response[GetWorkZoneFeedV1WzdxWorkZoneFeedGetResponse200 | Problem]:
-    """ Get Work Zone Feed
+    """Get Work Zone Feed
 
      The WZDx 4.2 WorkZoneFeed: each site's work zone (extent from the taper to the end of
     the termination area, lanes with the closed one, the reduced speed limit), from its site
@@ -148,12 +128,10 @@ def sync_detailed(
 
     Returns:
         Response[GetWorkZoneFeedV1WzdxWorkZoneFeedGetResponse200 | Problem]
-     """
-
+    """
 
     kwargs = _get_kwargs(
         site=site,
-
     )
 
     response = client.get_httpx_client().request(
@@ -162,13 +140,13 @@ def sync_detailed(
 
     return _build_response(client=client, response=response)
 
+
 def sync(
     *,
     client: AuthenticatedClient,
     site: None | str | Unset = UNSET,
-
 ) -> GetWorkZoneFeedV1WzdxWorkZoneFeedGetResponse200 | Problem | None:
-    """ Get Work Zone Feed
+    """Get Work Zone Feed
 
      The WZDx 4.2 WorkZoneFeed: each site's work zone (extent from the taper to the end of
     the termination area, lanes with the closed one, the reduced speed limit), from its site
@@ -183,22 +161,20 @@ def sync(
 
     Returns:
         GetWorkZoneFeedV1WzdxWorkZoneFeedGetResponse200 | Problem
-     """
-
+    """
 
     return sync_detailed(
         client=client,
-site=site,
-
+        site=site,
     ).parsed
+
 
 async def asyncio_detailed(
     *,
     client: AuthenticatedClient,
     site: None | str | Unset = UNSET,
-
 ) -> Response[GetWorkZoneFeedV1WzdxWorkZoneFeedGetResponse200 | Problem]:
-    """ Get Work Zone Feed
+    """Get Work Zone Feed
 
      The WZDx 4.2 WorkZoneFeed: each site's work zone (extent from the taper to the end of
     the termination area, lanes with the closed one, the reduced speed limit), from its site
@@ -213,27 +189,23 @@ async def asyncio_detailed(
 
     Returns:
         Response[GetWorkZoneFeedV1WzdxWorkZoneFeedGetResponse200 | Problem]
-     """
-
+    """
 
     kwargs = _get_kwargs(
         site=site,
-
     )
 
-    response = await client.get_async_httpx_client().request(
-        **kwargs
-    )
+    response = await client.get_async_httpx_client().request(**kwargs)
 
     return _build_response(client=client, response=response)
+
 
 async def asyncio(
     *,
     client: AuthenticatedClient,
     site: None | str | Unset = UNSET,
-
 ) -> GetWorkZoneFeedV1WzdxWorkZoneFeedGetResponse200 | Problem | None:
-    """ Get Work Zone Feed
+    """Get Work Zone Feed
 
      The WZDx 4.2 WorkZoneFeed: each site's work zone (extent from the taper to the end of
     the termination area, lanes with the closed one, the reduced speed limit), from its site
@@ -248,11 +220,11 @@ async def asyncio(
 
     Returns:
         GetWorkZoneFeedV1WzdxWorkZoneFeedGetResponse200 | Problem
-     """
+    """
 
-
-    return (await asyncio_detailed(
-        client=client,
-site=site,
-
-    )).parsed
+    return (
+        await asyncio_detailed(
+            client=client,
+            site=site,
+        )
+    ).parsed
