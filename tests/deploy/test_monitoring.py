@@ -12,6 +12,7 @@ import shutil
 import subprocess
 import time
 from pathlib import Path
+from typing import Any
 
 import httpx
 import pytest
@@ -195,5 +196,11 @@ def test_every_service_is_scraped_during_wz_up(tmp_path: Path) -> None:
             ).json()
             reported = {r["metric"]["service"] for r in reply["data"]["result"]}
             assert reported == {s.name for s in services}
-            rules = httpx.get(f"{api}/rules").json()["data"]["groups"][0]["rules"]
+            rules: list[dict[str, Any]] = []
+
+            def evaluated() -> bool:  # every evaluation_interval (15 s): wait for the first
+                rules[:] = httpx.get(f"{api}/rules").json()["data"]["groups"][0]["rules"]
+                return all(rule["health"] != "unknown" for rule in rules)
+
+            wait_for(evaluated, 60.0, "Prometheus' first evaluation of the rules")
             assert len(rules) == 6 and all(rule["health"] == "ok" for rule in rules), rules
