@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 import logging
+import socket
 import sqlite3
 import subprocess
 import sys
@@ -48,6 +49,19 @@ RATE_HZ = 20_000.0
 BOUND_S = 1.0
 
 
+def _wait_listening(port: int, process: subprocess.Popen[bytes], timeout_s: float = 30.0) -> None:
+    """Until the router accepts TCP connections on ``port`` (a loaded machine imports slowly)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if process.poll() is not None:
+            raise RuntimeError(f"the router exited with code {process.returncode}")
+        with socket.socket() as probe:
+            if probe.connect_ex(("127.0.0.1", port)) == 0:
+                return
+        time.sleep(0.1)
+    raise RuntimeError(f"the router did not listen on {port} within {timeout_s:.0f} s")
+
+
 def flood_run(
     flood_s: float, alerts: int, data_dir: Path, log_path: Path, rate_hz: float = RATE_HZ
 ) -> dict[str, Any]:
@@ -62,7 +76,7 @@ def flood_run(
     )  # fmt: skip
     settings = BusSettings(mode="client", connect_endpoints=[endpoint], listen_endpoints=[])
     try:
-        time.sleep(1.0)
+        _wait_listening(port, router)
         with (
             _Receiver() as receiver,
             Bus.open(settings, site=site_id, service="alert-service") as bus,
