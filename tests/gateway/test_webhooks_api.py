@@ -264,7 +264,12 @@ def test_the_secret_shown_once_verifies_deliveries_and_a_rotation_keeps_both(
             ).json()["secret"]
             http.post(f"/v1/webhooks/{subscription_id}/test", headers=ADMIN)
             receiver.wait_until(lambda r: len(r.requests) == 2, "the second test event")
+            # The deliverer records a delivery after the receiver's answer: wait for that.
+            deadline = time.monotonic() + 10.0
             events = http.get(f"/v1/webhooks/{subscription_id}/events", headers=ADMIN).json()
+            while any(e["state"] == "pending" for e in events) and time.monotonic() < deadline:
+                time.sleep(0.05)
+                events = http.get(f"/v1/webhooks/{subscription_id}/events", headers=ADMIN).json()
         finally:
             deliverer.close()
         first, second = receiver.snapshot()
