@@ -15,11 +15,13 @@ to t = 1.8 s and reaches the origin at t = 3.2 s: PET = 1.2 s.
 from __future__ import annotations
 
 import math
+from collections import defaultdict
 
 import numpy as np
 
+from tests.alert_service.helpers import batch
 from wz_gateway.conflicts import Trajectories, trajectories
-from wz_shared.messages import Track
+from wz_shared.messages import Track, TrackBatch
 
 DT_S = 0.05
 LENGTH_M = 4.5
@@ -114,3 +116,15 @@ def scene_track(
         length_m=LENGTH_M,
         width_m=WIDTH_M,
     )
+
+
+#: The scenes' track ids on the bus (the API tests store them as track batches).
+TRACK_IDS = {"lead": 1, "follow": 2, "a": 3, "b": 4}
+
+
+def scene_batches() -> list[TrackBatch]:
+    """The rear end (at y = 300 m) and the crossing as the tracker would publish them."""
+    by_stamp: dict[float, list[Track]] = defaultdict(list)
+    for name, t, x, y, vx, vy, heading, lane in rear_end_rows(y_m=300.0) + crossing_rows():
+        by_stamp[float(t)].append(scene_track(TRACK_IDS[name], x, y, vx, vy, heading, lane))
+    return [batch(t, tracks, k) for k, (t, tracks) in enumerate(sorted(by_stamp.items()))]

@@ -12,7 +12,6 @@ import shutil
 import subprocess
 import sys
 import warnings
-from collections import defaultdict
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -25,24 +24,18 @@ from wz_api_client.api.wzdx import get_device_feed_v1_wzdx_device_feed_get as de
 from wz_api_client.api.wzdx import get_work_zone_feed_v1_wzdx_work_zone_feed_get as work_zone_api
 from wz_api_client.models import ConflictPage, PointPage, Problem, Site
 
-from tests.gateway.conflict_scenes import crossing_rows, rear_end_rows, scene_track
-from tests.gateway.helpers import READ_KEY, SITE, batch, gateway_settings, live_server, open_storage
-from wz_shared.messages import Track
+from tests.gateway.conflict_scenes import TRACK_IDS, scene_batches
+from tests.gateway.helpers import READ_KEY, SITE, gateway_settings, live_server, open_storage
 
 ROOT = Path(__file__).resolve().parents[2]
 CLIENT = ROOT / "clients" / "python"
-TRACK_IDS = {"lead": 1, "follow": 2, "a": 3, "b": 4}
 
 
 @pytest.fixture(scope="module")
 def url(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     settings = gateway_settings(tmp_path_factory.mktemp("client"), max_page_size=500)
     storage = open_storage(settings)
-    by_stamp: dict[float, list[Track]] = defaultdict(list)
-    for name, t, x, y, vx, vy, heading, lane in rear_end_rows(y_m=300.0) + crossing_rows():
-        by_stamp[float(t)].append(scene_track(TRACK_IDS[name], x, y, vx, vy, heading, lane))
-    batches = [batch(t, tracks, k) for k, (t, tracks) in enumerate(sorted(by_stamp.items()))]
-    storage.ingest(batches, geo=SITE.geo_frame, received_at=1_750_000_000.0)
+    storage.ingest(scene_batches(), geo=SITE.geo_frame, received_at=1_750_000_000.0)
     with live_server(settings, storage) as base_url:
         yield base_url
     storage.close()

@@ -7,31 +7,24 @@ from __future__ import annotations
 import csv
 import io
 import math
-from collections import defaultdict
 from collections.abc import Iterator
 from typing import Any
 
 import httpx
 import pytest
 
-from tests.gateway.conflict_scenes import crossing_rows, rear_end_rows, scene_track
-from tests.gateway.helpers import READ_KEY, SITE, batch, gateway_settings, live_server, open_storage
+from tests.gateway.conflict_scenes import scene_batches
+from tests.gateway.helpers import READ_KEY, SITE, gateway_settings, live_server, open_storage
 from wz_gateway.conflicts import SSAM_COLUMNS
-from wz_shared.messages import Track
 
 READ = {"X-API-Key": READ_KEY}
-TRACK_IDS = {"lead": 1, "follow": 2, "a": 3, "b": 4}
 
 
 @pytest.fixture(scope="module")
 def client(tmp_path_factory: pytest.TempPathFactory) -> Iterator[httpx.Client]:
     settings = gateway_settings(tmp_path_factory.mktemp("conflicts"), max_page_size=500)
     storage = open_storage(settings)
-    by_stamp: dict[float, list[Track]] = defaultdict(list)
-    for name, t, x, y, vx, vy, heading, lane in rear_end_rows(y_m=300.0) + crossing_rows():
-        by_stamp[float(t)].append(scene_track(TRACK_IDS[name], x, y, vx, vy, heading, lane))
-    batches = [batch(t, tracks, k) for k, (t, tracks) in enumerate(sorted(by_stamp.items()))]
-    storage.ingest(batches, geo=SITE.geo_frame, received_at=1_750_000_000.0)
+    storage.ingest(scene_batches(), geo=SITE.geo_frame, received_at=1_750_000_000.0)
     with live_server(settings, storage) as url, httpx.Client(base_url=url, timeout=30.0) as c:
         yield c
     storage.close()

@@ -20,7 +20,13 @@ from typing import Any
 
 import numpy as np
 
-from wz_gateway.traffic import Crossings, TrafficSummary, find_crossings, summarize
+from wz_gateway.traffic import (
+    Crossings,
+    LaneTraffic,
+    TrafficSummary,
+    find_crossings,
+    summarize,
+)
 from wz_gateway.wzdx import detector_station_m, lane_order
 from wz_shared.messages import TrackBatch, VehicleTruth
 from wz_shared.site import Site
@@ -101,8 +107,8 @@ def _row(
     order: int | None,
     got: int,
     want: int,
-    measured: TrafficSummary | Any,
-    expected: TrafficSummary | Any,
+    measured: LaneTraffic | TrafficSummary,
+    expected: LaneTraffic | TrafficSummary,
 ) -> dict[str, Any]:
     error = (got - want) / want if want else (0.0 if got == 0 else None)
     speeds = (measured.average_speed_mps, expected.average_speed_mps)

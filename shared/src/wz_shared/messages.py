@@ -493,6 +493,10 @@ class ServiceState(StrEnum):
     STOPPING = "stopping"
 
 
+#: The message sign's name among a driver's :attr:`ServiceStatus.devices` (WZDx's device type).
+SIGN_DEVICE = "dynamic-message-sign"
+
+
 class DeviceLink(BaseModel):
     """Whether a service reaches a field device it drives (a message sign, a beacon relay).
 

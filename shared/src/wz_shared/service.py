@@ -143,9 +143,8 @@ class ServiceRuntime:
         if processed:
             self._input_at = now
             arrived = None if self._bus is None else self._bus.stats.last_taken_arrival
-            fresh = arrived is not None and arrived != self._observed_arrival  # each input once
-            if self.metrics is not None and arrived is not None and fresh:
-                self._observed_arrival = arrived
+            if self.metrics is not None and arrived not in (None, self._observed_arrival):
+                self._observed_arrival = arrived  # each input observed once
                 self.metrics.processing.observe(max(0.0, time.monotonic() - arrived))
 
     def input_age_s(self, now: float | None = None) -> float | None:

@@ -27,13 +27,11 @@ from pydantic_settings import SettingsConfigDict
 
 from wz_drivers.dms import DmsClient, SignError, SignSettings
 from wz_drivers.ntcip1203 import multi_to_text, text_to_multi
-from wz_shared.messages import ActiveAlerts, DeviceLink, RoadsideDeviceState
+from wz_shared.messages import SIGN_DEVICE, ActiveAlerts, DeviceLink, RoadsideDeviceState
 from wz_shared.service import NodeApp, ServiceRuntime
 from wz_shared.settings import ServiceSettings
 
 SERVICE = "device-driver"
-#: The sign's name in the status (the WZDx device feed's device type).
-SIGN = "dynamic-message-sign"
 log = logging.getLogger("wz_drivers.device_driver")
 
 
@@ -176,7 +174,7 @@ def run(runtime: ServiceRuntime, settings: DeviceDriverSettings) -> int:
                 driver.want(newest.sign_text)
             now = time.monotonic()
             changes += driver.step(now)
-            runtime.devices = {SIGN: driver.link(now)}
+            runtime.devices = {SIGN_DEVICE: driver.link(now)}
             runtime.beat(processed=newest is not None)
     finally:
         client.close()

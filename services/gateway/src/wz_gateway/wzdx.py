@@ -24,12 +24,16 @@ from datetime import UTC, datetime
 from typing import Any, Literal
 
 from wz_gateway.traffic import TrafficSummary
-from wz_shared.messages import AlertType, RoadsideDeviceState, ServiceState, ServiceStatus
+from wz_shared.messages import (
+    SIGN_DEVICE,
+    AlertType,
+    RoadsideDeviceState,
+    ServiceState,
+    ServiceStatus,
+)
 from wz_shared.site import AreaKind, SensorMount, Site
 
 WZDX_VERSION = "4.2"
-#: The message sign's name in a device driver's status (``ServiceStatus.devices``).
-SIGN_DEVICE = "dynamic-message-sign"
 CC0_LICENSE = "https://creativecommons.org/publicdomain/zero/1.0/"
 #: How often the feed's content changes [s] (it is computed on each request; the traffic
 #: sensor's interval moves with every tracker cycle).
