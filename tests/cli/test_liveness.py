@@ -89,7 +89,9 @@ def test_a_blocked_loop_is_unhealthy_within_10_s_and_restarted(
 
         wait_for(reported, STALL_RESTART_S, "the blocked loop reported unhealthy")
         assert seen["health"] <= 10.0 and seen["status"] <= 10.0, seen
-        assert child.process is not None and child.process.pid == first_pid  # not yet killed
+        # `stalled` (not `down`) in the status proves it was reported while the blocked process
+        # lived; the supervisor's kill at STALL_RESTART_S may follow at once, so the pid is not
+        # compared here (a loaded CI machine reached 9.9 s before this line).
 
         # The supervisor kills it and starts it again; the new one's loop goes round.
         wait_for(lambda: child.stalls == 1 and child.running, 30.0, "the restart")
