@@ -13,6 +13,7 @@ from wz_shared.coverage import (
     SiteCoverage,
     camera_covers,
     camera_fog_range_m,
+    lidar_beam_rows,
     lidar_car_ranges_m,
     lidar_covers,
     lidar_detection_range_m,
@@ -58,6 +59,23 @@ def test_a_lidar_covers_a_car_while_its_beams_are_closer_than_the_car_subtends()
     # car's roof, 3.5 m under the sensor, at 7.5 m).
     assert 7.5 <= near < 9.0
     assert not lidar_covers(dense, [3.0], [0.0])[0]
+
+
+def test_beam_rows_count_the_beam_spacings_a_car_spans_inside_the_fan() -> None:
+    mount = _lidar(32, -25.0, 15.0, 5.0)
+    spacing = 40.0 / 31.0
+    # At 30 m the car spans atan(5/30) - atan(3.5/30) = 2.79 degrees: 2.16 spacings.
+    expected = math.degrees(math.atan(5.0 / 30.0) - math.atan(3.5 / 30.0)) / spacing
+    assert lidar_beam_rows(mount, [30.0], [0.0])[0] == pytest.approx(expected)
+    # At 9 m the car's foot is under the fan (-29.1 degrees): only from -25 degrees up to its
+    # roof (-21.3 degrees) counts.
+    top = (25.0 - math.degrees(math.atan(3.5 / 9.0))) / spacing
+    assert lidar_beam_rows(mount, [9.0], [0.0])[0] == pytest.approx(top)
+    # Under the sensor, the whole car below the fan; beyond the paint's reach: none.
+    assert lidar_beam_rows(mount, [2.0, 500.0], [0.0, 0.0]).tolist() == [0.0, 0.0]
+    assert (lidar_beam_rows(mount, [30.0, 80.0], [0.0, 0.0]) >= 1.0).tolist() == (
+        lidar_covers(mount, [30.0, 80.0], [0.0, 0.0]).tolist()
+    )
 
 
 def test_a_dense_lidar_covers_as_far_as_a_cars_paint_returns() -> None:

@@ -82,11 +82,14 @@ def camera_fog_range_m(visibility_m: float) -> float:
     return -math.log(CAMERA_MIN_CONTRAST) / KOSCHMIEDER * visibility_m
 
 
-def lidar_covers(
+def lidar_beam_rows(
     mount: SensorMount, x_m: npt.ArrayLike, y_m: npt.ArrayLike, extinction_per_m: float = 0.0
-) -> Bool:
-    """Whether a LiDAR sees a car at each point: its paint returns from there and a beam is
-    sure to cross it (module docstring)."""
+) -> F64:
+    """How many of a LiDAR's beam rows cross a car standing at each point: the car's span of
+    elevations (module docstring), clipped to the beams' fan, over the beam spacing; 0 where
+    its paint does not return (beyond the reach) or the span is outside the fan. At least 1:
+    a beam is sure to cross the car; a single-beam sensor gives 1 where its beam falls on it.
+    """
     intrinsics = mount.intrinsics
     assert isinstance(intrinsics, LidarIntrinsics)
     r = np.hypot(np.asarray(x_m, float) - mount.pose.x_m, np.asarray(y_m, float) - mount.pose.y_m)
@@ -99,11 +102,20 @@ def lidar_covers(
         spacing = (intrinsics.vertical_max_deg - intrinsics.vertical_min_deg) / (
             intrinsics.beams - 1
         )
+        rows = np.maximum(hi - lo, 0.0) / spacing
     else:
-        spacing = 0.0
-    sure = (hi - lo) >= spacing if spacing > 0.0 else (lo <= 0.0) & (hi >= 0.0)
+        rows = ((lo <= intrinsics.vertical_min_deg) & (hi >= intrinsics.vertical_min_deg)) * 1.0
     reach = lidar_detection_range_m(intrinsics.max_range_m, extinction_per_m)
-    result: Bool = (r <= reach) & (hi > lo) & sure
+    result: F64 = np.where((r <= reach) & (hi > lo), rows, 0.0)
+    return result
+
+
+def lidar_covers(
+    mount: SensorMount, x_m: npt.ArrayLike, y_m: npt.ArrayLike, extinction_per_m: float = 0.0
+) -> Bool:
+    """Whether a LiDAR sees a car at each point: its paint returns from there and a beam is
+    sure to cross it (module docstring; :func:`lidar_beam_rows` at least 1)."""
+    result: Bool = lidar_beam_rows(mount, x_m, y_m, extinction_per_m) >= 1.0
     return result
 
 

@@ -23,7 +23,10 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Any, Literal
 
+import numpy as np
+
 from wz_gateway.traffic import TrafficSummary
+from wz_shared.coverage import lidar_beam_rows
 from wz_shared.messages import (
     SIGN_DEVICE,
     AlertType,
@@ -41,6 +44,11 @@ UPDATE_FREQUENCY_S = 1
 MPS_TO_KPH = 3.6
 #: The sign and beacon stand this far right of the right lane's edge [m].
 SHOULDER_OFFSET_M = 3.0
+#: Spacing of the stations :func:`detector_station_m` tries [m].
+DETECTOR_SEARCH_STEP_M = 1.0
+#: Every lane must be seen this far either side of the detector's station [m]: a car's length
+#: (4.5 m) and a little.
+DETECTOR_CAR_REACH_M = 5.0
 _NAMESPACE = uuid.UUID("6f0f3a3e-5b7e-4c55-9d0a-2a7f4f1c9b21")
 _WORK_ZONE_NAMESPACE = uuid.UUID("0b1e9a57-61c3-4d0e-8a8e-5c1f7b3d2a90")
 
@@ -214,14 +222,57 @@ def traffic_mast(site: Site) -> SensorMount | None:
 
 
 def detector_station_m(site: Site, override_m: float | None = None) -> float:
-    """Station of the virtual traffic detector: 30 m upstream of the traffic mast by default."""
+    """Station of the virtual traffic detector, a loop across every lane [m].
+
+    It goes where the site's LiDARs see a car in *every* lane best: of the stations upstream
+    of the taper (every lane still open) and of the LiDAR (where the camera and radar, facing
+    the traffic, see too), the one where the lane seen worst gets the most
+    beam rows from its best LiDAR (:func:`~wz_shared.coverage.lidar_beam_rows`, a car at the
+    lane's centre). The tracker acquires vehicles as they come into the LiDAR's view, so a
+    loop there counts vehicles it has followed for a while; one placed where the far lane
+    falls between two beams, or before the LiDAR's view, counts only what the camera kept.
+    That is usually 10-20 m upstream of the mast: nearer, the near lane drops under the
+    beams' fan. Without a LiDAR, or where none reaches a lane: 30 m upstream of the first
+    sensor. ``override_m`` (the gateway's setting) wins.
+    """
     if override_m is not None:
         return override_m
+    best = _best_lidar_station_m(site)
+    if best is not None:
+        return best
     mast = traffic_mast(site)
     if mast is None:
         return site.area(AreaKind.ADVANCE_WARNING).start_station_m
     station, _ = site.road_frame.to_road(mast.pose.x_m, mast.pose.y_m)
     return max(0.0, float(station) - 30.0)
+
+
+def _best_lidar_station_m(site: Site) -> float | None:
+    """The station of :func:`detector_station_m`'s LiDAR rule; None if no LiDAR sees every
+    lane anywhere upstream of the taper."""
+    lidars = [mount for mount in site.sensors if mount.kind == "lidar"]
+    if not lidars:
+        return None
+    frame = site.road_frame
+    mast_m = max(float(frame.to_road(m.pose.x_m, m.pose.y_m)[0]) for m in lidars)
+    end_m = min(site.area(AreaKind.TRANSITION).start_station_m, mast_m, frame.length_m)
+    stations = np.arange(0.0, end_m + 1e-9, DETECTOR_SEARCH_STEP_M)
+    worst_lane = np.full(stations.shape, np.inf)
+    for lane in site.lanes:
+        x, y = frame.to_site(stations, np.full(stations.shape, lane.center_offset_m))
+        rows = np.max([lidar_beam_rows(mount, x, y) for mount in lidars], axis=0)
+        worst_lane = np.minimum(worst_lane, rows)
+    # The least over a car's length either side: the loop must be seen all across a passing
+    # car, and the best single station often sits at the edge where the near lane drops
+    # under the beams' fan.
+    reach = round(DETECTOR_CAR_REACH_M / DETECTOR_SEARCH_STEP_M)
+    padded = np.pad(worst_lane, reach, constant_values=0.0)
+    windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * reach + 1)
+    robust = windows.min(axis=1)
+    best = int(np.argmax(robust))
+    if not robust[best] >= 1.0:  # no station where a beam is sure to cross every lane's car
+        return None
+    return float(stations[best])
 
 
 def lane_order(site: Site, lane_index: int) -> int:
