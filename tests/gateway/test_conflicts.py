@@ -115,9 +115,10 @@ def _straight(
     [(10.0, "rear end"), (45.0, "lane change"), (80.0, "lane change"), (120.0, "crossing")],
 )
 def test_types_by_angle(heading_deg: float, expected: str) -> None:
-    # B converges on A's path from its side at the given angle, lanes unknown
+    # B converges on A's path from its side at the given angle, lanes unknown; apart at the
+    # start (a pair that overlaps when first seen together is one vehicle tracked twice)
     heading = math.radians(heading_deg)
-    meet_s = 1.2
+    meet_s = 2.0
     a = _straight("a", -10.0 * meet_s, 0.0, 10.0, 0.0, -1)
     bx, by = -8.0 * meet_s * math.cos(heading), -8.0 * meet_s * math.sin(heading)
     b = _straight("b", bx, by, 8.0, heading, -1)
@@ -197,3 +198,20 @@ def test_sizes_default_and_speeds_give_the_acceleration() -> None:
                         [0.0, 0.0])  # fmt: skip
     assert np.isnan(data.length_m).all() and (data.lane_index == -1).all()
     assert clock_angle(-90.0) == "9:00" and clock_angle(180.0) == "12:00"
+
+
+def test_a_track_born_overlapping_another_is_one_vehicle_not_a_conflict() -> None:
+    # A semitrailer's trailer tracked apart from its cab: a second track 3 m behind the cab's
+    # centre from its first point on, at the same speed, the two boxes (4.5 m cars' where the
+    # length is unknown) overlapping: TTC 0 throughout.
+    cab = _straight("cab", 0.0, 0.0, 20.0, 0.0, 0)
+    trailer = _straight("trailer", -3.0, 0.0, 20.0, 0.0, 0)[10:]
+    assert find_conflicts(as_trajectories(cab + trailer)) == []
+    kept = find_conflicts(
+        as_trajectories(cab + trailer), ConflictSettings(drop_born_overlapping=False)
+    )
+    assert len(kept) == 1 and kept[0].ttc_s == 0.0
+    # A car that comes up from apart into the cab's rear is a conflict.
+    car = _straight("car", -30.0, 0.0, 30.0, 0.0, 0)
+    [conflict] = find_conflicts(as_trajectories(cab + car))
+    assert conflict.ttc_s < 1.5
