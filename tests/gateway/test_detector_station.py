@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wz_gateway.wzdx import DETECTOR_CAR_REACH_M, detector_station_m
+from wz_gateway.wzdx import DETECTOR_CAR_REACH_M, detector_lane_index, detector_station_m
 from wz_shared.coverage import lidar_beam_rows
 from wz_shared.site import DEFAULT_SITE_PATH, AreaKind, LidarIntrinsics, Site, load_site
 from wz_shared.site_generator import generate_site
@@ -61,3 +61,22 @@ def test_a_lidar_that_puts_no_sure_beam_on_the_far_lane_falls_back_to_30_m() -> 
     thin = site.model_copy(update={"sensors": sparse})
     assert detector_station_m(thin) == pytest.approx(_station_of(thin, "lidar") - 30.0)
     assert detector_station_m(site) != pytest.approx(_station_of(site, "lidar") - 30.0)
+
+
+def test_a_track_just_off_the_outer_lanes_counts_in_them() -> None:
+    site = load_site(DEFAULT_SITE_PATH)
+    right = min(site.lanes, key=lambda lane: lane.center_offset_m)
+    left = max(site.lanes, key=lambda lane: lane.center_offset_m)
+    right_edge = right.center_offset_m - right.width_m / 2
+    left_edge = left.center_offset_m + left.width_m / 2
+    offsets = [
+        right.center_offset_m,
+        right_edge - 0.4 * right.width_m,  # on the shoulder, within half a lane: the edge lane
+        right_edge - 0.6 * right.width_m,  # farther out: none
+        left_edge + 0.4 * left.width_m,
+        left_edge + 0.6 * left.width_m,
+    ]
+    got = detector_lane_index(site, offsets).tolist()
+    assert got == [right.index, right.index, -1, left.index, -1]
+    inside = np.linspace(right_edge + 0.01, left_edge - 0.01, 50)
+    assert (detector_lane_index(site, inside) == site.lane_index_at(inside)).all()

@@ -8,8 +8,8 @@ the simulation's truth (every vehicle, 20 Hz), with the gateway's own
 :func:`~wz_gateway.traffic.find_crossings` and :func:`~wz_gateway.traffic.summarize`. The
 issue's target: each lane's volume within 5 % of the truth count.
 
-A vehicle counts in the lane it occupies at the crossing (the truth's lane, or the track's
-``lane_index``); a truth vehicle counted in the other lane by the tracks is a lane error
+A vehicle counts in the lane it occupies at the crossing (the truth's lane, or the lane the
+gateway puts the track's offset in, :func:`~wz_gateway.wzdx.detector_lane_index`); a truth vehicle counted in the other lane by the tracks is a lane error
 even when the station totals agree, so the report gives both.
 """
 
@@ -27,7 +27,7 @@ from wz_gateway.traffic import (
     find_crossings,
     summarize,
 )
-from wz_gateway.wzdx import detector_station_m, lane_order
+from wz_gateway.wzdx import detector_lane_index, detector_station_m, lane_order
 from wz_shared.messages import TrackBatch, VehicleTruth
 from wz_shared.site import Site
 
@@ -35,14 +35,16 @@ from wz_shared.site import Site
 VOLUME_TOLERANCE = 0.05
 
 
-def track_crossings(batches: Sequence[TrackBatch], station_m: float) -> Crossings:
-    """Where the published tracks cross ``station_m`` (as the gateway finds them)."""
+def track_crossings(site: Site, batches: Sequence[TrackBatch], station_m: float) -> Crossings:
+    """Where the published tracks cross ``station_m``, in the lanes the gateway counts them
+    in (:func:`~wz_gateway.wzdx.detector_lane_index`)."""
     rows = [
-        (t.track_id, b.stamp, t.station_m, t.lane_index, t.speed_mps, t.length_m or np.nan)
+        (t.track_id, b.stamp, t.station_m, t.offset_m, t.speed_mps, t.length_m or np.nan)
         for b in batches
         for t in b.tracks
     ]
-    ids, stamps, stations, lanes, speeds, lengths = _columns(rows, 6)
+    ids, stamps, stations, offsets, speeds, lengths = _columns(rows, 6)
+    lanes = detector_lane_index(site, offsets)
     return find_crossings(ids, stamps, stations, lanes, speeds, lengths, station_m)
 
 
@@ -86,7 +88,7 @@ def lane_volume_report(
     the same for the station and the speeds' mean difference."""
     station = detector_station_m(site, station_override_m)
     lanes = sorted(lane.index for lane in site.lanes)
-    measured = summarize(track_crossings(batches, station), start_s, end_s, lanes, station)
+    measured = summarize(track_crossings(site, batches, station), start_s, end_s, lanes, station)
     expected = summarize(truth_crossings(truth, station), start_s, end_s, lanes, station)
     rows = [
         _row(lane_order(site, got.lane_index), got.vehicles, want.vehicles, got, want)

@@ -207,6 +207,7 @@ class TrafficPoints:
     stamp: npt.NDArray[np.float64]
     station_m: npt.NDArray[np.float64]
     lane_index: npt.NDArray[np.int64]
+    offset_m: npt.NDArray[np.float64]
     speed_mps: npt.NDArray[np.float64]
     length_m: npt.NDArray[np.float64]  # NaN where the tracker gave no length
 
@@ -624,7 +625,9 @@ class Storage:
         if received_since is not None:
             conditions.append(c.received_at >= received_since)
         stmt = (
-            select(c.track_id, c.stamp, c.station_m, c.lane_index, c.speed_mps, c.length_m)
+            select(
+                c.track_id, c.stamp, c.station_m, c.lane_index, c.offset_m, c.speed_mps, c.length_m
+            )
             .where(*conditions)
             .order_by(c.track_id, c.stamp)
         )
@@ -635,6 +638,7 @@ class Storage:
             stamp=np.array([r.stamp for r in rows], dtype=np.float64),
             station_m=np.array([r.station_m for r in rows], dtype=np.float64),
             lane_index=np.array([r.lane_index for r in rows], dtype=np.int64),
+            offset_m=np.array([r.offset_m for r in rows], dtype=np.float64),
             speed_mps=np.array([r.speed_mps for r in rows], dtype=np.float64),
             length_m=np.array(
                 [math.nan if r.length_m is None else r.length_m for r in rows], dtype=np.float64

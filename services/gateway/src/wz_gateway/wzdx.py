@@ -24,6 +24,7 @@ from datetime import UTC, datetime
 from typing import Any, Literal
 
 import numpy as np
+import numpy.typing as npt
 
 from wz_gateway.traffic import TrafficSummary
 from wz_shared.coverage import lidar_beam_rows
@@ -34,7 +35,7 @@ from wz_shared.messages import (
     ServiceState,
     ServiceStatus,
 )
-from wz_shared.site import AreaKind, SensorMount, Site
+from wz_shared.site import AreaKind, Lane, SensorMount, Site
 
 WZDX_VERSION = "4.2"
 CC0_LICENSE = "https://creativecommons.org/publicdomain/zero/1.0/"
@@ -273,6 +274,31 @@ def _best_lidar_station_m(site: Site) -> float | None:
     if not robust[best] >= 1.0:  # no station where a beam is sure to cross every lane's car
         return None
     return float(stations[best])
+
+
+def detector_lane_index(site: Site, offset_m: npt.ArrayLike) -> npt.NDArray[np.intp]:
+    """The lane a loop across the road counts a vehicle at each offset in [site index].
+
+    The lane holding the offset (:meth:`~wz_shared.site.Site.lane_index_at`); a vehicle up to
+    half a lane outside the outermost lanes counts in that lane, since a loop covers its lanes
+    whole and a track's lateral error is largest at the far edge (a LiDAR there sees only the
+    vehicle's near face); beyond that, none (-1).
+    """
+    offset = np.asarray(offset_m, dtype=np.float64)
+    index = site.lane_index_at(offset)
+    for lane in (min(site.lanes, key=_right_edge), max(site.lanes, key=_left_edge)):
+        half = 0.5 * lane.width_m
+        beyond = (index < 0) & (np.abs(offset - lane.center_offset_m) < 2.0 * half)
+        index[beyond] = lane.index
+    return index
+
+
+def _right_edge(lane: Lane) -> float:
+    return lane.center_offset_m - 0.5 * lane.width_m
+
+
+def _left_edge(lane: Lane) -> float:
+    return lane.center_offset_m + 0.5 * lane.width_m
 
 
 def lane_order(site: Site, lane_index: int) -> int:
