@@ -172,23 +172,12 @@ def hand_over(store: TrackStore, settings: TrackerSettings, stamp_s: float) -> N
     # A stray young track (a box split off a truck's trailer, 7 m behind it) whose last
     # update is older than the coasting track's is not its vehicle come back.
     took_up = table.updated_s[new_slots][None, :] > table.updated_s[old_slots][:, None]
-    # A young track's velocity is a guess for its first tenths of a second (a LiDAR box that
-    # grows as more of the car comes into view reads 5 m/s fast): the difference the tests
-    # below see is what is left beyond ``hand_over_velocity_sigmas`` of the two velocities'
-    # combined std along the road.
-    v_cov = (
-        store.bank.covariances(new_slots)[None, :, 2:, 2:]
-        + (store.bank.covariances(old_slots)[:, None, 2:, 2:])
-    )
-    v_std = np.sqrt(np.maximum(np.einsum("ok,onkl,ol->on", u, v_cov, u), 0.0))
-    slack_mps = settings.hand_over_velocity_sigmas * v_std
-    alike = dv - slack_mps < settings.merge_velocity_difference_mps
+    alike = dv < settings.merge_velocity_difference_mps
     if settings.hand_over_max_accel_mps2 > 0.0:
-        dv_along = np.einsum("onk,ok->on", x_new[None, :, 2:] - x_old[:, None, 2:], u)
         alike |= _speed_change_explains(
             settings,
             along,
-            np.sign(dv_along) * np.maximum(np.abs(dv_along) - slack_mps, 0.0),
+            np.einsum("onk,ok->on", x_new[None, :, 2:] - x_old[:, None, 2:], u),
             stamp_s - table.updated_s[old_slots],
             table.born_s[new_slots][None, :] > table.updated_s[old_slots][:, None],
         )

@@ -108,10 +108,6 @@ class TrackerSettings(BaseModel):
     #: Largest change of speed while unseen that may explain a young track's speed and place
     #: [m/s^2]: a car that braked behind a truck; 0 turns it off.
     hand_over_max_accel_mps2: float = Field(default=4.0, ge=0.0)
-    #: Both velocity tests of the hand-over forgive this many stds of the two tracks'
-    #: velocity difference along the road (a young track's speed is a guess at first) [-];
-    #: 0: the differences as they are.
-    hand_over_velocity_sigmas: float = Field(default=0.0, ge=0.0)
     #: Slack on that kinematic test's displacement [m].
     hand_over_kinematic_slack_m: float = Field(default=2.0, ge=0.0)
     #: An old track sliding across the road faster than this follows no vehicle and is not
