@@ -96,8 +96,9 @@ class GatewaySettings(ServiceSettings):
     stale_after_s: Annotated[float, Field(gt=0.0, le=3600.0)] = 10.0
     #: The WZDx traffic sensor's collection interval [s] (counts over the newest interval).
     traffic_interval_s: Annotated[float, Field(ge=10.0, le=86400.0)] = 300.0
-    #: Station of the virtual detector the traffic sensor counts at [m]; None: 30 m upstream
-    #: of the LiDAR mast, where every sensor on the mast sees the road.
+    #: Station of the virtual detector the traffic sensor counts at [m]; None: where the site's
+    #: LiDARs see every lane best, upstream of the taper and the mast
+    #: (:func:`wz_gateway.wzdx.detector_station_m`).
     traffic_detector_station_m: Annotated[float, Field(ge=0.0)] | None = None
     #: WZDx ``feed_info``: who publishes the feed.
     publisher: Annotated[str, Field(min_length=1, max_length=200)] = "Work-zone edge gateway"
