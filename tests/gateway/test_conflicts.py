@@ -207,10 +207,15 @@ def test_a_track_born_overlapping_another_is_one_vehicle_not_a_conflict() -> Non
     cab = _straight("cab", 0.0, 0.0, 20.0, 0.0, 0)
     trailer = _straight("trailer", -3.0, 0.0, 20.0, 0.0, 0)[10:]
     assert find_conflicts(as_trajectories(cab + trailer)) == []
-    kept = find_conflicts(
-        as_trajectories(cab + trailer), ConflictSettings(drop_born_overlapping=False)
-    )
+    kept = find_conflicts(as_trajectories(cab + trailer), ConflictSettings(drop_twins=False))
     assert len(kept) == 1 and kept[0].ttc_s == 0.0
+    # Born apart, then overlapping at the same speed (the trailer's track drifting onto the
+    # cab's): one vehicle too.
+    drifting = [
+        (n, t, x + min(t, 1.0) * 2.0, y, vx, vy, h, lane)
+        for n, t, x, y, vx, vy, h, lane in _straight("trailer", -9.0, 0.0, 20.0, 0.0, 0)
+    ]
+    assert find_conflicts(as_trajectories(cab + drifting)) == []
     # A car that comes up from apart into the cab's rear is a conflict.
     car = _straight("car", -30.0, 0.0, 30.0, 0.0, 0)
     [conflict] = find_conflicts(as_trajectories(cab + car))

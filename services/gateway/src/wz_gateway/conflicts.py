@@ -44,9 +44,11 @@ within ``event_gap_s``. Per event:
   within half a width plus ``lateral_margin_m`` of the centreline). The *first* vehicle is the
   one that leaves first; ``PET = t_enter(second) - t_leave(first)``, 0 if they overlap there.
   PET is None where a trajectory in the data ends before it passes the point.
-- A pair that overlaps already at the first step the two are examined together is one vehicle
-  tracked twice (a semitrailer's trailer split from its cab), not two: it has no events
-  (``drop_born_overlapping``). Two real vehicles come together from apart.
+- A pair that overlaps already at the first step the two are examined together, or that
+  overlaps while the two move alike (velocities within ``twin_speed_difference_mps``), is one
+  vehicle tracked twice (a semitrailer's trailer split from its cab), not two: it has no
+  events (``drop_twins``). Two real vehicles come together from apart, and a crash closes at
+  speed.
 - An event is a conflict when its minimum TTC is at most ``max_ttc_s`` and its minimum PET at
   most ``max_pet_s`` (or unknown). ``tMinTTC`` and ``xMinPET``/``yMinPET`` are the time of the
   minimum TTC and the conflict point of the minimum PET.
@@ -166,9 +168,12 @@ class ConflictSettings:
     #: A conflict point this far beyond half a vehicle's width is off its path [m].
     lateral_margin_m: float = 0.5
     use_lanes: bool = True
-    #: Leave out pairs that overlap from the first step they are seen together: one vehicle
-    #: tracked twice (:func:`_seen_twice`); False keeps them (a truth replay has none).
-    drop_born_overlapping: bool = True
+    #: Leave out pairs that are one vehicle tracked twice (:func:`_seen_twice`): they overlap
+    #: from the first step they are seen together, or overlap while their velocities differ
+    #: by less than ``twin_speed_difference_mps``. False keeps them (a truth replay has none).
+    drop_twins: bool = True
+    #: Overlapping at a closing speed below this is a split track, not a crash [m/s].
+    twin_speed_difference_mps: float = 2.0
     default_length_m: float = DEFAULT_LENGTH_M
     default_width_m: float = DEFAULT_WIDTH_M
 
@@ -455,8 +460,10 @@ def find_conflicts(data: Trajectories, settings: ConflictSettings | None = None)
     i, j = near_pairs(step.astype(np.int64), s.x, s.y, s.vehicle, settings.search_radius_m)
     ttc = time_to_collision(s.state(i), s.state(j))
     close = ttc <= settings.max_ttc_s
-    if settings.drop_born_overlapping:
-        close &= ~_seen_twice(s.vehicle[i] * len(s.names) + s.vehicle[j], s.stamp[i], ttc)
+    if settings.drop_twins:
+        dv = np.hypot(s.vx[j] - s.vx[i], s.vy[j] - s.vy[i])
+        twin = (ttc <= 0.0) & (dv < settings.twin_speed_difference_mps)
+        close &= ~_seen_twice(s.vehicle[i] * len(s.names) + s.vehicle[j], s.stamp[i], ttc, twin)
     i, j, ttc = i[close], j[close], ttc[close]
     pair = s.vehicle[i] * len(s.names) + s.vehicle[j]
     order = np.lexsort((s.stamp[i], pair))
@@ -477,13 +484,17 @@ def find_conflicts(data: Trajectories, settings: ConflictSettings | None = None)
     return found
 
 
-def _seen_twice(pair: IntArray, stamp: FloatArray, ttc: FloatArray) -> npt.NDArray[np.bool_]:
-    """Which examined points belong to a pair that already overlaps (``TTC`` 0) at the first
-    step the two are examined together: two vehicles cannot fill the same road, so that is
-    one vehicle tracked twice (a semitrailer's trailer split from its cab), not a conflict."""
+def _seen_twice(
+    pair: IntArray, stamp: FloatArray, ttc: FloatArray, twin: npt.NDArray[np.bool_]
+) -> npt.NDArray[np.bool_]:
+    """Which examined points belong to a pair that is one vehicle tracked twice (a
+    semitrailer's trailer split from its cab): two vehicles cannot fill the same road, so a
+    pair that already overlaps (``TTC`` 0) at the first step the two are examined together,
+    or that ever overlaps while moving alike (``twin``: a crash closes at speed), is one."""
     order = np.lexsort((stamp, pair))
     first = order[np.r_[True, pair[order][1:] != pair[order][:-1]]]
-    twice: npt.NDArray[np.bool_] = np.isin(pair, pair[first][ttc[first] <= 0.0])
+    ones = np.union1d(pair[first][ttc[first] <= 0.0], pair[twin])
+    twice: npt.NDArray[np.bool_] = np.isin(pair, ones)
     return twice
 
 
