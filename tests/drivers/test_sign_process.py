@@ -8,69 +8,25 @@ puts the message on it again."""
 from __future__ import annotations
 
 import os
-import queue
-import re
-import signal
-import socket
 import subprocess
 import sys
-import threading
 import time
-from pathlib import Path
-
-import pytest
 
 from tests.alert_service.helpers import SITE, batch
 from tests.alert_service.test_node_process import PERIOD_S, speeder_batches, wait_for
 from tests.cli.procs import start_router, stop_process
-from wz_gateway.wzdx import sign_link_health
+from tests.drivers.device_sims import ROOT, Sign, free_udp_port
+from wz_gateway.wzdx import device_link_health
 from wz_shared.bus import Bus
-from wz_shared.messages import Alert, AlertType, ServiceState, ServiceStatus, TrackBatch
+from wz_shared.messages import (
+    SIGN_DEVICE,
+    Alert,
+    AlertType,
+    ServiceState,
+    ServiceStatus,
+    TrackBatch,
+)
 from wz_shared.settings import BusSettings
-
-ROOT = Path(__file__).resolve().parents[2]
-SHOWING = re.compile(r"^showing '(.*)' at ([0-9.]+)$")
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
-
-
-class Sign:
-    """The simulator process; each face change its stdout reports, with its time."""
-
-    def __init__(self, port: int) -> None:
-        self.process = subprocess.Popen(
-            [sys.executable, "-m", "wz_drivers.sign_sim", "--port", str(port)],
-            cwd=ROOT,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.DEVNULL,
-            text=True,
-        )
-        self.faces: queue.Queue[tuple[str, float]] = queue.Queue()
-        self.listening = threading.Event()
-        threading.Thread(target=self._read, daemon=True).start()
-        assert self.listening.wait(20.0), "the sign simulator did not start"
-
-    def _read(self) -> None:
-        assert self.process.stdout is not None
-        for line in self.process.stdout:
-            if line.startswith("NTCIP 1203 sign listening"):
-                self.listening.set()
-            elif match := SHOWING.match(line.strip()):
-                self.faces.put((match.group(1), float(match.group(2))))
-
-    def next_face(self, timeout_s: float = 10.0) -> tuple[str, float]:
-        try:
-            return self.faces.get(timeout=timeout_s)
-        except queue.Empty:
-            pytest.fail(f"the sign did not change within {timeout_s:.0f} s")
-
-    def kill(self) -> None:
-        self.process.send_signal(signal.SIGKILL)
-        self.process.wait(10.0)
 
 
 def test_an_alert_changes_the_sign_within_a_second_and_a_dead_sign_blocks_nothing() -> None:
@@ -152,7 +108,9 @@ def test_an_alert_changes_the_sign_within_a_second_and_a_dead_sign_blocks_nothin
             assert down.state is ServiceState.DEGRADED
             link = down.devices["dynamic-message-sign"]
             assert f"127.0.0.1:{sign_port}" in link.address and "timeout" in link.detail
-            feed = sign_link_health("device-driver", (down, time.time()), time.time(), 10.0)
+            feed = device_link_health(
+                "device-driver", (down, time.time()), SIGN_DEVICE, time.time(), 10.0
+            )
             assert feed is not None and feed.status == "error"
             assert "not answering" in feed.messages[0]
 
