@@ -13,87 +13,39 @@ power cycle), the driver closes the relay again for the alert still open.
 from __future__ import annotations
 
 import logging
-import os
-import subprocess
-import sys
 import time
 
-from tests.alert_service.helpers import SITE, batch
-from tests.alert_service.test_node_process import PERIOD_S, speeder_batches, wait_for
-from tests.cli.procs import free_port, start_router, stop_process
-from tests.drivers.device_sims import ROOT, RelayModule, Sign, free_udp_port
-from wz_gateway.wzdx import device_link_health
-from wz_shared.bus import Bus, Publisher
-from wz_shared.messages import (
-    BEACON_DEVICE,
-    SIGN_DEVICE,
-    Alert,
-    AlertType,
-    ServiceState,
-    ServiceStatus,
-    TrackBatch,
+from tests.alert_service.helpers import batch
+from tests.alert_service.test_node_process import PERIOD_S, wait_for
+from tests.cli.procs import free_port
+from tests.drivers.device_sims import (
+    RelayModule,
+    Sign,
+    alert_service_and_driver,
+    free_udp_port,
+    sign_settings,
 )
-from wz_shared.settings import BusSettings
+from wz_gateway.wzdx import device_link_health
+from wz_shared.messages import BEACON_DEVICE, SIGN_DEVICE, ServiceState
 
 log = logging.getLogger(__name__)
 #: The most a device may lag the track batch that changed what it must show [s].
 MUST_FOLLOW_S = 1.0
 
 
-def send(tracks: Publisher[TrackBatch], batches: list[TrackBatch]) -> dict[float, float]:
-    """Put ``batches`` at twice the tracker's pace; when each went (by stamp, Unix time)."""
-    sent_at = {}
-    for message in batches:
-        tracks.put(message)
-        sent_at[round(message.stamp, 3)] = time.time()
-        time.sleep(PERIOD_S / 2)
-    return sent_at
-
-
-def next_sign_text(sign: Sign) -> tuple[str, float]:
-    """The sign's next face that is not blank (the alert service's blank states may come
-    first), and when."""
-    face, at = sign.next_face()
-    while face == "":
-        face, at = sign.next_face()
-    return face, at
-
-
 def test_the_beacon_follows_the_alerts_within_a_second_and_a_hung_relay_blocks_nothing() -> None:
     sign_port, relay_port = free_udp_port(), free_port()
-    endpoint, router = start_router()
-    settings = BusSettings(mode="client", listen_endpoints=[], connect_endpoints=[endpoint])
-    env = {k: v for k, v in os.environ.items() if not k.startswith("WZ_")}
-    env.update(
-        WZ_BUS_MODE="client",
-        WZ_BUS_CONNECT_ENDPOINTS=endpoint,
-        WZ_BUS_LISTEN_ENDPOINTS="",
-        WZ_STATUS_PERIOD_S="0.2",
-        WZ_LOG_FORMAT="json",
-        WZ_SIGN_HOST="127.0.0.1",
-        WZ_SIGN_PORT=str(sign_port),
-        WZ_SIGN_RETRY_S="0.5",
-        WZ_SIGN_CHECK_S="1.0",
-        WZ_BEACON_HOST="127.0.0.1",
-        WZ_BEACON_PORT=str(relay_port),
-        # A hung module then holds each exchange 3 s (2 tries): were the devices talked to in
-        # turn, the sign would lag the second alert by more than the second it is allowed.
-        WZ_BEACON_TIMEOUT_S="1.5",
-    )
     sign, relay = Sign(sign_port), RelayModule(relay_port)
-    processes = []
-    with Bus.open(settings, site=SITE.site_id, service="beacon-test") as bus:
-        tracks = bus.publisher(bus.keys.tracks, TrackBatch)
-        alerts = bus.subscribe(bus.keys.alerts_all, Alert)
-        driver_status = bus.subscribe(
-            bus.keys.status("device-driver"), ServiceStatus, mode="ring", capacity=1
-        )
-        try:
-            for module in ("wz_alert_service.node", "wz_drivers.device_driver"):
-                processes.append(
-                    subprocess.Popen([sys.executable, "-m", module], cwd=ROOT, env=env)
-                )
-            assert tracks.wait_for_subscribers(30.0), "the alert service never subscribed"
+    try:
+        with alert_service_and_driver(
+            **sign_settings(sign_port),
+            WZ_BEACON_HOST="127.0.0.1",
+            WZ_BEACON_PORT=str(relay_port),
+            # A hung module then holds each exchange 3 s (2 tries): were the devices talked to
+            # in turn, the sign would lag the second alert by more than the second it is allowed.
+            WZ_BEACON_TIMEOUT_S="1.5",
+        ) as rig:
+            alerts, driver_status = rig.alerts, rig.driver_status
             up = wait_for(
                 driver_status,
                 lambda s: all(
@@ -106,21 +58,16 @@ def test_the_beacon_follows_the_alerts_within_a_second_and_a_hung_relay_blocks_n
             assert up.devices[BEACON_DEVICE].shows == "off"
 
             # A speeder: the alert opens at the batch of 1.0 s; the relay closes.
-            sent_at = send(tracks, speeder_batches(1, 0.0, 2.0, 0))
-            start = wait_for(
-                alerts,
-                lambda a: a.alert_type is AlertType.SPEEDING and a.phase == "start",
-                "the speeding start",
-            )
+            alert_sent_at = rig.speeder(1, 0.0, 0)
             closed, closed_at = relay.next_switch()
             assert closed, "the relay opened instead of closing"
-            delay_s = closed_at - sent_at[round(start.stamp, 3)]
+            delay_s = closed_at - alert_sent_at
             log.info("relay closed %.0f ms after the alert's batch", 1000 * delay_s)
             assert 0.0 < delay_s < MUST_FOLLOW_S, f"the relay closed {delay_s:.3f} s after"
-            assert next_sign_text(sign)[0] == "SLOW[nl]DOWN"
+            assert sign.next_text()[0] == "SLOW[nl]DOWN"
 
             # The car leaves: the alert clears at the first empty batch; the relay opens.
-            cleared_at = send(tracks, [batch(2.0 + k * PERIOD_S, [], 20 + k) for k in range(3)])
+            cleared_at = rig.send([batch(2.0 + k * PERIOD_S, [], 20 + k) for k in range(3)])
             clear = wait_for(alerts, lambda a: a.phase == "clear", "the speeding clear")
             closed, opened_at = relay.next_switch()
             assert not closed, "the relay did not open"
@@ -130,33 +77,19 @@ def test_the_beacon_follows_the_alerts_within_a_second_and_a_hung_relay_blocks_n
 
             # The module hangs: the driver's read-back finds it, its status says so.
             relay.pause()
-            down = wait_for(
-                driver_status,
-                lambda s: s.devices[BEACON_DEVICE].reachable is False,
-                "the driver reporting the relay unreachable",
-            )
-            assert down.state is ServiceState.DEGRADED
+            down = rig.device_down(BEACON_DEVICE)
             link = down.devices[BEACON_DEVICE]
             assert "timeout, no answer" in link.detail and link.shows is None, link
             assert down.devices[SIGN_DEVICE].reachable is True
             now = time.time()
-            beacon = device_link_health("device-driver", (down, now), BEACON_DEVICE, now, 10.0)
-            assert beacon is not None and beacon.status == "error"
-            assert beacon.messages[0].startswith(f"flashing-beacon at {link.address} not answering")
             sign_health = device_link_health("device-driver", (down, now), SIGN_DEVICE, now, 10.0)
             assert sign_health is not None and sign_health.status == "ok"
 
             # A second car, while the driver keeps trying the hung module: alerts flow, and the
             # sign changes within the second all the same.
-            sent_at = send(tracks, speeder_batches(2, 3.0, 2.0, 30))
-            second = wait_for(
-                alerts,
-                lambda a: a.track_id == 2 and a.phase == "start",
-                "the second car's start, the relay hung",
-                timeout_s=5.0,
-            )
-            face, shown_at = next_sign_text(sign)
-            delay_s = shown_at - sent_at[round(second.stamp, 3)]
+            alert_sent_at = rig.speeder(2, 3.0, 30)
+            face, shown_at = sign.next_text()
+            delay_s = shown_at - alert_sent_at
             log.info("sign changed %.0f ms after the alert, the relay hung", 1000 * delay_s)
             assert face == "SLOW[nl]DOWN" and 0.0 < delay_s < MUST_FOLLOW_S, delay_s
 
@@ -178,16 +111,6 @@ def test_the_beacon_follows_the_alerts_within_a_second_and_a_hung_relay_blocks_n
                 ),
                 "the driver reporting the relay back and closed",
             )
-        finally:
-            for process in processes:
-                process.terminate()
-            for process in processes:
-                try:
-                    process.wait(10.0)
-                except subprocess.TimeoutExpired:
-                    process.kill()
-            sign.kill()
-            relay.kill()
-            stop_process(router)
-    for process in processes:
-        assert process.returncode == 0, "a service did not stop cleanly"
+    finally:
+        sign.kill()
+        relay.kill()

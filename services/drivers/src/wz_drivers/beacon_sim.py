@@ -80,19 +80,17 @@ class RelayModule:
         sys.stdout.flush()
 
 
-async def _no_such_unit(
-    function_code: int,
-    start_address: int,
-    address: int,
-    count: int,
-    registers: list[int],
-    set_values: list[int] | list[bool] | None,
-) -> ExcCodes | None:
+async def _no_such_unit(*_access: object) -> ExcCodes | None:
+    """pymodbus's hook for any other unit: refused as a gateway refuses an absent device."""
     return ExcCodes.GATEWAY_NO_RESPONSE
 
 
-def _blocks(coils: int, registers: int) -> tuple[list[SimData], ...]:
-    """A device's four tables: coils, discrete inputs, holding and input registers."""
+#: A device's four tables: coils, discrete inputs, holding and input registers.
+Tables = tuple[list[SimData], list[SimData], list[SimData], list[SimData]]
+
+
+def _tables(coils: int, registers: int) -> Tables:
+    """``coils`` coils and discrete inputs, ``registers`` registers of each kind, from 0."""
     return (
         [SimData(0, values=[False] * coils, datatype=DataType.BITS)],
         [SimData(0, values=[False] * coils, datatype=DataType.BITS)],
@@ -104,11 +102,9 @@ def _blocks(coils: int, registers: int) -> tuple[list[SimData], ...]:
 def devices(module: RelayModule, unit: int) -> list[SimDevice]:
     """The module as unit ``unit``, and every other unit (id 0: pymodbus's catch-all) as a
     gateway's absent device."""
-    coils, input_coils, holding, inputs = _blocks(len(module.closed), 1)
-    absent = _blocks(ADDRESSES, ADDRESSES)
     return [
-        SimDevice(unit, simdata=(coils, input_coils, holding, inputs), action=module.on_access),
-        SimDevice(0, simdata=absent, action=_no_such_unit),  # type: ignore[arg-type]
+        SimDevice(unit, simdata=_tables(len(module.closed), 1), action=module.on_access),
+        SimDevice(0, simdata=_tables(ADDRESSES, ADDRESSES), action=_no_such_unit),
     ]
 
 
