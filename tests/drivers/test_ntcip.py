@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.drivers.test_sign_process import Sign, free_udp_port
+from tests.drivers.device_sims import Sign, free_udp_port
 from wz_drivers.dms import DmsClient, SignError, SignSettings
 from wz_drivers.ntcip1203 import (
     ActivationCode,

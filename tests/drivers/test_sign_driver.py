@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import time
 
-from tests.drivers.test_sign_process import Sign, free_udp_port
+from tests.drivers.device_sims import Sign, free_udp_port
 from wz_drivers.device_driver import DeviceDriverSettings, SignDriver
 from wz_drivers.dms import DmsClient, SignSettings
 

@@ -28,7 +28,14 @@ from tests.gateway.helpers import (
 from wz_gateway import views, wzdx
 from wz_gateway.storage import Storage
 from wz_shared.keys import Keys
-from wz_shared.messages import AlertType, Message, ServiceState
+from wz_shared.messages import (
+    BEACON_DEVICE,
+    SIGN_DEVICE,
+    AlertType,
+    DeviceLink,
+    Message,
+    ServiceState,
+)
 
 KEYS = Keys(SITE.site_id)
 T0_UNIX = 1_750_000_000.0  # wall clock at stamp 0 in these tests
@@ -283,3 +290,51 @@ def test_a_stalled_alert_service_puts_its_sign_and_beacon_in_error(storage: Stor
         core = features_by_type(feed)[device_type]["properties"]["core_details"]
         assert core["device_status"] == "error", core
         assert "alert-service stalled: no work for 12 s" in core["status_messages"], core
+
+
+def test_the_beacon_relay_not_answering_its_driver_puts_the_beacon_alone_in_error(
+    storage: Storage,
+) -> None:
+    """The device driver reports the sign answering and the beacon's relay module not: the
+    beacon's feature is ``error`` with the driver's reason, the sign's stays ``ok``."""
+    traffic_day(storage)
+    flashing = devices_state(299.0, beacon_on=True, sign_text="SLOW DOWN", cause=AlertType.SPEEDING)
+    store(storage, [flashing, service_status("alert-service", 300.0, {})], T0_UNIX + 300.0)
+    relay = "tcp 10.0.0.8:502 unit 1 coil 0"
+    driver = service_status("device-driver", 300.0, {}).model_copy(
+        update={
+            "state": ServiceState.DEGRADED,
+            "devices": {
+                SIGN_DEVICE: DeviceLink(address="udp 10.0.0.9:161", reachable=True),
+                BEACON_DEVICE: DeviceLink(
+                    address=relay,
+                    reachable=False,
+                    detail=f"{relay}: timeout, no answer to the read in 2 x 0.4 s",
+                    answer_age_s=7.0,
+                ),
+            },
+        }
+    )
+    store(storage, [driver], T0_UNIX + 300.0)
+    feed = feed_of(storage, T0_UNIX + 301.0)
+    assert_valid(feed)
+    devices = features_by_type(feed)
+    beacon = devices[BEACON_DEVICE]["properties"]["core_details"]
+    assert beacon["device_status"] == "error", beacon
+    assert beacon["status_messages"] == [
+        f"flashing-beacon at {relay} not answering: {relay}: timeout, no answer to the read in "
+        "2 x 0.4 s (last answer 7 s ago)"
+    ]
+    assert devices[BEACON_DEVICE]["properties"]["is_flashing"] is True  # what is wanted
+    assert devices[SIGN_DEVICE]["properties"]["core_details"]["device_status"] == "ok"
+
+    # Before its first exchange the relay is unknown, not ok.
+    waiting = driver.model_copy(
+        update={
+            "state": ServiceState.RUNNING,
+            "devices": {**driver.devices, BEACON_DEVICE: DeviceLink(address=relay)},
+        }
+    )
+    store(storage, [waiting], T0_UNIX + 301.0)
+    beacon = features_by_type(feed_of(storage, T0_UNIX + 302.0))[BEACON_DEVICE]
+    assert beacon["properties"]["core_details"]["device_status"] == "unknown"

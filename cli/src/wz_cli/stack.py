@@ -225,7 +225,9 @@ STACK: tuple[ServiceSpec, ...] = (
         metrics_port=9477,
         module="wz_drivers.device_driver",
         summary="the portable message sign over NTCIP 1203 (SNMP at WZ_SIGN_HOST:WZ_SIGN_PORT) "
-        "showing the alert service's message; `python -m wz_drivers.sign_sim` is a bench sign",
+        "showing the alert service's message, and the flashing beacon's relay over Modbus TCP "
+        "(coil WZ_BEACON_COIL at WZ_BEACON_HOST, if set); `python -m wz_drivers.sign_sim` and "
+        "`python -m wz_drivers.beacon_sim` are a bench sign and relay module",
         env_prefix="WZ_SIGN_",
         optional=True,
     ),

@@ -495,6 +495,8 @@ class ServiceState(StrEnum):
 
 #: The message sign's name among a driver's :attr:`ServiceStatus.devices` (WZDx's device type).
 SIGN_DEVICE = "dynamic-message-sign"
+#: The flashing beacon's (its relay's) name there, also WZDx's device type.
+BEACON_DEVICE = "flashing-beacon"
 
 
 class DeviceLink(BaseModel):

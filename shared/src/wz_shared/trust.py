@@ -18,7 +18,7 @@ Roles (a certificate's common name is the role's name)::
     fusion-tracker   tracks; serves the newest batch
     alert-service    alerts, the roadside devices' state; serves the open episodes
     gateway          reads (and its own status)
-    device-driver    reads the devices' state (and its own status: the sign's link)
+    device-driver    reads the devices' state (and its own status: the sign's and beacon's links)
     operator         reads: wz status, wz tap, wz record on the box
     regional-router  reads: the trailer router's uplink, seen from the trailer
 
@@ -104,7 +104,8 @@ ROLES: Mapping[str, Role] = {
         Role(TRACKER, publishes=("tracks",), serves=("tracks/latest",)),
         Role(ALERT_SERVICE, publishes=("alerts/*", "devices/state"), serves=("alerts/active",)),
         Role("gateway"),
-        # drives the message sign from the devices' state; puts only its status
+        # drives the message sign and the beacon's relay from the devices' state; puts only its
+        # status
         Role("device-driver"),
     )
 }

@@ -27,6 +27,7 @@ from pysnmp.hlapi.v3arch.asyncio import (
 )
 from pysnmp.proto import rfc1902, rfc1905
 
+from wz_drivers.field_device import DeviceError
 from wz_drivers.ntcip1203 import (
     ACTIVATE_MESSAGE,
     ACTIVATE_MSG_ERROR,
@@ -46,13 +47,9 @@ from wz_drivers.ntcip1203 import (
 _ABSENT = (rfc1905.noSuchObject.tagSet, rfc1905.noSuchInstance.tagSet, rfc1905.endOfMibView.tagSet)
 
 
-class SignError(RuntimeError):
+class SignError(DeviceError):
     """The sign did not answer (``answered`` False), or refused a step (the message says
     which and why)."""
-
-    def __init__(self, message: str, *, answered: bool = True) -> None:
-        super().__init__(message)
-        self.answered = answered
 
 
 @dataclass(frozen=True)

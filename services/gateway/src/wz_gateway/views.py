@@ -25,14 +25,20 @@ from wz_gateway.wzdx import (
     detector_lane_index,
     detector_station_m,
     device_feed,
+    device_link_health,
     frames_health,
     freshness,
     service_health,
-    sign_link_health,
     traffic_mast,
 )
 from wz_shared.keys import Keys
-from wz_shared.messages import RoadsideDeviceState, ServiceStatus, TrackBatch
+from wz_shared.messages import (
+    BEACON_DEVICE,
+    SIGN_DEVICE,
+    RoadsideDeviceState,
+    ServiceStatus,
+    TrackBatch,
+)
 from wz_shared.site import Site
 
 log = logging.getLogger(__name__)
@@ -188,8 +194,11 @@ def device_feed_of(
         devices_health=service_health(
             ALERT_SERVICE, statuses.get(ALERT_SERVICE), now, stale_after_s
         ),
-        sign_health=sign_link_health(
-            DEVICE_DRIVER, statuses.get(DEVICE_DRIVER), now, stale_after_s
+        sign_health=device_link_health(
+            DEVICE_DRIVER, statuses.get(DEVICE_DRIVER), SIGN_DEVICE, now, stale_after_s
+        ),
+        beacon_health=device_link_health(
+            DEVICE_DRIVER, statuses.get(DEVICE_DRIVER), BEACON_DEVICE, now, stale_after_s
         ),
         stamp_offset_s=stamp_offset_s(tracks),
         traffic_interval_s=traffic_interval_s,

@@ -29,6 +29,7 @@ import numpy.typing as npt
 from wz_gateway.traffic import TrafficSummary
 from wz_shared.coverage import lidar_beam_rows
 from wz_shared.messages import (
+    BEACON_DEVICE,
     SIGN_DEVICE,
     AlertType,
     RoadsideDeviceState,
@@ -104,25 +105,32 @@ def service_health(
     return health
 
 
-def sign_link_health(
-    service: str, status: tuple[ServiceStatus, float] | None, now: float, stale_after_s: float
+def device_link_health(
+    service: str,
+    status: tuple[ServiceStatus, float] | None,
+    device: str,
+    now: float,
+    stale_after_s: float,
 ) -> DeviceHealth | None:
-    """Whether the real sign answers its driver (``service``'s status names it under
-    ``dynamic-message-sign``); None where no driver reports one (the sign is the alert
-    service's state alone, as in simulation)."""
-    if status is None or SIGN_DEVICE not in status[0].devices:
+    """Whether a real field device answers its driver (``service``'s status names it under
+    ``device``: :data:`~wz_shared.messages.SIGN_DEVICE`,
+    :data:`~wz_shared.messages.BEACON_DEVICE`); None where no driver reports one (the device
+    is the alert service's state alone, as in simulation)."""
+    if status is None or device not in status[0].devices:
         return None
     alive = service_health(service, status, now, stale_after_s)
     if alive.status != "ok":
         return alive
-    link = status[0].devices[SIGN_DEVICE]
+    link = status[0].devices[device]
     if link.reachable is False:
         since = "" if link.answer_age_s is None else f" (last answer {link.answer_age_s:.0f} s ago)"
         return DeviceHealth(
-            "error", (f"sign at {link.address} not answering: {link.detail}{since}",), status[1]
+            "error", (f"{device} at {link.address} not answering: {link.detail}{since}",), status[1]
         )
     if link.reachable is None:
-        return DeviceHealth("unknown", (f"sign at {link.address} not contacted yet",), status[1])
+        return DeviceHealth(
+            "unknown", (f"{device} at {link.address} not contacted yet",), status[1]
+        )
     return alive
 
 
@@ -162,8 +170,10 @@ class FeedInputs:
     cameras: dict[str, DeviceHealth]
     devices: RoadsideDeviceState | None
     devices_health: DeviceHealth
-    #: The real sign's link, from its driver's status (None: no driver reports one).
+    #: The real sign's and beacon relay's links, from their driver's status (None: no driver
+    #: reports one).
     sign_health: DeviceHealth | None = None
+    beacon_health: DeviceHealth | None = None
     stamp_offset_s: float = 0.0
     traffic_interval_s: float = 300.0
     contact_email: str | None = None
@@ -412,15 +422,18 @@ def roadside_features(inputs: FeedInputs) -> list[dict[str, Any]]:
     health = inputs.devices_health
     if devices is None and health.status == "ok":
         health = DeviceHealth("unknown", ("no device state received yet",), health.updated_at)
+    beacon_health = (
+        health if inputs.beacon_health is None else combine(health, inputs.beacon_health)
+    )
     beacon = {
-        "id": device_id(site, "flashing-beacon"),
+        "id": device_id(site, BEACON_DEVICE),
         "type": "Feature",
         "properties": {
             "core_details": _core(
                 site,
-                "flashing-beacon",
+                BEACON_DEVICE,
                 "Flashing beacon",
-                health,
+                beacon_health,
                 "Flashes while an alert concerns drivers approaching the work zone",
             ),
             "function": _beacon_function(devices),
@@ -430,12 +443,12 @@ def roadside_features(inputs: FeedInputs) -> list[dict[str, Any]]:
     }
     sign_health = health if inputs.sign_health is None else combine(health, inputs.sign_health)
     sign = {
-        "id": device_id(site, "dynamic-message-sign"),
+        "id": device_id(site, SIGN_DEVICE),
         "type": "Feature",
         "properties": {
             "core_details": _core(
                 site,
-                "dynamic-message-sign",
+                SIGN_DEVICE,
                 "Portable message sign",
                 sign_health,
                 "Shows the warning of the highest-priority open alert",
