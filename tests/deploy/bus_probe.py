@@ -3,7 +3,7 @@
 Usage: python -m tests.deploy.bus_probe ENDPOINT SITE TLS_DIR [--no-cert]
 
 Opens a Zenoh client session to ENDPOINT with the credentials in TLS_DIR (``--no-cert``: only
-its CA, to trust the router, and no certificate of its own), then for 3 s puts a forged message of each kind the bus carries (an
+its CA, to trust the router, and no certificate of its own), then for 5 s puts a forged message of each kind the bus carries (an
 alert, a detection batch, a track batch, the devices' state, a LiDAR frame, another
 service's status) every 50 ms, each payload naming the kind, and answers queries on the
 open-alerts key with a forged reply. Prints ``connected`` or ``refused: <why>`` (exit 3).
@@ -30,7 +30,7 @@ KINDS = {
     "raw": "raw/lidar/lidar-mast",
     "status": "status/alert-service",
 }
-PUT_S = 3.0
+PUT_S = 5.0
 
 
 def main() -> int:

@@ -36,7 +36,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from tests.deploy.bus_probe import KINDS
+from tests.deploy.bus_probe import KINDS, PUT_S
 from tests.deploy.netns import Host, Network, require_namespaces
 from wz_cli.credentials import make_site
 from wz_shared.bus import zenoh_config
@@ -204,11 +204,14 @@ def _probe(box: Box, tls_dir: Path, *extra: str) -> tuple[str, set[str]]:
     first = process.stdout.readline().decode().strip()
     replies: list[bytes] = []
     if first == "connected":
-        time.sleep(1.0)  # its queryable declared and routed
+        # Ask until its queryable answers through the router or it stops serving (a loaded
+        # machine routed the declaration after more than 1 s).
         session: zenoh.Session = box.session  # type: ignore[attr-defined]
-        for reply in session.get(f"wz/{SITE}/alerts/active", timeout=2.0):
-            if reply.ok is not None:
-                replies.append(reply.ok.payload.to_bytes())
+        serving_until = time.monotonic() + PUT_S - 0.5
+        while b"forged" not in replies and time.monotonic() < serving_until:
+            for reply in session.get(f"wz/{SITE}/alerts/active", timeout=0.5):
+                if reply.ok is not None:
+                    replies.append(reply.ok.payload.to_bytes())
     _, err = process.communicate(timeout=30)
     time.sleep(0.5)  # the last samples in flight
     seen = box.forged_seen()
