@@ -6,7 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wz_gateway.wzdx import DETECTOR_CAR_REACH_M, detector_lane_index, detector_station_m
+from wz_gateway.wzdx import (
+    DETECTOR_CAR_REACH_M,
+    MAX_LATERAL_SPEED_MPS,
+    detector_lane_index,
+    detector_lanes,
+    detector_station_m,
+)
 from wz_shared.coverage import lidar_beam_rows
 from wz_shared.site import DEFAULT_SITE_PATH, AreaKind, LidarIntrinsics, Site, load_site
 from wz_shared.site_generator import generate_site
@@ -80,3 +86,17 @@ def test_a_track_just_off_the_outer_lanes_counts_in_them() -> None:
     assert got == [right.index, right.index, -1, left.index, -1]
     inside = np.linspace(right_edge + 0.01, left_edge - 0.01, 50)
     assert (detector_lane_index(site, inside) == site.lane_index_at(inside)).all()
+
+
+def test_a_track_sliding_across_the_road_is_counted_in_no_lane() -> None:
+    site = load_site(DEFAULT_SITE_PATH)
+    station = np.array([600.0, 600.0, 600.0])
+    heading = float(site.road_frame.heading_at(600.0))
+    along = np.array([np.cos(heading), np.sin(heading)])
+    left = np.array([-np.sin(heading), np.cos(heading)])
+    # 25 m/s along the road; lateral 0, a lane change's 1.2 m/s, and a coasting track's 4 m/s.
+    lateral = np.array([0.0, 1.2, 2.0 * MAX_LATERAL_SPEED_MPS])
+    velocity = 25.0 * along[None, :] + lateral[:, None] * left[None, :]
+    offset = np.full(3, site.lanes[0].center_offset_m)
+    got = detector_lanes(site, station, offset, velocity[:, 0], velocity[:, 1]).tolist()
+    assert got == [site.lanes[0].index, site.lanes[0].index, -1]

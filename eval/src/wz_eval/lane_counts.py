@@ -9,7 +9,7 @@ the simulation's truth (every vehicle, 20 Hz), with the gateway's own
 issue's target: each lane's volume within 5 % of the truth count.
 
 A vehicle counts in the lane it occupies at the crossing (the truth's lane, or the lane the
-gateway puts the track's offset in, :func:`~wz_gateway.wzdx.detector_lane_index`); a truth vehicle counted in the other lane by the tracks is a lane error
+gateway puts the track's offset in, :func:`~wz_gateway.wzdx.detector_lanes`); a truth vehicle counted in the other lane by the tracks is a lane error
 even when the station totals agree, so the report gives both.
 """
 
@@ -27,7 +27,7 @@ from wz_gateway.traffic import (
     find_crossings,
     summarize,
 )
-from wz_gateway.wzdx import detector_lane_index, detector_station_m, lane_order
+from wz_gateway.wzdx import detector_lanes, detector_station_m, lane_order
 from wz_shared.messages import TrackBatch, VehicleTruth
 from wz_shared.site import Site
 
@@ -37,14 +37,15 @@ VOLUME_TOLERANCE = 0.05
 
 def track_crossings(site: Site, batches: Sequence[TrackBatch], station_m: float) -> Crossings:
     """Where the published tracks cross ``station_m``, in the lanes the gateway counts them
-    in (:func:`~wz_gateway.wzdx.detector_lane_index`)."""
+    in (:func:`~wz_gateway.wzdx.detector_lanes`)."""
     rows = [
-        (t.track_id, b.stamp, t.station_m, t.offset_m, t.speed_mps, t.length_m or np.nan)
+        (t.track_id, b.stamp, t.station_m, t.offset_m, t.vx_mps, t.vy_mps, t.speed_mps,
+         t.length_m or np.nan)
         for b in batches
         for t in b.tracks
-    ]
-    ids, stamps, stations, offsets, speeds, lengths = _columns(rows, 6)
-    lanes = detector_lane_index(site, offsets)
+    ]  # fmt: skip
+    ids, stamps, stations, offsets, vx, vy, speeds, lengths = _columns(rows, 8)
+    lanes = detector_lanes(site, stations, offsets, vx, vy)
     return find_crossings(ids, stamps, stations, lanes, speeds, lengths, station_m)
 
 

@@ -209,6 +209,8 @@ class TrafficPoints:
     lane_index: npt.NDArray[np.int64]
     offset_m: npt.NDArray[np.float64]
     speed_mps: npt.NDArray[np.float64]
+    vx_mps: npt.NDArray[np.float64]
+    vy_mps: npt.NDArray[np.float64]
     length_m: npt.NDArray[np.float64]  # NaN where the tracker gave no length
 
 
@@ -626,7 +628,15 @@ class Storage:
             conditions.append(c.received_at >= received_since)
         stmt = (
             select(
-                c.track_id, c.stamp, c.station_m, c.lane_index, c.offset_m, c.speed_mps, c.length_m
+                c.track_id,
+                c.stamp,
+                c.station_m,
+                c.lane_index,
+                c.offset_m,
+                c.speed_mps,
+                c.vx_mps,
+                c.vy_mps,
+                c.length_m,
             )
             .where(*conditions)
             .order_by(c.track_id, c.stamp)
@@ -640,6 +650,8 @@ class Storage:
             lane_index=np.array([r.lane_index for r in rows], dtype=np.int64),
             offset_m=np.array([r.offset_m for r in rows], dtype=np.float64),
             speed_mps=np.array([r.speed_mps for r in rows], dtype=np.float64),
+            vx_mps=np.array([r.vx_mps for r in rows], dtype=np.float64),
+            vy_mps=np.array([r.vy_mps for r in rows], dtype=np.float64),
             length_m=np.array(
                 [math.nan if r.length_m is None else r.length_m for r in rows], dtype=np.float64
             ),

@@ -46,6 +46,9 @@ UPDATE_FREQUENCY_S = 1
 MPS_TO_KPH = 3.6
 #: The sign and beacon stand this far right of the right lane's edge [m].
 SHOULDER_OFFSET_M = 3.0
+#: A track sliding across the road faster than this follows no vehicle [m/s]: a lane change
+#: peaks at 1-1.5 m/s (the tracker's ``hand_over_max_lateral_speed_mps``).
+MAX_LATERAL_SPEED_MPS = 2.5
 #: Spacing of the stations :func:`detector_station_m` tries [m].
 DETECTOR_SEARCH_STEP_M = 1.0
 #: Every lane must be seen this far either side of the detector's station [m]: a car's length
@@ -284,6 +287,26 @@ def _best_lidar_station_m(site: Site) -> float | None:
     if not robust[best] >= 1.0:  # no station where a beam is sure to cross every lane's car
         return None
     return float(stations[best])
+
+
+def detector_lanes(
+    site: Site,
+    station_m: npt.ArrayLike,
+    offset_m: npt.ArrayLike,
+    vx_mps: npt.ArrayLike,
+    vy_mps: npt.ArrayLike,
+) -> npt.NDArray[np.intp]:
+    """The lane the loop counts each track point in (:func:`detector_lane_index`), or none
+    (-1) for a point sliding across the road faster than
+    :data:`MAX_LATERAL_SPEED_MPS`: a coasting track whose velocity points off the road
+    follows no vehicle, and would be counted in each lane it slides through."""
+    heading = site.road_frame.heading_at(np.asarray(station_m, dtype=np.float64))
+    across = -np.asarray(vx_mps, dtype=np.float64) * np.sin(heading) + np.asarray(
+        vy_mps, dtype=np.float64
+    ) * np.cos(heading)
+    lanes = detector_lane_index(site, offset_m)
+    lanes[np.abs(across) > MAX_LATERAL_SPEED_MPS] = -1
+    return lanes
 
 
 def detector_lane_index(site: Site, offset_m: npt.ArrayLike) -> npt.NDArray[np.intp]:
