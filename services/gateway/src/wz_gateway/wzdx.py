@@ -245,8 +245,8 @@ def detector_station_m(site: Site, override_m: float | None = None) -> float:
     lane's centre). The tracker acquires vehicles as they come into the LiDAR's view, so a
     loop there counts vehicles it has followed for a while; one placed where the far lane
     falls between two beams, or before the LiDAR's view, counts only what the camera kept.
-    That is usually 10-20 m upstream of the mast: nearer, the near lane drops under the
-    beams' fan. Without a LiDAR, or where none reaches a lane: 30 m upstream of the first
+    On the generated sites checked that is 9-46 m upstream of the mast: nearer, the near
+    lane drops under the beams' fan. Without a LiDAR, or where none reaches a lane: 30 m upstream of the first
     sensor. ``override_m`` (the gateway's setting) wins.
     """
     if override_m is not None:
