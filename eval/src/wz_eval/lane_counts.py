@@ -8,8 +8,9 @@ the simulation's truth (every vehicle, 20 Hz), with the gateway's own
 :func:`~wz_gateway.traffic.find_crossings` and :func:`~wz_gateway.traffic.summarize`. The
 issue's target: each lane's volume within 5 % of the truth count.
 
-A vehicle counts in the lane it occupies at the crossing (the truth's lane, or the lane the
-gateway puts the track's offset in, :func:`~wz_gateway.wzdx.detector_lanes`); a truth vehicle counted in the other lane by the tracks is a lane error
+A vehicle counts in the lane its centre is in at the crossing, the truth's and the track's
+alike (:func:`~wz_gateway.wzdx.detector_lanes`; not SUMO's lane attribute, which switches at
+its own point of a lane change); a truth vehicle counted in the other lane by the tracks is a lane error
 even when the station totals agree, so the report gives both.
 """
 
@@ -27,7 +28,7 @@ from wz_gateway.traffic import (
     find_crossings,
     summarize,
 )
-from wz_gateway.wzdx import detector_lanes, detector_station_m, lane_order
+from wz_gateway.wzdx import detector_lane_index, detector_lanes, detector_station_m, lane_order
 from wz_shared.messages import TrackBatch, VehicleTruth
 from wz_shared.site import Site
 
@@ -50,23 +51,26 @@ def track_crossings(site: Site, batches: Sequence[TrackBatch], station_m: float)
 
 
 def truth_crossings(
-    truth: Sequence[tuple[float, list[VehicleTruth]]], station_m: float
+    site: Site, truth: Sequence[tuple[float, list[VehicleTruth]]], station_m: float
 ) -> Crossings:
-    """Where the simulated vehicles cross ``station_m``."""
+    """Where the simulated vehicles cross ``station_m``, each in the lane its centre is in
+    (:func:`~wz_gateway.wzdx.detector_lane_index`, as the tracks are counted): SUMO's own
+    lane switches at its own point of a lane change, a loop counts where the vehicle is."""
     numbers: dict[str, int] = {}  # the truth's ids are names; crossings take integers
     rows = [
         (
             numbers.setdefault(v.vehicle_id, len(numbers)),
             stamp,
             v.station_m,
-            v.lane_index,
+            v.offset_m,
             v.speed_mps,
             v.length_m,
         )
         for stamp, vehicles in truth
         for v in vehicles
     ]
-    ids, stamps, stations, lanes, speeds, lengths = _columns(rows, 6)
+    ids, stamps, stations, offsets, speeds, lengths = _columns(rows, 6)
+    lanes = detector_lane_index(site, offsets)
     return find_crossings(ids, stamps, stations, lanes, speeds, lengths, station_m)
 
 
@@ -90,7 +94,7 @@ def lane_volume_report(
     station = detector_station_m(site, station_override_m)
     lanes = sorted(lane.index for lane in site.lanes)
     measured = summarize(track_crossings(site, batches, station), start_s, end_s, lanes, station)
-    expected = summarize(truth_crossings(truth, station), start_s, end_s, lanes, station)
+    expected = summarize(truth_crossings(site, truth, station), start_s, end_s, lanes, station)
     rows = [
         _row(lane_order(site, got.lane_index), got.vehicles, want.vehicles, got, want)
         for got, want in zip(measured.lanes, expected.lanes, strict=True)
