@@ -21,6 +21,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from abc import ABC, abstractmethod
 from collections.abc import Callable
 from typing import Generic, TypeVar
 
@@ -47,7 +48,7 @@ class DeviceError(RuntimeError):
         self.answered = answered
 
 
-class FieldDevice(Generic[T]):
+class FieldDevice(ABC, Generic[T]):
     """Keeps one device showing the wanted value (``T``: a MULTI string, a relay's state).
 
     Subclasses say how to put a value on the device (:meth:`_put`), read it back
@@ -82,13 +83,13 @@ class FieldDevice(Generic[T]):
 
     # --- the protocol (subclasses) ------------------------------------------------------
 
+    @abstractmethod
     def _put(self, value: T) -> T:
         """Put ``value`` on the device; what it then says it shows. Raises DeviceError."""
-        raise NotImplementedError
 
+    @abstractmethod
     def _get(self) -> T:
         """What the device says it shows now. Raises DeviceError."""
-        raise NotImplementedError
 
     def describe(self, value: T) -> str:
         """``value`` for people (the status's ``shows``, the logs)."""

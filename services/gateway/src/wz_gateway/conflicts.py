@@ -460,12 +460,12 @@ def find_conflicts(data: Trajectories, settings: ConflictSettings | None = None)
     i, j = near_pairs(step.astype(np.int64), s.x, s.y, s.vehicle, settings.search_radius_m)
     ttc = time_to_collision(s.state(i), s.state(j))
     close = ttc <= settings.max_ttc_s
+    pair = s.vehicle[i] * len(s.names) + s.vehicle[j]
     if settings.drop_twins:
         dv = np.hypot(s.vx[j] - s.vx[i], s.vy[j] - s.vy[i])
         twin = (ttc <= 0.0) & (dv < settings.twin_speed_difference_mps)
-        close &= ~_seen_twice(s.vehicle[i] * len(s.names) + s.vehicle[j], s.stamp[i], ttc, twin)
-    i, j, ttc = i[close], j[close], ttc[close]
-    pair = s.vehicle[i] * len(s.names) + s.vehicle[j]
+        close &= ~_seen_twice(pair, s.stamp[i], ttc, twin)
+    i, j, ttc, pair = i[close], j[close], ttc[close], pair[close]
     order = np.lexsort((s.stamp[i], pair))
     i, j, ttc, pair = i[order], j[order], ttc[order], pair[order]
     if len(i) == 0:

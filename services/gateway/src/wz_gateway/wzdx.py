@@ -300,10 +300,8 @@ def detector_lanes(
     (-1) for a point sliding across the road faster than
     :data:`MAX_LATERAL_SPEED_MPS`: a coasting track whose velocity points off the road
     follows no vehicle, and would be counted in each lane it slides through."""
-    heading = site.road_frame.heading_at(np.asarray(station_m, dtype=np.float64))
-    across = -np.asarray(vx_mps, dtype=np.float64) * np.sin(heading) + np.asarray(
-        vy_mps, dtype=np.float64
-    ) * np.cos(heading)
+    velocity = np.stack([np.asarray(vx_mps, np.float64), np.asarray(vy_mps, np.float64)], -1)
+    across = np.einsum("...k,...k->...", velocity, site.road_frame.normal_at(station_m))
     lanes = detector_lane_index(site, offset_m)
     lanes[np.abs(across) > MAX_LATERAL_SPEED_MPS] = -1
     return lanes
