@@ -15,6 +15,7 @@ import pytest
 
 from tests.camera_detector.test_yolo import _fixed_output_model, _hand_made_output
 from wz_camera_detector.cli import main
+from wz_shared.site import DEFAULT_SITE_PATH
 
 
 @pytest.fixture
@@ -43,7 +44,8 @@ def test_images_give_one_line_per_frame_with_boxes_and_world_positions(
     tmp_path: Path, model: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     files = [_image(tmp_path, f"f{i}.jpg") for i in range(3)]
-    assert main(["--model", str(model), "--backend", "yolo", *HAND_ROI, *map(str, files)]) == 0
+    arguments = ["--model", str(model), "--backend", "yolo", "--site", str(DEFAULT_SITE_PATH)]
+    assert main([*arguments, *HAND_ROI, *map(str, files)]) == 0
     lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     assert [line["frame"] for line in lines] == [0, 1, 2]
     assert [line["stamp"] for line in lines] == pytest.approx([0.0, 0.1, 0.2])  # 10 Hz camera

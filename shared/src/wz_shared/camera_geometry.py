@@ -3,8 +3,9 @@
 Pure numpy, no I/O. The simulator renders with it and the camera detector ranges with it, so
 neither service depends on the other for the geometry.
 
-- :class:`PinholeCamera`: intrinsics ``K`` from the horizontal field of view and the resolution
-  (square pixels, principal point at the image centre), extrinsics from the mount's pose,
+- :class:`PinholeCamera`: intrinsics ``K`` from the camera's calibration, else from the
+  horizontal field of view and the resolution (square pixels, principal point at the image
+  centre), extrinsics from the mount's pose,
   projection of site points to pixels, pixel rays, and the flat-road back-projection
   (:func:`backproject_to_ground`). An optional :class:`LensDistortion` (OpenCV's ``k1, k2, p1,
   p2, k3``) is applied in :meth:`PinholeCamera.project` and removed in
@@ -22,7 +23,8 @@ Frames and pixels
 - Continuous pixel coordinates ``(u, v)``: the image spans ``[0, W] x [0, H]``, ``u`` to the
   right and ``v`` down; pixel (row ``i``, column ``j``) covers ``[j, j + 1) x [i, i + 1)`` and its
   centre is ``(j + 0.5, i + 0.5)``. The principal point is the image centre ``(W / 2, H / 2)``,
-  as in the paper's Eq. 1.
+  as in the paper's Eq. 1, unless a calibration gives it (OpenCV's ``cx`` + 0.5: OpenCV puts
+  the top-left pixel's centre at 0, :mod:`wz_shared.camera_calibration`).
 - Depth: the optical z of a point [m] (distance along the optical axis, not the range).
 """
 
@@ -35,6 +37,7 @@ import numpy as np
 import numpy.typing as npt
 
 from wz_shared.arrays import F64
+from wz_shared.camera_calibration import CalibrationError, CameraCalibration, scaled_to
 from wz_shared.sensor_mounts import intrinsics_of
 from wz_shared.site import CameraIntrinsics, SensorMount
 
@@ -157,13 +160,16 @@ class LensDistortion:
 class PinholeCamera:
     """Pinhole camera on a fixed mount, with optional lens distortion.
 
-    Intrinsics, with ``W, H`` the resolution and ``alpha`` the horizontal field of view::
+    Intrinsics: a calibrated camera's own focal lengths ``fx, fy`` and principal point
+    ``cx, cy`` (:class:`~wz_shared.site.CameraIntrinsics` read from its calibration file); else,
+    with ``W, H`` the resolution and ``alpha`` the horizontal field of view, square pixels and
+    the principal point at the image's centre::
 
-        f = (W / 2) / tan(alpha / 2)   [px]       K = [[f, 0, W/2], [0, f, H/2], [0, 0, 1]]
+        f = (W / 2) / tan(alpha / 2)   [px]       K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]
 
     Extrinsics: ``p_camera = R^T (p_site - C)`` with ``C`` the mount position and ``R`` the
-    rotation from the optical frame to the site frame. Pixels: ``u = cx + f x_d``,
-    ``v = cy + f y_d`` with ``(x_d, y_d)`` the distorted normalized coordinates
+    rotation from the optical frame to the site frame. Pixels: ``u = cx + fx x_d``,
+    ``v = cy + fy y_d`` with ``(x_d, y_d)`` the distorted normalized coordinates
     (:class:`LensDistortion`), equal to ``(X / Z, Y / Z)`` without distortion.
 
     Parameters
@@ -171,30 +177,39 @@ class PinholeCamera:
     mount
         A sensor mount with :class:`~wz_shared.site.CameraIntrinsics`.
     distortion
-        Lens distortion; None (the default) is the ideal pinhole. The site file's intrinsics
-        carry no distortion, so a calibrated lens is passed here.
+        Lens distortion; None (the default) takes the intrinsics' calibrated distortion, and
+        without one the ideal pinhole.
     """
 
     def __init__(self, mount: SensorMount, distortion: LensDistortion | None = None) -> None:
         intrinsics = camera_intrinsics(mount)
         self.mount = mount
+        if distortion is None and intrinsics.distortion is not None:
+            distortion = LensDistortion(*intrinsics.distortion)
         #: Lens distortion, None for the ideal pinhole (all-zero coefficients are stored as None,
         #: so that they reproduce the ideal pinhole bit for bit).
         self.distortion = None if distortion == LensDistortion() else distortion
         self.width_px = intrinsics.width_px
         self.height_px = intrinsics.height_px
         half_fov = math.radians(intrinsics.horizontal_fov_deg) / 2.0
-        #: Focal length [px] (square pixels).
-        self.focal_px = (self.width_px / 2.0) / math.tan(half_fov)
-        self.cx_px = self.width_px / 2.0
-        self.cy_px = self.height_px / 2.0
+        square_focal_px = (self.width_px / 2.0) / math.tan(half_fov)
+        #: Horizontal focal length [px] (``fx``).
+        self.focal_px = intrinsics.fx_px if intrinsics.fx_px is not None else square_focal_px
+        #: Vertical focal length [px] (``fy``; equal to ``fx`` for square pixels).
+        self.focal_y_px = intrinsics.fy_px if intrinsics.fy_px is not None else square_focal_px
+        self.cx_px = intrinsics.cx_px if intrinsics.cx_px is not None else self.width_px / 2.0
+        self.cy_px = intrinsics.cy_px if intrinsics.cy_px is not None else self.height_px / 2.0
         #: Intrinsic matrix, shape (3, 3).
         self.K = np.array(
-            [[self.focal_px, 0.0, self.cx_px], [0.0, self.focal_px, self.cy_px], [0.0, 0.0, 1.0]]
+            [
+                [self.focal_px, 0.0, self.cx_px],
+                [0.0, self.focal_y_px, self.cy_px],
+                [0.0, 0.0, 1.0],
+            ]
         )
-        #: Vertical field of view [deg] implied by square pixels (ignoring distortion).
+        #: Vertical field of view [deg] (ignoring distortion and an off-centre principal point).
         self.vertical_fov_deg = math.degrees(
-            2.0 * math.atan(self.height_px / self.width_px * math.tan(half_fov))
+            2.0 * math.atan(self.height_px / 2.0 / self.focal_y_px)
         )
         pose = mount.pose
         #: Camera centre C in the site frame [m], shape (3,).
@@ -227,7 +242,7 @@ class PinholeCamera:
     def project(self, points_site_m: npt.ArrayLike) -> tuple[F64, F64]:
         """Project site points to pixels.
 
-        ``u = cx + f x_d``, ``v = cy + f y_d`` with ``(x_d, y_d)`` the distorted ``(X / Z, Y / Z)``
+        ``u = cx + fx x_d``, ``v = cy + fy y_d`` with ``(x_d, y_d)`` the distorted ``(X / Z, Y / Z)``
         of the optical-frame point ``(X, Y, Z)``.
 
         Parameters
@@ -250,22 +265,22 @@ class PinholeCamera:
         uv = np.empty((camera.shape[0], 2))
         if self.distortion is None:
             uv[:, 0] = self.cx_px + self.focal_px * camera[:, 0] * inv
-            uv[:, 1] = self.cy_px + self.focal_px * camera[:, 1] * inv
+            uv[:, 1] = self.cy_px + self.focal_y_px * camera[:, 1] * inv
         else:
             distorted = self.distortion.distort(camera[:, :2] * inv[:, None])
             uv[:, 0] = self.cx_px + self.focal_px * distorted[:, 0]
-            uv[:, 1] = self.cy_px + self.focal_px * distorted[:, 1]
+            uv[:, 1] = self.cy_px + self.focal_y_px * distorted[:, 1]
         return uv, depth.copy()
 
     def pixel_to_camera_ray(self, uv_px: npt.ArrayLike) -> F64:
         """Optical-frame rays ``(x, y, 1)`` (unit depth) through pixels, shape (N, 3).
 
-        ``(x, y)`` are the undistorted normalized coordinates of ``((u - cx) / f, (v - cy) / f)``.
+        ``(x, y)`` are the undistorted normalized coordinates of ``((u - cx) / fx, (v - cy) / fy)``.
         """
         uv = np.atleast_2d(np.asarray(uv_px, dtype=np.float64))
         rays = np.ones((uv.shape[0], 3))
         rays[:, 0] = (uv[:, 0] - self.cx_px) / self.focal_px
-        rays[:, 1] = (uv[:, 1] - self.cy_px) / self.focal_px
+        rays[:, 1] = (uv[:, 1] - self.cy_px) / self.focal_y_px
         if self.distortion is not None:
             rays[:, :2] = self.distortion.undistort(rays[:, :2])
         return rays
@@ -290,6 +305,51 @@ class PinholeCamera:
     def ground_point(self, uv_px: npt.ArrayLike, ground_z_m: float = 0.0) -> F64:
         """Flat-road back-projection, see :func:`backproject_to_ground`."""
         return backproject_to_ground(self, uv_px, ground_z_m)
+
+
+def camera_at_size(mount: SensorMount, width_px: int, height_px: int) -> PinholeCamera:
+    """The mount's camera for frames of another size: the same picture, scaled.
+
+    A camera that streams a smaller (or larger) picture of its sensor keeps the aspect ratio;
+    the focal lengths and the principal point scale with the size, the field of view and the
+    distortion stay (:func:`~wz_shared.camera_calibration.scaled_to`).
+
+    Raises
+    ------
+    CalibrationError
+        A frame of another aspect ratio (a cropped stream, or another camera): ranging from it
+        with this mount's model would be wrong. It is a ValueError; the message says which
+        sizes and what to do.
+    """
+    intrinsics = camera_intrinsics(mount)
+    if (intrinsics.width_px, intrinsics.height_px) == (width_px, height_px):
+        return PinholeCamera(mount)
+    camera = PinholeCamera(mount)
+    distortion = camera.distortion if camera.distortion is not None else LensDistortion()
+    calibration = CameraCalibration(
+        width_px=camera.width_px,
+        height_px=camera.height_px,
+        fx_px=camera.focal_px,
+        fy_px=camera.focal_y_px,
+        cx_px=camera.cx_px,
+        cy_px=camera.cy_px,
+        distortion=(distortion.k1, distortion.k2, distortion.p1, distortion.p2, distortion.k3),
+    )
+    try:
+        scaled = scaled_to(calibration, width_px, height_px)
+    except CalibrationError as exc:
+        raise CalibrationError(f"camera {mount.sensor_id}: {exc}") from None
+    update: dict[str, object] = {"width_px": width_px, "height_px": height_px}
+    if intrinsics.fx_px is not None:
+        update |= {
+            "fx_px": scaled.fx_px,
+            "fy_px": scaled.fy_px,
+            "cx_px": scaled.cx_px,
+            "cy_px": scaled.cy_px,
+        }
+    return PinholeCamera(
+        mount.model_copy(update={"intrinsics": intrinsics.model_copy(update=update)})
+    )
 
 
 def backproject_to_ground(

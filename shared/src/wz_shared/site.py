@@ -31,12 +31,15 @@ import numpy.typing as npt
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from wz_shared.camera_calibration import CalibrationError, read_calibration
 from wz_shared.geometry import GeoFrame, RoadFrame
 
 MPH_TO_MPS = 0.44704
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 SiteId = Annotated[str, Field(pattern=r"^[a-z0-9][a-z0-9_-]{0,62}$")]
+#: A camera's stated field of view and the one its calibration implies may differ by this [deg].
+CALIBRATED_FOV_TOLERANCE_DEG = 1.0
 # Site attributes computed once and kept in the instance's __dict__ (functools.cached_property).
 _CACHED_FRAMES = ("road_frame", "geo_frame")
 
@@ -157,12 +160,44 @@ class LidarIntrinsics(_Strict):
 
 
 class CameraIntrinsics(_Strict):
-    """A pinhole camera given by its horizontal field of view and resolution."""
+    """A pinhole camera: its resolution and horizontal field of view, or its calibration.
+
+    A simulated (or roughly known) camera is its resolution and field of view: square pixels,
+    the principal point at the image's centre, no distortion. A real camera names its
+    calibration (``calibration_file``: OpenCV or ROS ``camera_info`` YAML, relative to the site
+    file, see :mod:`wz_shared.camera_calibration`); :func:`load_site` reads it into the focal
+    lengths, principal point and distortion below, and the resolution and field of view follow
+    from it.
+    """
 
     kind: Literal["camera"] = "camera"
     width_px: Annotated[int, Field(ge=16, le=8192)] = 1200
     height_px: Annotated[int, Field(ge=16, le=8192)] = 1200
     horizontal_fov_deg: Annotated[float, Field(gt=1.0, lt=179.0)] = 90.0
+    #: The calibration file this camera was read from (relative to the site file), if any.
+    calibration_file: str | None = None
+    #: Focal lengths [px] and principal point [px, continuous: the top-left pixel's centre is
+    #: (0.5, 0.5)] at ``width_px x height_px``; all four or none (None: from the field of view).
+    fx_px: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] | None = None
+    fy_px: Annotated[float, Field(gt=0.0, allow_inf_nan=False)] | None = None
+    cx_px: FiniteFloat | None = None
+    cy_px: FiniteFloat | None = None
+    #: Lens distortion ``(k1, k2, p1, p2, k3)``, OpenCV's convention; None: an ideal pinhole.
+    distortion: tuple[FiniteFloat, FiniteFloat, FiniteFloat, FiniteFloat, FiniteFloat] | None = None
+
+    @model_validator(mode="after")
+    def _calibrated_all_or_none(self) -> Self:
+        given = [v is not None for v in (self.fx_px, self.fy_px, self.cx_px, self.cy_px)]
+        if any(given) and not all(given):
+            raise ValueError("camera intrinsics: give fx_px, fy_px, cx_px and cy_px together")
+        if self.fx_px is not None:
+            fov_deg = math.degrees(2.0 * math.atan(self.width_px / (2.0 * self.fx_px)))
+            if abs(fov_deg - self.horizontal_fov_deg) > CALIBRATED_FOV_TOLERANCE_DEG:
+                raise ValueError(
+                    f"camera intrinsics: horizontal_fov_deg {self.horizontal_fov_deg} does not "
+                    f"match fx_px {self.fx_px} at {self.width_px} px ({fov_deg:.2f} deg)"
+                )
+        return self
 
 
 class RadarIntrinsics(_Strict):
@@ -606,9 +641,56 @@ def load_site(path: str | Path) -> Site:
     if not isinstance(raw, dict):
         raise SiteFileError(f"site file {path} must hold a mapping at the top level")
     try:
+        _read_camera_calibrations(raw, path.parent)
+    except CalibrationError as exc:
+        raise SiteFileError(f"site file {path}: {exc}") from exc
+    try:
         return Site.model_validate(raw)
     except ValueError as exc:
         raise SiteFileError(f"site file {path} is not a valid site description:\n{exc}") from exc
+
+
+def _read_camera_calibrations(raw: dict[str, Any], folder: Path) -> None:
+    """Fill in each camera's ``calibration_file`` (relative to ``folder``) in the raw site.
+
+    The calibration gives the resolution, focal lengths, principal point and distortion; a
+    resolution or field of view also written in the site file must agree with it.
+    """
+    sensors = raw.get("sensors")
+    for sensor in sensors if isinstance(sensors, list) else []:
+        intrinsics = sensor.get("intrinsics") if isinstance(sensor, dict) else None
+        if not isinstance(intrinsics, dict) or not intrinsics.get("calibration_file"):
+            continue
+        name = sensor.get("sensor_id", "?")
+        calibration = read_calibration(folder / str(intrinsics["calibration_file"]))
+        for key, value in (
+            ("width_px", calibration.width_px),
+            ("height_px", calibration.height_px),
+        ):
+            if key in intrinsics and intrinsics[key] != value:
+                raise CalibrationError(
+                    f"camera {name}: {key} {intrinsics[key]} but its calibration says {value}"
+                )
+        fov_deg = calibration.horizontal_fov_deg
+        if (
+            "horizontal_fov_deg" in intrinsics
+            and abs(float(intrinsics["horizontal_fov_deg"]) - fov_deg)
+            > CALIBRATED_FOV_TOLERANCE_DEG
+        ):
+            raise CalibrationError(
+                f"camera {name}: horizontal_fov_deg {intrinsics['horizontal_fov_deg']} but its "
+                f"calibration gives {fov_deg:.2f}"
+            )
+        intrinsics.update(
+            width_px=calibration.width_px,
+            height_px=calibration.height_px,
+            horizontal_fov_deg=fov_deg,
+            fx_px=calibration.fx_px,
+            fy_px=calibration.fy_px,
+            cx_px=calibration.cx_px,
+            cy_px=calibration.cy_px,
+            distortion=list(calibration.distortion),
+        )
 
 
 DEFAULT_SITE_PATH = Path(__file__).resolve().parents[3] / "deploy" / "sites" / "us75-lincoln.yaml"

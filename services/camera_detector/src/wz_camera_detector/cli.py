@@ -4,7 +4,15 @@ Usage (``python -m wz_camera_detector.cli``, or ``wz detect-camera``)::
 
     wz detect-camera FILE... [--model M.onnx] [--backend yolo|background-subtraction]
                      [--site SITE.yaml] [--camera ID] [--conf 0.25] [--roi x0,y0,x1,y1]
-                     [--no-track]
+                     [--tiles x0,y0,x1,y1;...] [--no-track] [--rate HZ]
+
+Any camera, any resolution. Without ``--site`` (nor ``WZ_SITE_FILE``) it knows nothing of the
+camera: it finds vehicles' boxes on the whole frame (or ``--roi``) and gives no road
+positions. With ``--site``, the site's camera (``--camera``) must have taken the frames: its
+pose and intrinsics (its calibration file, :mod:`wz_shared.camera_calibration`) range each
+box, and the road's geometry gives where the detector looks; frames of another size but the
+same aspect ratio are the same picture scaled; a frame of another aspect ratio is an error
+line naming both sizes.
 
 Images (``.jpg``, ``.jpeg``, ``.png``, ``.bmp``) are taken in the order given as one sequence;
 a video file (anything OpenCV's FFmpeg backend opens: ``.mp4``, ``.avi``, ``.mkv`` ...) gives
@@ -16,7 +24,7 @@ its frames in order. Each frame gives one line on stdout::
                      "paper_x": 4.01, "paper_y": 904.7}, ...],
      "timings_ms": {"detect": 21.3}}
 
-``box`` is in pixels of the frame (edges, continuous). ``x, y`` [m, site frame] is the vehicle
+``box`` is in pixels of the frame (edges, continuous). With ``--site``: ``x, y`` [m, site frame] is the vehicle
 centre from the calibrated pinhole model of ``--camera`` in ``--site``: the class's typical
 outline (a body on wheels), on the road's heading, fitted to the box
 (:func:`wz_camera_detector.world.fit_box_to_ground`); ``paper_x, paper_y`` is the paper's
@@ -25,7 +33,7 @@ Eq. 1-2 ground point of the box's bottom centre;
 Positions are null for a box reaching above the horizon, and for a box cut by the edge of the
 detector's view (``"cut": true``: its bottom is not its ground contact), as in the node. ``stamp`` is the video's frame time
 [s] (``CAP_PROP_POS_MSEC``), for images the position in the sequence divided by the camera's
-rate. ``track_id`` is the image tracker's id (``--no-track``: null, each frame on its own).
+rate (``--rate`` without a site). ``track_id`` is the image tracker's id (``--no-track``: null, each frame on its own).
 
 A file that cannot be read gives ``{"file": ..., "error": "..."}`` (a video that breaks off
 gives that after the frames it had); the other files are still processed and the exit code is
@@ -56,19 +64,21 @@ from wz_camera_detector.node import (
     make_backend,
     road_heading_at,
 )
-from wz_camera_detector.regions import camera_at_size
 from wz_camera_detector.settings import CameraDetectorSettings, camera_mount
 from wz_camera_detector.tracker import ImageTracker
 from wz_camera_detector.world import box_to_ground, fit_box_to_ground, paper_box_to_ground
 from wz_camera_detector.yolo import ImageDetection, ModelLoadError
 from wz_shared.arrays import U8
-from wz_shared.camera_geometry import PinholeCamera, camera_intrinsics
+from wz_shared.camera_calibration import CalibrationError
+from wz_shared.camera_geometry import PinholeCamera, camera_at_size
 from wz_shared.logs import configure_logging
 from wz_shared.site import SensorMount, Site, SiteFileError, load_site
 
 log = logging.getLogger("wz_camera_detector.cli")
 
 IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".bmp"}
+#: Frame rate of an image sequence without a site's camera [Hz].
+DEFAULT_RATE_HZ = 10.0
 
 
 class InputError(Exception):
@@ -97,7 +107,23 @@ def build_parser() -> argparse.ArgumentParser:
         help="far-field tiles x0,y0,x1,y1;... [px], '' for none (default: from the road)",
     )
     parser.add_argument("--no-track", action="store_true", help="no tracking across frames")
+    parser.add_argument(
+        "--rate",
+        type=_positive_rate,
+        default=DEFAULT_RATE_HZ,
+        help="frame rate of image sequences without --site [Hz] (default %(default)s)",
+    )
     return parser
+
+
+def _positive_rate(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and 0.0 < value <= 1000.0):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a frame rate in (0, 1000] Hz")
+    return value
 
 
 def _settings(args: argparse.Namespace) -> CameraDetectorSettings:
@@ -172,8 +198,8 @@ class FrameProcessor:
 
     def __init__(
         self,
-        site: Site,
-        mount: SensorMount,
+        site: Site | None,
+        mount: SensorMount | None,
         backend: ImageBackend,
         settings: CameraDetectorSettings,
         track: bool,
@@ -184,7 +210,16 @@ class FrameProcessor:
         self.tracker = ImageTracker(settings.tracker) if track else None
         self._cameras: dict[tuple[int, int], PinholeCamera] = {}
 
-    def camera(self, width_px: int, height_px: int) -> PinholeCamera:
+    def camera(self, width_px: int, height_px: int) -> PinholeCamera | None:
+        """The camera's model at this frame size; None without a site (boxes only).
+
+        Raises
+        ------
+        CalibrationError
+            The frame is not the site camera's picture (another aspect ratio).
+        """
+        if self.mount is None:
+            return None
         camera = self._cameras.get((width_px, height_px))
         if camera is None:
             camera = self._cameras[(width_px, height_px)] = camera_at_size(
@@ -199,6 +234,7 @@ class FrameProcessor:
         detect_s = time.perf_counter() - started
         found = [d for d in found if d.class_name in CLASS_SHAPES]
         height, width = image.shape[:2]
+        camera = self.camera(width, height)
         rows: list[tuple[ImageDetection, int | None]]
         if self.tracker is not None:
             tracks = self.tracker.update(found, stamp_s)
@@ -207,14 +243,11 @@ class FrameProcessor:
             ]
         else:
             rows = [(d, None) for d in found]
-        camera = self.camera(width, height)
-        mount = camera.mount
-        return [self._record(camera, mount, d, track_id) for d, track_id in rows], detect_s
+        return [self._record(camera, d, track_id) for d, track_id in rows], detect_s
 
     def _record(
         self,
-        camera: PinholeCamera,
-        mount: SensorMount,
+        camera: PinholeCamera | None,
         detection: ImageDetection,
         track_id: int | None,
     ) -> dict[str, Any]:
@@ -225,11 +258,13 @@ class FrameProcessor:
             "score": round(detection.score, 4),
             "track_id": track_id,
         }
-        contact = box_to_ground(camera, detection.box_xyxy_px, 0.0, 0.0, 0.0)
         keys = ("x", "y", "station", "offset", "range", "paper_x", "paper_y")
-        intrinsics = camera_intrinsics(camera.mount)
+        if camera is None or self.site is None:
+            return record | {"cut": None} | dict.fromkeys(keys)
+        contact = box_to_ground(camera, detection.box_xyxy_px, 0.0, 0.0, 0.0)
+        mount = camera.mount
         record["cut"] = cut_by_view(
-            detection.box_xyxy_px, self.backend, intrinsics.width_px, intrinsics.height_px
+            detection.box_xyxy_px, self.backend, camera.width_px, camera.height_px
         )
         if record["cut"] or not all(math.isfinite(v) for v in contact):
             return record | dict.fromkeys(keys)
@@ -274,7 +309,7 @@ def run(files: Sequence[Path], processor: FrameProcessor, rate_hz: float) -> int
                 sys.stdout.flush()
                 if is_image:
                     image_index += 1
-        except (InputError, ValueError, cv2.error) as exc:
+        except (InputError, CalibrationError, ValueError, cv2.error) as exc:
             status = 1
             sys.stdout.write(json.dumps({"file": str(path), "error": str(exc)}) + "\n")
             log.warning("%s", exc)
@@ -285,14 +320,26 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         settings = _settings(args)
-        site = load_site(settings.site_file)
-        mount = camera_mount(site, settings.camera_id)
-        configure_logging(service="detect-camera", site=site.site_id, level=settings.log_level)
+        site: Site | None = None
+        mount: SensorMount | None = None
+        if "site_file" in settings.model_fields_set:
+            site = load_site(settings.site_file)
+            mount = camera_mount(site, settings.camera_id)
+        configure_logging(
+            service="detect-camera",
+            site=site.site_id if site is not None else "-",
+            level=settings.log_level,
+        )
+        if site is None:
+            log.info(
+                "no --site: boxes only, on the whole frame (give --site SITE.yaml for road "
+                "positions and the road's region of interest)"
+            )
         backend = make_backend(settings, site, mount)
     except (ValidationError, SiteFileError, ModelLoadError, ValueError) as exc:
         sys.stderr.write(f"wz detect-camera: {exc}\n")
         return 2
-    rate_hz = mount.rate_hz
+    rate_hz = mount.rate_hz if mount is not None else args.rate
     processor = FrameProcessor(site, mount, backend, settings, track=not args.no_track)
     return run(args.files, processor, rate_hz)
 

@@ -36,8 +36,10 @@ under ``<raw camera key>|<reason>`` (the bus's own decode reasons such as ``bad_
 ``bad_jpeg`` come first):
 
 - ``bad_image``: the JPEG does not decode (the frame is skipped);
-- ``wrong_size``: the image is not the size its metadata says, or does not contain the
-  detector's region of interest (skipped);
+- ``wrong_size``: the image is not the size its metadata says, is not the camera's picture
+  (another aspect ratio than its calibration: a frame of the same aspect, scaled, is ranged
+  with the intrinsics scaled), or does not contain a region of interest set in the settings
+  (skipped);
 - ``wrong_sensor``: the metadata names another camera or site;
 - ``out_of_order``: the stamp is not after the previous frame's (skipped). When the stamps
   go back for good (:class:`~wz_shared.timebase.RunWatch`: a restarted simulation counts from
@@ -73,13 +75,20 @@ from wz_camera_detector.association import (
     to_detection,
 )
 from wz_camera_detector.background import BACKEND, BackgroundSubtractionDetector
-from wz_camera_detector.regions import camera_at_size, detector_regions
+from wz_camera_detector.regions import detector_regions
 from wz_camera_detector.settings import CameraDetectorSettings, camera_mount, radar_mount
 from wz_camera_detector.tracker import ImageTrack, ImageTracker
 from wz_camera_detector.world import VehicleShape, box_to_ground, fit_box_to_ground
-from wz_camera_detector.yolo import ImageDetection, ModelLoadError, YoloOnnxDetector
+from wz_camera_detector.yolo import (
+    Box,
+    ImageDetection,
+    ModelLoadError,
+    RegionsForSize,
+    YoloOnnxDetector,
+)
 from wz_shared.arrays import F64, U8
-from wz_shared.camera_geometry import PinholeCamera
+from wz_shared.camera_calibration import CalibrationError
+from wz_shared.camera_geometry import PinholeCamera, camera_at_size, camera_intrinsics
 from wz_shared.codec import Frame
 from wz_shared.messages import (
     CameraFrameMeta,
@@ -160,18 +169,43 @@ def make_backend(
         tiles_xyxy_px=settings.tiles_xyxy_px,
     )
     if site is not None and camera is not None:
-        regions = detector_regions(site, camera, max(detector.input_size))
-        detector.set_regions(
-            settings.roi_xyxy_px if settings.roi_xyxy_px is not None else regions.roi_xyxy_px,
-            settings.tiles_xyxy_px if settings.tiles_xyxy_px is not None else regions.tiles_xyxy_px,
+        intrinsics = camera_intrinsics(camera)
+        detector.follow_frame_size(
+            _geometry_regions(settings, site, camera, detector),
+            (intrinsics.width_px, intrinsics.height_px),
+        )
+    return detector
+
+
+def _geometry_regions(
+    settings: CameraDetectorSettings,
+    site: Site,
+    camera: SensorMount,
+    detector: YoloOnnxDetector,
+) -> RegionsForSize:
+    """Where YOLO looks in frames of each size: the settings' ROI and tiles where given, the
+    road's geometry (:func:`~wz_camera_detector.regions.detector_regions`) otherwise."""
+
+    def regions_for(width_px: int, height_px: int) -> tuple[Box | None, tuple[Box, ...]]:
+        regions = detector_regions(
+            site, camera, max(detector.input_size), width_px=width_px, height_px=height_px
+        )
+        roi = settings.roi_xyxy_px if settings.roi_xyxy_px is not None else regions.roi_xyxy_px
+        tiles = (
+            settings.tiles_xyxy_px if settings.tiles_xyxy_px is not None else regions.tiles_xyxy_px
         )
         log.info(
-            "camera %s: detector ROI %s, far-field tiles %s (from %s)",
+            "camera %s, %dx%d frames: detector ROI %s, far-field tiles %s (from %s)",
             camera.sensor_id,
-            detector.roi_xyxy_px,
-            list(detector.tiles_xyxy_px),
+            width_px,
+            height_px,
+            roi,
+            list(tiles),
             "the settings" if settings.roi_xyxy_px is not None else "the road's geometry",
         )
+        return roi, tiles
+
+    return regions_for
     return detector
 
 
@@ -224,8 +258,9 @@ class CameraDetector:
     site
         The site (its id, and its road for headings).
     camera
-        The camera's mount; frames of another size than its intrinsics are ranged with the same
-        field of view at their own size.
+        The camera's mount; frames of another size than its intrinsics (the same picture,
+        scaled) are ranged with its intrinsics scaled to their size; frames of another aspect
+        ratio are refused (``wrong_size``).
     radar
         The radar's mount, None for camera-only detections.
     settings
@@ -282,7 +317,8 @@ class CameraDetector:
             self._scan = scan
 
     def camera(self, width_px: int, height_px: int) -> PinholeCamera:
-        """The pinhole model at a frame's size (same pose and field of view as the mount)."""
+        """The pinhole model at a frame's size (the mount's, scaled; CalibrationError for
+        another aspect ratio)."""
         camera = self._cameras.get((width_px, height_px))
         if camera is None:
             camera = self._cameras[(width_px, height_px)] = camera_at_size(
@@ -321,14 +357,24 @@ class CameraDetector:
             self.report("bad_image", f"frame {meta.frame_index}: the JPEG does not decode")
             return None
         height, width = image.shape[:2]
-        roi = getattr(self.backend, "roi_xyxy_px", None)
-        if (width, height) != (meta.width_px, meta.height_px) or (
-            roi is not None and (roi[2] > width or roi[3] > height)
-        ):
+        if (width, height) != (meta.width_px, meta.height_px):
             self.report(
                 "wrong_size",
                 f"frame {meta.frame_index}: image {width}x{height}, metadata "
-                f"{meta.width_px}x{meta.height_px}, detector ROI {roi}",
+                f"{meta.width_px}x{meta.height_px}",
+            )
+            return None
+        try:
+            self.camera(width, height)
+        except CalibrationError as exc:  # another aspect ratio: not this camera's picture
+            self.report("wrong_size", f"frame {meta.frame_index}: {exc}")
+            return None
+        roi = self.settings.roi_xyxy_px
+        if roi is not None and (roi[2] > width or roi[3] > height):
+            self.report(
+                "wrong_size",
+                f"frame {meta.frame_index}: image {width}x{height} does not contain the ROI "
+                f"{roi} of the settings",
             )
             return None
         new_run = self._run.observe(meta.stamp) == "new_run"

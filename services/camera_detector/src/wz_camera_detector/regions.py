@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wz_shared.arrays import F64
-from wz_shared.camera_geometry import PinholeCamera, camera_intrinsics
+from wz_shared.camera_geometry import PinholeCamera, camera_at_size, camera_intrinsics
 from wz_shared.site import SensorMount, Site
 
 Box = tuple[int, int, int, int]
@@ -54,20 +54,6 @@ class DetectorRegions:
     #: Range [m] beyond which a car is smaller than ``min_car_px`` in the letterboxed ROI (the
     #: tile's near end), None without a tile.
     tile_from_m: float | None = None
-
-
-def camera_at_size(mount: SensorMount, width_px: int, height_px: int) -> PinholeCamera:
-    """The mount's pinhole model for frames of another size (same pose and field of view)."""
-    intrinsics = camera_intrinsics(mount)
-    if (intrinsics.width_px, intrinsics.height_px) != (width_px, height_px):
-        mount = mount.model_copy(
-            update={
-                "intrinsics": intrinsics.model_copy(
-                    update={"width_px": width_px, "height_px": height_px}
-                )
-            }
-        )
-    return PinholeCamera(mount)
 
 
 def _road_points(site: Site, camera: PinholeCamera, max_range_m: float) -> tuple[F64, F64]:
@@ -151,7 +137,8 @@ def detector_regions(
     input_size_px
         The model's (square) input side [px]: the ROI and each tile are letterboxed to it.
     width_px, height_px
-        The frames' size when it differs from the site file's (same field of view).
+        The frames' size when it differs from the site file's: the same picture, scaled
+        (:func:`~wz_shared.camera_geometry.camera_at_size`; another aspect ratio is refused).
     max_range_m
         Road farther than this from the camera (on the ground) is not looked at [m].
     min_car_px

@@ -28,7 +28,7 @@ from __future__ import annotations
 import ast
 import logging
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -48,6 +48,10 @@ PAD_GRAY = 114
 _BOX_ROWS = 4  # cx, cy, w, h
 
 logger = logging.getLogger(__name__)
+
+Box = tuple[int, int, int, int]
+#: ``(width, height) -> (ROI or None, far-field tiles)`` [px] for frames of that size.
+RegionsForSize = Callable[[int, int], tuple[Box | None, Sequence[Box]]]
 
 
 class ModelLoadError(RuntimeError):
@@ -393,6 +397,8 @@ class YoloOnnxDetector:
             tiles_xyxy_px if tiles_xyxy_px is not None else self._metadata_tiles(),
         )
         self.input_size = self._check_input(input_size)
+        self._regions_for: RegionsForSize | None = None
+        self._regions_size: tuple[int, int] | None = None
         self._check_output()
         logger.info(
             "loaded YOLO model %s: input %dx%d, %d classes",
@@ -423,6 +429,24 @@ class YoloOnnxDetector:
                 raise ValueError(f"ROI {roi_xyxy_px} is empty or negative")
         self.roi_xyxy_px = roi_xyxy_px
         self.tiles_xyxy_px = tuple(tiles_xyxy_px)
+
+    def follow_frame_size(self, regions_for: RegionsForSize, size: tuple[int, int]) -> None:
+        """Look where ``regions_for(width, height)`` says, for each frame size met.
+
+        A camera may stream another size than its site file says (a scaled picture): the
+        regions are computed again, once per size, at the first frame of that size. ``size``
+        ``(width, height)`` [px]: the frames expected, whose regions are set now.
+        """
+        self._regions_for = regions_for
+        self._regions_size = None
+        self._fit_regions(*size)
+
+    def _fit_regions(self, width_px: int, height_px: int) -> None:
+        if self._regions_for is None or self._regions_size == (width_px, height_px):
+            return
+        roi, tiles = self._regions_for(width_px, height_px)
+        self.set_regions(roi, tiles)
+        self._regions_size = (width_px, height_px)
 
     def _metadata_class_names(self) -> tuple[str, ...]:
         text = self.metadata.get("wz_class_names")
@@ -594,6 +618,8 @@ class YoloOnnxDetector:
         ValueError
             The frame is not an (H, W, 3) image or does not contain the ROI.
         """
+        if image_bgr.ndim == 3:
+            self._fit_regions(image_bgr.shape[1], image_bgr.shape[0])
         region, origin = self.crop(image_bgr)  # checks the frame's shape
         height, width = image_bgr.shape[:2]
         for tile in self.tiles_xyxy_px:

@@ -140,7 +140,9 @@ class CameraModel:
         noise_std: float | None = None,
         near_m: float = 0.05,
     ) -> None:
-        self.camera = PinholeCamera(mount)
+        # The renderer draws an ideal pinhole (a calibrated camera's focal lengths and principal
+        # point, not its lens distortion): truth boxes and pixels agree with each other.
+        self.camera = PinholeCamera(mount, LensDistortion())
         self.weather = weather if weather is not None else Weather()
         self.blur_sigma_px = blur_sigma_px
         self.motion_blur_px = motion_blur_px

@@ -72,7 +72,7 @@ class Projector:
         self.camera = camera
         cam = camera
         width, height = cam.width_px, cam.height_px
-        f, cx, cy = cam.focal_px, cam.cx_px, cam.cy_px
+        f, fy, cx, cy = cam.focal_px, cam.focal_y_px, cam.cx_px, cam.cy_px
         # Clip planes in the optical frame (a . p + d >= 0): near plane, then a guard band of
         # one image size around the image so fixed-point vertices stay small.
         u_min, u_max, v_min, v_max = -width, 2.0 * width, -height, 2.0 * height
@@ -81,13 +81,13 @@ class Projector:
                 [0.0, 0.0, 1.0, -near_m],
                 [f, 0.0, cx - u_min, 0.0],
                 [-f, 0.0, u_max - cx, 0.0],
-                [0.0, f, cy - v_min, 0.0],
-                [0.0, -f, v_max - cy, 0.0],
+                [0.0, fy, cy - v_min, 0.0],
+                [0.0, -fy, v_max - cy, 0.0],
             ]
         )
         # Per-pixel rays (unit optical depth) at pixel centres.
         self.ray_x = ((np.arange(width) + 0.5 - cx) / f).astype(np.float32)
-        self.ray_y = ((np.arange(height) + 0.5 - cy) / f).astype(np.float32)
+        self.ray_y = ((np.arange(height) + 0.5 - cy) / fy).astype(np.float32)
 
     def project_quads(self, quads_site: F64, drawable: Bool) -> Projected:
         """Clip (in 3D, where needed) and project quads (Q, 4, 3) to fixed-point polygons."""
@@ -101,7 +101,7 @@ class Projector:
         clean = (plane_dist >= 0.0).all(axis=(1, 2))
         safe_z = np.where(clean[:, None], z, 1.0)
         u = cam.cx_px + cam.focal_px * camera[..., 0] / safe_z
-        v = cam.cy_px + cam.focal_px * camera[..., 1] / safe_z
+        v = cam.cy_px + cam.focal_y_px * camera[..., 1] / safe_z
         # Whole quads off one side of the image show nothing.
         offscreen = (
             (u.max(axis=1) < 0)
@@ -128,7 +128,7 @@ class Projector:
             if clipped.shape[0] < 3:
                 continue
             uq = cam.cx_px + cam.focal_px * clipped[:, 0] / clipped[:, 2]
-            vq = cam.cy_px + cam.focal_px * clipped[:, 1] / clipped[:, 2]
+            vq = cam.cy_px + cam.focal_y_px * clipped[:, 1] / clipped[:, 2]
             if uq.max() < 0 or uq.min() > width or vq.max() < 0 or vq.min() > height:
                 continue
             pts = np.empty((uq.size, 2), dtype=np.int32)
@@ -185,7 +185,7 @@ class Projector:
         if clipped.shape[0] < 3:
             return None
         u = cam.cx_px + cam.focal_px * clipped[:, 0] / clipped[:, 2]
-        v = cam.cy_px + cam.focal_px * clipped[:, 1] / clipped[:, 2]
+        v = cam.cy_px + cam.focal_y_px * clipped[:, 1] / clipped[:, 2]
         x0, x1 = max(0, math.floor(u.min() - 0.5)), min(cam.width_px, math.ceil(u.max() + 0.5))
         y0, y1 = max(0, math.floor(v.min() - 0.5)), min(cam.height_px, math.ceil(v.max() + 0.5))
         if x1 <= x0 or y1 <= y0:
