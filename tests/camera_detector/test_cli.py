@@ -141,3 +141,37 @@ def test_a_bad_roi_or_tile_is_a_start_up_error(
     image = _image(tmp_path, "f.jpg")
     assert main(["--model", str(model), *arguments, str(image)]) == 2
     assert "expected x0,y0,x1,y1" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("width", "height"), [(320, 240), (1280, 720), (1920, 1080)])
+def test_any_resolution_runs_without_options(
+    tmp_path: Path, width: int, height: int, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """No site, no model, no ROI: the shipped COCO model on the whole frame of any camera."""
+    video = tmp_path / f"clip-{width}x{height}.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (width, height))
+    assert writer.isOpened()
+    rng = np.random.default_rng(width)
+    for _ in range(3):
+        writer.write(rng.integers(90, 110, size=(height, width, 3), dtype=np.uint8))
+    writer.release()
+    assert main([str(video)]) == 0
+    captured = capsys.readouterr()
+    lines = [json.loads(line) for line in captured.out.splitlines()]
+    assert [line["frame"] for line in lines] == [0, 1, 2]
+    assert all((line["width"], line["height"]) == (width, height) for line in lines)
+    assert all(line["detections"] == [] for line in lines)  # noise is not a vehicle
+    assert "coco-nanodet-g-416-int8.onnx" in captured.err and "no --site" in captured.err
+
+
+def test_a_frame_the_site_camera_cannot_have_taken_is_an_error_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    image = tmp_path / "wide.jpg"
+    cv2.imwrite(str(image), np.zeros((240, 320, 3), np.uint8))  # the site's camera is square
+    half = tmp_path / "half.jpg"
+    cv2.imwrite(str(half), np.zeros((600, 600, 3), np.uint8))  # the same picture, scaled
+    assert main(["--site", str(DEFAULT_SITE_PATH), str(image), str(half)]) == 1
+    lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert "320x240 frame does not fit the calibration made at 1200x1200" in lines[0]["error"]
+    assert lines[1]["width"] == 600 and "error" not in lines[1]

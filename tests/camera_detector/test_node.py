@@ -9,13 +9,19 @@ import math
 import time
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
-from pydantic import ValidationError
 
 from wz_camera_detector.background import BackgroundSubtractionSettings
 from wz_camera_detector.node import CameraDetector, build_detector
-from wz_camera_detector.settings import CameraDetectorSettings, camera_mount, radar_mount
+from wz_camera_detector.settings import (
+    DEFAULT_MODEL_PATH,
+    SIMULATION_MODEL_PATH,
+    CameraDetectorSettings,
+    camera_mount,
+    radar_mount,
+)
 from wz_camera_detector.yolo import ModelLoadError
 from wz_shared.messages import (
     CameraFrameMeta,
@@ -239,9 +245,32 @@ def test_a_garbage_jpeg_is_counted_and_skipped(
     assert len(reports) == 1
 
 
-def test_yolo_without_a_model_path_is_refused_by_the_settings() -> None:
-    with pytest.raises(ValidationError, match="WZ_CAMERA_MODEL_PATH"):
-        CameraDetectorSettings(backend="yolo", model_path=None)
+def test_without_a_model_path_the_node_takes_the_shipped_model_for_the_frames_source() -> None:
+    mount = camera_mount(SITE, None)
+    width, height = mount.intrinsics.width_px, mount.intrinsics.height_px  # type: ignore[union-attr]
+    detector = CameraDetector(SITE, mount, None, CameraDetectorSettings(), report=lambda r, d: None)
+    assert detector.backend.model_path == DEFAULT_MODEL_PATH  # type: ignore[attr-defined]
+    ok, jpeg = cv2.imencode(".jpg", np.full((height, width, 3), 90, dtype=np.uint8))
+    assert ok
+    for index, (rendered, model) in enumerate(
+        [(True, SIMULATION_MODEL_PATH), (True, SIMULATION_MODEL_PATH), (False, DEFAULT_MODEL_PATH)]
+    ):
+        meta = CameraFrameMeta(
+            site=SITE.site_id,
+            source_id=mount.sensor_id,
+            stamp=0.1 * (index + 1),
+            frame_index=index,
+            width_px=width,
+            height_px=height,
+            rendered=rendered,
+        )
+        detector.handle(meta, jpeg.tobytes(), time.monotonic())
+        assert detector.backend.model_path == model  # type: ignore[attr-defined]
+    # A model named in the settings is kept whatever the frames are.
+    named = CameraDetectorSettings(model_path=SIMULATION_MODEL_PATH)
+    detector = CameraDetector(SITE, mount, None, named, report=lambda r, d: None)
+    detector.handle(meta, jpeg.tobytes(), time.monotonic())
+    assert detector.backend.model_path == SIMULATION_MODEL_PATH  # type: ignore[attr-defined]
 
 
 def test_yolo_with_a_missing_model_fails_at_start_up(tmp_path: Path) -> None:

@@ -37,9 +37,15 @@ import cv2
 import numpy as np
 
 from wz_camera_detector.node import CameraDetector
-from wz_camera_detector.settings import CameraDetectorSettings, camera_mount, radar_mount
+from wz_camera_detector.settings import (
+    SIMULATION_MODEL_PATH,
+    CameraDetectorSettings,
+    camera_mount,
+    radar_mount,
+)
 from wz_camera_detector.world import paper_box_to_ground
 from wz_camera_detector.yolo import box_iou
+from wz_eval import camera_video
 from wz_shared.logs import configure_logging
 from wz_shared.messages import VehicleTruth
 from wz_shared.site import Site, load_site
@@ -50,6 +56,8 @@ from wz_simulator.settings import SimulatorSettings
 from wz_simulator.traffic.world import TrafficWorld
 
 log = logging.getLogger("wz_eval.camera")
+
+DEFAULT_OUT = Path("runs/camera-eval")
 
 METHODS = ("paper_eq12", "calibrated", "camera_radar")
 RANGE_BINS_M: tuple[tuple[float, float], ...] = (
@@ -142,7 +150,7 @@ def evaluate(site: Site, options: CameraEvalOptions) -> dict[str, object]:
     def report(reason: str, detail: str) -> None:
         problems[reason] += 1
 
-    detector = CameraDetector(site, camera, radar, settings, report)
+    detector = CameraDetector(site, camera, radar, settings, report, rendered=True)
     sim_kwargs: dict[str, object] = {
         "seed": options.seed,
         "realtime_factor": 0.0,
@@ -232,7 +240,7 @@ def evaluate(site: Site, options: CameraEvalOptions) -> dict[str, object]:
         "site": site.site_id,
         "camera": camera.sensor_id,
         "radar": radar.sensor_id,
-        "model": str(settings.model_path),
+        "model": str(settings.model_path or SIMULATION_MODEL_PATH),
         "seed": options.seed,
         "weather": options.weather,
         "duration_s": options.duration_s,
@@ -284,21 +292,24 @@ def markdown(report: dict[str, object]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="wz eval-camera", description=__doc__.split("\n")[0])
-    parser.add_argument("--site", type=Path, default=SimulatorSettings().site_file)
-    parser.add_argument(
-        "--model",
-        type=Path,
-        default=None,
-        help="YOLOv8 .onnx (default: the camera detector's setting)",
+    parser = argparse.ArgumentParser(
+        prog="wz eval-camera",
+        description=__doc__.split("\n")[0]
+        + "; with --video and --truth: the detector on real video (wz_eval.camera_video).",
     )
+    parser.add_argument("--site", type=Path, default=SimulatorSettings().site_file)
+    camera_video.add_arguments(parser)
     parser.add_argument("--seed", type=int, default=7)
     parser.add_argument("--duration-s", type=float, default=120.0)
     parser.add_argument("--warmup-s", type=float, default=60.0)
     parser.add_argument("--weather", default="day", choices=sorted(WEATHER_PRESETS))
     parser.add_argument("--vehicles-per-hour", type=float, default=1400.0)
-    parser.add_argument("--out", type=Path, default=Path("runs/camera-eval"))
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
     args = parser.parse_args(argv)
+    if args.video is not None:
+        if args.out == DEFAULT_OUT:
+            args.out = Path("runs/camera-video-eval")
+        return camera_video.run(args)
     site = load_site(args.site)
     configure_logging(service="eval-camera", site=site.site_id)
     options = CameraEvalOptions(

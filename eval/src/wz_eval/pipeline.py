@@ -113,7 +113,7 @@ def run_pipeline(
     if options.camera_model is not None:
         camera_kwargs["model_path"] = options.camera_model
     camera_settings = CameraDetectorSettings.model_validate(camera_kwargs)
-    camera_detector = CameraDetector(site, camera, radar, camera_settings, report)
+    camera_detector = CameraDetector(site, camera, radar, camera_settings, report, rendered=True)
     association = AssociationSettings()
     sensor_ids = [lidar.sensor_id, camera.sensor_id] + ([radar.sensor_id] if radar else [])
     rig = SensorRig(site, WEATHER_PRESETS[options.weather], options.seed, sensor_ids=sensor_ids)

@@ -228,6 +228,8 @@ class CameraFrameMeta(Message):
     width_px: Annotated[int, Field(ge=1, le=16384)]
     height_px: Annotated[int, Field(ge=1, le=16384)]
     encoding: Literal["jpeg"] = "jpeg"
+    #: Drawn by the simulator, not taken by a camera (the detector picks its model by it).
+    rendered: bool = False
 
 
 class RadarTarget(BaseModel):

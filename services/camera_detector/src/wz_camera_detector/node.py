@@ -76,7 +76,12 @@ from wz_camera_detector.association import (
 )
 from wz_camera_detector.background import BACKEND, BackgroundSubtractionDetector
 from wz_camera_detector.regions import detector_regions
-from wz_camera_detector.settings import CameraDetectorSettings, camera_mount, radar_mount
+from wz_camera_detector.settings import (
+    CameraDetectorSettings,
+    camera_mount,
+    radar_mount,
+    shipped_model,
+)
 from wz_camera_detector.tracker import ImageTrack, ImageTracker
 from wz_camera_detector.world import VehicleShape, box_to_ground, fit_box_to_ground
 from wz_camera_detector.yolo import (
@@ -144,25 +149,26 @@ def make_backend(
     settings: CameraDetectorSettings,
     site: Site | None = None,
     camera: SensorMount | None = None,
+    rendered: bool = False,
 ) -> ImageBackend:
     """The image detector the settings name.
 
     With ``site`` and ``camera``, YOLO looks at the region of interest and far-field tiles the
     road's geometry gives (:func:`~wz_camera_detector.regions.detector_regions`), unless the
     settings give their own; without them, at the model's metadata regions, else the frame.
+    Without a model in the settings: the shipped one for real frames, or for the simulator's
+    ``rendered`` ones (:func:`~wz_camera_detector.settings.shipped_model`).
 
     Raises
     ------
     ModelLoadError
-        ``yolo`` with a model that is missing, unreadable or not a YOLOv8 model (never a
-        download).
+        ``yolo`` with a model that is missing, unreadable or not a YOLOv8 or NanoDet model
+        (never a download).
     """
     if settings.backend == BACKEND:
         return BackgroundSubtractionDetector(settings.background)
-    if settings.model_path is None:  # the settings validator refuses this already
-        raise ModelLoadError("backend 'yolo' needs WZ_CAMERA_MODEL_PATH (a local .onnx file)")
     detector = YoloOnnxDetector(
-        settings.model_path,
+        settings.model_path if settings.model_path is not None else shipped_model(rendered),
         settings.class_names,
         conf_threshold=settings.conf_threshold,
         roi_xyxy_px=settings.roi_xyxy_px,
@@ -269,7 +275,11 @@ class CameraDetector:
         Called with ``(reason, detail)`` for every problem.
     backend
         The image detector; default :func:`make_backend` (which may raise
-        :class:`ModelLoadError`).
+        :class:`ModelLoadError`): with no model in the settings, the shipped model for the
+        frames, switched when the frames' ``rendered`` flag says they come from the simulator
+        (or, for :meth:`process_image` callers, ``rendered``).
+    rendered
+        The frames are the simulator's renders (the default backend's first model).
     """
 
     def __init__(
@@ -280,13 +290,19 @@ class CameraDetector:
         settings: CameraDetectorSettings,
         report: Report,
         backend: ImageBackend | None = None,
+        rendered: bool = False,
     ) -> None:
         self.site = site
         self.camera_mount = camera
         self.radar_mount = radar
         self.settings = settings
         self.report = report
-        self.backend = backend if backend is not None else make_backend(settings, site, camera)
+        #: Whether the backend follows the frames' source (the shipped models, by default).
+        self._follows_source = backend is None and settings.model_path is None
+        self._rendered = rendered
+        self.backend = (
+            backend if backend is not None else make_backend(settings, site, camera, rendered)
+        )
         self.tracker = ImageTracker(settings.tracker)
         self._cameras: dict[tuple[int, int], PinholeCamera] = {}
         self._radar_heading = (
@@ -377,6 +393,8 @@ class CameraDetector:
                 f"{roi} of the settings",
             )
             return None
+        if self._follows_source and meta.rendered != self._rendered:
+            self._switch_model(meta.rendered)
         new_run = self._run.observe(meta.stamp) == "new_run"
         if new_run:
             self._start_new_run(meta.stamp)
@@ -400,6 +418,18 @@ class CameraDetector:
             detections=self._detections(result.fused),
             latency_s=max(0.0, time.monotonic() - taken_s),
         )
+
+    def _switch_model(self, rendered: bool) -> None:
+        """Take the shipped model for the simulator's renders, or for a real camera's frames."""
+        log.info(
+            "camera %s: %s frames: the detector takes %s",
+            self.camera_mount.sensor_id,
+            "the simulator's rendered" if rendered else "real camera",
+            shipped_model(rendered).name,
+        )
+        self.backend = make_backend(self.settings, self.site, self.camera_mount, rendered)
+        self._rendered = rendered
+        self.tracker.restart()
 
     def _start_new_run(self, stamp_s: float) -> None:
         log.warning(

@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field
 from pydantic_settings import SettingsConfigDict
 
 from wz_camera_detector.association import AssociationSettings
@@ -20,8 +20,19 @@ from wz_shared.sensor_mounts import mount_of_kind
 from wz_shared.settings import ServiceSettings
 from wz_shared.site import SensorMount, Site
 
-#: The camera model shipped in the package (``training/README.md`` says how it was made).
-DEFAULT_MODEL_PATH = Path(__file__).resolve().parent / "models" / "wz-vehicles-pico-480.onnx"
+MODELS = Path(__file__).resolve().parent / "models"
+#: The model for real cameras: NanoDet-g, pretrained on COCO's photographs, int8
+#: (``training/nanodet_from_npm.py``, ``training/quantize_int8.py``; docs/camera-detector.md).
+DEFAULT_MODEL_PATH = MODELS / "coco-nanodet-g-416-int8.onnx"
+#: The model for the simulator's rendered frames: YOLOv8-pico trained on them
+#: (``training/README.md``). A COCO model finds few of the renders' low-polygon vehicles.
+SIMULATION_MODEL_PATH = MODELS / "wz-vehicles-pico-480.onnx"
+
+
+def shipped_model(rendered: bool) -> Path:
+    """The shipped model for real camera frames, or for the simulator's renders."""
+    return SIMULATION_MODEL_PATH if rendered else DEFAULT_MODEL_PATH
+
 
 #: ``radar_id`` value that turns fusion off (camera-only detections).
 NO_RADAR = "none"
@@ -43,12 +54,14 @@ class CameraDetectorSettings(ServiceSettings):
     #: The radar to fuse with (scans on ``raw/radar/<id>``); default: the site's first radar,
     #: camera-only when the site has none; ``"none"``: camera-only.
     radar_id: str | None = None
-    #: Image backend: ``yolo`` (a local YOLOv8 ONNX model, ``model_path``; never downloaded) or
-    #: ``background-subtraction`` (no model, learns the empty road first; class "vehicle").
+    #: Image backend: ``yolo`` (a local ONNX detector, YOLOv8 or NanoDet, ``model_path``;
+    #: never downloaded) or ``background-subtraction`` (no model, learns the empty road first;
+    #: class "vehicle").
     backend: Literal["background-subtraction", "yolo"] = "yolo"
-    #: The YOLOv8 ``.onnx`` file (required with ``backend="yolo"``); default: the model shipped
-    #: with the service, trained on the simulated work zone (see docs/camera-detector.md).
-    model_path: Path | None = DEFAULT_MODEL_PATH
+    #: The detector's ``.onnx`` file; default (None): the shipped model for the frames, the
+    #: COCO-pretrained one for a camera's, the simulator-trained one for the simulator's
+    #: rendered frames (:func:`shipped_model`; see docs/camera-detector.md).
+    model_path: Path | None = None
     #: The model's class names, in its class order (yolo); default: the model's metadata.
     #: Classes that are not vehicles (anything but car, vehicle, truck, bus, motorcycle) are
     #: ignored.
@@ -60,8 +73,9 @@ class CameraDetectorSettings(ServiceSettings):
     #: Far-field tiles ``x0, y0, x1, y1`` [px], each letterboxed on its own (yolo); default:
     #: from the road's geometry with the ROI; ``()`` for none.
     tiles_xyxy_px: tuple[tuple[int, int, int, int], ...] | None = None
-    #: Minimum class score of a YOLO detection [0-1].
-    conf_threshold: Annotated[float, Field(ge=0.0, lt=1.0)] = 0.25
+    #: Minimum class score of a detection [0-1]; default: the model's own operating point
+    #: (its metadata's ``wz_conf_threshold``: 0.35 for the COCO model), else 0.25.
+    conf_threshold: Annotated[float, Field(ge=0.0, lt=1.0)] | None = None
     #: A radar scan is fused with a frame when their stamps differ by at most this [s].
     radar_max_age_s: Annotated[float, Field(ge=0.0)] = 0.1
     #: Publish only confirmed image tracks (``tracker.min_hits`` detections); False: every
@@ -88,15 +102,6 @@ class CameraDetectorSettings(ServiceSettings):
     background: BackgroundSubtractionSettings = Field(default_factory=BackgroundSubtractionSettings)
     tracker: ImageTrackerSettings = Field(default_factory=ImageTrackerSettings)
     association: AssociationSettings = Field(default_factory=AssociationSettings)
-
-    @model_validator(mode="after")
-    def _yolo_needs_a_model(self) -> CameraDetectorSettings:
-        if self.backend == "yolo" and self.model_path is None:
-            raise ValueError(
-                "backend 'yolo' needs a local model file: set WZ_CAMERA_MODEL_PATH to a YOLOv8 "
-                ".onnx file (nothing is downloaded), or use backend 'background-subtraction'"
-            )
-        return self
 
 
 def camera_mount(site: Site, camera_id: str | None) -> SensorMount:

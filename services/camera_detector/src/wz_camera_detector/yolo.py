@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import ast
 import logging
+import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -37,13 +38,28 @@ import numpy as np
 import numpy.typing as npt
 import onnxruntime as ort
 
+from wz_camera_detector import nanodet
 from wz_shared.arrays import F32, F64, U8, IntP
 
 #: A far-field tile's box closer than this to the tile's edge is a cut vehicle [px].
 TILE_EDGE_MARGIN_PX = 2.0
 
+#: Minimum class score of a model that names none (ultralytics' predict default).
+DEFAULT_CONF_THRESHOLD = 0.25
+
 #: Gray level of the letterbox padding (ultralytics' convention).
 PAD_GRAY = 114
+
+#: A free-size input is padded to a multiple of this (the model's largest stride) [px].
+INPUT_STRIDE_PX = 32
+#: The whole frame of an unknown camera is not shrunk more than this: a vehicle of the 20 px
+#: the detector is asked to find stays 15 px, two cells of the finest (8 px) stride.
+MIN_FRAME_SCALE = 15.0 / 20.0
+
+#: Model families the detector reads (ONNX metadata ``wz_architecture``; none: yolov8).
+ARCHITECTURES = ("yolov8", "nanodet")
+#: Class names that are vehicles (a COCO model's other 76 classes are not looked at).
+VEHICLE_CLASSES = frozenset({"car", "vehicle", "truck", "bus", "motorcycle"})
 
 _BOX_ROWS = 4  # cx, cy, w, h
 
@@ -125,6 +141,20 @@ def letterbox(image_bgr: U8, size: tuple[int, int]) -> tuple[F32, Letterbox]:
     transform
         The :class:`Letterbox` mapping input pixels back to the frame.
     """
+    canvas, transform = fit_letterbox(image_bgr, size, (PAD_GRAY, PAD_GRAY, PAD_GRAY))
+    # BGR -> RGB, HWC -> CHW, then 0..255 -> 0..1.
+    chw = canvas[:, :, ::-1].transpose(2, 0, 1)
+    tensor = np.ascontiguousarray(chw, dtype=np.float32)[np.newaxis] / np.float32(255.0)
+    return tensor, transform
+
+
+def fit_letterbox(
+    image_bgr: U8, size: tuple[int, int], pad_bgr: tuple[int, int, int]
+) -> tuple[U8, Letterbox]:
+    """The frame resized (aspect kept) and centred on an ``h x w`` canvas of ``pad_bgr``.
+
+    See :func:`letterbox` for the rule; the canvas stays uint8 BGR (H, W, 3).
+    """
     if image_bgr.ndim != 3 or image_bgr.shape[2] != 3 or image_bgr.dtype != np.uint8:
         raise ValueError(
             f"expected a BGR uint8 frame of shape (H, W, 3), got {image_bgr.dtype} "
@@ -145,16 +175,13 @@ def letterbox(image_bgr: U8, size: tuple[int, int]) -> tuple[F32, Letterbox]:
             cv2.resize(image_bgr, (resized_w, resized_h), interpolation=cv2.INTER_LINEAR),
             dtype=np.uint8,
         )
-    canvas = np.full((input_h, input_w, 3), PAD_GRAY, dtype=np.uint8)
+    canvas = np.empty((input_h, input_w, 3), dtype=np.uint8)
+    canvas[:] = pad_bgr
     canvas[pad_y : pad_y + resized_h, pad_x : pad_x + resized_w] = resized
-
-    # BGR -> RGB, HWC -> CHW, then 0..255 -> 0..1.
-    chw = canvas[:, :, ::-1].transpose(2, 0, 1)
-    tensor = np.ascontiguousarray(chw, dtype=np.float32)[np.newaxis] / np.float32(255.0)
     transform = Letterbox(
         scale=scale, pad_x=pad_x, pad_y=pad_y, image_width_px=image_w, image_height_px=image_h
     )
-    return tensor, transform
+    return canvas, transform
 
 
 def decode(output: npt.ArrayLike, conf_threshold: float) -> tuple[F32, F32, IntP]:
@@ -333,7 +360,9 @@ class YoloOnnxDetector:
         Network input ``(h, w)`` [px]. Default: read from the model (required if the model's
         spatial input dimensions are dynamic; must agree with them if they are static).
     conf_threshold
-        Minimum class score of a detection, in [0, 1).
+        Minimum class score of a detection, in [0, 1). Default: the model's metadata
+        ``wz_conf_threshold`` (its operating point, chosen on data it is not scored on), else
+        :data:`DEFAULT_CONF_THRESHOLD`.
     iou_threshold
         IoU above which a lower-scoring box of the same class is suppressed, in [0, 1].
     threads
@@ -363,7 +392,7 @@ class YoloOnnxDetector:
         model_path: Path | str,
         class_names: Sequence[str] | None = None,
         input_size: tuple[int, int] | None = None,
-        conf_threshold: float = 0.25,
+        conf_threshold: float | None = None,
         iou_threshold: float = 0.5,
         threads: int = 2,
         max_detections: int = 300,
@@ -372,7 +401,7 @@ class YoloOnnxDetector:
     ) -> None:
         if class_names is not None and not class_names:
             raise ValueError("class_names is empty: give the model's class names in its order")
-        if not 0.0 <= conf_threshold < 1.0:
+        if conf_threshold is not None and not 0.0 <= conf_threshold < 1.0:
             raise ValueError(f"conf_threshold must be in [0, 1), got {conf_threshold}")
         if not 0.0 <= iou_threshold <= 1.0:
             raise ValueError(f"iou_threshold must be in [0, 1], got {iou_threshold}")
@@ -381,12 +410,22 @@ class YoloOnnxDetector:
                 f"threads and max_detections must be >= 1, got {threads}, {max_detections}"
             )
         self.model_path = Path(model_path)
-        self.conf_threshold = conf_threshold
+        self.conf_threshold = DEFAULT_CONF_THRESHOLD
         self.iou_threshold = iou_threshold
         self.max_detections = max_detections
 
         self._session = self._open_session(threads)
         self.metadata: dict[str, str] = dict(self._session.get_modelmeta().custom_metadata_map)
+        self.conf_threshold = (
+            conf_threshold if conf_threshold is not None else self._metadata_conf_threshold()
+        )
+        #: ``yolov8`` (ultralytics' export, the default) or ``nanodet`` (metadata
+        #: ``wz_architecture``): how the input is made and the output read.
+        self.architecture = self.metadata.get("wz_architecture", "yolov8")
+        if self.architecture not in ARCHITECTURES:
+            raise self._fail(
+                f"its metadata wz_architecture {self.architecture!r} is not one of {ARCHITECTURES}"
+            )
         self.class_names = (
             tuple(class_names) if class_names is not None else self._metadata_class_names()
         )
@@ -397,6 +436,18 @@ class YoloOnnxDetector:
             tiles_xyxy_px if tiles_xyxy_px is not None else self._metadata_tiles(),
         )
         self.input_size = self._check_input(input_size)
+        #: A model whose input height and width are free (NanoDet) gets each region at its own
+        #: aspect (padded to a multiple of :data:`INPUT_STRIDE_PX` only), not a square.
+        self.free_input = self.architecture == "nanodet" and self._free_input_dims
+        #: Vehicle classes only (NanoDet's COCO has 80), suppressed across classes: a COCO
+        #: model often gives one vehicle both a car and a truck box.
+        self._keep_classes: IntP | None = None
+        self.class_agnostic_nms = self.architecture == "nanodet"
+        if self.architecture == "nanodet":
+            self._keep_classes = np.array(
+                [i for i, name in enumerate(self.class_names) if name in VEHICLE_CLASSES],
+                dtype=np.intp,
+            )
         self._regions_for: RegionsForSize | None = None
         self._regions_size: tuple[int, int] | None = None
         self._check_output()
@@ -460,6 +511,18 @@ class YoloOnnxDetector:
             except (ValueError, SyntaxError, TypeError) as error:
                 raise self._fail(f"its metadata names {text!r} cannot be read") from error
         raise self._fail("it has no class names in its metadata: give class_names explicitly")
+
+    def _metadata_conf_threshold(self) -> float:
+        text = self.metadata.get("wz_conf_threshold")
+        if not text:
+            return DEFAULT_CONF_THRESHOLD
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not 0.0 <= value < 1.0:
+            raise self._fail(f"its metadata wz_conf_threshold {text!r} is not in [0, 1)")
+        return value
 
     def _metadata_tiles(self) -> tuple[tuple[int, int, int, int], ...]:
         text = self.metadata.get("wz_tiles_xyxy_px")
@@ -535,9 +598,13 @@ class YoloOnnxDetector:
                 f"expected a float32 input of shape (1, 3, h, w), found {model_input.type} {shape}"
             )
         batch, channels, height, width = (_static_dim(dim) for dim in shape)
+        self._free_input_dims = height is None and width is None
         if batch not in (None, 1) or channels not in (None, 3):
             raise self._fail(f"expected an input of shape (1, 3, h, w), found {shape}")
         self._input_name: str = model_input.name
+        if input_size is None and (height is None or width is None) and "wz_input" in self.metadata:
+            side = int(self.metadata["wz_input"])
+            input_size = (side, side)
         if input_size is None:
             if height is None or width is None:
                 raise self._fail(
@@ -554,22 +621,42 @@ class YoloOnnxDetector:
         outputs = self._session.get_outputs()
         if not outputs:
             raise self._fail("the model has no output")
-        self._output_name: str = outputs[0].name
+        if self.architecture == "nanodet":
+            self._check_nanodet_output([output.name for output in outputs])
+            return
+        self._output_names: list[str] = [outputs[0].name]
         expected_rows = _BOX_ROWS + len(self.class_names)
         declared_rows = _static_dim(outputs[0].shape[1]) if len(outputs[0].shape) == 3 else None
         if declared_rows is not None and declared_rows != expected_rows:
             raise self._fail(self._class_count_message(declared_rows))
         # Shapes may be symbolic: one run on a blank input settles them (and warms up).
-        height, width = self.input_size
-        blank = np.full((1, 3, height, width), PAD_GRAY / 255.0, dtype=np.float32)
-        try:
-            output = self._run(blank)
-        except Exception as error:  # onnxruntime raises its own pybind exception types
-            raise self._fail(f"a test inference failed ({error})") from error
+        output = self._test_run()[0]
         if output.ndim != 3 or output.shape[0] != 1:
             raise self._fail(f"expected an output of shape (1, 4 + C, N), found {output.shape}")
         if output.shape[1] != expected_rows:
             raise self._fail(self._class_count_message(output.shape[1]))
+
+    def _check_nanodet_output(self, names: list[str]) -> None:
+        expected = nanodet.output_names()
+        if sorted(names) != sorted(expected):
+            raise self._fail(f"a NanoDet model must output {expected}, found {names}")
+        self._output_names = expected
+        scores = self._test_run()[0]
+        if scores.ndim != 3 or scores.shape[2] != len(self.class_names):
+            raise self._fail(
+                f"it scores {scores.shape[-1]} classes but {len(self.class_names)} class names "
+                "were given"
+            )
+
+    def _test_run(self) -> list[F32]:
+        """One inference on a blank input (settles symbolic shapes, warms up)."""
+        height, width = self.input_size
+        blank = np.zeros((height, width, 3), dtype=np.uint8)
+        blank[:] = PAD_GRAY
+        try:
+            return self._run(self._tensor(blank))
+        except Exception as error:  # onnxruntime raises its own pybind exception types
+            raise self._fail(f"a test inference failed ({error})") from error
 
     def _class_count_message(self, rows: int) -> str:
         return (
@@ -577,10 +664,47 @@ class YoloOnnxDetector:
             f"class names were given ({', '.join(self.class_names)})"
         )
 
-    def _run(self, tensor: F32) -> F32:
-        outputs = self._session.run([self._output_name], {self._input_name: tensor})
-        output: F32 = np.asarray(outputs[0], dtype=np.float32)
-        return output
+    def _run(self, tensor: F32) -> list[F32]:
+        outputs = self._session.run(self._output_names, {self._input_name: tensor})
+        return [np.asarray(output, dtype=np.float32) for output in outputs]
+
+    def _tensor(self, canvas_bgr: U8) -> F32:
+        """A letterboxed BGR canvas as the model's input."""
+        if self.architecture == "nanodet":
+            return nanodet.to_tensor(canvas_bgr)
+        chw = canvas_bgr[:, :, ::-1].transpose(2, 0, 1)  # BGR -> RGB, HWC -> CHW
+        tensor: F32 = np.ascontiguousarray(chw, dtype=np.float32)[np.newaxis] / np.float32(255.0)
+        return tensor
+
+    def _pad_bgr(self) -> tuple[int, int, int]:
+        return nanodet.PAD_BGR if self.architecture == "nanodet" else (PAD_GRAY,) * 3
+
+    def _decode(self, outputs: list[F32], input_hw: tuple[int, int]) -> tuple[F32, F32, IntP]:
+        if self.architecture == "nanodet":
+            return nanodet.decode(outputs, input_hw, self.conf_threshold, self._keep_classes)
+        return decode(outputs[0], self.conf_threshold)
+
+    def region_input_size(
+        self, height_px: int, width_px: int, whole_frame: bool
+    ) -> tuple[int, int]:
+        """The model input ``(h, w)`` [px] a region of ``height x width`` pixels is fitted into.
+
+        A fixed-size model: its input. A model with a free input size: the region scaled as the
+        square letterbox would scale it (its long side to the model's size), padded only to a
+        multiple of :data:`INPUT_STRIDE_PX`; the whole frame of a camera the detector knows
+        nothing of (no region of interest) is never shrunk below :data:`MIN_FRAME_SCALE`, so that
+        a vehicle 20 px tall stays at least 15 px tall in the input.
+        """
+        if not self.free_input:
+            return self.input_size
+        scale = min(self.input_size[0] / height_px, self.input_size[1] / width_px)
+        if whole_frame:
+            scale = max(scale, min(1.0, MIN_FRAME_SCALE))
+        stride = INPUT_STRIDE_PX
+        return (
+            max(stride, math.ceil(height_px * scale / stride) * stride),
+            max(stride, math.ceil(width_px * scale / stride) * stride),
+        )
 
     def detect(self, image_bgr: U8) -> list[ImageDetection]:
         """Detect objects in one frame.
@@ -634,13 +758,16 @@ class YoloOnnxDetector:
         all_boxes, all_scores, all_classes = [], [], []
         for pixels, (x0, y0), is_tile in regions:
             started = time.perf_counter()
-            tensor, transform = letterbox(pixels, self.input_size)
+            whole_frame = self.roi_xyxy_px is None and not is_tile
+            input_hw = self.region_input_size(pixels.shape[0], pixels.shape[1], whole_frame)
+            canvas, transform = fit_letterbox(pixels, input_hw, self._pad_bgr())
+            tensor = self._tensor(canvas)
             preprocess_s += time.perf_counter() - started
             started = time.perf_counter()
-            output = self._run(tensor)
+            outputs = self._run(tensor)
             inference_s += time.perf_counter() - started
             started = time.perf_counter()
-            input_boxes, scores, class_ids = decode(output, self.conf_threshold)
+            input_boxes, scores, class_ids = self._decode(outputs, input_hw)
             boxes = transform.to_image(input_boxes)
             if is_tile:
                 # A box touching the tile's edge is a cut vehicle: the ROI sees it whole.
@@ -661,7 +788,8 @@ class YoloOnnxDetector:
         boxes_px = np.concatenate(all_boxes)
         scores = np.concatenate(all_scores)
         class_ids = np.concatenate(all_classes)
-        kept = nms(boxes_px, scores, self.iou_threshold, class_ids)[: self.max_detections]
+        by_class = None if self.class_agnostic_nms else class_ids
+        kept = nms(boxes_px, scores, self.iou_threshold, by_class)[: self.max_detections]
         boxes_px = boxes_px[kept]
         detections = [
             ImageDetection(

@@ -1,0 +1,66 @@
+"""NanoDet's decode, and the shipped COCO model as the detector loads it (real cameras)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wz_camera_detector import nanodet
+from wz_camera_detector.settings import DEFAULT_MODEL_PATH
+from wz_camera_detector.yolo import YoloOnnxDetector
+
+
+def _outputs(side: int, hits: dict[tuple[int, int], tuple[int, float, list[int]]]) -> list:  # type: ignore[type-arg]
+    """Zero-score outputs of a ``side x side`` input with ``hits``: (stride, point) -> (class,
+    score, the l, t, r, b bins each distance's logits pick)."""
+    scores, dists = [], []
+    for stride in nanodet.STRIDES:
+        points = (side // stride) ** 2
+        level_scores = np.zeros((1, points, 80), np.float32)
+        level_dists = np.zeros((1, points, 4 * (nanodet.REG_MAX + 1)), np.float32)
+        for (hit_stride, point), (class_id, score, bins) in hits.items():
+            if hit_stride == stride:
+                level_scores[0, point, class_id] = score
+                for side_index, bin_index in enumerate(bins):
+                    level_dists[0, point, side_index * 11 + bin_index] = 60.0  # softmax ~ one-hot
+        scores.append(level_scores)
+        dists.append(level_dists)
+    return scores + dists
+
+
+def test_decode_puts_each_point_s_distances_around_its_centre() -> None:
+    # Stride 8 on a 64 px input: 8 columns; point 26 is row 3, column 2: centre (20, 28).
+    # Stride 32: point 3 is row 1, column 1: centre (48, 48).
+    outputs = _outputs(
+        64,
+        {
+            (8, 26): (2, 0.9, [2, 2, 3, 3]),
+            (32, 3): (7, 0.6, [1, 1, 0, 0]),
+            (16, 5): (0, 0.99, [1, 1, 1, 1]),
+        },
+    )
+    vehicles = np.array([2, 3, 5, 7], dtype=np.intp)
+    boxes, scores, classes = nanodet.decode(outputs, (64, 64), 0.35, vehicles)
+    # The person (class 0) is not a vehicle: not kept.
+    assert classes.tolist() == [2, 7]
+    assert scores == pytest.approx([0.9, 0.6])
+    assert boxes[0] == pytest.approx([20 - 16, 28 - 16, 20 + 24, 28 + 24], abs=1e-3)
+    assert boxes[1] == pytest.approx([48 - 32, 48 - 32, 48, 48], abs=1e-3)
+    # Nothing above the threshold: nothing.
+    assert len(nanodet.decode(outputs, (64, 64), 0.95, vehicles)[0]) == 0
+
+
+def test_the_shipped_coco_model_loads_with_its_operating_point() -> None:
+    detector = YoloOnnxDetector(DEFAULT_MODEL_PATH, threads=1)
+    assert detector.architecture == "nanodet" and detector.free_input
+    assert len(detector.class_names) == 80
+    assert {"car", "truck", "bus", "motorcycle"} <= set(detector.class_names)
+    assert detector.conf_threshold == 0.35
+    assert detector.input_size == (416, 416)
+    # The whole frame of an unknown camera: 320x240 magnified to the model's 416; 1280x720 not
+    # shrunk below 0.75 (a 20 px vehicle stays 15 px); a region of interest as a square
+    # letterbox would scale it, padded to a multiple of 32 only.
+    assert detector.region_input_size(240, 320, whole_frame=True) == (320, 416)
+    assert detector.region_input_size(720, 1280, whole_frame=True) == (544, 960)
+    assert detector.region_input_size(720, 1280, whole_frame=False) == (256, 416)
+    assert detector.detect(np.full((240, 320, 3), 120, np.uint8)) == []
