@@ -223,6 +223,7 @@ class SensorRig:
                 frame_index=index,
                 width_px=width,
                 height_px=height,
+                rendered=True,
             )
             return CameraOutput(sensor_id, meta, frame, encode_jpeg(frame.image, self.jpeg_quality))
         result = self._radars[sensor_id].scan(now, fire_s, index)
