@@ -30,7 +30,12 @@ import numpy as np
 
 from benchmarks.common import ROOT, free_port
 from wz_camera_detector.node import CameraDetector, make_backend
-from wz_camera_detector.settings import CameraDetectorSettings, camera_mount, radar_mount
+from wz_camera_detector.settings import (
+    SIMULATION_MODEL_PATH,
+    CameraDetectorSettings,
+    camera_mount,
+    radar_mount,
+)
 from wz_camera_detector.yolo import YoloOnnxDetector
 from wz_shared.bus import Bus
 from wz_shared.codec import encode_camera_frame
@@ -95,7 +100,8 @@ def _stats_ms(values_s: list[float]) -> dict[str, float]:
 
 
 def _inference(recorded: Recorded) -> dict[str, Any]:
-    settings = CameraDetectorSettings.model_validate({})
+    # The simulator's frames: the model the node takes for rendered frames.
+    settings = CameraDetectorSettings(model_path=SIMULATION_MODEL_PATH)
     assert settings.model_path is not None
     site = load_site(DEFAULT_SITE_PATH)
     detector = make_backend(settings, site, camera_mount(site, None))
@@ -132,7 +138,9 @@ def _per_frame(recorded: Recorded) -> dict[str, Any]:
     site = load_site(DEFAULT_SITE_PATH)
     settings = CameraDetectorSettings.model_validate({})
     camera, radar = camera_mount(site, None), radar_mount(site, None)
-    detector = CameraDetector(site, camera, radar, settings, report=lambda r, d: None)
+    detector = CameraDetector(
+        site, camera, radar, settings, report=lambda r, d: None, rendered=True
+    )
     times: list[float] = []
     detections = 0
     for _, kind, payload in recorded.events:

@@ -585,3 +585,41 @@ def generated_sites(result: dict[str, Any]) -> list[str]:
     )
     lines += ["", *[f"- {site['site_id']}: {site['name']}" for site in result["sites"]], ""]
     return lines
+
+
+def camera_models(result: dict[str, Any]) -> list[str]:
+    per_frame = result["per_frame_one_core"]
+    labels = list(per_frame)
+    lines = [
+        f"Per frame on one core (the process pinned to one CPU, ONNX Runtime with 1 thread), "
+        f"the detector's `detect` on the same {result['frames']} rendered frames of the default "
+        "site: with the regions its road gives (what the node runs), and as the whole frame of a "
+        "camera the detector knows nothing of, resized. Method: `benchmarks/camera_models.py`.",
+        "",
+    ]
+    cases = list(per_frame[labels[0]]["cases"])
+    header = ["case"] + [f"{label} `{per_frame[label]['model']}` p50 / p99" for label in labels]
+    rows = [
+        [case]
+        + [
+            f"{fmt_ms(per_frame[label]['cases'][case]['p50_ms'])} / "
+            f"{fmt_ms(per_frame[label]['cases'][case]['p99_ms'])}"
+            for label in labels
+        ]
+        for case in cases
+    ]
+    lines += md_table(header, rows)
+    stack = result["stack_cpu_percent"]
+    services = sorted({name for usage in stack.values() for name in usage} - {"all"})
+    lines += [
+        "",
+        f"The whole stack (`wz up`, real time, LiDAR 10 Hz, camera 10 Hz, radar 15 Hz), each "
+        f"process's CPU in % of one core over {result['stack_window_s']:.0f} s, with each model "
+        "in the camera detector:",
+        "",
+    ]
+    rows = [[name] + [f"{stack[label].get(name, 0.0):.1f}" for label in stack] for name in services]
+    rows.append(["**all**"] + [f"**{stack[label]['all']:.1f}**" for label in stack])
+    lines += md_table(["process", *stack], rows)
+    lines.append("")
+    return lines
