@@ -113,6 +113,7 @@ def test_node_process_detects_fuses_and_survives_bad_input(port: int) -> None:
                     frame_index=index,
                     width_px=size,
                     height_px=size,
+                    rendered=True,  # the simulator's model for its renders
                 )
                 frames.put_bytes(encode_camera_frame(meta, jpeg))
                 index += 1

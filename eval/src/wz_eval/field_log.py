@@ -40,7 +40,7 @@ import yaml
 
 from wz_drivers.records import LidarSweep
 from wz_shared.messages import VehicleClass, VehicleTruth
-from wz_shared.site import DEFAULT_SITE_PATH, LidarIntrinsics, Site, load_site
+from wz_shared.site import DEFAULT_SITE_PATH, LidarIntrinsics, Site, load_site, site_document
 
 #: Unix time of simulation time zero.
 T0_UNIX_S = dt.datetime(2026, 9, 1, 14, 0, 0, tzinfo=dt.UTC).timestamp()
@@ -232,7 +232,7 @@ def write_sample_log(out: Path, options: SampleOptions | None = None) -> Path:
     _write_gps(out / "gps" / "probe.nmea", truth, probe_id, site, rng)
     _write_truth(out / "truth.csv", truth)
     site_path = out / "site.yaml"
-    site_path.write_text(yaml.safe_dump(site.model_dump(mode="json"), sort_keys=False))
+    site_path.write_text(yaml.safe_dump(site_document(site), sort_keys=False))
     manifest = {
         "format": "wz-field-log/1",
         "description": f"Simulated field log (seed {options.seed}): probe {probe_id} through "

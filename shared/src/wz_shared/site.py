@@ -38,6 +38,8 @@ MPH_TO_MPS = 0.44704
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 SiteId = Annotated[str, Field(pattern=r"^[a-z0-9][a-z0-9_-]{0,62}$")]
+#: The fields a camera's calibration file fills in (:func:`load_site`).
+CALIBRATION_FIELDS = ("calibration_file", "fx_px", "fy_px", "cx_px", "cy_px", "distortion")
 #: A camera's stated field of view and the one its calibration implies may differ by this [deg].
 CALIBRATED_FOV_TOLERANCE_DEG = 1.0
 # Site attributes computed once and kept in the instance's __dict__ (functools.cached_property).
@@ -691,6 +693,18 @@ def _read_camera_calibrations(raw: dict[str, Any], folder: Path) -> None:
             cy_px=calibration.cy_px,
             distortion=list(calibration.distortion),
         )
+
+
+def site_document(site: Site) -> dict[str, Any]:
+    """The site as a site file's mapping (JSON types): an uncalibrated camera without the
+    calibration's empty fields, as site files are written."""
+    data = site.model_dump(mode="json")
+    for sensor in data.get("sensors", []):
+        intrinsics = sensor.get("intrinsics", {})
+        for key in CALIBRATION_FIELDS:
+            if intrinsics.get(key, 0) is None:
+                del intrinsics[key]
+    return data
 
 
 DEFAULT_SITE_PATH = Path(__file__).resolve().parents[3] / "deploy" / "sites" / "us75-lincoln.yaml"
