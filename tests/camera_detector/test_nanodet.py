@@ -64,3 +64,34 @@ def test_the_shipped_coco_model_loads_with_its_operating_point() -> None:
     assert detector.region_input_size(720, 1280, whole_frame=True) == (544, 960)
     assert detector.region_input_size(720, 1280, whole_frame=False) == (256, 416)
     assert detector.detect(np.full((240, 320, 3), 120, np.uint8)) == []
+
+
+@pytest.mark.parametrize(
+    ("frame_hw", "roi", "inputs"),
+    [
+        # An unknown camera's HD frame: at the model's size and at the 0.75 floor.
+        ((720, 1280), None, [(256, 416), (544, 960)]),
+        # A small frame is magnified to the model's size: one size, one pass.
+        ((240, 320), None, [(320, 416)]),
+        # A region of interest from the road (or --roi): one pass, as the letterbox scales it.
+        ((720, 1280), (0, 0, 1280, 720), [(256, 416)]),
+    ],
+)
+def test_the_whole_frame_of_an_unknown_camera_is_run_at_two_sizes(
+    frame_hw: tuple[int, int],
+    roi: tuple[int, int, int, int] | None,
+    inputs: list[tuple[int, int]],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    detector = YoloOnnxDetector(DEFAULT_MODEL_PATH, threads=1)
+    detector.set_regions(roi, ())
+    seen: list[tuple[int, int]] = []
+    run = detector._run
+
+    def recording(tensor: np.ndarray) -> list[np.ndarray]:
+        seen.append((tensor.shape[2], tensor.shape[3]))
+        return run(tensor)
+
+    monkeypatch.setattr(detector, "_run", recording)
+    detector.detect(np.full((*frame_hw, 3), 120, np.uint8))
+    assert seen == inputs
