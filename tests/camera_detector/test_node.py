@@ -252,9 +252,10 @@ def test_without_a_model_path_the_node_takes_the_shipped_model_for_the_frames_so
     assert detector.backend.model_path == DEFAULT_MODEL_PATH  # type: ignore[attr-defined]
     ok, jpeg = cv2.imencode(".jpg", np.full((height, width, 3), 90, dtype=np.uint8))
     assert ok
-    for index, (rendered, model) in enumerate(
-        [(True, SIMULATION_MODEL_PATH), (True, SIMULATION_MODEL_PATH), (False, DEFAULT_MODEL_PATH)]
-    ):
+    backends: set[int] = set()
+    sequence = [(True, SIMULATION_MODEL_PATH), (True, SIMULATION_MODEL_PATH)]
+    sequence += [(False, DEFAULT_MODEL_PATH), (True, SIMULATION_MODEL_PATH)] * 2
+    for index, (rendered, model) in enumerate(sequence):
         meta = CameraFrameMeta(
             site=SITE.site_id,
             source_id=mount.sensor_id,
@@ -266,6 +267,8 @@ def test_without_a_model_path_the_node_takes_the_shipped_model_for_the_frames_so
         )
         detector.handle(meta, jpeg.tobytes(), time.monotonic())
         assert detector.backend.model_path == model  # type: ignore[attr-defined]
+        backends.add(id(detector.backend))
+    assert len(backends) == 2  # each model loaded once, however often the source switches
     # A model named in the settings is kept whatever the frames are.
     named = CameraDetectorSettings(model_path=SIMULATION_MODEL_PATH)
     detector = CameraDetector(SITE, mount, None, named, report=lambda r, d: None)

@@ -303,6 +303,8 @@ class CameraDetector:
         self.backend = (
             backend if backend is not None else make_backend(settings, site, camera, rendered)
         )
+        #: The shipped models loaded so far, by ``rendered`` (each is loaded once).
+        self._shipped: dict[bool, ImageBackend] = {rendered: self.backend}
         self.tracker = ImageTracker(settings.tracker)
         self._cameras: dict[tuple[int, int], PinholeCamera] = {}
         self._radar_heading = (
@@ -420,14 +422,19 @@ class CameraDetector:
         )
 
     def _switch_model(self, rendered: bool) -> None:
-        """Take the shipped model for the simulator's renders, or for a real camera's frames."""
+        """Take the shipped model for the simulator's renders, or for a real camera's frames
+        (loaded at the first such frame, kept: a source that keeps switching costs no loads)."""
         log.info(
             "camera %s: %s frames: the detector takes %s",
             self.camera_mount.sensor_id,
             "the simulator's rendered" if rendered else "real camera",
             shipped_model(rendered).name,
         )
-        self.backend = make_backend(self.settings, self.site, self.camera_mount, rendered)
+        if rendered not in self._shipped:
+            self._shipped[rendered] = make_backend(
+                self.settings, self.site, self.camera_mount, rendered
+            )
+        self.backend = self._shipped[rendered]
         self._rendered = rendered
         self.tracker.restart()
 
