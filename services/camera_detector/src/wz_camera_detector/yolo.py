@@ -755,7 +755,12 @@ class YoloOnnxDetector:
                 raise ValueError(f"frame does not contain the detector's tile {tile}")
         # The ROI, then each far-field tile: each letterboxed and run on its own.
         passes = [
-            (region, origin, False, self.region_input_size(*region.shape[:2], whole_frame=False))
+            (
+                region,
+                origin,
+                False,
+                self.region_input_size(region.shape[0], region.shape[1], whole_frame=False),
+            )
         ] + [
             (
                 image_bgr[ty0:ty1, tx0:tx1],
@@ -769,7 +774,7 @@ class YoloOnnxDetector:
             # The whole frame of a camera the detector knows nothing of: at the model's own
             # size (near, large vehicles) and, where that shrinks it more, at the least scale
             # that keeps a 20 px vehicle findable (far, small ones).
-            enlarged = self.region_input_size(*region.shape[:2], whole_frame=True)
+            enlarged = self.region_input_size(region.shape[0], region.shape[1], whole_frame=True)
             if enlarged != passes[0][3]:
                 passes.append((region, origin, False, enlarged))
         preprocess_s = inference_s = postprocess_s = 0.0
