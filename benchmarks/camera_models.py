@@ -102,8 +102,8 @@ def per_frame_one_core(frames: list[U8]) -> dict[str, Any]:
         on_site = make_backend(settings, site, mount)
         assert isinstance(on_site, YoloOnnxDetector)
         rows = {"default site, ROI + tile": _time(_one_thread(path, on_site), frames)}
+        whole = _one_thread(path, None)
         for width, height in SIZES:
-            whole = _one_thread(path, None)
             rows[f"whole frame {width}x{height}"] = _time(
                 whole, [_resized(f, width, height) for f in frames]
             )

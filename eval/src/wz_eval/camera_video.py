@@ -42,6 +42,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from wz_camera_detector.cli import IMAGE_SUFFIXES
 from wz_camera_detector.node import CLASS_SHAPES, ImageBackend, make_backend
 from wz_camera_detector.settings import CameraDetectorSettings
 from wz_camera_detector.yolo import ModelLoadError, box_iou
@@ -50,7 +51,6 @@ from wz_shared.logs import configure_logging
 
 log = logging.getLogger("wz_eval.camera_video")
 
-IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".bmp"}
 #: Box heights [px] the figures are given by (the last bin is open).
 HEIGHT_BINS_PX = (20.0, 40.0, 80.0, 160.0)
 #: Motion-mask values (CDnet): moving, unknown (a blob's blurred edge), outside the ROI.
@@ -133,7 +133,7 @@ def _read_mot(path: Path) -> dict[int, FrameTruth]:
             continue
         try:
             values = [float(v) for v in line.split(",")[:7]]
-            frame, _, x, y, w, h = (*(int(values[0]),), *values[1:6])
+            frame, (x, y, w, h) = int(values[0]), values[2:6]
         except (ValueError, IndexError) as exc:
             raise TruthError(f"{path}:{number}: not a MOT line (frame,id,x,y,w,h,...)") from exc
         if not (np.isfinite([x, y, w, h]).all() and w > 0 and h > 0):
@@ -150,25 +150,30 @@ def _read_mot(path: Path) -> dict[int, FrameTruth]:
     }
 
 
-@dataclass
 class YoloTruth:
     """A folder of YOLO label files, read for each image (the labels are normalised)."""
 
-    folder: Path
+    def __init__(self, folder: Path) -> None:
+        #: Label file by frame number (the digits of its name), indexed once.
+        self.files = {
+            number: path
+            for path in sorted(folder.glob("*.txt"))
+            if (number := _frame_number(path)) is not None
+        }
 
     def for_image(self, number: int, width: int, height: int) -> FrameTruth | None:
-        matches = [p for p in self.folder.glob("*.txt") if _frame_number(p) == number]
-        if not matches:
+        path = self.files.get(number)
+        if path is None:
             return None
         rows = []
-        for line in matches[0].read_text(encoding="utf-8").splitlines():
+        for line in path.read_text(encoding="utf-8").splitlines():
             parts = line.split()
             if len(parts) < 5:
                 continue
             try:
                 cx, cy, w, h = (float(v) for v in parts[1:5])
             except ValueError as exc:
-                raise TruthError(f"{matches[0]}: not a YOLO line: {line!r}") from exc
+                raise TruthError(f"{path}: not a YOLO line: {line!r}") from exc
             rows.append(
                 [
                     (cx - w / 2) * width,

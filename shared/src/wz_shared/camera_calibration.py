@@ -35,7 +35,8 @@ _OPENCV_HEADER = re.compile(r"^%YAML[: ]1\.0\s*$", re.MULTILINE)
 #: Distortion coefficients this project's lens model has (OpenCV's first five).
 LENS_COEFFICIENTS = 5
 #: A frame whose aspect ratio differs from the calibration's by more than this share does not
-#: fit it (a scaled stream keeps the aspect; a cropped one does not).
+#: fit it (a scaled stream keeps the aspect; a cropped one does not;
+#: :func:`wz_shared.camera_geometry.camera_at_size`).
 ASPECT_TOLERANCE = 0.01
 
 
@@ -173,38 +174,3 @@ def _matrix(raw: Mapping[str, Any], key: str, size: int | None) -> tuple[float, 
     if size is not None and len(values) != size:
         raise CalibrationError(f"{key} must hold {size} numbers, got {len(values)}")
     return values
-
-
-def scaled_to(calibration: CameraCalibration, width_px: int, height_px: int) -> CameraCalibration:
-    """The calibration for frames of another size of the same stream (resized, not cropped).
-
-    A camera that streams a smaller picture of the same sensor keeps its aspect ratio; its
-    focal lengths and principal point scale with the width. Distortion, on normalized
-    coordinates, does not change.
-
-    Raises
-    ------
-    CalibrationError
-        The frame's aspect ratio differs from the calibration's by more than
-        :data:`ASPECT_TOLERANCE`: it is cropped or another camera, and ranging from it would be
-        wrong.
-    """
-    if (width_px, height_px) == (calibration.width_px, calibration.height_px):
-        return calibration
-    scale_x = width_px / calibration.width_px
-    scale_y = height_px / calibration.height_px
-    if abs(scale_y / scale_x - 1.0) > ASPECT_TOLERANCE:
-        raise CalibrationError(
-            f"a {width_px}x{height_px} frame does not fit the calibration made at "
-            f"{calibration.width_px}x{calibration.height_px}: the aspect ratio differs (a "
-            "cropped stream or another camera); calibrate the camera at this resolution"
-        )
-    return CameraCalibration(
-        width_px=width_px,
-        height_px=height_px,
-        fx_px=calibration.fx_px * scale_x,
-        fy_px=calibration.fy_px * scale_y,
-        cx_px=calibration.cx_px * scale_x,
-        cy_px=calibration.cy_px * scale_y,
-        distortion=calibration.distortion,
-    )

@@ -37,7 +37,7 @@ import numpy as np
 import numpy.typing as npt
 
 from wz_shared.arrays import F64
-from wz_shared.camera_calibration import CalibrationError, CameraCalibration, scaled_to
+from wz_shared.camera_calibration import ASPECT_TOLERANCE, CalibrationError
 from wz_shared.sensor_mounts import intrinsics_of
 from wz_shared.site import CameraIntrinsics, SensorMount
 
@@ -312,40 +312,36 @@ def camera_at_size(mount: SensorMount, width_px: int, height_px: int) -> Pinhole
 
     A camera that streams a smaller (or larger) picture of its sensor keeps the aspect ratio;
     the focal lengths and the principal point scale with the size, the field of view and the
-    distortion stay (:func:`~wz_shared.camera_calibration.scaled_to`).
+    distortion (on normalized coordinates) stay.
 
     Raises
     ------
     CalibrationError
-        A frame of another aspect ratio (a cropped stream, or another camera): ranging from it
-        with this mount's model would be wrong. It is a ValueError; the message says which
-        sizes and what to do.
+        A frame whose aspect ratio differs from the mount's by more than
+        :data:`~wz_shared.camera_calibration.ASPECT_TOLERANCE` (a cropped stream, or another
+        camera): ranging from it with this mount's model would be wrong. It is a ValueError;
+        the message says which sizes and what to do.
     """
     intrinsics = camera_intrinsics(mount)
     if (intrinsics.width_px, intrinsics.height_px) == (width_px, height_px):
         return PinholeCamera(mount)
-    camera = PinholeCamera(mount)
-    distortion = camera.distortion if camera.distortion is not None else LensDistortion()
-    calibration = CameraCalibration(
-        width_px=camera.width_px,
-        height_px=camera.height_px,
-        fx_px=camera.focal_px,
-        fy_px=camera.focal_y_px,
-        cx_px=camera.cx_px,
-        cy_px=camera.cy_px,
-        distortion=(distortion.k1, distortion.k2, distortion.p1, distortion.p2, distortion.k3),
-    )
-    try:
-        scaled = scaled_to(calibration, width_px, height_px)
-    except CalibrationError as exc:
-        raise CalibrationError(f"camera {mount.sensor_id}: {exc}") from None
+    scale_x = width_px / intrinsics.width_px
+    scale_y = height_px / intrinsics.height_px
+    if abs(scale_y / scale_x - 1.0) > ASPECT_TOLERANCE:
+        raise CalibrationError(
+            f"camera {mount.sensor_id}: a {width_px}x{height_px} frame does not fit the "
+            f"calibration made at {intrinsics.width_px}x{intrinsics.height_px}: the aspect ratio "
+            "differs (a cropped stream or another camera); calibrate the camera at this "
+            "resolution"
+        )
     update: dict[str, object] = {"width_px": width_px, "height_px": height_px}
-    if intrinsics.fx_px is not None:
+    fx, fy, cx, cy = intrinsics.fx_px, intrinsics.fy_px, intrinsics.cx_px, intrinsics.cy_px
+    if fx is not None and fy is not None and cx is not None and cy is not None:
         update |= {
-            "fx_px": scaled.fx_px,
-            "fy_px": scaled.fy_px,
-            "cx_px": scaled.cx_px,
-            "cy_px": scaled.cy_px,
+            "fx_px": fx * scale_x,
+            "fy_px": fy * scale_y,
+            "cx_px": cx * scale_x,
+            "cy_px": cy * scale_y,
         }
     return PinholeCamera(
         mount.model_copy(update={"intrinsics": intrinsics.model_copy(update=update)})

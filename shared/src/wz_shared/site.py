@@ -656,7 +656,8 @@ def _read_camera_calibrations(raw: dict[str, Any], folder: Path) -> None:
     """Fill in each camera's ``calibration_file`` (relative to ``folder``) in the raw site.
 
     The calibration gives the resolution, focal lengths, principal point and distortion; a
-    resolution or field of view also written in the site file must agree with it.
+    resolution also written in the site file must agree with it (a field of view is checked
+    by :class:`CameraIntrinsics`).
     """
     sensors = raw.get("sensors")
     for sensor in sensors if isinstance(sensors, list) else []:
@@ -673,20 +674,11 @@ def _read_camera_calibrations(raw: dict[str, Any], folder: Path) -> None:
                 raise CalibrationError(
                     f"camera {name}: {key} {intrinsics[key]} but its calibration says {value}"
                 )
-        fov_deg = calibration.horizontal_fov_deg
-        if (
-            "horizontal_fov_deg" in intrinsics
-            and abs(float(intrinsics["horizontal_fov_deg"]) - fov_deg)
-            > CALIBRATED_FOV_TOLERANCE_DEG
-        ):
-            raise CalibrationError(
-                f"camera {name}: horizontal_fov_deg {intrinsics['horizontal_fov_deg']} but its "
-                f"calibration gives {fov_deg:.2f}"
-            )
+        # A field of view written beside the calibration is checked against fx by the model.
+        intrinsics.setdefault("horizontal_fov_deg", calibration.horizontal_fov_deg)
         intrinsics.update(
             width_px=calibration.width_px,
             height_px=calibration.height_px,
-            horizontal_fov_deg=fov_deg,
             fx_px=calibration.fx_px,
             fy_px=calibration.fy_px,
             cx_px=calibration.cx_px,

@@ -72,7 +72,7 @@ def decode(
         if keep_classes is not None:
             scores = scores[:, keep_classes]
         best = np.argmax(scores, axis=1)
-        best_score = scores[np.arange(len(scores)), best]
+        best_score = scores.max(axis=1)
         points = np.flatnonzero(best_score > conf_threshold)
         if points.size == 0:
             continue

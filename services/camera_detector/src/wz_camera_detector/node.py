@@ -212,7 +212,6 @@ def _geometry_regions(
         return roi, tiles
 
     return regions_for
-    return detector
 
 
 def cut_by_view(

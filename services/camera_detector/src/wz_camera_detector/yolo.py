@@ -142,10 +142,14 @@ def letterbox(image_bgr: U8, size: tuple[int, int]) -> tuple[F32, Letterbox]:
         The :class:`Letterbox` mapping input pixels back to the frame.
     """
     canvas, transform = fit_letterbox(image_bgr, size, (PAD_GRAY, PAD_GRAY, PAD_GRAY))
-    # BGR -> RGB, HWC -> CHW, then 0..255 -> 0..1.
-    chw = canvas[:, :, ::-1].transpose(2, 0, 1)
-    tensor = np.ascontiguousarray(chw, dtype=np.float32)[np.newaxis] / np.float32(255.0)
-    return tensor, transform
+    return yolo_tensor(canvas), transform
+
+
+def yolo_tensor(canvas_bgr: U8) -> F32:
+    """A letterboxed BGR canvas (h, w, 3) as YOLOv8's input: (1, 3, h, w), RGB in [0, 1]."""
+    chw = canvas_bgr[:, :, ::-1].transpose(2, 0, 1)  # BGR -> RGB, HWC -> CHW
+    tensor: F32 = np.ascontiguousarray(chw, dtype=np.float32)[np.newaxis] / np.float32(255.0)
+    return tensor
 
 
 def fit_letterbox(
@@ -410,7 +414,6 @@ class YoloOnnxDetector:
                 f"threads and max_detections must be >= 1, got {threads}, {max_detections}"
             )
         self.model_path = Path(model_path)
-        self.conf_threshold = DEFAULT_CONF_THRESHOLD
         self.iou_threshold = iou_threshold
         self.max_detections = max_detections
 
@@ -651,8 +654,7 @@ class YoloOnnxDetector:
     def _test_run(self) -> list[F32]:
         """One inference on a blank input (settles symbolic shapes, warms up)."""
         height, width = self.input_size
-        blank = np.zeros((height, width, 3), dtype=np.uint8)
-        blank[:] = PAD_GRAY
+        blank = np.full((height, width, 3), PAD_GRAY, dtype=np.uint8)
         try:
             return self._run(self._tensor(blank))
         except Exception as error:  # onnxruntime raises its own pybind exception types
@@ -672,9 +674,7 @@ class YoloOnnxDetector:
         """A letterboxed BGR canvas as the model's input."""
         if self.architecture == "nanodet":
             return nanodet.to_tensor(canvas_bgr)
-        chw = canvas_bgr[:, :, ::-1].transpose(2, 0, 1)  # BGR -> RGB, HWC -> CHW
-        tensor: F32 = np.ascontiguousarray(chw, dtype=np.float32)[np.newaxis] / np.float32(255.0)
-        return tensor
+        return yolo_tensor(canvas_bgr)
 
     def _pad_bgr(self) -> tuple[int, int, int]:
         return nanodet.PAD_BGR if self.architecture == "nanodet" else (PAD_GRAY,) * 3
