@@ -32,7 +32,7 @@ from wz_shared.settings import BusSettings
 
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLE = ROOT / "samples" / "field-log"
-REAL_FRAME = ROOT.parent / "shared" / "data" / "real-freeway-lidar" / "rawdata.pcd"
+REAL_FRAME = ROOT / "samples" / "real-freeway-lidar" / "rawdata.pcd"
 LIDAR, UNIT = "lidar-mast", "radar-mast"
 
 

@@ -12,7 +12,7 @@ from wz_drivers.lidar_files import read_frame, read_frame_folder, time_from_name
 from wz_drivers.records import FieldDataError, Problems
 
 # The shared data folder sits beside the checkout (as for wz_lidar_detector.real_frame).
-REAL_FRAME = Path(__file__).resolve().parents[3] / "shared/data/real-freeway-lidar/rawdata.pcd"
+REAL_FRAME = Path(__file__).resolve().parents[2] / "samples/real-freeway-lidar/rawdata.pcd"
 T0 = 1_700_000_000.0
 
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -19,14 +18,9 @@ from wz_lidar_detector.cli import run
 from wz_lidar_detector.detection import PointFrame
 
 ROOT = Path(__file__).resolve().parents[2]
-REAL = ROOT.parent / "shared" / "data" / "real-freeway-lidar"
+REAL = ROOT / "samples" / "real-freeway-lidar"
 CUT = Path(__file__).resolve().parent / "data" / "rawdata-cut.pcd"
-# The real frame sits in ../shared beside the repository (CI has it): only a checkout without it
-# skips, and under CI a missing file fails loudly instead.
-needs_real = pytest.mark.skipif(
-    not (REAL / "rawdata.pcd").is_file() and not os.environ.get("CI"),
-    reason=f"real LiDAR data not found at {REAL}",
-)
+# The real frame ships in samples/real-freeway-lidar (its README: source and use).
 
 
 def wz(*args: str) -> subprocess.CompletedProcess[str]:
@@ -49,7 +43,6 @@ def on_road(detection: dict[str, Any]) -> bool:
     return -10 < detection["x"] < 130 and abs(detection["y"]) < 25
 
 
-@needs_real
 def test_real_frame_reference_then_fast_path(tmp_path: Path) -> None:
     truncated = tmp_path / "truncated.pcd"
     truncated.write_bytes(CUT.read_bytes()[:-500])

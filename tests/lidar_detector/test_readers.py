@@ -6,7 +6,6 @@ round trip checks one against the other.
 
 from __future__ import annotations
 
-import os
 import struct
 from collections.abc import Sequence
 from pathlib import Path
@@ -24,15 +23,9 @@ from wz_shared.pointcloud_files import (
     read_point_cloud,
 )
 
-REAL = Path(__file__).resolve().parents[3] / "shared" / "data" / "real-freeway-lidar"
+REAL = Path(__file__).resolve().parents[2] / "samples" / "real-freeway-lidar"
 CUT = Path(__file__).resolve().parent / "data" / "rawdata-cut.pcd"
-# The real frame sits in ../shared beside the repository (CI has it): only a checkout without it
-# skips, and under CI a missing file fails loudly instead.
-needs_real = pytest.mark.skipif(
-    not (REAL / "rawdata.pcd").is_file() and not os.environ.get("CI"),
-    reason=f"real LiDAR data not found at {REAL}",
-)
-
+# The real frame ships in samples/real-freeway-lidar (its README: source and use).
 Fields = Sequence[tuple[str, str, int]]  # (name, PCD TYPE, SIZE)
 XYZI: Fields = (("x", "F", 4), ("y", "F", 4), ("z", "F", 4), ("intensity", "F", 4))
 
@@ -141,7 +134,6 @@ def assert_same(actual: npt.NDArray[np.float32], expected: npt.NDArray[np.float3
 # --- the real freeway frame -----------------------------------------------------------------
 
 
-@needs_real
 def test_real_organized_ascii_frame() -> None:
     frame = read_point_cloud(REAL / "rawdata.pcd")
     assert (frame.rows, frame.columns) == (80, 1800) and frame.organized
@@ -157,7 +149,6 @@ def test_real_organized_ascii_frame() -> None:
     assert_same(cut.points.reshape(8, 30, 4), image[40:48, 1200:1230])
 
 
-@needs_real
 def test_real_background_ascii_and_filtered_binary() -> None:
     background = read_point_cloud(REAL / "background.pcd")
     assert (background.rows, background.columns) == (1, 90_059) and not background.organized

@@ -11,7 +11,6 @@ from __future__ import annotations
 import ast
 import inspect
 import math
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,13 +33,8 @@ from wz_shared.messages import VehicleClass
 
 GROUND_Z_M = -5.0  # the road, 5 m below the sensor
 SPACING_M = 0.12  # between sampled points on a vehicle face
-REAL = Path(__file__).resolve().parents[3] / "shared" / "data" / "real-freeway-lidar"
-# The real frame sits in ../shared beside the repository (CI has it): only a checkout without it
-# skips, and under CI a missing file fails loudly instead.
-needs_real = pytest.mark.skipif(
-    not (REAL / "rawdata.pcd").is_file() and not os.environ.get("CI"),
-    reason=f"real LiDAR data not found at {REAL}",
-)
+REAL = Path(__file__).resolve().parents[2] / "samples" / "real-freeway-lidar"
+# The real frame ships in samples/real-freeway-lidar (its README: source and use).
 
 
 @dataclass(frozen=True)
@@ -482,7 +476,6 @@ def read_binary_xyz_pcd(path: Path) -> npt.NDArray[np.float32]:
     return points
 
 
-@needs_real
 def test_real_freeway_frame_finds_each_vehicle_once() -> None:
     points = read_ascii_pcd(REAL / "rawdata.pcd")
     assert points.shape == (144_000, 4)

@@ -35,7 +35,7 @@ update      ``background.update(frame)`` when ``update_background`` (a range-ima
 
 Why Euclidean clustering and not range-image connectivity: it works on organized and unorganized
 frames alike; it does not depend on the driver's slot order (the real 80-beam freeway frame in
-``shared/data`` stores its 80 beams per column one after the other although its header says 80
+``samples/real-freeway-lidar`` stores its 80 beams per column one after the other although its header says 80
 rows of 1800); and it bridges the no-return holes that dark paint and glass leave in a vehicle,
 which cut range-image neighbourhoods. Averaging per cube first bounds its cost by the occupied
 cubes, not the points: a truck beside the mast returns thousands of points (plain

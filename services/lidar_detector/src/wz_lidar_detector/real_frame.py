@@ -34,7 +34,7 @@ from wz_lidar_detector.fast import FastPipeline, FastSettings
 from wz_lidar_detector.reference import ReferencePipeline, ReferenceSettings
 from wz_shared.pointcloud_files import read_point_cloud
 
-DEFAULT_DATA = Path(__file__).resolve().parents[5] / "shared" / "data" / "real-freeway-lidar"
+DEFAULT_DATA = Path(__file__).resolve().parents[4] / "samples" / "real-freeway-lidar"
 ROAD_X_M = (-10.0, 130.0)
 ROAD_ABS_Y_M = 20.0
 
