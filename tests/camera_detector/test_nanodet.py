@@ -57,27 +57,41 @@ def test_the_shipped_coco_model_loads_with_its_operating_point() -> None:
     assert {"car", "truck", "bus", "motorcycle"} <= set(detector.class_names)
     assert detector.conf_threshold == 0.35
     assert detector.input_size == (416, 416)
-    # The whole frame of an unknown camera: 320x240 magnified to the model's 416; 1280x720 not
-    # shrunk below 0.75 (a 20 px vehicle stays 15 px); a region of interest as a square
-    # letterbox would scale it, padded to a multiple of 32 only.
-    assert detector.region_input_size(240, 320, whole_frame=True) == (320, 416)
-    assert detector.region_input_size(720, 1280, whole_frame=True) == (544, 960)
-    assert detector.region_input_size(720, 1280, whole_frame=False) == (256, 416)
+    # A region as a square letterbox would scale it, padded to a multiple of 32 only.
+    assert detector.region_input_size(720, 1280) == (256, 416)
+    assert detector.region_input_size(720, 1280, 1.5) == (1088, 1920)
+    # The whole frame of an unknown camera: a pyramid from 1.5 (a 20 px vehicle becomes 30 px;
+    # a 4K frame within the pixel cap) halved while above the model's size by sqrt(2), then
+    # the model's size. A 320x240 frame is magnified by the model's size already.
+    assert detector.pyramid_input_sizes(240, 320) == [(320, 416)]
+    assert detector.pyramid_input_sizes(720, 1280) == [(1088, 1920), (544, 960), (256, 416)]
+    assert detector.pyramid_input_sizes(1080, 1920) == [
+        (1632, 2880),
+        (832, 1440),
+        (416, 736),
+        (256, 416),
+    ]
+    assert detector.pyramid_input_sizes(2160, 3840) == [
+        (1728, 3072),
+        (864, 1536),
+        (448, 768),
+        (256, 416),
+    ]
     assert detector.detect(np.full((240, 320, 3), 120, np.uint8)) == []
 
 
 @pytest.mark.parametrize(
     ("frame_hw", "roi", "inputs"),
     [
-        # An unknown camera's HD frame: at the model's size and at the 0.75 floor.
-        ((720, 1280), None, [(256, 416), (544, 960)]),
+        # An unknown camera's frame: the pyramid, largest first.
+        ((720, 1280), None, [(1088, 1920), (544, 960), (256, 416)]),
         # A small frame is magnified to the model's size: one size, one pass.
         ((240, 320), None, [(320, 416)]),
         # A region of interest from the road (or --roi): one pass, as the letterbox scales it.
         ((720, 1280), (0, 0, 1280, 720), [(256, 416)]),
     ],
 )
-def test_the_whole_frame_of_an_unknown_camera_is_run_at_two_sizes(
+def test_the_whole_frame_of_an_unknown_camera_is_run_as_a_pyramid(
     frame_hw: tuple[int, int],
     roi: tuple[int, int, int, int] | None,
     inputs: list[tuple[int, int]],
