@@ -109,3 +109,26 @@ def test_the_whole_frame_of_an_unknown_camera_is_run_as_a_pyramid(
     monkeypatch.setattr(detector, "_run", recording)
     detector.detect(np.full((*frame_hw, 3), 120, np.uint8))
     assert seen == inputs
+
+
+def test_a_middle_pyramid_level_keeps_only_the_vehicles_it_sees_large(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Each level decodes a 16 px and a 48 px box (in its input), apart from the other levels'
+    boxes, their score naming level and size: the top (small vehicles) and the model's own size
+    keep both; the middle level, there for vehicles of middle size, drops the 16 px one (seen
+    twice as large by the level above)."""
+    detector = YoloOnnxDetector(DEFAULT_MODEL_PATH, threads=1)
+    sizes = detector.pyramid_input_sizes(720, 1280)
+    assert len(sizes) == 3
+
+    def decode(outputs: list[np.ndarray], input_hw: tuple[int, int]) -> tuple:  # type: ignore[type-arg]
+        level = sizes.index(input_hw)
+        x = input_hw[1] * (level + 1) / 4.0  # a quarter, half, three quarters of the frame
+        boxes = np.array([[x, 0.0, x + 16.0, 16.0], [x, 50.0, x + 48.0, 98.0]], np.float32)
+        scores = np.array([0.5 + 0.1 * level, 0.55 + 0.1 * level], np.float32)
+        return boxes, scores, np.array([2, 2], np.intp)
+
+    monkeypatch.setattr(detector, "_decode", decode)
+    found = detector.detect(np.full((720, 1280, 3), 120, np.uint8))
+    assert sorted(round(d.score, 2) for d in found) == [0.5, 0.55, 0.65, 0.7, 0.75]
