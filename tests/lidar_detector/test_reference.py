@@ -9,6 +9,7 @@ from a 0.3 m sill up, as a roadside LiDAR sees them.
 from __future__ import annotations
 
 import ast
+import importlib.util
 import inspect
 import math
 from dataclasses import dataclass
@@ -498,11 +499,29 @@ def test_real_freeway_frame_finds_each_vehicle_once() -> None:
 # --- purity -------------------------------------------------------------------------------------
 
 
+def test_without_open3d_the_reference_path_says_what_to_install(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """open3d is the optional extra ``reference`` (the edge box's image leaves it out): the
+    pipeline refuses to start without it, naming the extra and the fast path."""
+    find_spec = importlib.util.find_spec
+    monkeypatch.setattr(
+        importlib.util,
+        "find_spec",
+        lambda name, *a: None if name == "open3d" else find_spec(name, *a),
+    )
+    with pytest.raises(
+        ModuleNotFoundError, match=r"wz-lidar-detector\[reference\].*WZ_LIDAR_PATH=fast"
+    ):
+        ReferencePipeline(ReferenceSettings())
+
+
 def test_the_core_does_no_io() -> None:
     """A pure core: numpy, scipy, open3d, pydantic and the project's models; no bus, no files."""
     imported = top_level_imports(reference_module)
     assert imported <= {
         "__future__",
+        "importlib",  # only to say open3d is missing (an optional extra)
         "math",
         "time",
         "typing",

@@ -76,6 +76,7 @@ each fit, so that a frame gives the same result every time.
 
 from __future__ import annotations
 
+import importlib.util
 import math
 import time
 from typing import TYPE_CHECKING, Any, Literal
@@ -265,6 +266,12 @@ class ReferencePipeline:
     """
 
     def __init__(self, settings: ReferenceSettings) -> None:
+        if importlib.util.find_spec("open3d") is None:
+            raise ModuleNotFoundError(
+                "the reference path needs open3d, an optional extra of the LiDAR detector: "
+                "install wz-lidar-detector[reference] (the reference container image has it), "
+                "or run the fast path (WZ_LIDAR_PATH=fast)"
+            )
         self.settings = settings
 
     def detect(self, frame: PointFrame) -> DetectionResult:
