@@ -25,8 +25,11 @@ What it does, in order:
    own health check (``podman healthcheck run``) every 2 s while it waits.
 5. ``check``: every service healthy within 120 s; ``/v1/tracks/live`` serves tracks from the
    containers' pipeline; ``down`` then ``up`` keeps the stored alerts; a container killed
-   (SIGKILL to its process, as a crash: the fusion tracker, then the gateway that stores) is
-   back and healthy within 10 s by its restart policy, with nothing stored lost. Each step's
+   (SIGKILL to its process, as a crash in operation once tracks flow: the fusion tracker, the
+   alert service, then the gateway that stores) is back and healthy by its restart policy
+   within 10 s (the gateway: 15 s, ``KILLED_BACK_WITHIN_S``), live tracks flow again, and
+   nothing stored is lost. Not ``podman kill``: Podman leaves a container an
+   operator killed or stopped down, by design. Each step's
    time is printed; exit 1 on the first that fails. ``--down-after`` (``make test``) takes the
    stack down at the end; ``make containers`` leaves it up.
 """
@@ -76,7 +79,10 @@ CEILINGS_MB = {
     "workzone/gateway:0.1.0": 650,  # 560
 }
 HEALTHY_WITHIN_S = 120.0
-BACK_WITHIN_S = 10.0
+#: The services killed, in order, and how soon each must be back and healthy [s]. The gateway
+#: (the one that stores) imports FastAPI, SQLAlchemy and its API, 1.4 s on an idle core; with
+#: the whole stack saturating this 2-core machine it came back in 5.7-9.7 s, hence its margin.
+KILLED_BACK_WITHIN_S = {"fusion-tracker": 10.0, "alert-service": 10.0, "gateway": 15.0}
 
 
 class CheckFailedError(RuntimeError):
@@ -376,6 +382,12 @@ def wait_for(what: str, probe: Any, within_s: float) -> Any:
     raise CheckFailedError(f"{what}: not within {within_s:.0f} s (last: {last!r})")
 
 
+def live_tracks(key: str) -> bool:
+    """Whether the gateway's newest track batch is under 2 s old and holds tracks."""
+    live = get("/v1/tracks/live", key)
+    return bool(live["tracks"]) and live["age_s"] is not None and live["age_s"] < 2.0
+
+
 def stored_alerts(key: str) -> list[Any]:
     page = get("/v1/alerts?limit=1000", key)
     return list(page["alerts"])
@@ -422,7 +434,10 @@ def _check(skip_build: bool) -> int:
     if not before <= after:
         raise CheckFailedError(f"down/up lost {len(before - after)} of {len(before)} stored alerts")
     say(f"down then up: the {len(before)} stored alerts are all there ({len(after)} now)")
-    for service in ("fusion-tracker", "gateway"):
+    # The kills come in steady state (a crash in operation, not at start-up): once the pipeline
+    # delivers tracks again (the simulator's warm-up over); after each, it must again.
+    wait_for("tracks again after up", lambda: live_tracks(key), 180.0)
+    for service, within_s in KILLED_BACK_WITHIN_S.items():
         entry = containers()[service]
         name = entry["Names"][0]
         killed_at = time.monotonic()
@@ -435,8 +450,13 @@ def _check(skip_build: bool) -> int:
             ).stdout.split()
             return now[0] not in ("0", pid) and now[1] == "running" and health(name) == "healthy"
 
-        wait_for(f"{service} back and healthy after SIGKILL", back, BACK_WITHIN_S)
-        say(f"{service} killed: back and healthy in {time.monotonic() - killed_at:.1f} s")
+        wait_for(f"{service} back and healthy after SIGKILL", back, within_s)
+        healthy_s = time.monotonic() - killed_at
+        wait_for(f"tracks again after {service}'s kill", lambda: live_tracks(key), 60.0)
+        say(
+            f"{service} killed: back and healthy in {healthy_s:.1f} s, live tracks again "
+            f"{time.monotonic() - killed_at:.1f} s after the kill"
+        )
     kept = {a["alert_id"] for a in stored_alerts(key)}
     if not after <= kept:
         raise CheckFailedError(f"the kill lost {len(after - kept)} stored alerts")
