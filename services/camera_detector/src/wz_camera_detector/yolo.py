@@ -710,12 +710,16 @@ class YoloOnnxDetector:
         if not self.free_input:
             return self.input_size
         if scale is None:
-            scale = min(self.input_size[0] / height_px, self.input_size[1] / width_px)
+            scale = self._fit_scale(height_px, width_px)
         stride = INPUT_STRIDE_PX
         return (
             max(stride, math.ceil(height_px * scale / stride) * stride),
             max(stride, math.ceil(width_px * scale / stride) * stride),
         )
+
+    def _fit_scale(self, height_px: int, width_px: int) -> float:
+        """The scale the square letterbox gives a region: its long side to the model's size."""
+        return min(self.input_size[0] / height_px, self.input_size[1] / width_px)
 
     def pyramid_input_sizes(self, height_px: int, width_px: int) -> list[tuple[int, int]]:
         """The inputs [px] the whole frame of an unknown camera is run at, largest first.
@@ -732,7 +736,7 @@ class YoloOnnxDetector:
         fit = self.region_input_size(height_px, width_px)
         if not self.free_input:
             return [fit]
-        fit_scale = min(self.input_size[0] / height_px, self.input_size[1] / width_px)
+        fit_scale = self._fit_scale(height_px, width_px)
         level = min(SMALL_VEHICLE_SCALE, math.sqrt(MAX_INPUT_PIXELS / (height_px * width_px)))
         sizes = []
         while level > fit_scale * math.sqrt(2.0):
@@ -783,34 +787,32 @@ class YoloOnnxDetector:
         for tile in self.tiles_xyxy_px:
             if tile[2] > width or tile[3] > height:
                 raise ValueError(f"frame does not contain the detector's tile {tile}")
-        # The ROI, then each far-field tile: each letterboxed and run on its own.
+        # The ROI, then each far-field tile: each letterboxed and run on its own. The whole
+        # frame of a camera the detector knows nothing of (no ROI): an image pyramid, from a
+        # 20 px vehicle at 30 px (far, small ones) to the model's own size (near ones); a level
+        # between the two keeps only boxes at least LEVEL_MIN_BOX_PX tall in its input: it is
+        # there for vehicles of middle size, a smaller one is seen larger, and boxed better,
+        # by the level above. Each pass: pixels, origin, is a tile, input size, least box height.
+        if self.roi_xyxy_px is None:
+            sizes = self.pyramid_input_sizes(region.shape[0], region.shape[1])
+        else:
+            sizes = [self.region_input_size(region.shape[0], region.shape[1])]
         passes = [
-            (
-                region,
-                origin,
-                False,
-                self.region_input_size(region.shape[0], region.shape[1]),
-            )
+            (region, origin, False, size, LEVEL_MIN_BOX_PX if 0 < level < len(sizes) - 1 else 0.0)
+            for level, size in enumerate(sizes)
         ] + [
             (
                 image_bgr[ty0:ty1, tx0:tx1],
                 (tx0, ty0),
                 True,
                 self.region_input_size(ty1 - ty0, tx1 - tx0),
+                0.0,
             )
             for tx0, ty0, tx1, ty1 in self.tiles_xyxy_px
         ]
-        if self.roi_xyxy_px is None:
-            # The whole frame of a camera the detector knows nothing of: an image pyramid, from
-            # a 20 px vehicle at 30 px (far, small ones) to the model's own size (near ones).
-            # A level between the top and the model's own size keeps only the boxes it sees
-            # at least LEVEL_MIN_BOX_PX tall: it is there for vehicles of middle size; a
-            # smaller one is seen larger, and boxed better, by the level above.
-            sizes = self.pyramid_input_sizes(region.shape[0], region.shape[1])
-            passes = [(region, origin, False, size) for size in sizes]
         preprocess_s = inference_s = postprocess_s = 0.0
         all_boxes, all_scores, all_classes = [], [], []
-        for level, (pixels, (x0, y0), is_tile, input_hw) in enumerate(passes):
+        for pixels, (x0, y0), is_tile, input_hw, min_box_px in passes:
             started = time.perf_counter()
             canvas, transform = fit_letterbox(pixels, input_hw, self._pad_bgr())
             tensor = self._tensor(canvas)
@@ -820,8 +822,8 @@ class YoloOnnxDetector:
             inference_s += time.perf_counter() - started
             started = time.perf_counter()
             input_boxes, scores, class_ids = self._decode(outputs, input_hw)
-            if 0 < level < len(passes) - 1 and self.roi_xyxy_px is None:
-                tall = input_boxes[:, 3] - input_boxes[:, 1] >= LEVEL_MIN_BOX_PX
+            if min_box_px:
+                tall = input_boxes[:, 3] - input_boxes[:, 1] >= min_box_px
                 input_boxes, scores, class_ids = input_boxes[tall], scores[tall], class_ids[tall]
             boxes = transform.to_image(input_boxes)
             if is_tile:
