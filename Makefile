@@ -33,8 +33,13 @@ lint:
 typecheck:
 	$(RUN) mypy $(TYPED)
 
+# On every core (pytest-xdist, one worker per logical CPU); the tests that run `wz up` share one
+# worker (xdist_group "stack": its services' metrics ports are fixed). The 25 slowest listed.
+PYTEST_WORKERS ?= logical
+
 pytest:
-	$(RUN) pytest -q --cov --cov-report=term:skip-covered --cov-fail-under=$(COV_FLOOR)
+	$(RUN) pytest -q -n $(PYTEST_WORKERS) --dist loadgroup --durations=25 \
+		--cov --cov-report=term:skip-covered --cov-fail-under=$(COV_FLOOR)
 
 bench: bootstrap
 	$(RUN) python -m benchmarks.run

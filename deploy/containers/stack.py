@@ -8,7 +8,9 @@
 What it does, in order:
 
 1. **Podman's settings** come from ``deploy/containers/containers.conf`` (``CONTAINERS_CONF``):
-   runc with cgroupfs, no default ulimits, file logs; nothing in ``/etc`` is changed.
+   runc with cgroupfs, CNI networks, no default ulimits, file logs; nothing in ``/etc`` is
+   changed. Podman, runc, debootstrap and CNI's plugins (the dnsname plugin among them, which
+   gives a compose network its names) are installed from Debian when missing.
 2. **The base image.** The Dockerfile builds ``FROM python:3.11-slim-bookworm``. Where no
    registry serves it (this machine has none), it is made here: ``debootstrap --variant=minbase
    bookworm``, imported as ``localhost/wz-bookworm-minbase:12``, and Debian's Python 3.11 added
@@ -23,7 +25,9 @@ What it does, in order:
    (``.containers/credentials``, readable by the images' user, nobody). Podman runs health
    checks from systemd timers; on a host without systemd this script runs each container's
    own health check (``podman healthcheck run``) every 2 s while it waits.
-5. ``check``: every service healthy within 120 s; ``/v1/tracks/live`` serves tracks from the
+5. ``check``: first, two containers on a fresh network: one must resolve the other by name
+   (``check_network_dns``; the cause named when not: CNI's dnsname plugin missing); then
+   every service healthy within 120 s; ``/v1/tracks/live`` serves tracks from the
    containers' pipeline; ``down`` then ``up`` keeps the stored alerts; a container killed
    (SIGKILL to its process, as a crash in operation once tracks flow: the fusion tracker, the
    alert service, then the gateway that stores) is back and healthy by its restart policy
@@ -142,17 +146,23 @@ def _podman_compose() -> str:
     return found
 
 
+#: What the containers need from Debian, and a file each installs. Podman 4.3 (bookworm) runs
+#: its networks with CNI (containers.conf pins ``network_backend = "cni"``); the names of a
+#: compose network (``router``) are served by CNI's dnsname plugin, a package podman only
+#: recommends: installed with --no-install-recommends, the containers cannot find each other.
+DEBIAN_PACKAGES = {
+    "podman": "/usr/bin/podman",
+    "runc": "/usr/sbin/runc",
+    "debootstrap": "/usr/sbin/debootstrap",
+    "golang-github-containernetworking-plugin-dnsname": "/usr/lib/cni/dnsname",
+    "containernetworking-plugins": "/usr/lib/cni/bridge",
+}
+
+
 def ensure_podman() -> None:
-    """Podman, runc and debootstrap from Debian, when missing (root)."""
-    missing = [
-        package
-        for package, program in (
-            ("podman", "podman"),
-            ("runc", "runc"),
-            ("debootstrap", "debootstrap"),
-        )
-        if shutil.which(program, path=f"{os.environ['PATH']}:/usr/sbin:/sbin") is None
-    ]
+    """Podman, runc, debootstrap and CNI's plugins (dnsname included) from Debian, when
+    missing (root)."""
+    missing = [package for package, path in DEBIAN_PACKAGES.items() if not Path(path).exists()]
     if missing:
         say(f"installing {' '.join(missing)} from Debian")
         subprocess.run(["apt-get", "update", "-q"], check=True, stdout=subprocess.DEVNULL)
@@ -162,6 +172,56 @@ def ensure_podman() -> None:
             stdout=subprocess.DEVNULL,
             env={**os.environ, "DEBIAN_FRONTEND": "noninteractive"},
         )
+
+
+DNS_CHECK_NETWORK = "wz-dns-check"
+DNS_CHECK_TARGET = "wz-dns-check-target"
+
+
+def check_network_dns(image: str) -> None:
+    """One container resolves another by name on a network made as compose makes one; raises
+    CheckFailedError naming the cause otherwise (checked before the stack comes up: without
+    it every service waits for ``router`` and the check would only say "not healthy")."""
+    backend = podman("info", "--format", "{{.Host.NetworkBackend}}").stdout.strip()
+    podman("rm", "--force", "--time", "0", DNS_CHECK_TARGET, check=False)
+    podman("network", "rm", "--force", DNS_CHECK_NETWORK, check=False)
+    podman("network", "create", DNS_CHECK_NETWORK)
+    try:
+        podman(
+            "run", "--detach", "--name", DNS_CHECK_TARGET, "--network", DNS_CHECK_NETWORK,
+            image, "sleep", "60",
+        )  # fmt: skip
+        looked_up = podman(
+            "run", "--rm", "--network", DNS_CHECK_NETWORK, image,
+            "getent", "hosts", DNS_CHECK_TARGET,
+            check=False,
+        )  # fmt: skip
+    finally:
+        podman("rm", "--force", "--time", "0", DNS_CHECK_TARGET, check=False)
+        podman("network", "rm", "--force", DNS_CHECK_NETWORK, check=False)
+    if looked_up.returncode != 0 or not looked_up.stdout.strip():
+        fix = {
+            "cni": "install Debian's golang-github-containernetworking-plugin-dnsname (CNI's "
+            "dnsname plugin; /usr/lib/cni/dnsname)",
+            "netavark": "install aardvark-dns (netavark's name server)",
+        }.get(backend, "give the container network a DNS server")
+        raise CheckFailedError(
+            f"containers cannot resolve each other by name: `getent hosts {DNS_CHECK_TARGET}` "
+            f"on a {backend} network found nothing ({looked_up.stderr.strip() or 'no answer'})"
+            f"; the services would never find `router`. Fix: {fix}."
+        )
+    say(f"container DNS: {DNS_CHECK_TARGET} resolves on a {backend} network")
+    # A network of the project made before the plugin was there keeps no DNS (its CNI config
+    # is written once): remove it, compose makes it again.
+    listed = podman(
+        "network", "ls", "--filter", f"label=io.podman.compose.project={PROJECT}",
+        "--format", "{{.Name}} {{.DNSEnabled}}",
+    ).stdout  # fmt: skip
+    for line in listed.splitlines():
+        name, _, dns = line.partition(" ")
+        if dns.strip() != "true":
+            podman("network", "rm", "--force", name, check=False)
+            say(f"removed the network {name}, made without DNS; compose makes it again")
 
 
 def base_image() -> str:
@@ -422,6 +482,7 @@ def _check(skip_build: bool) -> int:
             return 1
     key = prepare()
     compose("down")
+    check_network_dns(base_image())
     compose("up", "-d", "--no-build")
     times = wait_healthy(HEALTHY_WITHIN_S)
     say(
@@ -498,6 +559,7 @@ def main(argv: list[str] | None = None) -> int:
             return 1 if over else 0
         if args.command == "up":
             prepare()
+            check_network_dns(base_image())
             compose("up", "-d", "--no-build")
             times = wait_healthy(HEALTHY_WITHIN_S)
             say(f"healthy {max(times.values()):.0f} s after up")

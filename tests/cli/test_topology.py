@@ -119,6 +119,7 @@ def test_up_with_the_edge_box_topology_needs_credentials(tmp_path: Path) -> None
     assert result.returncode == 2 and "has no credentials for router" in result.stderr
 
 
+@pytest.mark.xdist_group("stack")
 def test_up_with_the_edge_box_topology(tmp_path: Path) -> None:
     from wz_cli.credentials import make_site
     from wz_shared.site import load_site

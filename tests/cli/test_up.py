@@ -26,6 +26,10 @@ from wz_cli.stack import ServiceSpec, StackOptions
 from wz_cli.supervisor import Supervisor
 from wz_shared.site import DEFAULT_SITE_PATH
 
+#: Runs `wz up`, whose services serve metrics on fixed ports: one such test at a time (pytest-xdist
+#: group; the Makefile runs -n auto --dist loadgroup).
+pytestmark = pytest.mark.xdist_group("stack")
+
 
 def _state(pid: int) -> str | None:
     """The process state letter (R, S, Z ...) or None when there is no such process."""

@@ -68,6 +68,14 @@ class Cable:
         _ip("-n", self.far.name, "link", "set", self.far_if, "up")
 
 
+def _worker_octet() -> int:
+    """The second octet of this test process's cables: 231 alone, 231 + N for pytest-xdist's
+    worker gwN. A root cable puts its near address in the test's own (shared) namespace, so two
+    workers must not both take 10.231.1.1."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "")
+    return 231 + (int(worker[2:]) + 1 if worker.startswith("gw") and worker[2:].isdigit() else 0)
+
+
 class Network:
     """Namespaces and cables, all removed by :meth:`close` (processes must be stopped first)."""
 
@@ -75,6 +83,7 @@ class Network:
         self.prefix = prefix
         self.hosts: list[Host] = []
         self._subnet = 0
+        self._octet = _worker_octet()
         self._root_ifs: list[str] = []  # veth ends in this test's own namespace
 
     def host(self, name: str) -> Host:
@@ -86,14 +95,14 @@ class Network:
         return host
 
     def cable(self, near: Host, far: Host) -> Cable:
-        """A /30 between ``near`` (.1) and ``far`` (.2), in 10.231.<n>.0."""
+        """A /30 between ``near`` (.1) and ``far`` (.2), in 10.<octet>.<n>.0."""
         self._subnet += 1
         n = self._subnet
         near_if, far_if = f"{self.prefix[:6]}{n}a", f"{self.prefix[:6]}{n}b"
         _ip("link", "add", near_if, "type", "veth", "peer", "name", far_if)
         for host, ifname, last in ((near, near_if, 1), (far, far_if, 2)):
             _ip("link", "set", ifname, "netns", host.name)
-            address = f"10.231.{n}.{last}"
+            address = f"10.{self._octet}.{n}.{last}"
             _ip("-n", host.name, "addr", "add", f"{address}/30", "dev", ifname)
             _ip("-n", host.name, "link", "set", ifname, "up")
             host.addresses.append(address)
@@ -106,12 +115,12 @@ class Network:
         near_if, far_if = f"{self.prefix[:6]}{n}a", f"{self.prefix[:6]}{n}b"
         _ip("link", "add", near_if, "type", "veth", "peer", "name", far_if)
         _ip("link", "set", far_if, "netns", far.name)
-        _ip("addr", "add", f"10.231.{n}.1/30", "dev", near_if)
+        _ip("addr", "add", f"10.{self._octet}.{n}.1/30", "dev", near_if)
         _ip("link", "set", near_if, "up")
-        _ip("-n", far.name, "addr", "add", f"10.231.{n}.2/30", "dev", far_if)
+        _ip("-n", far.name, "addr", "add", f"10.{self._octet}.{n}.2/30", "dev", far_if)
         _ip("-n", far.name, "link", "set", far_if, "up")
         self._root_ifs.append(near_if)
-        return f"10.231.{n}.2"
+        return f"10.{self._octet}.{n}.2"
 
     def close(self) -> None:
         for ifname in self._root_ifs:

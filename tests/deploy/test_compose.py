@@ -511,6 +511,26 @@ def test_every_service_has_a_real_health_probe(services: dict[str, Service]) -> 
             compile(probe[2], f"<{service.name} healthcheck>", "exec")
 
 
+#: The third-party images of the monitoring profile and the endpoint each one's probe asks.
+THIRD_PARTY_HEALTH = {"prometheus": "/-/healthy", "grafana": "/api/health"}
+
+
+def test_every_compose_service_has_a_healthcheck_the_third_party_ones_too() -> None:
+    """Every service of every profile: `podman ps` / `docker compose ps` shows each one's
+    health, and a `depends_on: service_healthy` can name any of them."""
+    document = yaml.safe_load(COMPOSE_FILE.read_text(encoding="utf-8"))
+    for name, config in document["services"].items():
+        healthcheck = config.get("healthcheck")
+        assert healthcheck and not healthcheck.get("disable"), f"{name} has no healthcheck"
+        test = healthcheck["test"]
+        assert isinstance(test, list) and test[0] == "CMD", name
+        if name in THIRD_PARTY_HEALTH:
+            assert test[1] == "wget" and test[-1].endswith(THIRD_PARTY_HEALTH[name]), name
+    assert set(THIRD_PARTY_HEALTH) <= set(document["services"])
+    grafana_needs = document["services"]["grafana"]["depends_on"]
+    assert grafana_needs["prometheus"]["condition"] == "service_healthy"
+
+
 def _mounted(service: Service, container_path: str) -> Path:
     """The file of this repository that ``service`` sees at ``container_path``."""
     for entry in service.config.get("volumes", []):

@@ -66,3 +66,21 @@ def test_bad_arguments_are_a_usage_error(
         _stack().main(argv)
     assert exited.value.code == 2
     assert "usage:" in capsys.readouterr().err
+
+
+def test_the_container_networks_dns_is_installed_and_its_backend_pinned() -> None:
+    """A fresh machine got podman without its recommends, so no DNS on the compose network and
+    no service found `router` (issue 37): the plugin is installed with podman, the backend that
+    uses it is pinned, and the check resolves one container from another before the stack."""
+    stack = _stack()
+    assert stack.DEBIAN_PACKAGES["golang-github-containernetworking-plugin-dnsname"] == (
+        "/usr/lib/cni/dnsname"
+    )
+    assert {"podman", "runc", "debootstrap", "containernetworking-plugins"} <= set(
+        stack.DEBIAN_PACKAGES
+    )
+    conf = (ROOT / "deploy/containers/containers.conf").read_text(encoding="utf-8")
+    assert re.search(r'^\[network\]\s*\n(?:#.*\n)*network_backend = "cni"', conf, re.MULTILINE)
+    source = (ROOT / "deploy/containers/stack.py").read_text(encoding="utf-8")
+    check_body = source.split("def _check(", 1)[1]
+    assert check_body.index("check_network_dns(") < check_body.index('compose("up"')

@@ -11,6 +11,7 @@ import re
 import shutil
 import subprocess
 import time
+import urllib.parse
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +28,7 @@ from wz_shared.metrics import RuntimeView, ServiceMetrics
 MONITORING = ROOT / "deploy" / "monitoring"
 PROMTOOL = shutil.which("promtool")
 PROMETHEUS = shutil.which("prometheus")
+COMPOSE = yaml.safe_load((ROOT / "docker-compose.yml").read_text(encoding="utf-8"))
 #: The gateway's port in prometheus-local.yml: `wz up`'s default (WZ_GATEWAY_PORT).
 GATEWAY_PORT = 8000
 
@@ -110,6 +112,7 @@ def scrape(port: int) -> str:
     return response.text
 
 
+@pytest.mark.xdist_group("stack")
 def test_every_service_is_scraped_during_wz_up(tmp_path: Path) -> None:
     assert PROMETHEUS, "prometheus is missing: run deploy/host/bootstrap.sh (apt: prometheus)"
     endpoint = f"tcp/127.0.0.1:{free_port()}"
@@ -184,6 +187,11 @@ def test_every_service_is_scraped_during_wz_up(tmp_path: Path) -> None:
                 return bool(health) and "unknown" not in health.values()
 
             wait_for(scraped, 60.0, "Prometheus' first scrape of every target")
+            # The compose file's healthcheck asks this URL of the real Prometheus.
+            probe = COMPOSE["services"]["prometheus"]["healthcheck"]["test"]
+            url = urllib.parse.urlsplit(probe[-1])
+            assert url.path == "/-/healthy"
+            assert httpx.get(f"http://127.0.0.1:{web}{url.path}", timeout=5.0).status_code == 200
             running_ports = {f"127.0.0.1:{s.metrics_port}" for s in services}
             running_ports.add(f"127.0.0.1:{http_port}")
             assert {i for i, h in health.items() if h == "up"} == running_ports, health

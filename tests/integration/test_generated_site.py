@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 import httpx
+import pytest
 
 from tests.cli.procs import free_port, port_open, running, start_wz_up, wait_for
 from wz_eval.site_tool import site_yaml
@@ -16,6 +17,10 @@ from wz_shared.messages import DetectionBatch, TrackBatch
 from wz_shared.settings import BusSettings
 from wz_shared.site import CameraIntrinsics, Site
 from wz_shared.site_generator import generate_site
+
+#: Runs `wz up`, whose services serve metrics on fixed ports: one such test at a time (pytest-xdist
+#: group; the Makefile runs -n auto --dist loadgroup).
+pytestmark = pytest.mark.xdist_group("stack")
 
 
 def a_site_unlike_the_default() -> Site:

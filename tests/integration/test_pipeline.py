@@ -22,6 +22,10 @@ from wz_shared.messages import GroundTruth, TrackBatch
 from wz_shared.settings import BusSettings
 from wz_shared.site import DEFAULT_SITE_PATH, load_site
 
+#: Runs `wz up`, whose services serve metrics on fixed ports: one such test at a time (pytest-xdist
+#: group; the Makefile runs -n auto --dist loadgroup).
+pytestmark = pytest.mark.xdist_group("stack")
+
 SITE = load_site(DEFAULT_SITE_PATH)
 
 

@@ -158,6 +158,8 @@ def cmd_up(args: argparse.Namespace) -> int:
             seed=args.seed,
             state_dir=Path(state_dir),
         )
+        # `wz status --health-dir` reads each service's health file there (<service>/health).
+        log.info("state and health files of this run under %s", state_dir)
         if topology is not None:
             options = topology.configure(options)
         if args.credentials is not None:
@@ -210,15 +212,26 @@ def _demo_banner(site_id: str, endpoint: str) -> None:
 
 def cmd_status(args: argparse.Namespace) -> int:
     from wz_cli.stack import select
-    from wz_cli.status import collect, problems, render_json, render_table
+    from wz_cli.status import collect, health_notes, problems, render_json, render_table
 
     site = args.site or default_site_id()
     if args.expect is None:
         expected = [spec.name for spec in select(None)]  # what `wz up` runs
     else:
         expected = [name.strip() for name in args.expect.split(",") if name.strip()]
-    with open_bus(args.connect, site=site, service="wz-status") as bus:
-        views = collect(bus, site, args.timeout, expected)
+    notes = health_notes(args.health_dir) if args.health_dir is not None else {}
+    try:
+        bus = open_bus(args.connect, site=site, service="wz-status")
+    except CliError as error:
+        if not notes:
+            raise
+        # No bus to ask: what the services' own health files say is all there is.
+        emit(str(error))
+        for name, note in sorted(notes.items()):
+            emit(f"{name}: {note}")
+        return 1
+    with bus:
+        views = collect(bus, site, args.timeout, expected, notes)
     if args.json:
         emit(render_json(site, views))
     else:
@@ -382,7 +395,7 @@ SERVICE_TOOLS = {
         "detect vehicles in image or video files, one JSON line per frame",
     ),
     "eval": (
-        "wz_eval.fusion",
+        "wz_eval.cli",
         "run the pipeline on the simulated work zone and score it against truth (tracks, MOT)",
     ),
     "site": (
@@ -547,6 +560,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="how long to wait for status messages [s] (default 3)",
     )
     status.add_argument("--json", action="store_true", help="one JSON object instead of a table")
+    status.add_argument(
+        "--health-dir",
+        type=Path,
+        metavar="DIR",
+        help="a folder of the services' health files (<service>/health: the state folder "
+        "`wz up` logs at start): a service not up shows what its file says, e.g. why it is "
+        "still waiting for the bus",
+    )
     status.add_argument(
         "--expect",
         metavar="NAME[,NAME...]",

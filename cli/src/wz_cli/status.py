@@ -14,6 +14,10 @@ Each expected service (by default those ``wz up`` runs) gets a health:
   session the router has not yet given up);
 - ``down``: neither token nor status (not running).
 
+With ``--health-dir`` (``wz up``'s state folder), a service that is not up also shows what its
+health file says: a service still waiting for its router writes why there
+(:mod:`wz_shared.reach`: ``waiting for the bus: tcp/127.0.0.1:7447: connection refused``).
+
 The command exits 1 when an expected service is anything but up.
 """
 
@@ -23,10 +27,12 @@ import json
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from wz_cli.common import format_duration, format_table
 from wz_shared.bus import Bus
+from wz_shared.health import waiting_reason
 from wz_shared.keys import Keys
 from wz_shared.messages import ServiceState, ServiceStatus
 
@@ -42,6 +48,8 @@ class ServiceView:
     status_age_s: float | None
     #: Whether ``wz status`` was told to expect it.
     expected: bool = False
+    #: What its health file says while it is not working (``waiting for the bus: ...``).
+    note: str | None = None
 
     @property
     def health(self) -> str:
@@ -55,11 +63,27 @@ def _name(key: str) -> str:
     return key.rsplit("/", 1)[-1]
 
 
+def health_notes(folder: Path) -> dict[str, str]:
+    """Service name -> what its health file says (``folder/<service>/health``), for the
+    services whose file holds a reason (:func:`wz_shared.health.mark_waiting`)."""
+    notes = {}
+    for path in sorted(folder.glob("*/health")):
+        reason = waiting_reason(path)
+        if reason is not None:
+            notes[path.parent.name] = reason
+    return notes
+
+
 def collect(
-    bus: Bus, site: str, timeout_s: float, expected: Iterable[str] = ()
+    bus: Bus,
+    site: str,
+    timeout_s: float,
+    expected: Iterable[str] = (),
+    notes: dict[str, str] | None = None,
 ) -> list[ServiceView]:
     """Ask who is alive at ``site`` and listen to status messages for up to ``timeout_s``;
-    one view per service alive, heard or ``expected``.
+    one view per service alive, heard or ``expected``; ``notes`` (:func:`health_notes`) go
+    to the services that did not report.
 
     Returns early once every alive and expected service has reported.
     """
@@ -85,6 +109,7 @@ def collect(
             status=latest[name][0] if name in latest else None,
             status_age_s=end - latest[name][1] if name in latest else None,
             expected=name in wanted,
+            note=None if name in latest else (notes or {}).get(name),
         )
         for name in sorted(alive | latest.keys() | wanted)
     ]
@@ -101,6 +126,8 @@ def problems(views: list[ServiceView]) -> list[str]:
             out.append(f"{view.name}: stalled (its loop has not gone round for {age:.1f} s)")
         elif view.health == "silent":
             out.append(f"{view.name}: silent (alive on the bus, but no status: stopped or hung)")
+        elif view.note is not None:
+            out.append(f"{view.name}: {view.health} ({view.note})")
         else:
             out.append(f"{view.name}: down (not running)")
     return out
@@ -193,6 +220,7 @@ def render_json(site: str, views: list[ServiceView]) -> str:
                 "alive": view.alive,
                 "expected": view.expected,
                 "health": view.health,
+                "note": view.note,
                 "status": view.status.model_dump(mode="json") if view.status else None,
                 "status_age_s": (
                     None if view.status_age_s is None else round(view.status_age_s, 3)

@@ -48,6 +48,7 @@ import zenoh.ext
 from wz_shared import codec
 from wz_shared.keys import Keys
 from wz_shared.messages import Message
+from wz_shared.reach import open_session
 from wz_shared.settings import BusSettings
 from wz_shared.trust import expected_source, source_problem, tls_config
 
@@ -592,8 +593,19 @@ class Bus:
         self._closed = False
 
     @classmethod
-    def open(cls, settings: BusSettings, *, site: str, service: str) -> Bus:
-        session = zenoh.open(zenoh_config(settings))
+    def open(
+        cls,
+        settings: BusSettings,
+        *,
+        site: str,
+        service: str,
+        on_wait: Callable[[str], None] | None = None,
+        stop: threading.Event | None = None,
+    ) -> Bus:
+        """Join the bus; while the session waits for its router, log why every few seconds
+        and pass the reason to ``on_wait`` (:func:`wz_shared.reach.open_session`). ``stop``
+        set during the wait raises :class:`~wz_shared.reach.BusWaitAbortedError`."""
+        session = open_session(zenoh_config(settings), on_wait=on_wait, stop=stop)
         log.debug("zenoh session %s open (%s)", session.zid(), settings.mode)
         return cls(session, site=site, service=service)
 

@@ -12,6 +12,12 @@ the file. A container's healthcheck then runs::
 which exits 0 when the file was touched within the last ``max_age_s`` seconds, else 1 with one
 line on stderr saying why. It reads one file's modification time: no bus session, no import of
 zenoh, so it costs a few milliseconds every interval.
+
+While the service waits for the bus (no router reachable yet, :mod:`wz_shared.reach`), the file
+holds one line saying why (``waiting for the bus: tls/router:7447: name not resolved ...``),
+rewritten every few seconds: the check fails with that line, so ``docker inspect`` /
+``podman healthcheck run`` and ``wz status --health-dir`` show the cause. Once the service
+is on the bus, the next touch empties the file.
 """
 
 from __future__ import annotations
@@ -34,7 +40,27 @@ def touch(path: Path, at_s: float | None = None) -> None:
     (and its folder) and set its modification time to that."""
     path.parent.mkdir(parents=True, exist_ok=True)
     path.touch(exist_ok=True)
+    if path.stat().st_size:  # a reason left by mark_waiting: the service is on the bus now
+        path.write_bytes(b"")
     os.utime(path, None if at_s is None else (at_s, at_s))
+
+
+def mark_waiting(path: Path, reason: str) -> None:
+    """Say in ``path`` why the service is not working yet (``reason``: one line), now."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    partial = path.with_name(path.name + ".part")
+    partial.write_text(reason.replace("\n", " ") + "\n", encoding="utf-8")
+    partial.replace(path)
+
+
+def waiting_reason(path: Path) -> str | None:
+    """What the service wrote while waiting (:func:`mark_waiting`), or None."""
+    try:
+        if not path.stat().st_size:
+            return None
+        return path.read_text(encoding="utf-8", errors="replace").strip() or None
+    except FileNotFoundError:
+        return None
 
 
 def heartbeat_problem(path: Path, max_age_s: float, now_s: float | None = None) -> str | None:
@@ -53,6 +79,9 @@ def heartbeat_problem(path: Path, max_age_s: float, now_s: float | None = None) 
         modified_s = path.stat().st_mtime
     except FileNotFoundError:
         return f"no heartbeat file {path} (service not started, or stopped)"
+    reason = waiting_reason(path)
+    if reason is not None:
+        return reason
     age_s = (time.time() if now_s is None else now_s) - modified_s
     if age_s > max_age_s:
         return f"heartbeat {path} is {age_s:.1f} s old (limit {max_age_s:g} s)"

@@ -48,6 +48,7 @@ from wz_shared.bus import Bus, BusStats
 from wz_shared.logs import configure_logging
 from wz_shared.messages import DeviceLink, ServiceState, ServiceStatus
 from wz_shared.metrics import RuntimeView, ServiceMetrics
+from wz_shared.reach import BusWaitAbortedError
 from wz_shared.settings import BusSettings, ServiceSettings
 from wz_shared.signals import stop_on_signals
 from wz_shared.site import Site, SiteFileError, load_site
@@ -111,7 +112,15 @@ class ServiceRuntime:
 
     def __enter__(self) -> ServiceRuntime:
         self._install_signal_handlers()
-        self._bus = Bus.open(self.bus_settings, site=self.site, service=self.service)
+        self._bus = Bus.open(
+            self.bus_settings,
+            site=self.site,
+            service=self.service,
+            on_wait=self._waiting_for_bus,
+            stop=self.stop,
+        )
+        if self.health_file is not None:
+            health.touch(self.health_file)  # on the bus: no more "waiting for the bus"
         self._bus.declare_alive()
         self.state = ServiceState.RUNNING
         if self.metrics_port is not None:
@@ -121,6 +130,11 @@ class ServiceRuntime:
         self._health.start()
         log.info("service %s up at site %s (pid %d)", self.service, self.site, os.getpid())
         return self
+
+    def _waiting_for_bus(self, reason: str) -> None:
+        """No router yet (:mod:`wz_shared.reach`): the health file says why."""
+        if self.health_file is not None:
+            health.mark_waiting(self.health_file, reason)
 
     def __exit__(self, *exc: object) -> None:
         self.state = ServiceState.STOPPING
@@ -335,15 +349,21 @@ class NodeApp(Generic[SettingsT]):
         if self.site_id is None:
             raise RuntimeError("start_logging (or load_site) comes before serve")
         settings = self.settings
-        with ServiceRuntime(
-            self.service,
-            self.site_id,
-            BusSettings(),
-            status_period_s=settings.status_period_s,
-            clock_stamp=self.clock.now if sim_clock else None,
-            health_file=settings.health_file if health_file else None,
-            stall_after_s=settings.stall_after_s,
-            metrics_port=settings.metrics_port,
-            metrics_host=settings.metrics_host,
-        ) as runtime:
-            return loop(runtime)
+        try:
+            with ServiceRuntime(
+                self.service,
+                self.site_id,
+                BusSettings(),
+                status_period_s=settings.status_period_s,
+                clock_stamp=self.clock.now if sim_clock else None,
+                health_file=settings.health_file if health_file else None,
+                stall_after_s=settings.stall_after_s,
+                metrics_port=settings.metrics_port,
+                metrics_host=settings.metrics_host,
+            ) as runtime:
+                return loop(runtime)
+        except BusWaitAbortedError:  # SIGTERM while no router could be reached: a clean stop
+            if settings.health_file is not None and health_file:
+                settings.health_file.unlink(missing_ok=True)
+            log.info("%s stopped before it joined the bus", self.service)
+            raise SystemExit(0) from None
