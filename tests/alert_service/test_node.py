@@ -115,3 +115,37 @@ def test_a_new_run_of_the_tracker_starts_the_engine_again_with_ids_going_on() ->
     assert len(starts) == 2 and starts[1].stamp == pytest.approx(1.2)
     ids = [a.alert_id for a in first + second]
     assert len(ids) == len(set(ids))
+
+
+def test_a_new_run_clears_every_open_episode_once() -> None:
+    """The tracker restarts mid-episode (its stamps go back): each episode open then gets one
+    clear, its next event id, before the new run's events; the beacon goes off; nothing is
+    cleared twice when the new run goes on."""
+    core, _ = core_and_reports()
+    events: list[Alert] = []
+    devices = []
+    for k, t in enumerate(stamps(2.0, rate_hz=10.0, start_s=100.0)):
+        tracks = [make_track(1, 500.0 + 27.0 * (t - 100.0), FAST_MPS)]
+        tracks.append(make_track(2, 520.0 + 27.0 * (t - 100.0), FAST_MPS, offset_m=-1.0))
+        outputs = core.add(batch(t, tracks, k))
+        events += outputs.alerts
+        devices += [outputs.devices] if outputs.devices is not None else []
+    opened = {a.episode_id: a for a in events if a.phase != "clear"}
+    assert len(opened) >= 2 and not [a for a in events if a.phase == "clear"]
+    assert devices[-1].beacon_on
+    after: list[Alert] = []
+    for k, t in enumerate(stamps(3.0, rate_hz=10.0)):  # the new run: nobody on the road yet
+        outputs = core.add(batch(t, [], 100 + k))
+        after += outputs.alerts
+        devices += [outputs.devices] if outputs.devices is not None else []
+    assert core.runs == 2
+    clears = [a for a in after if a.phase == "clear"]
+    assert sorted(a.episode_id for a in clears) == sorted(opened)
+    newest = {a.episode_id: a for a in events}
+    for clear in clears:
+        last = newest[clear.episode_id]
+        sequence = int(last.alert_id.rsplit("-", 1)[1])
+        assert clear.alert_id == f"{clear.episode_id}-{sequence + 1}"
+        assert clear.alert_type is last.alert_type and "a new run" in clear.description
+    assert not devices[-1].beacon_on
+    assert core.active().alerts == []

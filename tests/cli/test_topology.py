@@ -176,3 +176,12 @@ def test_up_with_the_edge_box_topology(tmp_path: Path) -> None:
     log_text = log_path.read_text()
     assert "trailer-router.json5" in log_text
     assert f"listening on {endpoint}, connecting to nothing" in log_text
+
+
+def test_up_help_says_credentials_takes_the_folder_make_wrote() -> None:
+    """The folder given to `wz credentials make`, not its <site>/ subfolder (which the help
+    once said, and which fails)."""
+    result = run_wz("up", "--help")
+    text = " ".join(result.stdout.split())
+    assert result.returncode == 0
+    assert "DIR itself, not its <site>/ subfolder" in text

@@ -3,9 +3,9 @@
 Usage: python -m tests.deploy.bus_probe ENDPOINT SITE TLS_DIR [--no-cert]
 
 Opens a Zenoh client session to ENDPOINT with the credentials in TLS_DIR (``--no-cert``: only
-its CA, to trust the router, and no certificate of its own), then for 5 s puts a forged message of each kind the bus carries (an
-alert, a detection batch, a track batch, the devices' state, a LiDAR frame, another
-service's status) every 50 ms, each payload naming the kind, and answers queries on the
+its CA, to trust the router, and no certificate of its own), then for 5 s puts a forged
+message of each kind the bus carries (an alert, a detection batch, a track batch, the devices'
+state, a LiDAR frame, another service's status, the site's description) every 50 ms, each payload naming the kind, and answers queries on the
 open-alerts key with a forged reply. Prints ``connected`` or ``refused: <why>`` (exit 3).
 """
 
@@ -29,6 +29,7 @@ KINDS = {
     "devices": "devices/state",
     "raw": "raw/lidar/lidar-mast",
     "status": "status/alert-service",
+    "config": "config/site",
 }
 PUT_S = 5.0
 

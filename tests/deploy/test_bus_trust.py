@@ -14,11 +14,18 @@ its switch:
   devices' state, LiDAR frame and the alert service's status, and answers the open-alerts
   query with a forged reply.
 
-This test's own session (the operator's certificate, over a third cable) is a raw subscriber
-of every key of the site, so what it sees is what the router let through, before any
+The box also runs the regional router (``regional-router.json5``, on another port), which the
+trailer's router links up to, as a centre does over the cellular link.
+
+This test's own sessions (over a third cable) are raw subscribers of every key of the site:
+one with the site operator's certificate at the trailer's router, one with the central
+gateway's at the regional router; what they see is what the routers let through, before any
 consumer's own checks. Each role must get through exactly what its row of the issue's table
-says, nothing more; a session without the CA's certificate must not connect at all; and the
-authorised pipeline, running all along, stores the alert service's alerts in the gateway.
+says, nothing more; a session without the CA's certificate must not connect at all; every
+identity of *another site from the same CA* (its services', its operator's, its trailer
+router's) connects but gets nothing of this site's through either router (a key taken from
+one trailer on a roadside forges nothing at another); and the authorised pipeline, running
+all along, stores the alert service's alerts in the gateway and reaches the centre.
 """
 
 from __future__ import annotations
@@ -38,7 +45,7 @@ import zenoh
 
 from tests.deploy.bus_probe import KINDS, PUT_S
 from tests.deploy.netns import Host, Network, require_namespaces
-from wz_cli.credentials import make_site
+from wz_cli.credentials import make_regional, make_site
 from wz_shared.bus import zenoh_config
 from wz_shared.settings import BusSettings
 from wz_shared.site import load_site
@@ -47,13 +54,17 @@ ROOT = Path(__file__).resolve().parents[2]
 ZENOH = ROOT / "deploy" / "zenoh"
 SITE_FILE = ROOT / "deploy" / "sites" / "us75-lincoln.yaml"
 SITE = load_site(SITE_FILE).site_id
+#: Another site's credentials from the same CA.
+OTHER_SITE = "i80-omaha"
 PORT = 7447
+#: The regional router's port, on the box's host too.
+REGIONAL_PORT = 7448
 
 #: What each role's forged messages may get through the router: the issue's table (only the
 #: alert service alerts, only detectors detections, only the tracker tracks, the gateway only
 #: reads), plus raw data from the sensors' side, and each service its own status only.
 ALLOWED: dict[str, set[str]] = {
-    "simulator": {"raw"},
+    "simulator": {"raw", "config"},
     "drivers": {"raw", "detection"},
     "lidar-detector": {"detection"},
     "camera-detector": {"detection"},
@@ -70,15 +81,19 @@ class Box:
     box: Host
     yard: Host
     router_endpoint: str  # as the yard reaches it
+    regional_endpoint: str  # as the yard reaches it
     credentials: Path
     stranger: Path  # another CA's credentials for the same site
     data_dir: Path
     seen: list[tuple[str, bytes]] = field(default_factory=list)
+    #: What the central gateway's session at the regional router received.
+    central_seen: list[tuple[str, bytes]] = field(default_factory=list)
     lock: threading.Lock = field(default_factory=threading.Lock)
 
-    def forged_seen(self) -> set[str]:
+    def forged_seen(self, at: str = "trailer") -> set[str]:
         with self.lock:
-            return {payload.decode() for _, payload in self.seen if payload.decode() in KINDS}
+            samples = self.seen if at == "trailer" else self.central_seen
+            return {payload.decode() for _, payload in samples if payload.decode() in KINDS}
 
 
 def _env(**extra: str) -> dict[str, str]:
@@ -110,6 +125,8 @@ def box(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Box]:
         credentials, stranger = tmp / "credentials", tmp / "stranger"
         names = [*box_host.addresses, watch_address]
         make_site(credentials, SITE, router_names=names)
+        make_site(credentials, OTHER_SITE, router_names=names)
+        make_regional(credentials, names=[*names, "127.0.0.1"])
         make_site(stranger, SITE, router_names=names)
         site = credentials / SITE
         logs = tmp / "logs"
@@ -120,9 +137,17 @@ def box(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Box]:
             processes.append(box_host.popen(argv, env=_env(**env), cwd=ROOT, log=log))
 
         start(
+            "regional-router",
+            [sys.executable, "-m", "wz_cli.main", "router", "--config",
+             str(ZENOH / "regional-router.json5"), "--tls-dir",
+             str(credentials / "regional" / "router"), "--listen",
+             f"tls/0.0.0.0:{REGIONAL_PORT}"],
+        )  # fmt: skip
+        start(
             "router",
             [sys.executable, "-m", "wz_cli.main", "router", "--config",
-             str(ZENOH / "trailer-router.json5"), "--tls-dir", str(site / "router")],
+             str(ZENOH / "trailer-router.json5"), "--tls-dir", str(site / "router"),
+             "--connect", f"tls/127.0.0.1:{REGIONAL_PORT}"],
         )  # fmt: skip
         service = {
             "WZ_BUS_CONFIG_FILE": str(ZENOH / "edge-service.json5"),
@@ -151,8 +176,8 @@ def box(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Box]:
             WZ_BUS_TLS_DIR=str(site / "fusion-tracker"),
         )
         result = Box(
-            network, box_host, yard, f"tls/{box_host.addresses[0]}:{PORT}", credentials,
-            stranger, data_dir,
+            network, box_host, yard, f"tls/{box_host.addresses[0]}:{PORT}",
+            f"tls/{box_host.addresses[0]}:{REGIONAL_PORT}", credentials, stranger, data_dir,
         )  # fmt: skip
         settings = BusSettings(
             mode="client",
@@ -160,14 +185,29 @@ def box(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Box]:
             listen_endpoints=[],
             tls_dir=site / "operator",
         )
+        central = BusSettings(
+            mode="client",
+            connect_endpoints=[f"tls/{watch_address}:{REGIONAL_PORT}"],
+            listen_endpoints=[],
+            tls_dir=credentials / "regional" / "central-gateway",
+        )
         _wait(lambda: _opens(settings), "the router, for the operator", 30.0)
-        with zenoh.open(zenoh_config(settings)) as session:
+        _wait(lambda: _opens(central), "the regional router, for the centre", 30.0)
+        with (
+            zenoh.open(zenoh_config(settings)) as session,
+            zenoh.open(zenoh_config(central)) as central_session,
+        ):
 
             def on_sample(sample: zenoh.Sample) -> None:
                 with result.lock:
                     result.seen.append((str(sample.key_expr), sample.payload.to_bytes()))
 
+            def on_central(sample: zenoh.Sample) -> None:
+                with result.lock:
+                    result.central_seen.append((str(sample.key_expr), sample.payload.to_bytes()))
+
             session.declare_subscriber(f"wz/{SITE}/**", on_sample)
+            central_session.declare_subscriber(f"wz/{SITE}/**", on_central)
             result.session = session  # type: ignore[attr-defined]
             yield result
     finally:
@@ -191,11 +231,15 @@ def _opens(settings: BusSettings) -> bool:
     return True
 
 
-def _probe(box: Box, tls_dir: Path, *extra: str) -> tuple[str, set[str]]:
-    """Run the probe in the yard; its first line, and the forged kinds the router let by."""
+def _probe(box: Box, tls_dir: Path, *extra: str, at: str = "trailer") -> tuple[str, set[str]]:
+    """Run the probe in the yard against the trailer's router (or the regional one); its first
+    line, and the forged kinds the routers let by (to the operator at the trailer's router,
+    or to the centre at the regional router)."""
     with box.lock:
         box.seen.clear()
-    argv = [sys.executable, "-m", "tests.deploy.bus_probe", box.router_endpoint, SITE,
+        box.central_seen.clear()
+    endpoint = box.router_endpoint if at == "trailer" else box.regional_endpoint
+    argv = [sys.executable, "-m", "tests.deploy.bus_probe", endpoint, SITE,
             str(tls_dir), *extra]  # fmt: skip
     process = subprocess.Popen(
         box.yard.argv(argv), env=_env(), cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE
@@ -203,7 +247,7 @@ def _probe(box: Box, tls_dir: Path, *extra: str) -> tuple[str, set[str]]:
     assert process.stdout is not None
     first = process.stdout.readline().decode().strip()
     replies: list[bytes] = []
-    if first == "connected":
+    if first == "connected" and at == "trailer":
         # Ask until its queryable answers through the router or it stops serving (a loaded
         # machine routed the declaration after more than 1 s).
         session: zenoh.Session = box.session  # type: ignore[attr-defined]
@@ -214,7 +258,7 @@ def _probe(box: Box, tls_dir: Path, *extra: str) -> tuple[str, set[str]]:
                     replies.append(reply.ok.payload.to_bytes())
     _, err = process.communicate(timeout=30)
     time.sleep(0.5)  # the last samples in flight
-    seen = box.forged_seen()
+    seen = box.forged_seen(at) | (box.forged_seen("regional") if at == "trailer" else set())
     if b"forged" in replies:
         seen.add("active reply")
     assert process.returncode in (0, 3), err.decode()[-2000:]
@@ -225,7 +269,24 @@ def _probe(box: Box, tls_dir: Path, *extra: str) -> tuple[str, set[str]]:
 def test_a_role_gets_through_the_router_only_what_it_may_give(box: Box, role: str) -> None:
     first, seen = _probe(box, box.credentials / SITE / role)
     assert first == "connected"
+    # What the trailer's router lets by also reaches the centre (the trailer's uplink), and
+    # nothing else does.
     assert seen == ALLOWED[role]
+
+
+#: Every identity of the other site: its services', its operator's and its trailer router's.
+OTHER_IDENTITIES = [*ALLOWED, "router"]
+
+
+@pytest.mark.parametrize("at", ["trailer", "regional"])
+@pytest.mark.parametrize("role", OTHER_IDENTITIES)
+def test_another_sites_certificate_gives_nothing_of_this_site(box: Box, role: str, at: str) -> None:
+    """Same CA, so the TLS handshake succeeds; the common name names the other site, so no
+    rule of this site's router, and no rule of the regional router for this site's keys,
+    lets anything by: alerts, detections, tracks, devices, raw data, status, config."""
+    first, seen = _probe(box, box.credentials / OTHER_SITE / role, at=at)
+    assert first == "connected"
+    assert seen == set(), f"{OTHER_SITE}'s {role} certificate got {seen} through at {at}"
 
 
 def test_the_router_lets_the_authorised_pipeline_run(box: Box) -> None:
@@ -244,6 +305,17 @@ def test_the_router_lets_the_authorised_pipeline_run(box: Box) -> None:
     with box.lock:
         keys = {key for key, _ in box.seen}
     assert f"wz/{SITE}/tracks" in keys and f"wz/{SITE}/status/gateway" in keys
+
+    def central_keys() -> set[str]:
+        with box.lock:
+            return {key for key, _ in box.central_seen}
+
+    # Up the trailer's link to the regional router: the site's alerts and tracks.
+    _wait(
+        lambda: {f"wz/{SITE}/tracks", f"wz/{SITE}/alerts/speeding"} <= central_keys(),
+        "the site's tracks and alerts at the centre",
+        30.0,
+    )
 
 
 @pytest.mark.parametrize("how", ["no certificate", "another CA's certificate"])

@@ -22,7 +22,7 @@ import zenoh
 from tests.cli.procs import ROOT, free_port, port_open, stop_process, wait_for, wz_argv, wz_env
 from wz_shared.bus import zenoh_config
 from wz_shared.settings import BusSettings
-from wz_shared.trust import edge_access_control, regional_access_control
+from wz_shared.trust import deny_all, edge_access_control, regional_access_control
 
 ZENOH_DIR = ROOT / "deploy" / "zenoh"
 EDGE_SERVICE = ZENOH_DIR / "edge-service.json5"
@@ -80,11 +80,12 @@ def test_trailer_router_listens_for_the_box_over_tls_and_connects_up() -> None:
     assert tls["listen_certificate"] == tls["connect_certificate"] == "/etc/wz/tls/cert.pem"
 
 
-def test_trailer_router_access_control_is_the_roles_table() -> None:
-    """The shipped file says what wz_shared.trust.ROLES says (regenerate it from there)."""
+def test_trailer_router_as_shipped_denies_everything_until_its_site_is_given() -> None:
+    """The shipped file names no identity (fail closed); the site's own access control comes
+    with its credentials (`wz router --tls-dir`)."""
     config = zenoh.Config.from_file(str(TRAILER_ROUTER))
     expected = zenoh.Config()
-    expected.insert_json5("access_control", json.dumps(edge_access_control()))
+    expected.insert_json5("access_control", json.dumps(deny_all()))
     assert get(config, "access_control") == get(expected, "access_control")
 
 
@@ -101,7 +102,12 @@ def test_regional_router_listens_over_tls_and_denies_all_without_its_sites() -> 
 
 @pytest.mark.parametrize("sites", [["a"], ["us75-lincoln", "i80-omaha"]])
 def test_generated_access_controls_load_and_name_what_exists(sites: list[str]) -> None:
-    for acl in (edge_access_control(), edge_access_control("a"), regional_access_control(sites)):
+    generations = {site: 1 for site in sites}
+    for acl in (
+        edge_access_control(sites[0], 1),
+        edge_access_control(sites[-1], 7),
+        regional_access_control(generations),
+    ):
         config = zenoh.Config()
         config.insert_json5("access_control", json.dumps(acl))  # zenoh checks the block
         rules = {rule["id"] for rule in acl["rules"]}
@@ -308,5 +314,5 @@ def test_router_overrides_replace_the_config_endpoints_and_credentials(
     config = router_config(None, REGIONAL_ROUTER, None, regional)
     assert get(config, "transport/link/tls/listen_certificate") == str(regional / "cert.pem")
     expected = zenoh.Config()
-    expected.insert_json5("access_control", json.dumps(regional_access_control([SITE])))
+    expected.insert_json5("access_control", json.dumps(regional_access_control({SITE: 1})))
     assert get(config, "access_control") == get(expected, "access_control")

@@ -228,3 +228,29 @@ def eventually(probe: Callable[[], _T | None], what: str, timeout_s: float = 20.
             return value
         time.sleep(0.05)
     pytest.fail(f"timed out after {timeout_s:.0f} s waiting for {what}")
+
+
+def mint_concurrently(url: str, headers: dict[str, str], count: int) -> list[int]:
+    """``count`` POST /v1/admin/api-keys at once (a thread each, released together); their
+    status codes."""
+    import threading
+
+    gate = threading.Barrier(count)
+    codes: list[int] = []
+    lock = threading.Lock()
+
+    def one() -> None:
+        with httpx.Client(timeout=60.0) as client:
+            gate.wait()
+            reply = client.post(
+                f"{url}/v1/admin/api-keys", headers=headers, json={"scope": "read", "name": "n"}
+            )
+        with lock:
+            codes.append(reply.status_code)
+
+    threads = [threading.Thread(target=one) for _ in range(count)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join(120.0)
+    return codes

@@ -12,7 +12,13 @@ import pytest
 from pydantic import ValidationError
 from sqlalchemy import create_engine, insert
 
-from tests.gateway.helpers import ADMIN_KEY, gateway_settings, live_server, open_storage
+from tests.gateway.helpers import (
+    ADMIN_KEY,
+    gateway_settings,
+    live_server,
+    mint_concurrently,
+    open_storage,
+)
 from wz_gateway.auth import check_secret, new_secret
 from wz_gateway.key_store import KeyStore
 from wz_gateway.node import prepare_keys
@@ -122,6 +128,19 @@ def test_making_a_key_beyond_the_limit_gets_409(tmp_path: Path) -> None:
         key_id = made.json()["key_id"]
         assert httpx.delete(f"{url}/v1/admin/api-keys/{key_id}", headers=ADMIN).status_code == 204
         assert mint(url, ADMIN).status_code == 201
+    storage.close()
+
+
+def test_concurrent_key_creations_never_pass_the_cap(tmp_path: Path) -> None:
+    """60 creations at once against a cap of 20 (two keys configured): exactly 18 made, the
+    rest refused with 409, 20 live (the count and the insert were two statements: 32-34)."""
+    settings = gateway_settings(tmp_path, max_api_keys=20)
+    storage = open_storage(settings)
+    with live_server(settings, storage) as url:
+        codes = mint_concurrently(url, ADMIN, 60)
+    assert sorted(set(codes)) == [201, 409], codes
+    assert codes.count(201) == 18 and codes.count(409) == 42
+    assert KeyStore(storage.engine).count_live() == 20
     storage.close()
 
 

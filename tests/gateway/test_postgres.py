@@ -18,11 +18,15 @@ import pytest
 
 from tests.conftest import free_port
 from tests.gateway.helpers import (
+    ADMIN_KEY,
     SITE,
     batch,
     car_batches,
     gateway_settings,
+    live_server,
     make_track,
+    mint_concurrently,
+    open_storage,
     sample_alert,
 )
 from tests.gateway.tracking import car_tracks, filtered_car, merged_batches
@@ -230,3 +234,19 @@ def test_track_smoothing_on_postgresql(postgres_url: str, tmp_path: Path) -> Non
         assert unfinished.track_id == 72 and unfinished.process_noise == ProcessNoise()
     finally:
         storage.close()
+
+
+def test_concurrent_key_creations_never_pass_the_cap_on_postgresql(
+    postgres_url: str, tmp_path: Path
+) -> None:
+    """60 creations at once against a cap of 20: the cap holds under read committed too."""
+    settings = gateway_settings(tmp_path, database_url=postgres_url, max_api_keys=20)
+    storage = open_storage(settings)
+    live_before = KeyStore(storage.engine).count_live()
+    assert live_before < 20
+    with live_server(settings, storage) as url:
+        codes = mint_concurrently(url, {"X-API-Key": ADMIN_KEY}, 60)
+    assert sorted(set(codes)) == [201, 409], codes
+    assert codes.count(201) == 20 - live_before
+    assert KeyStore(storage.engine).count_live() == 20
+    storage.close()

@@ -15,7 +15,16 @@ from tests.shared.samples import json_samples
 from wz_shared.bus import Bus
 from wz_shared.messages import Alert, TrackBatch
 from wz_shared.settings import BusSettings
-from wz_shared.trust import ROLES, edge_access_control, expected_source, source_problem
+from wz_shared.trust import (
+    ROLES,
+    edge_access_control,
+    expected_source,
+    identity,
+    parse_identity,
+    regional_access_control,
+    site_problem,
+    source_problem,
+)
 
 
 @pytest.mark.parametrize(
@@ -44,12 +53,50 @@ def test_a_message_from_another_source_is_a_problem() -> None:
 
 
 def test_every_role_gives_its_own_status_and_only_the_tracker_tracks() -> None:
-    acl = edge_access_control("s")
+    acl = edge_access_control("s", 1)
     gives = {rule["id"]: set(rule["key_exprs"]) for rule in acl["rules"]}
     for role in ROLES:
         assert f"wz/s/status/{role}" in gives[f"{role}: gives"]
     assert [r for r in ROLES if "wz/s/tracks" in gives[f"{r}: gives"]] == ["fusion-tracker"]
     assert [r for r in ROLES if "wz/s/alerts/*" in gives[f"{r}: gives"]] == ["alert-service"]
+
+
+def test_a_certificate_names_its_role_site_and_generation() -> None:
+    assert identity("alert-service", "us75-lincoln", 2) == "alert-service@us75-lincoln#2"
+    assert parse_identity("alert-service@us75-lincoln#2") == ("alert-service", "us75-lincoln", 2)
+    for other in ("alert-service", "regional-router", "a@b", "a@b#0", "a@b#x", "a@b/c#1"):
+        assert parse_identity(other) is None, other
+    with pytest.raises(ValueError, match="counts from 1"):
+        identity("gateway", "s", 0)
+
+
+def test_a_site_access_control_names_its_own_identities_and_keys_only() -> None:
+    """Site s's router: every subject is an identity of s's current generation (or the
+    regional router), every key is under wz/s/ (or the router's admin space)."""
+    acl = edge_access_control("s", 3)
+    names = [name for subject in acl["subjects"] for name in subject["cert_common_names"]]
+    assert "regional-router" in names
+    for name in names:
+        if name != "regional-router":
+            parsed = parse_identity(name)
+            assert parsed is not None and parsed[1:] == ("s", 3), name
+    assert "alert-service@t#3" not in names and "alert-service@s#2" not in names
+    for rule in acl["rules"]:
+        for key in rule["key_exprs"]:
+            # Only interest (subscriptions, queries) may name any site.
+            interest = rule["id"] in ("take: interest", "take: others' interest")
+            assert key.startswith("wz/s/") or key == "@/**" or interest, key
+    regional = regional_access_control({"s": 3, "t": 1})
+    trailers = {s["id"]: s["cert_common_names"] for s in regional["subjects"]}
+    assert trailers["trailer s"] == ["router@s#3"] and trailers["trailer t"] == ["router@t#1"]
+    gives = {rule["id"]: rule["key_exprs"] for rule in regional["rules"]}
+    assert all(k.startswith("wz/t/") for k in gives["trailer t: gives"])
+
+
+def test_a_message_naming_another_site_than_its_key_is_a_problem() -> None:
+    assert site_problem("wz/a/alerts/speeding", "a") is None
+    assert "site a's, not b's" in str(site_problem("wz/a/alerts/speeding", "b"))
+    assert site_problem("other/a/x", "b") is None
 
 
 @pytest.fixture
@@ -88,7 +135,13 @@ def test_consumers_refuse_a_track_batch_or_alert_from_another_source(
     assert received is not None and received.source_id == "fusion-tracker"
     assert batches.recv(0.5) is None
     assert [a.source_id for a in called] == ["alert-service"]
+    # Right source, wrong site: a batch of site "elsewhere" on this site's key.
+    tracks.put(batch.model_copy(update={"site": "elsewhere"}))
+    tracks.put(batch)
+    assert batches.recv(10.0) is not None
+    assert batches.recv(0.5) is None
     assert dict(consumer.stats.invalid) == {
         (consumer.keys.tracks, "wrong_source"): 1,
         (consumer.keys.alerts_all, "wrong_source"): 1,
+        (consumer.keys.tracks, "wrong_site"): 1,
     }

@@ -4,9 +4,12 @@ One folder holds a DOT's credentials, all signed by one certificate authority (C
 first use::
 
     DIR/ca/ca.pem, ca-key.pem         the CA (keep ca-key.pem offline; nothing mounts it)
-    DIR/<site>/router/                 the trailer's router: CN trailer-<site>, for the names
-                                       the services and the regional router reach it by
-    DIR/<site>/<service>/              one per role of wz_shared.trust.ROLES: CN = the role
+    DIR/<site>/generation              the site's credentials generation (1, 2, ...)
+    DIR/<site>/router/                 the trailer's router: CN router@<site>#<generation>,
+                                       for the names the services and the regional router
+                                       reach it by, and its access-control.json (the site's)
+    DIR/<site>/<service>/              one per role of wz_shared.trust.ROLES:
+                                       CN <role>@<site>#<generation>
     DIR/<site>/operator/               wz status, wz tap, wz record on the box (reads only)
     DIR/regional/router/               the regional router (CN regional-router) and its
                                        access-control.json, naming every site in DIR
@@ -18,9 +21,21 @@ containers mount at ``/etc/wz/tls``. A container sees its own folder only, so a 
 detector cannot speak as the alert service. Keys are written mode 0600, owned by ``--uid``
 (the images' user, 65534) when given.
 
-Making a site again replaces its certificates (same CA: the other sites keep working); the
-regional router's access control is rewritten from the sites present, so restart it after
-adding a site.
+A certificate names its site (:func:`wz_shared.trust.identity`), and each router's access
+control names the identities it takes (:mod:`wz_shared.trust`): another site's certificate,
+though signed by the same CA, is refused.
+
+**Rotation.** Making a site again (``make`` on a site that exists) re-keys it: a new
+generation, every certificate of the site issued anew, its router's access control and the
+regional router's rewritten to name the new generation only. The other sites keep working.
+Install the new folders on the trailer and restart its containers, and restart the regional
+router: from then on the old generation's certificates are refused everywhere.
+
+**Revocation** (a trailer stolen, its keys taken): ``wz credentials revoke DIR --site SITE``
+moves the site to a new generation and deletes its identities without issuing new ones, and
+rewrites the regional access control without the site. Restart the regional router: nothing
+of the stolen box's reaches the region or any other site. ``make`` re-provisions the site
+later (a generation newer still).
 """
 
 from __future__ import annotations
@@ -46,15 +61,22 @@ from wz_shared.trust import (
     CENTRAL_READERS,
     CERT_FILE,
     KEY_FILE,
+    REGIONAL_ROUTER,
     ROLES,
+    ROUTER_ROLE,
+    edge_access_control,
+    identity,
     regional_access_control,
-    trailer_name,
 )
 
 #: Names a trailer router is reached by: the compose service, and the box itself.
 ROUTER_NAMES = ("router", "localhost", "127.0.0.1")
 REGIONAL = "regional"
 CA_DAYS = 3650
+#: A site's credentials generation, in its folder.
+GENERATION_FILE = "generation"
+#: Left in a site's folder by ``revoke``: no identity of it is valid until ``make`` again.
+REVOKED_FILE = "revoked"
 
 
 @dataclass(frozen=True)
@@ -187,6 +209,29 @@ def issue(
     )
 
 
+def generation(folder: Path, site: str) -> int:
+    """The site's current credentials generation; 0 when it has none yet."""
+    path = folder / site / GENERATION_FILE
+    if not path.is_file():
+        # Made before generations were recorded: its certificates name no site (refused).
+        return 1 if (folder / site / ROUTER_ROLE).is_dir() else 0
+    try:
+        return int(path.read_text(encoding="utf-8").strip())
+    except ValueError as exc:
+        raise CliError(f"{path} holds no generation number", 1) from exc
+
+
+def _checked_site(site: str) -> None:
+    try:
+        Keys(site)
+    except ValueError as exc:
+        raise CliError(str(exc)) from exc
+
+
+def _identities(site_dir: Path) -> list[Path]:
+    return [path for path in sorted(site_dir.iterdir()) if (path / CERT_FILE).is_file()]
+
+
 def make_site(
     folder: Path,
     site: str,
@@ -195,32 +240,76 @@ def make_site(
     days: int = 400,
     uid: int | None = None,
 ) -> list[Path]:
-    """Every identity of one site (see the module); the folders written."""
-    try:
-        Keys(site)
-    except ValueError as exc:
-        raise CliError(str(exc)) from exc
+    """Every identity of one site (see the module), at a new generation; the folders written.
+
+    A site that exists is re-keyed (rotation): its old generation is named by no access
+    control any more.
+    """
+    _checked_site(site)
     ca = load_or_make_ca(folder, uid=uid)
-    written = []
     site_dir = folder / site
-    router = site_dir / "router"
-    issue(ca, router, trailer_name(site), names=[*ROUTER_NAMES, *router_names], days=days, uid=uid)
+    current = generation(folder, site) + 1
+    if site_dir.is_dir():
+        for old in _identities(site_dir):
+            _remove_identity(old)
+    _write(site_dir / GENERATION_FILE, f"{current}\n".encode(), secret=False, uid=None)
+    (site_dir / REVOKED_FILE).unlink(missing_ok=True)
+    written = []
+    router = site_dir / ROUTER_ROLE
+    issue(
+        ca,
+        router,
+        identity(ROUTER_ROLE, site, current),
+        names=[*ROUTER_NAMES, *router_names],
+        days=days,
+        uid=uid,
+    )
+    acl = edge_access_control(site, current)
+    _write(router / ACL_FILE, (json.dumps(acl, indent=2) + "\n").encode(), secret=False, uid=uid)
     written.append(router)
     for name in [*ROLES, "operator"]:
-        issue(ca, site_dir / name, name, days=days, uid=uid)
+        # Its name for TLS (a DNS name, as before the site was in the common name): the role.
+        issue(ca, site_dir / name, identity(name, site, current), names=[name], days=days, uid=uid)
         written.append(site_dir / name)
     if (folder / REGIONAL / "router").exists():
         write_regional_acl(folder, uid=uid)
     return written
 
 
-def sites_in(folder: Path) -> list[str]:
-    """The sites with credentials in ``folder``."""
-    return sorted(
-        path.name
-        for path in folder.iterdir()
-        if path.is_dir() and path.name not in ("ca", REGIONAL) and (path / "router").is_dir()
-    )
+def _remove_identity(path: Path) -> None:
+    for name in (KEY_FILE, CERT_FILE, CA_FILE, ACL_FILE):
+        (path / name).unlink(missing_ok=True)
+    if not any(path.iterdir()):
+        path.rmdir()
+
+
+def revoke_site(folder: Path, site: str) -> list[Path]:
+    """Revoke every identity of ``site`` (see the module); the folders removed."""
+    _checked_site(site)
+    site_dir = folder / site
+    if not site_dir.is_dir():
+        raise CliError(f"{folder} has no credentials of site {site}", 1)
+    current = generation(folder, site) + 1
+    removed = _identities(site_dir)
+    for path in removed:
+        _remove_identity(path)
+    _write(site_dir / GENERATION_FILE, f"{current}\n".encode(), secret=False, uid=None)
+    _write(site_dir / REVOKED_FILE, b"", secret=False, uid=None)
+    if (folder / REGIONAL / "router").exists():
+        write_regional_acl(folder)
+    return removed
+
+
+def sites_in(folder: Path) -> dict[str, int]:
+    """The sites with valid credentials in ``folder``, each with its generation."""
+    return {
+        path.name: generation(folder, path.name)
+        for path in sorted(folder.iterdir())
+        if path.is_dir()
+        and path.name not in ("ca", REGIONAL)
+        and (path / ROUTER_ROLE / CERT_FILE).is_file()
+        and not (path / REVOKED_FILE).exists()
+    }
 
 
 def write_regional_acl(folder: Path, *, uid: int | None = None) -> Path:
@@ -239,7 +328,7 @@ def make_regional(
         raise CliError("name the regional router's host names or addresses (--name)")
     ca = load_or_make_ca(folder, uid=uid)
     regional = folder / REGIONAL
-    issue(ca, regional / "router", "regional-router", names=list(names), days=days, uid=uid)
+    issue(ca, regional / "router", REGIONAL_ROUTER, names=list(names), days=days, uid=uid)
     for name in CENTRAL_READERS:
         issue(ca, regional / name, name, days=days, uid=uid)
     write_regional_acl(folder, uid=uid)

@@ -102,6 +102,12 @@ def cmd_credentials(args: argparse.Namespace) -> int:
         written = credentials.make_site(
             folder, args.site, router_names=args.name or [], days=args.days, uid=args.uid
         )
+    elif args.action == "revoke":
+        if not args.site:
+            raise CliError("wz credentials revoke needs --site SITE")
+        for path in credentials.revoke_site(folder, args.site):
+            emit(f"revoked {path}")
+        written = []
     elif args.action == "regional":
         written = credentials.make_regional(
             folder, names=args.name or [], days=args.days, uid=args.uid
@@ -472,13 +478,17 @@ def build_parser() -> argparse.ArgumentParser:
     creds = commands.add_parser(
         "credentials",
         help="make a site's bus certificates (mutual TLS, one per service)",
-        description="make: the CA (first time) and every identity of --site (its router, each "
-        "service, the operator); regional: the regional router (--name its host names), the "
-        "central gateway and its access control for every site in FOLDER; list: what is there.",
+        description="make: the CA (first time) and every identity of --site (its router with "
+        "the site's access control, each service, the operator), each certificate naming the "
+        "site; on a site that exists, a new generation (rotation: the old one is refused "
+        "once the routers restart); revoke: every identity of --site deleted and refused (a "
+        "stolen trailer), the regional access control rewritten without it; regional: the "
+        "regional router (--name its host names), the central gateway and its access control "
+        "for every site in FOLDER; list: what is there.",
     )
-    creds.add_argument("action", choices=["make", "regional", "list"])
+    creds.add_argument("action", choices=["make", "revoke", "regional", "list"])
     creds.add_argument("folder", type=Path, metavar="FOLDER", help="e.g. /etc/wz/credentials")
-    creds.add_argument("--site", help="the site id (make)")
+    creds.add_argument("--site", help="the site id (make, revoke)")
     creds.add_argument(
         "--name",
         action="append",
@@ -537,9 +547,9 @@ def build_parser() -> argparse.ArgumentParser:
             "--credentials",
             type=Path,
             metavar="DIR",
-            help="the credentials folder of `wz credentials make` (its <site>/ subfolder): "
-            "every process joins the bus with its own certificate; needed by a topology whose "
-            "router listens on tls/",
+            help="the folder `wz credentials make DIR --site SITE` wrote (DIR itself, not its "
+            "<site>/ subfolder: the site's is taken from it): every process joins the bus "
+            "with its own certificate; needed by a topology whose router listens on tls/",
         )
         up.set_defaults(handler=cmd_up)
 

@@ -67,7 +67,14 @@ def router_config(
             raise CliError(f"{tls_dir} holds no {CERT_FILE}: make it with `wz credentials`")
         config.insert_json5("transport/link/tls", json.dumps(tls_config(tls_dir)))
         acl = tls_dir / ACL_FILE
-        if acl.is_file():
+        if not acl.is_file():
+            log.warning(
+                "%s holds no %s: the config's own access control applies (a trailer "
+                "router's denies everything: make the site's with `wz credentials make`)",
+                tls_dir,
+                ACL_FILE,
+            )
+        else:
             try:
                 config.insert_json5("access_control", acl.read_text())
             except zenoh.ZError as exc:

@@ -21,8 +21,10 @@ reason, and dropped; it never raises into Zenoh's callback thread and never stop
 A callback that raises is logged and counted the same way. So is a message whose
 ``source_id`` is not the one its key carries (``wrong_source``, :func:`wz_shared.trust.
 source_problem`): a track batch not from the tracker, an alert not from the alert service, a
-detection batch not from the sensor its key names. The routers' access control already keeps
-other sessions from putting them (:mod:`wz_shared.trust`); this is the consumer's own check.
+detection batch not from the sensor its key names. So is a message that names another site than
+its key (``wrong_site``): each site's certificates may put only their own site's keys, and a
+message must say the same. The routers' access control already keeps other sessions from
+putting them (:mod:`wz_shared.trust`); this is the consumer's own check.
 
 Shutdown
 --------
@@ -50,7 +52,7 @@ from wz_shared.keys import Keys
 from wz_shared.messages import Message
 from wz_shared.reach import open_session
 from wz_shared.settings import BusSettings
-from wz_shared.trust import expected_source, source_problem, tls_config
+from wz_shared.trust import expected_source, site_problem, source_problem, tls_config
 
 log = logging.getLogger(__name__)
 
@@ -539,16 +541,20 @@ class _CacheRefetch:
 
 
 def _source_checked(key: str, value: object) -> object:
-    """``value`` if its ``source_id`` is the one ``key`` carries; else a DecodeError."""
+    """``value`` if its ``site`` is the one ``key`` names and its ``source_id`` the one
+    ``key`` carries; else a DecodeError (``wrong_site``, ``wrong_source``)."""
     if isinstance(value, codec.Frame):
-        value_source = value.meta.source_id  # a frame's source is in its metadata
+        message: Message = value.meta  # a frame's site and source are in its metadata
     elif isinstance(value, Message):
-        value_source = value.source_id
+        message = value
     else:  # raw bytes: not decoded, not checked
         return value
+    problem = site_problem(key, message.site)
+    if problem is not None:
+        raise codec.DecodeError("wrong_site", problem)
     expected = expected_source(key)
-    if expected is not None and value_source != expected:
-        raise codec.DecodeError("wrong_source", str(source_problem(key, value_source)))
+    if expected is not None and message.source_id != expected:
+        raise codec.DecodeError("wrong_source", str(source_problem(key, message.source_id)))
     return value
 
 

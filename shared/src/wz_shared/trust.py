@@ -26,16 +26,26 @@ Each service also publishes its own status and liveliness token
 (``wz/<site>/status/<name>``), no other service's.
 
 The routers' rules are seen from the router: *ingress* is what a session sends to the router
-(its samples, its declarations, its replies), *egress* what the router sends to it. Keys are
-site-wildcarded (``wz/*/...``): the trailer's router serves one site and the consumers refuse
-another site's messages; the regional router's rules name each trailer's own site
-(:func:`regional_access_control`).
+(its samples, its declarations, its replies), *egress* what the router sends to it.
+
+A certificate is bound to its site. Its common name is ``<role>@<site>#<generation>``
+(:func:`identity`): ``alert-service@us75-lincoln#1``. One DOT's trailers share one CA, so
+the name is what tells them apart: a trailer router's access control (made per site by ``wz
+credentials make``, :func:`edge_access_control`) names its own site's identities and its own
+site's keys only (``wz/us75-lincoln/...``), and the regional router's names each trailer's
+router with its site's keys (:func:`regional_access_control`). A key taken from one trailer
+on a roadside then does nothing at any other trailer, nor for any other site at the regional
+router. The *generation* revokes: re-making a site's credentials (``wz credentials make``
+again, or ``wz credentials revoke``) moves it on, and the access controls then name the new
+generation only, so the certificates of the old one (a stolen box's) are refused once the
+routers run the new rules.
 
 Key expressions with a verbatim chunk (``@adv``: the history caches and liveliness tokens of
 Zenoh's advanced publishers and subscribers) are not matched by ``*`` or ``**``, so each key
 with a history is allowed with its ``/@adv/**`` too.
 
-A consumer also checks what it takes (:func:`source_problem`): a track batch whose
+A consumer also checks what it takes (:func:`site_problem`, :func:`source_problem`): a message
+whose ``site`` is not its key's, a track batch whose
 ``source_id`` is not the tracker's, an alert not from the alert service, a detection batch
 whose ``source_id`` is not the sensor its key names, is refused and counted
 (``wrong_source``), not used.
@@ -44,6 +54,7 @@ whose ``source_id`` is not the sensor its key names, is refused and counted
 from __future__ import annotations
 
 import functools
+import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -112,6 +123,28 @@ ROLES: Mapping[str, Role] = {
 #: Sessions that only read: the operator's tools on the box, and the regional router's link
 #: seen from the trailer's router.
 READERS = ("operator", "regional-router")
+#: The regional router's own identity (it is no site's): what a trailer router lets read.
+REGIONAL_ROUTER = "regional-router"
+#: A site's identity that is no service's: the trailer's router.
+ROUTER_ROLE = "router"
+
+_IDENTITY = re.compile(r"^(?P<role>[a-z0-9-]+)@(?P<site>[^@#/*?$]+)#(?P<generation>[1-9][0-9]*)$")
+
+
+def identity(role: str, site: str, generation: int) -> str:
+    """The common name of ``role``'s certificate at ``site``: ``<role>@<site>#<generation>``."""
+    if generation < 1:
+        raise ValueError(f"a credentials generation counts from 1, not {generation}")
+    return f"{role}@{site}#{generation}"
+
+
+def parse_identity(common_name: str) -> tuple[str, str, int] | None:
+    """``(role, site, generation)`` of a site's certificate name; None for another name (the
+    regional router's, the centre's)."""
+    match = _IDENTITY.match(common_name)
+    if match is None:
+        return None
+    return match["role"], match["site"], int(match["generation"])
 
 
 def _site_keys(site: str, suffixes: Iterable[str]) -> list[str]:
@@ -154,18 +187,20 @@ def _everything(site: str) -> list[str]:
     return [f"{prefix}/**", f"{prefix}/**/@adv/**"]
 
 
-def edge_access_control(site: str = "*") -> dict[str, Any]:
-    """The trailer router's ``access_control`` block: each role's certificate may give what
-    :data:`ROLES` says and take everything; :data:`READERS` only take; nobody else anything.
-
-    Parameters
-    ----------
-    site : str
-        The site chunk of every key (``*``: any, the shipped config).
+def edge_access_control(site: str, generation: int) -> dict[str, Any]:
+    """A trailer router's ``access_control`` block: each role's certificate of ``site`` (its
+    current ``generation``) may give what :data:`ROLES` says on ``site``'s keys and take
+    ``site``'s keys; the site's operator and the regional router only take; nobody else, and
+    no other site's certificate, anything.
     """
     rules = [
-        _rule("take: interest", ["ingress"], INTEREST, _everything(site)),
-        _rule("take: data", ["egress"], ALL_MESSAGES, _everything(site)),
+        # Interest in any site (a rule's keys must include what is declared, and the centre's
+        # subscriptions name every site at once: wz/*/alerts/*); what comes back is only ever
+        # this site's, the one site anybody may put here.
+        _rule("take: interest", ["ingress"], INTEREST, _everything("*")),
+        # Egress: others' interest, relayed, may name any site too; data only this site's.
+        _rule("take: data", ["egress"], DATA, _everything(site)),
+        _rule("take: others' interest", ["egress"], INTEREST, _everything("*")),
     ]
     policies: list[dict[str, Any]] = []
     subjects: list[dict[str, Any]] = []
@@ -173,11 +208,13 @@ def edge_access_control(site: str = "*") -> dict[str, Any]:
         give = f"{role.name}: gives"
         keys = _site_keys(site, (*role.publishes, *role.serves, f"status/{role.name}"))
         rules.append(_rule(give, ["ingress"], DATA, keys))
-        subjects.append({"id": role.name, "cert_common_names": [role.name]})
+        subjects.append(
+            {"id": role.name, "cert_common_names": [identity(role.name, site, generation)]}
+        )
         policies.append(
             {
                 "id": role.name,
-                "rules": [give, "take: interest", "take: data"],
+                "rules": [give, "take: interest", "take: data", "take: others' interest"],
                 "subjects": [role.name],
             }
         )
@@ -186,31 +223,40 @@ def edge_access_control(site: str = "*") -> dict[str, Any]:
         _rule("operator: admin space", ["ingress", "egress"], ("query", "reply"), ["@/**"])
     )
     for reader in READERS:
-        subjects.append({"id": reader, "cert_common_names": [reader]})
+        name = REGIONAL_ROUTER if reader == REGIONAL_ROUTER else identity(reader, site, generation)
+        subjects.append({"id": reader, "cert_common_names": [name]})
         extra = ["operator: admin space"] if reader == "operator" else []
         policies.append(
             {
                 "id": reader,
-                "rules": ["take: interest", "take: data", *extra],
+                "rules": ["take: interest", "take: data", "take: others' interest", *extra],
                 "subjects": [reader],
             }
         )
     return _deny_but(rules, subjects, policies)
 
 
-def trailer_name(site: str) -> str:
+def deny_all() -> dict[str, Any]:
+    """An ``access_control`` block that lets nobody do anything: a trailer router's config as
+    shipped, until ``wz router --tls-dir`` puts the site's own in its place (fail closed)."""
+    return _deny_but([], [], [])
+
+
+def trailer_name(site: str, generation: int) -> str:
     """The common name of a trailer router's certificate, as the regional router knows it."""
-    return f"trailer-{site}"
+    return identity(ROUTER_ROLE, site, generation)
 
 
 #: The central side's reading sessions at the regional router.
 CENTRAL_READERS = ("central-gateway", "operator")
 
 
-def regional_access_control(sites: Iterable[str]) -> dict[str, Any]:
-    """The regional router's ``access_control`` block: each trailer gives only its own site's
-    keys (samples, tokens, replies) and gets only the centre's interest, no samples; the
-    central gateway and operator take every site's.
+def regional_access_control(sites: Mapping[str, int]) -> dict[str, Any]:
+    """The regional router's ``access_control`` block: each trailer (``sites``: site -> its
+    credentials' generation) gives only its own site's keys (samples, tokens, replies) and
+    gets only the centre's interest, no samples; the central gateway and operator take every
+    site's. A site's services' certificates are named nowhere here: they only reach their
+    own trailer's router.
     """
     rules = [
         _rule("central: interest", ["ingress"], INTEREST, _everything("*")),
@@ -233,12 +279,13 @@ def regional_access_control(sites: Iterable[str]) -> dict[str, Any]:
                 "subjects": [reader],
             }
         )
-    for site in sorted(set(sites)):
-        name = trailer_name(site)
-        rules.append(_rule(f"{name}: gives", ["ingress"], ALL_MESSAGES, _everything(site)))
-        subjects.append({"id": name, "cert_common_names": [name]})
+    for site in sorted(sites):
+        name = trailer_name(site, sites[site])
+        key = f"trailer {site}"
+        rules.append(_rule(f"{key}: gives", ["ingress"], ALL_MESSAGES, _everything(site)))
+        subjects.append({"id": key, "cert_common_names": [name]})
         policies.append(
-            {"id": name, "rules": [f"{name}: gives", "trailers: are asked"], "subjects": [name]}
+            {"id": key, "rules": [f"{key}: gives", "trailers: are asked"], "subjects": [key]}
         )
     return _deny_but(rules, subjects, policies)
 
@@ -289,6 +336,15 @@ def expected_source(key: str) -> str | None:
     if (rest[0] == "alerts" and len(rest) == 2) or rest == ["devices", "state"]:
         return ALERT_SERVICE
     return None
+
+
+def site_problem(key: str, site: str) -> str | None:
+    """Why a message naming ``site`` is not to be taken from ``key``, or None (a key outside
+    ``wz/<site>/...`` names no site)."""
+    parts = str(key).split("/", 2)
+    if len(parts) < 3 or parts[0] != ROOT or parts[1] == site:
+        return None
+    return f"{key} is site {parts[1]}'s, not {site}'s"
 
 
 def source_problem(key: str, source_id: str) -> str | None:

@@ -32,7 +32,12 @@ from dataclasses import dataclass, field
 
 from wz_alert_service.devices import roadside_devices
 from wz_alert_service.engine import AlertEngine
-from wz_alert_service.recovery import EpisodeRecovery, load_open_episodes, save_open_episodes
+from wz_alert_service.recovery import (
+    EpisodeRecovery,
+    clear_event,
+    load_open_episodes,
+    save_open_episodes,
+)
 from wz_alert_service.settings import AlertServiceSettings
 from wz_shared.codec import encode_json
 from wz_shared.messages import ActiveAlerts, Alert, AlertType, RoadsideDeviceState, TrackBatch
@@ -105,9 +110,18 @@ class AlertCore:
         self._run = RunWatch()
         self.runs = 1
 
+    def _end_open_episodes(self, stamp: float, already: set[str]) -> list[Alert]:
+        """A clear for each open episode of the old run (but those in ``already``): a sign
+        or a consumer that saw its start must see it end, once."""
+        return [
+            clear_event(alert, stamp, "a new run: its tracks are gone")
+            for episode, alert in self._newest.items()
+            if episode not in already
+        ]
+
     def _start_new_run(self, batch: TrackBatch) -> None:
-        """Start the engine again for the new run; its episode numbers go on (ids stay unique),
-        the old run's open episodes end without a clear (their tracks are gone)."""
+        """Start the engine again for the new run; its episode numbers go on (ids stay unique).
+        The old run's open episodes were cleared first (:meth:`_end_open_episodes`)."""
         count = self.engine.episode_count
         self.engine = AlertEngine(self.site, id_prefix=self._id_prefix)
         self.engine.episode_count = count
@@ -129,6 +143,7 @@ class AlertCore:
         if self._run.observe(batch.stamp) == "new_run":
             if self.recovery.active:
                 ended = self.recovery.clear_all(batch.stamp, "a new run")
+            ended += self._end_open_episodes(batch.stamp, {str(a.episode_id) for a in ended})
             self._start_new_run(batch)
         out_of_order = self.engine.counters.batches_out_of_order
         events = self.engine.update(batch)

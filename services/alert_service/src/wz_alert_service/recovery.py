@@ -77,6 +77,21 @@ def save_open_episodes(path: Path, alerts: Sequence[Alert]) -> None:
     os.replace(tmp, path)
 
 
+def clear_event(alert: Alert, stamp: float, why: str, sequence: int | None = None) -> Alert:
+    """The clear that ends ``alert``'s episode (its newest event): the next event id of the
+    episode (``sequence``, or one past ``alert``'s), stamped no earlier than ``alert``."""
+    if sequence is None:
+        sequence = _sequence(alert) + 1
+    return alert.model_copy(
+        update={
+            "alert_id": f"{alert.episode_id}-{sequence}",
+            "phase": "clear",
+            "stamp": max(stamp, alert.stamp),
+            "description": f"{alert.description} (cleared: {why})"[:500],
+        }
+    )
+
+
 class EpisodeRecovery:
     """Recovered episodes, matched to the new engine's (see the module).
 
@@ -130,14 +145,10 @@ class EpisodeRecovery:
         )
 
     def _cleared(self, recovered: Alert, stamp: float, why: str) -> Alert:
-        return recovered.model_copy(
-            update={
-                "alert_id": self._next_alert_id(recovered),
-                "phase": "clear",
-                "stamp": max(stamp, recovered.stamp),
-                "description": f"{recovered.description} (cleared: {why})"[:500],
-            }
-        )
+        episode = str(recovered.episode_id)
+        sequence = self._next[episode]
+        self._next[episode] = sequence + 1
+        return clear_event(recovered, stamp, why, sequence)
 
     def rewrite(self, alerts: list[Alert], stamp: float) -> list[Alert]:
         """The engine's events for the batch at ``stamp``, with the recovered episodes

@@ -23,7 +23,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from sqlalchemy import Engine, func, insert, select, update
+from sqlalchemy import Engine, func, insert, literal, select, text, update
 
 from wz_gateway import auth
 from wz_gateway.models import ApiKeyInfo, KeyOrigin
@@ -70,27 +70,46 @@ class KeyStore:
             created_at=now,
             dev_mode=dev_mode,
         )
+        values = {
+            "key_id": info.key_id,
+            "fingerprint": auth.fingerprint(secret),
+            "salt": salt,
+            "secret_hash": auth.hash_secret(secret, salt),
+            "scope": scope,
+            "name": name,
+            "origin": origin,
+            "created_at": now,
+            "dev_mode": dev_mode,
+        }
         with self.engine.begin() as connection:
-            if max_live is not None:
-                live = self._count_live(connection)
-                if live >= max_live:
-                    raise KeyLimitError(
-                        f"{live} API keys are live, the most allowed is {max_live} "
-                        "(WZ_GATEWAY_MAX_API_KEYS): revoke keys no longer used first"
-                    )
-            connection.execute(
-                insert(api_keys).values(
-                    key_id=info.key_id,
-                    fingerprint=auth.fingerprint(secret),
-                    salt=salt,
-                    secret_hash=auth.hash_secret(secret, salt),
-                    scope=scope,
-                    name=name,
-                    origin=origin,
-                    created_at=now,
-                    dev_mode=dev_mode,
-                )
+            if max_live is None:
+                connection.execute(insert(api_keys).values(**values))
+                return info
+            # The count and the insert are one statement, so two requests cannot both see
+            # room for one more key. SQLite runs a writing statement under its write lock
+            # from its start; PostgreSQL (read committed) lets two transactions count alike,
+            # so each first takes a lock that key creations share with nobody (reads go on).
+            if connection.dialect.name == "postgresql":
+                connection.execute(text("LOCK TABLE api_keys IN SHARE ROW EXCLUSIVE MODE"))
+            room = (
+                select(func.count())
+                .select_from(api_keys)
+                .where(api_keys.c.revoked_at.is_(None))
+                .scalar_subquery()
+                < max_live
             )
+            row = select(*(literal(v, api_keys.c[k].type).label(k) for k, v in values.items()))
+            inserted = connection.execute(
+                insert(api_keys)
+                .from_select(list(values), row.where(room))
+                .returning(api_keys.c.key_id)
+            ).first()
+            if inserted is None:
+                live = self._count_live(connection)
+                raise KeyLimitError(
+                    f"{live} API keys are live, the most allowed is {max_live} "
+                    "(WZ_GATEWAY_MAX_API_KEYS): revoke keys no longer used first"
+                )
         return info
 
     def count_live(self) -> int:
