@@ -1,6 +1,6 @@
 """A flood of track batches on the bus, from its own process (``alert_flood`` and its test).
 
-Usage: ``python -m benchmarks.flood_peer ENDPOINT SITE RATE_HZ DURATION_S``
+Usage: ``python -m benchmarks.flood_peer ENDPOINT SITE RATE_HZ DURATION_S [TRACKS]``
 
 Connects as a client to ENDPOINT (``WZ_BUS_*`` apart from that) and, once a subscriber of
 ``wz/<SITE>/tracks`` matches, puts one-track :class:`TrackBatch` payloads (encoded once
@@ -23,11 +23,20 @@ from wz_shared.settings import BusSettings
 BURST_S = 0.005
 
 
-def payload(site: str) -> bytes:
-    track = Track(
-        track_id=1,
+def payload(site: str, count: int = 1) -> bytes:
+    """One batch of ``count`` tracks (a queue's batch holds 10-30), encoded."""
+    tracks = [_track(number) for number in range(1, count + 1)]
+    batch = TrackBatch(
+        site=site, source_id="fusion-tracker", stamp=1.0, cycle_index=1, tracks=tracks
+    )
+    return encode_json(batch)
+
+
+def _track(track_id: int) -> Track:
+    return Track(
+        track_id=track_id,
         x_m=-1.83,
-        y_m=600.0,
+        y_m=600.0 - 10.0 * track_id,
         vx_mps=0.0,
         vy_mps=25.0,
         covariance=[
@@ -48,7 +57,7 @@ def payload(site: str) -> bytes:
             0.0,
             1.0,
         ],
-        station_m=600.0,
+        station_m=600.0 - 10.0 * track_id,
         offset_m=-1.83,
         speed_mps=25.0,
         heading_rad=1.5707963,
@@ -58,10 +67,6 @@ def payload(site: str) -> bytes:
         confirmed=True,
         sources=["lidar-mast"],
     )
-    batch = TrackBatch(
-        site=site, source_id="fusion-tracker", stamp=1.0, cycle_index=1, tracks=[track]
-    )
-    return encode_json(batch)
 
 
 def main() -> None:
@@ -71,12 +76,13 @@ def main() -> None:
         float(sys.argv[3]),
         float(sys.argv[4]),
     )
+    count = int(sys.argv[5]) if len(sys.argv) > 5 else 1
     settings = BusSettings(mode="client", connect_endpoints=[endpoint], listen_endpoints=[])
     with Bus.open(settings, site=site, service="fusion-tracker") as bus:
         tracks = bus.publisher(bus.keys.tracks, TrackBatch)
         if not tracks.wait_for_subscribers(30.0):
             raise SystemExit("nobody subscribes to the tracks")
-        body = payload(site)
+        body = payload(site, count)
         per_burst = max(1, round(rate_hz * BURST_S))
         report("flooding")
         started = time.perf_counter()

@@ -18,6 +18,7 @@ from benchmarks.report_bus import (
     bus_trust,
     gateway_live,
     recovery,
+    speeding_flood,
     webhook_latency,
 )
 from benchmarks.report_format import (
@@ -215,6 +216,20 @@ def _summary(benchmarks: dict[str, Any]) -> list[str]:
             f"{fmt_rate(plain['small']['msg_per_s'])}/s (x{ratios['small_msg_per_s']:.2f}); "
             f"2 MB frames x{ratios['frames_msg_per_s']:.2f}."
         )
+    speeding = benchmarks.get("speeding_flood", {}).get("result")
+    if speeding:
+        on, off = speeding["gate_on"], speeding["gate_off"]
+
+        def late(value: float | None) -> str:
+            return "never" if value is None else fmt_ms(1e3 * value)
+
+        lines.append(
+            f"- A speeding car inside a replay flood ({speeding['target_rate_hz']:,.0f} batches "
+            f"a second of 20 tracks): its alert stored **{late(on['stored_s'])}** and webhooked "
+            f"**{late(on['webhooked_s'])}** past the rule's hold time with the alert service's "
+            f"gate, {late(off['stored_s'])} and {late(off['webhooked_s'])} without it (bound "
+            f"{speeding['bound_s']:.0f} s)."
+        )
     flood = benchmarks.get("alert_flood", {}).get("result")
     if flood:
         lines.append(
@@ -310,6 +325,10 @@ SECTIONS: dict[str, tuple[str, Callable[[dict[str, Any]], list[str]]]] = {
     "alert_flood": (
         "alerts first: an alert stored and webhooked during a flood of track batches",
         alert_flood,
+    ),
+    "speeding_flood": (
+        "a speeding car inside a flood of track batches: alerted, stored, webhooked in time",
+        speeding_flood,
     ),
     "webhook_latency": (
         "gateway webhooks: alert on the bus to the signed POST at the receiver",

@@ -417,3 +417,59 @@ def alert_flood(result: dict[str, Any]) -> list[str]:
         rows,
     )
     return [*lines, ""]
+
+
+def speeding_flood(result: dict[str, Any]) -> list[str]:
+    lines = [
+        "Five processes on loopback: `wz router`; the alert service node; the gateway node "
+        "(SQLite, a webhook subscription to an `http.server` in this process); a source "
+        "replaying one old batch of 20 tracks (~11 kB) at a target of "
+        f"{result['target_rate_hz']:,.0f} a second for {result['flood_s']:.0f} s (blocking "
+        "congestion control, as the tracker's publisher); and this process as the real "
+        "tracker, a batch every 0.1 s with one car that speeds up to 70 mph in the 55 mph zone "
+        "2 s into the flood. Each time is from the first batch with the car over the limit, "
+        "minus the rule's hold time (1 s): *raised*, the alert service's speeding start on the "
+        "bus; *stored*, the gateway writer's `received_at`; *webhooked*, its signed POST read "
+        f"by the receiver. The issue's bound: {result['bound_s']:.0f} s. *Gate on*: the alert "
+        "service sheds batches that carry no news before decoding them (the default); *gate "
+        "off*: every batch queued, as before the gate.",
+        "",
+    ]
+    rows = []
+    for name in ("gate_on", "gate_off"):
+        run = result[name]
+        flood = run["flood"]
+        shed = ", ".join(
+            f"{n:,} {reason}" for reason, n in sorted(run["alert_service_shed"].items())
+        )
+        invalid = ", ".join(
+            f"{n:,} {reason}" for reason, n in sorted(run["alert_service_invalid"].items())
+        )
+
+        def late(value: float | None) -> str:
+            return "never" if value is None else f"**{fmt_ms(1e3 * value)}**"
+
+        rows.append(
+            [
+                name.replace("_", " "),
+                f"{flood['rate_hz']:,.0f} msg/s ({flood['sent']:,})",
+                late(run["raised_s"]),
+                late(run["stored_s"]),
+                late(run["webhooked_s"]),
+                shed or "0",
+                invalid or "0",
+            ]
+        )
+    lines += md_table(
+        [
+            "Alert service",
+            "Flood reached",
+            "Raised",
+            "Stored",
+            "Webhooked",
+            "Shed (undecoded)",
+            "Refused after decoding",
+        ],
+        rows,
+    )
+    return [*lines, ""]

@@ -261,3 +261,30 @@ def test_router_config_file_is_loopback_router_without_multicast() -> None:
     assert json.loads(config.get_json("scouting/multicast/enabled")) is False
     default = router_config(None, None)
     assert json.loads(default.get_json("listen/endpoints")) == ["tcp/127.0.0.1:7447"]
+
+
+def test_status_shows_what_a_service_shed_by_reason_with_its_drops() -> None:
+    """`wz status`: the DROPPED column counts a ring's overwritten samples and the samples shed
+    undecoded, naming the shedding's reasons; a service that shed nothing shows its drops."""
+    from wz_cli.status import ServiceView, render_table
+    from wz_shared.messages import ServiceState, ServiceStatus
+
+    status = ServiceStatus(
+        site="s",
+        source_id="alert-service",
+        stamp=1.0,
+        service="alert-service",
+        state=ServiceState.RUNNING,
+        uptime_s=10.0,
+        pid=7,
+        received_hz={"wz/s/tracks": 20000.0, "wz/s/raw/camera/c": 10.0},
+        invalid_counts={"wz/s/tracks|out_of_order": 3},
+        dropped_counts={"wz/s/raw/camera/c": 2},
+        shed_counts={"wz/s/tracks|stale": 1000, "wz/s/tracks|superseded": 5},
+    )
+    view = ServiceView("alert-service", True, status, 0.1, expected=True)
+    lines = render_table("s", [view])
+    tracks = next(line for line in lines if "wz/s/tracks" in line)
+    camera = next(line for line in lines if "wz/s/raw/camera/c" in line)
+    assert "1005 (stale, superseded)" in tracks and "3 (out_of_order)" in tracks
+    assert camera.rstrip().endswith("2")

@@ -133,17 +133,31 @@ def problems(views: list[ServiceView]) -> list[str]:
     return out
 
 
-def _per_key(status: ServiceStatus) -> list[tuple[str, str, str, str, str]]:
-    """Rows (key, published Hz, received Hz, invalid, dropped) of one status message."""
-    invalid: dict[str, dict[str, int]] = {}
-    for key_reason, count in status.invalid_counts.items():
+def _by_reason(counts: dict[str, int]) -> dict[str, dict[str, int]]:
+    """``"<key>|<reason>"`` -> count, as key -> reason -> count."""
+    out: dict[str, dict[str, int]] = {}
+    for key_reason, count in counts.items():
         key, _, reason = key_reason.partition("|")
-        invalid.setdefault(key, {})[reason or "?"] = count
+        out.setdefault(key, {})[reason or "?"] = count
+    return out
+
+
+def _with_reasons(total: int, reasons: dict[str, int]) -> str:
+    return f"{total} ({', '.join(sorted(reasons))})" if reasons else str(total)
+
+
+def _per_key(status: ServiceStatus) -> list[tuple[str, str, str, str, str]]:
+    """Rows (key, published Hz, received Hz, invalid, dropped) of one status message; the
+    dropped column counts a ring's overwritten samples and those shed undecoded (with the
+    shedding's reasons: ``stale``, ``superseded``)."""
+    invalid = _by_reason(status.invalid_counts)
+    shed = _by_reason(status.shed_counts)
     keys = sorted(
         status.published_hz.keys()
         | status.received_hz.keys()
         | invalid.keys()
         | status.dropped_counts.keys()
+        | shed.keys()
     )
 
     def rate(rates: dict[str, float], key: str) -> str:
@@ -152,14 +166,15 @@ def _per_key(status: ServiceStatus) -> list[tuple[str, str, str, str, str]]:
     rows = []
     for key in keys:
         reasons = invalid.get(key, {})
-        total = sum(reasons.values())
+        shed_reasons = shed.get(key, {})
+        dropped = status.dropped_counts.get(key, 0) + sum(shed_reasons.values())
         rows.append(
             (
                 key,
                 rate(status.published_hz, key),
                 rate(status.received_hz, key),
-                f"{total} ({', '.join(sorted(reasons))})" if total else "0",
-                str(status.dropped_counts.get(key, 0)),
+                _with_reasons(sum(reasons.values()), reasons) if reasons else "0",
+                _with_reasons(dropped, shed_reasons),
             )
         )
     return rows

@@ -52,6 +52,7 @@ from wz_shared.keys import Keys
 from wz_shared.messages import Message
 from wz_shared.reach import open_session
 from wz_shared.settings import BusSettings
+from wz_shared.shedding import StampGate
 from wz_shared.trust import expected_source, site_problem, source_problem, tls_config
 
 log = logging.getLogger(__name__)
@@ -102,6 +103,9 @@ class BusStats:
     received: collections.Counter[str] = field(default_factory=collections.Counter)
     invalid: collections.Counter[tuple[str, str]] = field(default_factory=collections.Counter)
     dropped: collections.Counter[str] = field(default_factory=collections.Counter)
+    #: Samples a subscription's gate shed before decoding, by (key, reason): ``stale``,
+    #: ``superseded`` (:mod:`wz_shared.shedding`).
+    shed: collections.Counter[tuple[str, str]] = field(default_factory=collections.Counter)
     #: Gaps a recovering subscription found and re-fetched (:class:`CallbackSubscription`).
     gaps: collections.Counter[str] = field(default_factory=collections.Counter)
     #: When the newest message a consumer took from a queue had arrived (monotonic [s]): the
@@ -124,6 +128,10 @@ class BusStats:
     def count_dropped(self, key: str, n: int = 1) -> None:
         with self._lock:
             self.dropped[key] += n
+
+    def count_shed(self, key: str, reason: str) -> None:
+        with self._lock:
+            self.shed[(key, reason)] += 1
 
     def count_gap(self, key: str, detail: str) -> None:
         with self._lock:
@@ -152,6 +160,7 @@ class BusStats:
                 "received": dict(self.received),
                 "invalid": {f"{k}|{r}": n for (k, r), n in self.invalid.items()},
                 "dropped": dict(self.dropped),
+                "shed": {f"{k}|{r}": n for (k, r), n in self.shed.items()},
                 "gaps": dict(self.gaps),
             }
 
@@ -328,17 +337,25 @@ class Subscription(Generic[T]):
         mode: QueueMode,
         capacity: int,
         on_push: Callable[[], None] | None = None,
+        gate: StampGate | None = None,
     ) -> None:
         self.key = key
         self._decoder = decoder
         self._stats = bus.stats
         self._queue = _SampleQueue(mode, capacity, key, bus.stats, on_push)
+        self._gate = gate
         self._subscriber = bus.session.declare_subscriber(key, self._on_sample)
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         try:
             self._stats.count_received(self.key)
-            self._queue.push(str(sample.key_expr), sample.payload.to_bytes())
+            payload = sample.payload.to_bytes()
+            if self._gate is not None:
+                reason = self._gate.check(payload)
+                if reason is not None:
+                    self._stats.count_shed(self.key, reason)
+                    return
+            self._queue.push(str(sample.key_expr), payload)
         except Exception as exc:  # never raise into Zenoh's thread
             self._stats.count_invalid(self.key, "receive_error", repr(exc))
 
@@ -360,6 +377,8 @@ class Subscription(Generic[T]):
                 return Received(key, value)
             except codec.DecodeError as exc:
                 self._stats.count_invalid(self.key, exc.reason, exc.detail)
+                if self._gate is not None:
+                    self._gate.refused(payload)
 
     def recv(self, timeout_s: float | None = None) -> T | None:
         received = self.recv_with_key(timeout_s)
@@ -659,11 +678,17 @@ class Bus:
         mode: QueueMode = "fifo",
         capacity: int = 4096,
         on_push: Callable[[], None] | None = None,
+        gate: StampGate | None = None,
     ) -> Subscription[M]:
         """Queue JSON messages of ``cls`` from ``key`` (may hold wildcards); ``on_push()``
-        after each sample queued, on Zenoh's thread (keep it short: set an event)."""
+        after each sample queued, on Zenoh's thread (keep it short: set an event).
+
+        ``gate`` (:class:`~wz_shared.shedding.StampGate`) checks each sample on Zenoh's
+        thread before anything else and sheds, undecoded, those that carry no news (counted
+        in ``stats.shed`` by reason); tell it what became of those let in
+        (:meth:`~wz_shared.shedding.StampGate.settle`)."""
         return self._keep(
-            lambda: Subscription(self, key, json_decoder(cls), mode, capacity, on_push)
+            lambda: Subscription(self, key, json_decoder(cls), mode, capacity, on_push, gate)
         )
 
     def subscribe_frames(

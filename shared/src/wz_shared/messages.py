@@ -531,6 +531,9 @@ class ServiceStatus(Message):
     latency_p50_ms: dict[str, NonNegFloat] = Field(default_factory=dict)
     invalid_counts: dict[str, Annotated[int, Field(ge=0)]] = Field(default_factory=dict)
     dropped_counts: dict[str, Annotated[int, Field(ge=0)]] = Field(default_factory=dict)
+    #: Samples shed before decoding, ``"<key>|<reason>"`` -> count (``stale``,
+    #: ``superseded``: a flood or a replay on a stamped stream, :mod:`wz_shared.shedding`).
+    shed_counts: dict[str, Annotated[int, Field(ge=0)]] = Field(default_factory=dict)
     #: Seconds since the service's own loop last went round (None: not yet started); past
     #: its stall limit the state is ``stalled``, whatever the status thread still says.
     loop_age_s: NonNegFloat | None = None

@@ -6,6 +6,8 @@ API's ``/metrics``. Names follow Prometheus' conventions (base units, ``_total``
 
 - ``wz_bus_published_total{key}``, ``wz_bus_received_total{key}``: messages put and taken;
 - ``wz_bus_dropped_total{key}``: samples a ring subscription dropped (a consumer behind);
+- ``wz_bus_shed_total{key,reason}``: samples shed undecoded (``stale``, ``superseded``: a
+  flood or a replay, :mod:`wz_shared.shedding`), by reason;
 - ``wz_bus_invalid_total{key,reason}``: messages refused (undecodable, out of range, from the
   wrong source), by reason;
 - ``wz_queue_depth{key}`` and ``wz_queue_capacity{key}``: each subscription's queue now;
@@ -75,15 +77,15 @@ class _RuntimeCollector(Collector):
             for key, n in snap.get(what, {}).items():
                 family.add_metric([*ids, key], n)
             yield family
-        invalid = CounterMetricFamily(
-            "wz_bus_invalid",
-            "Messages refused, per key and reason",
-            labels=[*base, "key", "reason"],
-        )
-        for name, n in snap.get("invalid", {}).items():
-            key, _, reason = name.partition("|")
-            invalid.add_metric([*ids, key, reason], n)
-        yield invalid
+        for name, doc in (
+            ("invalid", "Messages refused, per key and reason"),
+            ("shed", "Samples shed before decoding (a flood, a replay), per key and reason"),
+        ):
+            family = CounterMetricFamily(f"wz_bus_{name}", doc, labels=[*base, "key", "reason"])
+            for key_reason, n in snap.get(name, {}).items():
+                key, _, reason = key_reason.partition("|")
+                family.add_metric([*ids, key, reason], n)
+            yield family
         depth = GaugeMetricFamily("wz_queue_depth", "Samples queued now", labels=[*base, "key"])
         capacity = GaugeMetricFamily(
             "wz_queue_capacity", "A subscription queue's capacity", labels=[*base, "key"]

@@ -226,6 +226,7 @@ class ServiceRuntime:
             received_hz=_rates(snap["received"], previous.get("received", {}), dt_s),
             invalid_counts=snap["invalid"],
             dropped_counts=snap["dropped"],
+            shed_counts=snap["shed"],
             loop_age_s=None if loop_age_s is None else round(loop_age_s, 3),
             input_age_s=None if input_age_s is None else round(input_age_s, 3),
             devices=devices,

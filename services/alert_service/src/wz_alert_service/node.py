@@ -4,7 +4,12 @@ Run it as ``python -m wz_alert_service.node`` (settings: ``WZ_ALERT_*``, bus ``W
 rules' thresholds are the ``alerts:`` section of the site file). It
 
 - takes :class:`TrackBatch` messages from ``wz/<site>/tracks`` (a FIFO: every batch counts, in
-  the order the tracker published them) and gives each to the :class:`AlertEngine`;
+  the order the tracker published them) and gives each to the :class:`AlertEngine`. Before a
+  batch is queued, a gate reads its stamp off the bytes and sheds, undecoded, one that carries
+  no news (``stale``: not newer than the last one let in; ``superseded``: newer by less than
+  ``WZ_ALERT_MIN_BATCH_INTERVAL_S``, 5 ms; :mod:`wz_shared.shedding`), counted by reason in
+  the status message's ``shed_counts``, ``wz status`` and ``wz_bus_shed_total``: a flood of
+  batches from a faulty or hostile source never puts the engine behind the road;
 - publishes each event the engine decides (an episode's start, a rise in severity, its clear)
   as an :class:`Alert` on ``wz/<site>/alerts/<type>``, reliably (congestion control blocks: an
   alert is never dropped), before anything else is done with the batch;
@@ -42,6 +47,7 @@ from wz_alert_service.settings import AlertServiceSettings
 from wz_shared.codec import encode_json
 from wz_shared.messages import ActiveAlerts, Alert, AlertType, RoadsideDeviceState, TrackBatch
 from wz_shared.service import NodeApp, ServiceRuntime
+from wz_shared.shedding import StampGate
 from wz_shared.site import Site
 from wz_shared.timebase import RunWatch, SimClock
 
@@ -234,7 +240,13 @@ def run(
     devices_publisher = bus.publisher(bus.keys.devices_state, RoadsideDeviceState, history=1)
     snapshot = [encode_json(core.active())]
     bus.serve(bus.keys.alerts_active, lambda: snapshot[-1])
-    batches = bus.subscribe(tracks_key, TrackBatch, capacity=settings.queue_capacity)
+    gate = StampGate(settings.min_batch_interval_s) if settings.shed_stale_batches else None
+    batches = bus.subscribe(
+        tracks_key,
+        TrackBatch,
+        capacity=settings.queue_capacity,
+        gate=gate,
+    )
     log.info("alerting on %s -> %s", tracks_key, bus.keys.alerts_all)
     published = 0
     runs = core.runs
@@ -244,6 +256,8 @@ def run(
         if batch is None:
             continue
         outputs = core.add(batch)
+        if gate is not None:
+            gate.settle(batch.stamp, outputs.accepted)
         if not outputs.accepted:
             continue
         for alert in outputs.alerts:

@@ -35,6 +35,16 @@ class AlertServiceSettings(ServiceSettings):
     #: Where the open episodes are kept across restarts (:mod:`wz_alert_service.recovery`);
     #: None: a restart forgets them (the development stack without a state folder).
     state_file: Path | None = None
+    #: Shed track batches that carry no news before decoding them (:mod:`wz_shared.shedding`):
+    #: not newer than the last one let in (``stale``: a replay, a duplicate), or newer by less
+    #: than ``min_batch_interval_s`` (``superseded``). So a flood of batches, from a faulty or
+    #: hostile source, never puts the engine behind: a speeding car inside it is alerted on
+    #: within its normal latency. False: every batch queued (the benchmark's comparison).
+    shed_stale_batches: bool = True
+    #: Least stamp step between two batches the engine takes [s]: a tracker cycles at 10-20 Hz
+    #: (50-100 ms); 5 ms lets every real tracker's batch by and at most 200 batches/s of a
+    #: flood; the rules hold for a second or more.
+    min_batch_interval_s: Annotated[float, Field(ge=0.0, le=0.05)] = 0.005
 
     @field_validator("episode_id_prefix")
     @classmethod
