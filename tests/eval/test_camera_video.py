@@ -11,11 +11,13 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import numpy.typing as npt
 import onnx
 import pytest
 
 from tests.camera_detector.test_yolo import _fixed_output_model, _hand_made_output
 from wz_eval.camera import main
+from wz_eval.camera_video import FrameScore, _bin_of, markdown, summarise
 
 A = (160.0, 100.0, 240.0, 140.0)  # car, 40 px tall (1280x720 frames)
 C = (500.0, 300.0, 700.0, 420.0)  # truck, 120 px tall
@@ -129,3 +131,47 @@ def test_bad_truth_is_a_clear_error(
     argv = ["--model", str(model), "--video", str(video), *filled, "--out", str(tmp_path / "o")]
     assert main(argv) == 2
     assert message in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("height_px", "name"),
+    [
+        (15.0, "<20"),
+        (20.0, "20-40"),
+        (39.0, "20-40"),
+        (40.0, "40-80"),
+        (159.0, "80-160"),
+        (160.0, "160+"),
+    ],
+)
+def test_a_box_falls_in_the_bin_of_its_height(height_px: float, name: str) -> None:
+    """Each bin from its lower edge up to the next; below the first edge its own bin (a box
+    under 20 px is not in the open top bin)."""
+    assert _bin_of(height_px) == name
+
+
+def test_the_summary_and_its_table_give_the_bins_lowest_first() -> None:
+    def box(height_px: float) -> npt.NDArray[np.float64]:
+        return np.array([0.0, 100.0, 30.0, 100.0 + height_px])
+
+    frame = FrameScore(
+        found=[(box(200.0), box(190.0))],
+        missed=[box(15.0), box(50.0)],
+        false=[box(100.0), box(25.0)],
+    )
+    summary = summarise([frame])
+    assert list(summary["by_height_px"]) == ["<20", "20-40", "40-80", "80-160", "160+"]
+    assert summary["by_height_px"]["<20"] == {
+        "vehicles": 1,
+        "recall": 0.0,
+        "detections": 0,
+        "precision": None,
+    }
+    assert summary["by_height_px"]["160+"] == {
+        "vehicles": 1,
+        "recall": 1.0,
+        "detections": 1,
+        "precision": 1.0,
+    }
+    rows = [line.split(" | ")[0] for line in markdown(summary, "t").splitlines()[6:]]
+    assert rows == ["| <20", "| 20-40", "| 40-80", "| 80-160", "| 160+"]

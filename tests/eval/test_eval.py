@@ -10,7 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from wz_eval.fusion import SOURCES, Dropout, EvalOptions, pipeline_options
+from wz_eval.fusion import Dropout, EvalOptions, pipeline_options
+from wz_eval.scores import SOURCES
 from wz_fusion_tracker.calibration import load_bias_map
 from wz_gateway.conflicts import SSAM_COLUMNS
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from datetime import UTC, datetime, timedelta, timezone
 from pathlib import Path
 from typing import Any
 
@@ -15,10 +16,11 @@ import pytest
 from tests.gateway.helpers import READ_KEY, SITE, gateway_settings, live_server, open_storage
 from tests.gateway.test_wzdx import feed_of as device_feed_of
 from tests.gateway.test_wzdx import wzdx_validator
+from wz_gateway.sites import load_sites
 from wz_gateway.storage import Storage
 from wz_gateway.wzdx import work_zone_event_id
 from wz_gateway.wzdx_workzone import extent_m, work_zone_feed
-from wz_shared.site import Site
+from wz_shared.site import DEFAULT_SITE_PATH, Schedule, Site
 from wz_shared.site_generator import generate_site
 
 T0_UNIX = 1_795_000_000.0
@@ -70,6 +72,37 @@ def test_the_default_sites_work_zone_is_a_valid_road_event() -> None:
     assert length_m(line) == pytest.approx(end - start, rel=0.01)
 
 
+def test_a_sites_schedule_gives_the_events_dates_and_their_verification() -> None:
+    """The site file's schedule, in UTC whole seconds, verified as it says; the time the
+    gateway began serving plays no part. The feed still validates."""
+    schedule = Schedule(
+        start=datetime(2026, 5, 4, 7, 0, 0, tzinfo=timezone(timedelta(hours=-5))),
+        end=datetime(2026, 6, 26, 19, 30, 15, 600_000, tzinfo=UTC),
+        start_verified=True,
+    )
+    feed = feed_of(SITE.model_copy(update={"schedule": schedule}))
+    assert_valid(feed)
+    props = feed["features"][0]["properties"]
+    assert props["start_date"] == "2026-05-04T12:00:00Z"
+    assert props["end_date"] == "2026-06-26T19:30:15Z"
+    assert (props["is_start_date_verified"], props["is_end_date_verified"]) == (True, False)
+    both = schedule.model_copy(update={"end_verified": True})
+    props = feed_of(SITE.model_copy(update={"schedule": both}))["features"][0]["properties"]
+    assert (props["is_start_date_verified"], props["is_end_date_verified"]) == (True, True)
+
+
+def test_without_a_schedule_the_event_runs_four_weeks_from_serving_unverified() -> None:
+    assert SITE.schedule is None
+    feed = work_zone_feed(SITE, now=T0_UNIX + 60.0, served_since=T0_UNIX + 3600.0, publisher="P")
+    assert_valid(feed)
+    props = feed["features"][0]["properties"]
+    assert (props["start_date"], props["end_date"]) == (
+        "2026-11-18T12:06:40Z",
+        "2026-12-16T12:06:40Z",
+    )
+    assert (props["is_start_date_verified"], props["is_end_date_verified"]) == (False, False)
+
+
 @pytest.mark.parametrize("seed", [9301, 9302, 9303, 9304, 9305, 9306])
 def test_generated_sites_of_either_side_give_valid_feeds(seed: int) -> None:
     """Seeds never used before: the closure side, lane count and curvature vary."""
@@ -113,6 +146,39 @@ def test_the_gateway_serves_the_feed(tmp_path: Path) -> None:
     assert_valid(response.json())
     assert response.json()["features"][0]["id"] == work_zone_event_id(SITE)
     assert refused.status_code == 401 and unknown.status_code == 404
+
+
+def test_the_gateway_serves_a_site_files_schedule(tmp_path: Path) -> None:
+    """From the site file as the gateway loads it to the served feed (and ``/v1/site``)."""
+    path = tmp_path / "site.yaml"
+    path.write_text(
+        DEFAULT_SITE_PATH.read_text(encoding="utf-8")
+        + "schedule:\n  start: 2026-05-04T07:00:00-05:00\n  end: 2026-06-26T19:00:00-05:00\n"
+        "  end_verified: true\n",
+        encoding="utf-8",
+    )
+    settings = gateway_settings(tmp_path)
+    storage = open_storage(settings)
+    with live_server(settings, storage, site=load_sites([path])) as url:
+        feed = httpx.get(
+            f"{url}/v1/wzdx/work-zone-feed", headers={"X-API-Key": READ_KEY}, timeout=10.0
+        )
+        site = httpx.get(f"{url}/v1/site", headers={"X-API-Key": READ_KEY}, timeout=10.0)
+    storage.close()
+    assert feed.status_code == 200, feed.text
+    assert_valid(feed.json())
+    props = feed.json()["features"][0]["properties"]
+    assert (props["start_date"], props["end_date"]) == (
+        "2026-05-04T12:00:00Z",
+        "2026-06-27T00:00:00Z",
+    )
+    assert (props["is_start_date_verified"], props["is_end_date_verified"]) == (False, True)
+    assert site.json()["schedule"] == {
+        "start": "2026-05-04T07:00:00-05:00",
+        "end": "2026-06-26T19:00:00-05:00",
+        "start_verified": False,
+        "end_verified": True,
+    }
 
 
 def test_every_device_names_the_work_zone(tmp_path: Path) -> None:

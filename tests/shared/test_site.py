@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any
 
@@ -11,7 +12,14 @@ import pytest
 import yaml
 
 from wz_shared.geometry import GeoFrame, RoadFrame
-from wz_shared.site import DEFAULT_SITE_PATH, AreaKind, Site, SiteFileError, load_site
+from wz_shared.site import (
+    DEFAULT_SITE_PATH,
+    AreaKind,
+    Site,
+    SiteFileError,
+    load_site,
+    site_document,
+)
 
 
 def default_raw() -> dict[str, Any]:
@@ -99,6 +107,64 @@ def test_road_names_and_direction_for_feeds(tmp_path: Path, site: Site) -> None:
     assert (bare.road_names, bare.road_direction) == ([], "unknown")
     raw["road_direction"] = "north"
     with pytest.raises(SiteFileError, match=r"(?s)road_direction.*'northbound'"):
+        load_site(write_site(tmp_path, raw))
+
+
+SCHEDULE = """
+schedule:
+  start: 2026-05-04T07:00:00-05:00
+  end: "2026-06-27T00:00:00Z"
+  start_verified: true
+"""
+
+
+def test_a_schedule_gives_the_work_zones_dates(tmp_path: Path, site: Site) -> None:
+    """Optional (the default site has none); YAML's own timestamps and quoted ISO 8601 text
+    both read, with their offsets; a site document keeps it and drops it when absent."""
+    assert site.schedule is None
+    assert "schedule" not in site_document(site)
+    path = tmp_path / "site.yaml"
+    path.write_text(DEFAULT_SITE_PATH.read_text(encoding="utf-8") + SCHEDULE, encoding="utf-8")
+    schedule = load_site(path).schedule
+    assert schedule is not None
+    assert schedule.start == datetime(2026, 5, 4, 12, 0, tzinfo=UTC)
+    assert schedule.start.utcoffset() == timedelta(hours=-5)
+    assert schedule.end == datetime(2026, 6, 27, 0, 0, tzinfo=UTC)
+    assert (schedule.start_verified, schedule.end_verified) == (True, False)
+    document = site_document(load_site(path))
+    assert document["schedule"]["start"] == "2026-05-04T07:00:00-05:00"
+    assert load_site(write_site(tmp_path, document)).schedule == schedule
+
+
+@pytest.mark.parametrize(
+    ("schedule", "message"),
+    [
+        (
+            {"start": "2026-06-27T00:00:00Z", "end": "2026-05-04T07:00:00-05:00"},
+            r"schedule: end 2026-05-04T07:00:00-05:00 must be after start 2026-06-27T00:00:00\+00:00",
+        ),
+        (
+            {"start": "2026-05-04T07:00:00Z", "end": "2026-05-04T02:00:00-05:00"},
+            r"schedule: end .* must be after start",
+        ),
+        (
+            {"start": "2026-05-04T07:00:00", "end": "2026-06-27T00:00:00Z"},
+            r"(?s)schedule\.start\n.*2026-05-04T07:00:00 has no UTC offset",
+        ),
+        (
+            {"start": "2026-05-04T07:00:00Z", "end": "2026-06-27"},
+            r"(?s)schedule\.end\n.*2026-06-27T00:00:00 has no UTC offset",
+        ),
+        ({"start": "2026-05-04T07:00:00Z"}, r"(?s)schedule\.end\n.*Field required"),
+    ],
+    ids=["end-before-start", "end-at-start", "naive-start", "date-only-end", "no-end"],
+)
+def test_a_bad_schedule_is_refused_with_the_field_named(
+    tmp_path: Path, schedule: dict[str, str], message: str
+) -> None:
+    raw = default_raw()
+    raw["schedule"] = schedule
+    with pytest.raises(SiteFileError, match=message):
         load_site(write_site(tmp_path, raw))
 
 

@@ -21,14 +21,17 @@ vehicles (far away, in a queue): a detection lying at least 70 % inside a blob i
 match is one of them, true (``in_blob``), and the blob is found. Only vehicles at least ``--min-height``
 pixels tall (20) count: a detection matched to a smaller vehicle, lying mostly (half its area)
 on ignored pixels or in an ignored region, or itself smaller and unmatched, is neither true nor
-false. Recall by true box height, precision by detected box height, and pictures of the frames
-with the most misses and false boxes (truth green, found blue, missed orange, false red).
+false. Recall by true box height, precision by detected box height (bins of
+:data:`HEIGHT_BINS_PX`: ``<20``, ``20-40``, ``40-80``, ``80-160``, ``160+`` px, lowest first), and
+pictures of the frames with the most misses and false boxes (truth green, found blue, missed
+orange, false red).
 Writes ``video-eval.json`` and ``video-eval.md`` in ``--out``.
 """
 
 from __future__ import annotations
 
 import argparse
+import bisect
 import itertools
 import json
 import logging
@@ -51,8 +54,16 @@ from wz_shared.logs import configure_logging
 
 log = logging.getLogger("wz_eval.camera_video")
 
-#: Box heights [px] the figures are given by (the last bin is open).
+#: Box heights [px] the figures are given by: the edges of the bins, each bin from its lower
+#: edge up to (not including) the next; a bin below the first edge and an open one from the last.
 HEIGHT_BINS_PX = (20.0, 40.0, 80.0, 160.0)
+#: The bins' names, lowest first (the order of the summary's and the table's rows): ``<20``,
+#: ``20-40``, ``40-80``, ``80-160``, ``160+``.
+HEIGHT_BIN_NAMES = (
+    f"<{HEIGHT_BINS_PX[0]:.0f}",
+    *(f"{low:.0f}-{high:.0f}" for low, high in itertools.pairwise(HEIGHT_BINS_PX)),
+    f"{HEIGHT_BINS_PX[-1]:.0f}+",
+)
 #: Motion-mask values (CDnet): moving, unknown (a blob's blurred edge), outside the ROI.
 MASK_MOVING, MASK_UNKNOWN, MASK_OUTSIDE = 255, 170, 85
 #: A blob smaller than this [px^2] is noise, not a vehicle.
@@ -283,11 +294,8 @@ def _on_ignored(box: F64, truth: FrameTruth) -> bool:
 
 
 def _bin_of(height: float) -> str:
-    edges = HEIGHT_BINS_PX
-    for low, high in itertools.pairwise(edges):
-        if low <= height < high:
-            return f"{low:.0f}-{high:.0f}"
-    return f"{edges[-1]:.0f}+"
+    """The name of the bin of :data:`HEIGHT_BINS_PX` that a box ``height`` px tall falls in."""
+    return HEIGHT_BIN_NAMES[bisect.bisect_right(HEIGHT_BINS_PX, height)]
 
 
 def summarise(scores: list[FrameScore]) -> dict[str, Any]:
@@ -321,9 +329,7 @@ def summarise(scores: list[FrameScore]) -> dict[str, Any]:
             "detections": b["tp_det"] + b["fp"],
             "precision": _ratio(b["tp_det"], b["tp_det"] + b["fp"]),
         }
-        for name, b in sorted(
-            by_bin.items(), key=lambda item: float(item[0].split("-")[0].rstrip("+"))
-        )
+        for name, b in sorted(by_bin.items(), key=lambda item: HEIGHT_BIN_NAMES.index(item[0]))
     }
     return {
         "frames": len(scores),

@@ -333,7 +333,7 @@ def markdown(report: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``wz eval --log LOG_DIR [--truth GPS_FILE]`` (from :func:`wz_eval.fusion.main`)."""
+    """``wz eval --log LOG_DIR [--truth GPS_FILE]`` (from :func:`wz_eval.cli.main`)."""
     parser = argparse.ArgumentParser(
         prog="wz eval --log", description="the paper's field validation on a field log"
     )

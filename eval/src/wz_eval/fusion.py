@@ -1,12 +1,12 @@
 """``wz eval``: the whole pipeline on the simulated work zone, scored against truth.
 
-Usage::
+Usage (the command line is :mod:`wz_eval.cli`'s)::
 
     wz eval [--site FILE] [--duration-s 600] [--seed 7] [--max-range-m 150]
             [--drop SENSOR@START+SECONDS ...] [--bias-map FILE] [--write-bias-map FILE]
             [--json FILE] [--out DIR]
 
-Runs SUMO, the three sensors and both detectors in one process (:mod:`wz_eval.pipeline`), then
+:func:`evaluate` runs SUMO, the three sensors and both detectors in one process (:mod:`wz_eval.pipeline`), then
 feeds the detections, in stamp order, to
 
 - the production tracker (:class:`MultiTargetTracker`, as the fusion node runs it), sampled at
@@ -70,8 +70,6 @@ the tracks and of the truth within the alerts' range (:mod:`wz_eval.conflicts_re
 
 from __future__ import annotations
 
-import argparse
-import json
 import logging
 import math
 import sys
@@ -89,23 +87,12 @@ from wz_eval.alerts import observed_truth, run_alert_engine, score_alerts, track
 from wz_eval.by_station import StationBreakdown
 from wz_eval.conflicts_report import conflict_report
 from wz_eval.coverage_report import coverage_report, weather_coverage
-from wz_eval.fusion_report import (
-    ALERT_TRUTH_RANGE_M,
-    markdown,
-    must_show,
-    table_summary,
-)
+from wz_eval.fusion_report import ALERT_TRUTH_RANGE_M, must_show, table_summary
 from wz_eval.lane_counts import lane_volume_report
-from wz_eval.metrics import AxisErrors, TruthIndex, in_range, match, score_instant
+from wz_eval.metrics import TruthIndex, in_range, match
 from wz_eval.pipeline import PipelineOptions, PipelineRecord, run_pipeline
-from wz_fusion_tracker.calibration import (
-    BiasMap,
-    BiasMapError,
-    LateralBiasCorrector,
-    fit_bias_map,
-    load_bias_map,
-    write_bias_map,
-)
+from wz_eval.scores import SOURCE_GATE_M, SOURCES, Scores
+from wz_fusion_tracker.calibration import BiasMap, LateralBiasCorrector, fit_bias_map
 from wz_fusion_tracker.node import (
     process_noise,
     road_heading_hook,
@@ -127,28 +114,13 @@ from wz_fusion_tracker.types import TrackHistory, TrackState
 from wz_lidar_detector.settings import lidar_mount
 from wz_shared.arrays import F64
 from wz_shared.coverage import SiteCoverage
-from wz_shared.logs import configure_logging
 from wz_shared.messages import DetectionBatch, TrackBatch, VehicleTruth
 from wz_shared.motion import rts_smooth
-from wz_shared.site import Site, SiteFileError, load_site
-from wz_simulator.sensors.scene import WEATHER_PRESETS
-from wz_simulator.settings import SimulatorSettings
+from wz_shared.site import Site
 
 log = logging.getLogger("wz_eval.fusion")
 
-SOURCES = (
-    "camera",
-    "lidar",
-    "radar",
-    "camera_radar",
-    "average",
-    "paper_kf",
-    "fused",
-    "fused_smoothed",
-    "fused_stored",
-)
-#: Gate for matching a source's estimate to a vehicle [m] (the MOT metrics use 3 m).
-SOURCE_GATE_M = 5.0
+#: Gate for matching a track to a vehicle in the MOT metrics [m].
 MOT_GATE_M = 3.0
 #: Width of the "don't care" band at the scored region's edge [m] (see :func:`scored_region`).
 EDGE_MARGIN_M = 10.0
@@ -234,41 +206,6 @@ def _silent(sensor_id: str, stamp_s: float, dropouts: Sequence[Dropout], warmup_
 
 def _dropped(batch: DetectionBatch, dropouts: Sequence[Dropout], warmup_s: float) -> bool:
     return _silent(batch.source_id, batch.stamp, dropouts, warmup_s)
-
-
-@dataclass
-class Scores:
-    """Per-source errors, per-vehicle samples for the paper table, MOT events."""
-
-    errors: dict[str, AxisErrors] = field(
-        default_factory=lambda: {s: AxisErrors() for s in SOURCES}
-    )
-    # vehicle id -> source -> stamp -> (lon error, lat error, true station, true offset)
-    per_vehicle: dict[str, dict[str, dict[float, tuple[float, float, float, float]]]] = field(
-        default_factory=lambda: defaultdict(lambda: defaultdict(dict))
-    )
-
-    def add(
-        self,
-        site: Site,
-        source: str,
-        stamp_s: float,
-        estimates: Sequence[tuple[float, float, float | None]],
-        vehicles: Sequence[VehicleTruth],
-        time_offsets_s: Sequence[float | None] | None = None,
-    ) -> list[tuple[int, VehicleTruth, float, float]]:
-        matched = score_instant(
-            site, self.errors[source], estimates, vehicles, SOURCE_GATE_M, time_offsets_s
-        )
-        for _, vehicle, lon, lat in matched:
-            station, offset = site.road_frame.to_road(vehicle.x_m, vehicle.y_m)
-            self.per_vehicle[vehicle.vehicle_id][source][round(stamp_s, 4)] = (
-                lon,
-                lat,
-                float(station),
-                float(offset),
-            )
-        return matched
 
 
 def _oracle_observations(
@@ -836,128 +773,3 @@ def paper_table(
             }
         rows.append(row)
     return rows
-
-
-def _number(text: str) -> float:
-    """A finite number from the command line (``nan`` and ``inf`` refused)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
-    return value
-
-
-def _positive(text: str) -> float:
-    if (value := _number(text)) <= 0.0:
-        raise argparse.ArgumentTypeError(f"{text} is not above 0")
-    return value
-
-
-def _not_negative(text: str) -> float:
-    if (value := _number(text)) < 0.0:
-        raise argparse.ArgumentTypeError(f"{text} is below 0")
-    return value
-
-
-def _share(text: str) -> float:
-    if not 0.0 <= (value := _number(text)) <= 1.0:
-        raise argparse.ArgumentTypeError(f"{text} is not a share from 0 to 1")
-    return value
-
-
-def main(argv: list[str] | None = None) -> int:
-    arguments = sys.argv[1:] if argv is None else argv
-    if any(a.split("=")[0] in ("--log", "--truth") for a in arguments):  # a field log
-        from wz_eval.field_run import main as field_main
-
-        return field_main(arguments)
-    if any(a.split("=")[0] == "--sites" for a in arguments):  # generated sites
-        from wz_eval.sites import main as sites_main
-
-        return sites_main(arguments)
-    parser = argparse.ArgumentParser(
-        prog="wz eval",
-        description=__doc__.split("\n")[0],
-        epilog="With --log LOG_DIR [--truth GPS_FILE]: the paper's "
-        "field validation on a field log instead (its own options). With --sites N [--seed S]: "
-        "N generated sites, one report (its own options).",
-    )
-    parser.add_argument("--site", type=Path, default=SimulatorSettings().site_file)
-    parser.add_argument("--duration-s", type=_positive, default=600.0, help="scored [s]")
-    parser.add_argument("--warmup-s", type=_not_negative, default=60.0, help="before it [s]")
-    parser.add_argument("--seed", type=int, default=7)
-    parser.add_argument("--max-range-m", type=_positive, default=150.0)
-    parser.add_argument("--weather", choices=sorted(WEATHER_PRESETS), default="day")
-    parser.add_argument("--vehicles-per-hour", type=_positive, default=1400.0)
-    parser.add_argument("--truck-share", type=_share, default=0.15, help="0 to 1")
-    parser.add_argument("--aggressive-share", type=_share, default=0.2, help="0 to 1")
-    parser.add_argument(
-        "--drop",
-        action="append",
-        default=[],
-        metavar="SENSOR@START+SECONDS",
-        help="silence a sensor (repeatable)",
-    )
-    parser.add_argument("--model", type=Path, default=None, help="camera model (.onnx)")
-    parser.add_argument(
-        "--bias-map",
-        type=Path,
-        default=None,
-        metavar="FILE",
-        help="remove each sensor's calibrated lateral bias (a map written by "
-        "--write-bias-map from a run of another seed) before the tracker",
-    )
-    parser.add_argument(
-        "--write-bias-map",
-        type=Path,
-        default=None,
-        metavar="FILE",
-        help="write the lateral bias map this run measured",
-    )
-    parser.add_argument("--json", type=Path, default=None)
-    parser.add_argument("--out", type=Path, default=Path("runs/eval"))
-    args = parser.parse_args(argv)
-    try:
-        dropouts = tuple(Dropout.parse(text) for text in args.drop)
-    except ValueError as exc:
-        parser.error(str(exc))
-    try:
-        site = load_site(args.site)
-    except SiteFileError as exc:
-        parser.error(str(exc))
-    bias_map = None
-    if args.bias_map is not None:
-        try:
-            bias_map = load_bias_map(args.bias_map, site)
-        except BiasMapError as exc:
-            parser.error(str(exc))
-    configure_logging(service="eval", site=site.site_id, level="WARNING")
-    options = EvalOptions(
-        seed=args.seed,
-        duration_s=args.duration_s,
-        warmup_s=args.warmup_s,
-        max_range_m=args.max_range_m,
-        dropouts=dropouts,
-        camera_model=args.model,
-        vehicles_per_hour=args.vehicles_per_hour,
-        weather=args.weather,
-        truck_share=args.truck_share,
-        aggressive_share=args.aggressive_share,
-        bias_map=bias_map,
-    )
-    args.out.mkdir(parents=True, exist_ok=True)
-    report = evaluate(site, options, plots_dir=args.out)
-    if args.write_bias_map is not None:
-        write_bias_map(args.write_bias_map, BiasMap.model_validate(report["measured_bias_map"]))
-    text = json.dumps(report, indent=2, default=str)
-    (args.json or args.out / "eval.json").write_text(text + "\n")
-    summary = markdown(report)
-    (args.out / "eval.md").write_text(summary)
-    sys.stdout.write(summary)
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

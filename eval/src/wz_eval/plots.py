@@ -10,7 +10,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import matplotlib
 
@@ -18,10 +18,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
 from wz_eval.pipeline import PipelineRecord
+from wz_eval.scores import Scores
 from wz_shared.site import Site
-
-if TYPE_CHECKING:
-    from wz_eval.fusion import Scores
 
 STYLE: dict[str, dict[str, Any]] = {
     "camera": {"marker": "o", "linestyle": "none", "markersize": 3, "color": "tab:blue"},

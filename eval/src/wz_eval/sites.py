@@ -29,6 +29,8 @@ from typing import Any
 
 import numpy as np
 
+from wz_eval.arguments import not_negative, positive
+
 log = logging.getLogger("wz_eval.sites")
 
 WEATHER_CYCLE = ("day", "dusk", "rain", "fog")
@@ -377,13 +379,11 @@ def run_sites(
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    from wz_eval.fusion import _not_negative, _positive
-
     parser = argparse.ArgumentParser(prog="wz eval --sites", description=__doc__.split("\n")[0])
     parser.add_argument("--sites", type=int, required=True, help="how many generated sites")
     parser.add_argument("--seed", type=int, default=1000, help="the first site's seed")
-    parser.add_argument("--duration-s", type=_positive, default=300.0, help="scored [s]")
-    parser.add_argument("--warmup-s", type=_not_negative, default=60.0, help="before it [s]")
+    parser.add_argument("--duration-s", type=positive, default=300.0, help="scored [s]")
+    parser.add_argument("--warmup-s", type=not_negative, default=60.0, help="before it [s]")
     parser.add_argument("--jobs", type=int, default=None, help="processes (default: cores)")
     parser.add_argument("--out", type=Path, default=Path("runs/sites"))
     parser.add_argument(

@@ -21,6 +21,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Mapping
+from datetime import datetime
 from enum import StrEnum
 from functools import cached_property
 from pathlib import Path
@@ -465,6 +466,39 @@ class AlertRules(_Strict):
     devices: DeviceRules = Field(default_factory=DeviceRules)
 
 
+class Schedule(_Strict):
+    """When the work zone is in place (the contract's or the traffic control plan's dates):
+    the WZDx WorkZoneFeed's ``start_date`` and ``end_date``, and whether each is verified
+    (``is_start_date_verified``, ``is_end_date_verified``: confirmed by someone at the site).
+
+    Both are ISO 8601 date-times with a UTC offset (``2026-05-04T07:00:00-05:00`` or
+    ``...Z``): a time without one names no instant.
+    """
+
+    start: datetime
+    end: datetime
+    start_verified: bool = False
+    end_verified: bool = False
+
+    @field_validator("start", "end")
+    @classmethod
+    def _has_offset(cls, value: datetime) -> datetime:
+        if value.tzinfo is None or value.utcoffset() is None:
+            raise ValueError(
+                f"{value.isoformat()} has no UTC offset: write the date-time with one, e.g. "
+                f"{value.strftime('%Y-%m-%dT%H:%M:%S')}-05:00, or Z for UTC"
+            )
+        return value
+
+    @model_validator(mode="after")
+    def _ordered(self) -> Schedule:
+        if self.end <= self.start:
+            raise ValueError(
+                f"schedule: end {self.end.isoformat()} must be after start {self.start.isoformat()}"
+            )
+        return self
+
+
 #: The direction of traffic as the road is signed (WZDx ``Direction``), not a compass heading:
 #: a northbound route stays northbound through its curves.
 RoadDirection = Literal[
@@ -490,6 +524,9 @@ class Site(_Strict):
         default_factory=list
     )
     road_direction: RoadDirection = "unknown"
+    #: When the work zone is in place (the WZDx WorkZoneFeed's dates); None: not known (the
+    #: gateway then gives the time it began serving and four weeks on, neither verified).
+    schedule: Schedule | None = None
     origin: GeoOrigin
     centerline_xy_m: Annotated[list[tuple[FiniteFloat, FiniteFloat]], Field(min_length=2)]
     lanes: Annotated[list[Lane], Field(min_length=1)]
@@ -689,8 +726,11 @@ def _read_camera_calibrations(raw: dict[str, Any], folder: Path) -> None:
 
 def site_document(site: Site) -> dict[str, Any]:
     """The site as a site file's mapping (JSON types): an uncalibrated camera without the
-    calibration's empty fields, as site files are written."""
+    calibration's empty fields and a site without a schedule without ``schedule``, as site
+    files are written."""
     data = site.model_dump(mode="json")
+    if data.get("schedule", 0) is None:
+        del data["schedule"]
     for sensor in data.get("sensors", []):
         intrinsics = sensor.get("intrinsics", {})
         for key in CALIBRATION_FIELDS:

@@ -9,10 +9,12 @@ One ``work-zone`` road event per site, from the site file alone:
   ``vehicle_impact`` says which side traffic merges to;
 - the **reduced speed limit**: the posted limit in the activity area, when it is lower than
   the limit upstream of the whole work zone (km/h, WZDx's unit);
-- its **dates**: the feed knows no contract dates, so ``start_date`` is the first moment the
-  gateway served the site (``served_since``) and ``end_date`` is ``planned_days`` later (a
-  trailer stays a few weeks), neither verified (``is_*_verified: false``); the positions
-  come from the site file (surveyed, not from a GPS at the cones: not verified either).
+- its **dates**: the site file's ``schedule`` (:class:`~wz_shared.site.Schedule`, in UTC)
+  when it has one, each verified as the schedule says; without one the feed knows no
+  contract dates, so ``start_date`` is the first moment the gateway served the site
+  (``served_since``) and ``end_date`` is ``planned_days`` later (a trailer stays a few
+  weeks), neither verified (``is_*_date_verified: false``). The positions come from the site
+  file (surveyed, not from a GPS at the cones: not verified).
 
 The DeviceFeed's devices name this event in their ``road_event_ids``
 (:func:`work_zone_event_id`).
@@ -111,6 +113,25 @@ def reduced_speed_limit_kph(site: Site) -> float | None:
     return round(zone * MPS_TO_KPH, 1)
 
 
+def dates(site: Site, served_since: float, planned_days: float) -> dict[str, Any]:
+    """The event's ``start_date``, ``end_date`` and whether each is verified: the site's
+    schedule, or without one from ``served_since`` for ``planned_days``, unverified."""
+    schedule = site.schedule
+    if schedule is None:
+        return {
+            "start_date": rfc3339(served_since),
+            "end_date": rfc3339(served_since + planned_days * DAY_S),
+            "is_start_date_verified": False,
+            "is_end_date_verified": False,
+        }
+    return {
+        "start_date": rfc3339(schedule.start.timestamp()),
+        "end_date": rfc3339(schedule.end.timestamp()),
+        "is_start_date_verified": schedule.start_verified,
+        "is_end_date_verified": schedule.end_verified,
+    }
+
+
 def work_zone_feed(
     site: Site,
     *,
@@ -120,7 +141,8 @@ def work_zone_feed(
     planned_days: float = 28.0,
     contact_email: str | None = None,
 ) -> dict[str, Any]:
-    """The WZDx 4.2 WorkZoneFeed of ``site`` (a JSON-ready dict)."""
+    """The WZDx 4.2 WorkZoneFeed of ``site`` (a JSON-ready dict); ``served_since`` and
+    ``planned_days`` give its dates only when the site has no ``schedule`` (:func:`dates`)."""
     properties: dict[str, Any] = {
         "core_details": {
             "event_type": "work-zone",
@@ -134,10 +156,7 @@ def work_zone_feed(
             ),
             "update_date": rfc3339(now),
         },
-        "start_date": rfc3339(served_since),
-        "end_date": rfc3339(served_since + planned_days * DAY_S),
-        "is_start_date_verified": False,
-        "is_end_date_verified": False,
+        **dates(site, served_since, planned_days),
         "is_start_position_verified": False,
         "is_end_position_verified": False,
         "location_method": "channel-device-method",

@@ -63,6 +63,7 @@ from .radar_intrinsics import RadarIntrinsics
 from .readiness import Readiness
 from .readiness_checks import ReadinessChecks
 from .readiness_status import ReadinessStatus
+from .schedule import Schedule
 from .sensor_mount import SensorMount
 from .short_ttc_rule import ShortTtcRule
 from .site import Site
@@ -137,6 +138,7 @@ __all__ = (
     "Readiness",
     "ReadinessChecks",
     "ReadinessStatus",
+    "Schedule",
     "SensorMount",
     "ShortTtcRule",
     "Site",

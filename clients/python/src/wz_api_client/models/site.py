@@ -17,6 +17,7 @@ if TYPE_CHECKING:
     from ..models.alert_rules import AlertRules
     from ..models.geo_origin import GeoOrigin
     from ..models.lane import Lane
+    from ..models.schedule import Schedule
     from ..models.sensor_mount import SensorMount
     from ..models.speed_limit import SpeedLimit
     from ..models.work_zone_area import WorkZoneArea
@@ -45,6 +46,7 @@ class Site:
             there. Each rule has its own :class:`EpisodeTiming` (hold, clear, cool-down).
         road_direction (SiteRoadDirection | Unset):  Default: SiteRoadDirection.UNKNOWN.
         road_names (list[str] | Unset):
+        schedule (None | Schedule | Unset):
         schema_version (Literal[1] | Unset):  Default: 1.
         sensors (list[SensorMount] | Unset):
     """
@@ -60,6 +62,7 @@ class Site:
     alerts: AlertRules | Unset = UNSET
     road_direction: SiteRoadDirection | Unset = SiteRoadDirection.UNKNOWN
     road_names: list[str] | Unset = UNSET
+    schedule: None | Schedule | Unset = UNSET
     schema_version: Literal[1] | Unset = 1
     sensors: list[SensorMount] | Unset = UNSET
 
@@ -67,6 +70,7 @@ class Site:
         from ..models.alert_rules import AlertRules  # noqa: PLC0415
         from ..models.geo_origin import GeoOrigin  # noqa: PLC0415
         from ..models.lane import Lane  # noqa: PLC0415
+        from ..models.schedule import Schedule  # noqa: PLC0415
         from ..models.sensor_mount import SensorMount  # noqa: PLC0415
         from ..models.speed_limit import SpeedLimit  # noqa: PLC0415
         from ..models.work_zone_area import WorkZoneArea  # noqa: PLC0415
@@ -116,6 +120,14 @@ class Site:
         if not isinstance(self.road_names, Unset):
             road_names = self.road_names
 
+        schedule: dict[str, Any] | None | Unset
+        if isinstance(self.schedule, Unset):
+            schedule = UNSET
+        elif isinstance(self.schedule, Schedule):
+            schedule = self.schedule.to_dict()
+        else:
+            schedule = self.schedule
+
         schema_version = self.schema_version
 
         sensors: list[dict[str, Any]] | Unset = UNSET
@@ -145,6 +157,8 @@ class Site:
             field_dict["road_direction"] = road_direction
         if road_names is not UNSET:
             field_dict["road_names"] = road_names
+        if schedule is not UNSET:
+            field_dict["schedule"] = schedule
         if schema_version is not UNSET:
             field_dict["schema_version"] = schema_version
         if sensors is not UNSET:
@@ -157,6 +171,7 @@ class Site:
         from ..models.alert_rules import AlertRules  # noqa: PLC0415
         from ..models.geo_origin import GeoOrigin  # noqa: PLC0415
         from ..models.lane import Lane  # noqa: PLC0415
+        from ..models.schedule import Schedule  # noqa: PLC0415
         from ..models.sensor_mount import SensorMount  # noqa: PLC0415
         from ..models.speed_limit import SpeedLimit  # noqa: PLC0415
         from ..models.work_zone_area import WorkZoneArea  # noqa: PLC0415
@@ -225,6 +240,23 @@ class Site:
 
         road_names = cast(list[str], d.pop("road_names", UNSET))
 
+        def _parse_schedule(data: object) -> None | Schedule | Unset:
+            if data is None:
+                return data
+            if isinstance(data, Unset):
+                return data
+            try:
+                if not isinstance(data, dict):
+                    raise TypeError()
+                schedule_type_0 = Schedule.from_dict(data)
+
+                return schedule_type_0
+            except (TypeError, ValueError, AttributeError, KeyError):
+                pass
+            return cast(None | Schedule | Unset, data)
+
+        schedule = _parse_schedule(d.pop("schedule", UNSET))
+
         schema_version = cast(Literal[1] | Unset, d.pop("schema_version", UNSET))
         if schema_version != 1 and not isinstance(schema_version, Unset):
             raise ValueError(
@@ -252,6 +284,7 @@ class Site:
             alerts=alerts,
             road_direction=road_direction,
             road_names=road_names,
+            schedule=schedule,
             schema_version=schema_version,
             sensors=sensors,
         )

@@ -52,7 +52,8 @@ class GatewayContext:
     live: Broadcaster
     readiness: Callable[[], dict[str, str]] | None
     clock: Callable[[], float]
-    #: When this gateway began serving [Unix s] (the WorkZoneFeed's start date).
+    #: When this gateway began serving [Unix s] (the WorkZoneFeed's start date of a site
+    #: without a ``schedule``).
     started_at: float = field(default_factory=time.time)
 
     @property

@@ -116,8 +116,8 @@ def sync_detailed(
     """Get Work Zone Feed
 
      The WZDx 4.2 WorkZoneFeed: each site's work zone (extent from the taper to the end of
-    the termination area, lanes with the closed one, the reduced speed limit), from its site
-    file; its devices are in the DeviceFeed.
+    the termination area, lanes with the closed one, the reduced speed limit, the dates of its
+    ``schedule``), from its site file; its devices are in the DeviceFeed.
 
     Args:
         site (None | str | Unset): Only this site's work zone (default: every site's)
@@ -149,8 +149,8 @@ def sync(
     """Get Work Zone Feed
 
      The WZDx 4.2 WorkZoneFeed: each site's work zone (extent from the taper to the end of
-    the termination area, lanes with the closed one, the reduced speed limit), from its site
-    file; its devices are in the DeviceFeed.
+    the termination area, lanes with the closed one, the reduced speed limit, the dates of its
+    ``schedule``), from its site file; its devices are in the DeviceFeed.
 
     Args:
         site (None | str | Unset): Only this site's work zone (default: every site's)
@@ -177,8 +177,8 @@ async def asyncio_detailed(
     """Get Work Zone Feed
 
      The WZDx 4.2 WorkZoneFeed: each site's work zone (extent from the taper to the end of
-    the termination area, lanes with the closed one, the reduced speed limit), from its site
-    file; its devices are in the DeviceFeed.
+    the termination area, lanes with the closed one, the reduced speed limit, the dates of its
+    ``schedule``), from its site file; its devices are in the DeviceFeed.
 
     Args:
         site (None | str | Unset): Only this site's work zone (default: every site's)
@@ -208,8 +208,8 @@ async def asyncio(
     """Get Work Zone Feed
 
      The WZDx 4.2 WorkZoneFeed: each site's work zone (extent from the taper to the end of
-    the termination area, lanes with the closed one, the reduced speed limit), from its site
-    file; its devices are in the DeviceFeed.
+    the termination area, lanes with the closed one, the reduced speed limit, the dates of its
+    ``schedule``), from its site file; its devices are in the DeviceFeed.
 
     Args:
         site (None | str | Unset): Only this site's work zone (default: every site's)

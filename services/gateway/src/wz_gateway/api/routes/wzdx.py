@@ -86,8 +86,8 @@ def get_work_zone_feed(
     ] = None,
 ) -> JSONResponse:
     """The WZDx 4.2 WorkZoneFeed: each site's work zone (extent from the taper to the end of
-    the termination area, lanes with the closed one, the reduced speed limit), from its site
-    file; its devices are in the DeviceFeed."""
+    the termination area, lanes with the closed one, the reduced speed limit, the dates of its
+    ``schedule``), from its site file; its devices are in the DeviceFeed."""
     settings = context.settings
     served = [site_of(context, site)] if site is not None else list(context.sites)
     feeds = [
