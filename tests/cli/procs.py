@@ -34,6 +34,9 @@ def wz_argv(*args: str) -> list[str]:
 def wz_env(**extra: str) -> dict[str, str]:
     """The environment of a `wz` process: this one without WZ_* settings, logs as JSON."""
     env = {k: v for k, v in os.environ.items() if not k.startswith("WZ_")}
+    # The terminal's size as pytest (or its xdist worker) set it would cut `wz tap`'s lines.
+    for name in ("COLUMNS", "LINES"):
+        env.pop(name, None)
     env.update({"WZ_LOG_FORMAT": "json", "PYTHONUNBUFFERED": "1", **extra})
     return env
 

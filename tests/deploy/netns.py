@@ -7,6 +7,7 @@ setting one end down and up (what a lost cellular link looks like to TCP: silenc
 
 from __future__ import annotations
 
+import itertools
 import os
 import shutil
 import subprocess
@@ -76,6 +77,10 @@ def _worker_octet() -> int:
     return 231 + (int(worker[2:]) + 1 if worker.startswith("gw") and worker[2:].isdigit() else 0)
 
 
+#: Numbers the networks of this process: each one's interfaces are named apart.
+_NETWORKS = itertools.count()
+
+
 class Network:
     """Namespaces and cables, all removed by :meth:`close` (processes must be stopped first)."""
 
@@ -84,6 +89,9 @@ class Network:
         self.hosts: list[Host] = []
         self._subnet = 0
         self._octet = _worker_octet()
+        # Interface names (15 characters at most), unique to this process and network: the
+        # prefix's first characters would be alike for two workers' pids (wzt3422, wzt3425).
+        self._ifbase = f"v{os.getpid() % 1_000_000:06d}{next(_NETWORKS) % 100:02d}"
         self._root_ifs: list[str] = []  # veth ends in this test's own namespace
 
     def host(self, name: str) -> Host:
@@ -98,7 +106,7 @@ class Network:
         """A /30 between ``near`` (.1) and ``far`` (.2), in 10.<octet>.<n>.0."""
         self._subnet += 1
         n = self._subnet
-        near_if, far_if = f"{self.prefix[:6]}{n}a", f"{self.prefix[:6]}{n}b"
+        near_if, far_if = f"{self._ifbase}{n}a", f"{self._ifbase}{n}b"
         _ip("link", "add", near_if, "type", "veth", "peer", "name", far_if)
         for host, ifname, last in ((near, near_if, 1), (far, far_if, 2)):
             _ip("link", "set", ifname, "netns", host.name)
@@ -112,7 +120,7 @@ class Network:
         """A veth between this test's own namespace and ``far``; ``far``'s address."""
         self._subnet += 1
         n = self._subnet
-        near_if, far_if = f"{self.prefix[:6]}{n}a", f"{self.prefix[:6]}{n}b"
+        near_if, far_if = f"{self._ifbase}{n}a", f"{self._ifbase}{n}b"
         _ip("link", "add", near_if, "type", "veth", "peer", "name", far_if)
         _ip("link", "set", far_if, "netns", far.name)
         _ip("addr", "add", f"10.{self._octet}.{n}.1/30", "dev", near_if)

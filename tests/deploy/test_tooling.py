@@ -20,14 +20,20 @@ def makefile_variable(name: str) -> list[str]:
 
 
 def makefile_recipe(target: str) -> list[str]:
-    """The command lines of ``target``."""
+    """The command lines of ``target`` (a line ending in a backslash joined to the next)."""
     lines = (ROOT / "Makefile").read_text(encoding="utf-8").splitlines()
     start = next(i for i, line in enumerate(lines) if line.startswith(f"{target}:"))
-    recipe = []
+    recipe: list[str] = []
+    continued = False
     for line in lines[start + 1 :]:
         if not line.startswith("\t"):
             break
-        recipe.append(line.strip())
+        text = line.strip()
+        if continued:
+            recipe[-1] = recipe[-1].removesuffix("\\").rstrip() + " " + text
+        else:
+            recipe.append(text)
+        continued = text.endswith("\\")
     return recipe
 
 
@@ -67,6 +73,11 @@ def test_pytest_measures_coverage_against_the_floor() -> None:
     (command,) = makefile_recipe("pytest")
     assert "--cov" in shlex.split(command)
     assert "--cov-fail-under=$(COV_FLOOR)" in shlex.split(command)
+    # On every core, the tests that run `wz up` kept on one worker, the slowest listed.
+    words = shlex.split(command)
+    assert words[words.index("-n") + 1] == "$(PYTEST_WORKERS)"
+    assert "--dist" in words and words[words.index("--dist") + 1] == "loadgroup"
+    assert any(word.startswith("--durations=") for word in words)
 
 
 def test_vendored_wzdx_schemas_are_the_recorded_files() -> None:
