@@ -33,13 +33,17 @@ lint:
 typecheck:
 	$(RUN) mypy $(TYPED)
 
-# On every core (pytest-xdist, one worker per logical CPU); the tests that run `wz up` share one
-# worker (xdist_group "stack": its services' metrics ports are fixed). The 25 slowest listed.
+# On every core (pytest-xdist, one worker per logical CPU; a module's tests on one worker); the
+# tests that run `wz up` share one worker (xdist_group "stack": its services' metrics ports are
+# fixed). Then the tests marked `serial` (they time the whole stack) alone. The slowest listed;
+# the coverage floor holds for both runs together.
 PYTEST_WORKERS ?= logical
 
 pytest:
-	$(RUN) pytest -q -n $(PYTEST_WORKERS) --dist loadgroup --durations=25 \
-		--cov --cov-report=term:skip-covered --cov-fail-under=$(COV_FLOOR)
+	$(RUN) pytest -q -n $(PYTEST_WORKERS) --dist loadgroup -m "not serial" --durations=25 \
+		--cov --cov-report=
+	$(RUN) pytest -q -m serial --durations=5 --cov --cov-append \
+		--cov-report=term:skip-covered --cov-fail-under=$(COV_FLOOR)
 
 bench: bootstrap
 	$(RUN) python -m benchmarks.run

@@ -24,13 +24,15 @@ consumer's own checks. Each role must get through exactly what its row of the is
 says, nothing more; a session without the CA's certificate must not connect at all; every
 identity of *another site from the same CA* (its services', its operator's, its trailer
 router's) connects but gets nothing of this site's through either router (a key taken from
-one trailer on a roadside forges nothing at another); and the authorised pipeline, running
+one trailer on a roadside forges nothing at another); neither does this site's own previous
+generation of certificates, rotated away by making the site again; and the authorised pipeline, running
 all along, stores the alert service's alerts in the gateway and reaches the centre.
 """
 
 from __future__ import annotations
 
 import os
+import shutil
 import sqlite3
 import subprocess
 import sys
@@ -84,6 +86,7 @@ class Box:
     regional_endpoint: str  # as the yard reaches it
     credentials: Path
     stranger: Path  # another CA's credentials for the same site
+    revoked: Path  # the site's credentials of the generation before (rotated away)
     data_dir: Path
     seen: list[tuple[str, bytes]] = field(default_factory=list)
     #: What the central gateway's session at the regional router received.
@@ -124,6 +127,10 @@ def box(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Box]:
         watch_address = network.root_cable(box_host)
         credentials, stranger = tmp / "credentials", tmp / "stranger"
         names = [*box_host.addresses, watch_address]
+        make_site(credentials, SITE, router_names=names)
+        # The site's first generation, kept as a thief would have it, then rotated away.
+        revoked = tmp / "revoked"
+        shutil.copytree(credentials / SITE, revoked)
         make_site(credentials, SITE, router_names=names)
         make_site(credentials, OTHER_SITE, router_names=names)
         make_regional(credentials, names=[*names, "127.0.0.1"])
@@ -177,7 +184,8 @@ def box(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Box]:
         )
         result = Box(
             network, box_host, yard, f"tls/{box_host.addresses[0]}:{PORT}",
-            f"tls/{box_host.addresses[0]}:{REGIONAL_PORT}", credentials, stranger, data_dir,
+            f"tls/{box_host.addresses[0]}:{REGIONAL_PORT}", credentials, stranger, revoked,
+            data_dir,
         )  # fmt: skip
         settings = BusSettings(
             mode="client",
@@ -316,6 +324,18 @@ def test_the_router_lets_the_authorised_pipeline_run(box: Box) -> None:
         "the site's tracks and alerts at the centre",
         30.0,
     )
+
+
+@pytest.mark.parametrize(
+    ("role", "at"),
+    [("alert-service", "trailer"), ("fusion-tracker", "trailer"), ("router", "regional")],
+)
+def test_the_sites_rotated_away_generation_gives_nothing(box: Box, role: str, at: str) -> None:
+    """Certificates of this very site, of the generation before `wz credentials make` made it
+    again (a stolen box's): the same CA and the same role, but named by no rule any more."""
+    first, seen = _probe(box, box.revoked / role, at=at)
+    assert first == "connected"
+    assert seen == set(), f"the old {role} certificate got {seen} through at {at}"
 
 
 @pytest.mark.parametrize("how", ["no certificate", "another CA's certificate"])
