@@ -346,6 +346,23 @@ SECTIONS: dict[str, tuple[str, Callable[[dict[str, Any]], list[str]]]] = {
 }
 
 
+def _other_machines(results: dict[str, Any]) -> list[str]:
+    """A warning naming the benchmarks whose figures come from another machine than this
+    file's (``--only`` run on a new machine keeps the others, labelled)."""
+    names = [
+        name
+        for name, entry in results["benchmarks"].items()
+        if entry.get("machine") and entry["machine"] != results["machine"]
+    ]
+    if not names:
+        return []
+    return [
+        f"> **Measured on another machine** than the one below: {', '.join(names)} (each "
+        "section names its machine). Compare figures only within one machine.",
+        "",
+    ]
+
+
 def render(results: dict[str, Any]) -> str:
     """The whole BENCHMARKS.md."""
     lines = [
@@ -356,6 +373,7 @@ def render(results: dict[str, Any]) -> str:
         "in `benchmarks/` with its method in its docstring.",
         "",
         *_interference(results["benchmarks"]),
+        *_other_machines(results),
         *_summary(results["benchmarks"]),
         *_machine(results["machine"]),
     ]
@@ -370,6 +388,14 @@ def render(results: dict[str, Any]) -> str:
             f"{100 * entry.get('cpu_other_during', float('nan')):.0f} %.",
             "",
         ]
+        other = entry.get("machine")
+        if other and other != results["machine"]:
+            lines += [
+                f"**Measured on another machine**: {other.get('cpu_model', '?')}, "
+                f"{other.get('cores', '?')} cores, {other.get('memory_gib', '?')} GiB "
+                "(not this file's; compare only within this section).",
+                "",
+            ]
         if "error" in entry:
             lines += ["**Failed:**", "", "```", entry["error"].rstrip(), "```", ""]
         else:

@@ -141,14 +141,18 @@ def _busy_and_own_cpu_s() -> tuple[float, float]:
 
 
 def _previous_results(machine: dict[str, Any]) -> dict[str, Any]:
-    """Benchmarks of the last results.json, if it was written on this machine."""
+    """Benchmarks of the last results.json. Those measured on another machine or setup are
+    kept with that machine named in their entry (``machine``): the report says so in their
+    section, so that no figure is read as this machine's."""
     if not RESULTS_PATH.exists():
         return {}
     previous = json.loads(RESULTS_PATH.read_text())
-    if previous.get("machine") != machine:
-        log.warning("%s was written on another machine or setup: not kept", RESULTS_PATH)
-        return {}
     kept: dict[str, Any] = previous.get("benchmarks", {})
+    if previous.get("machine") != machine:
+        log.warning("%s was written on another machine or setup: its entries are labelled so",
+                    RESULTS_PATH)  # fmt: skip
+        for entry in kept.values():
+            entry.setdefault("machine", previous.get("machine"))
     return kept
 
 
