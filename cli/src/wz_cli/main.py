@@ -163,6 +163,7 @@ def cmd_up(args: argparse.Namespace) -> int:
             realtime_factor=args.realtime_factor,
             seed=args.seed,
             state_dir=Path(state_dir),
+            mount_errors=args.mount_errors,
         )
         # `wz status --health-dir` reads each service's health file there (<service>/health).
         log.info("state and health files of this run under %s", state_dir)
@@ -529,6 +530,14 @@ def build_parser() -> argparse.ArgumentParser:
             help="simulated seconds per wall-clock second (0 = as fast as possible)",
         )
         up.add_argument("--seed", type=int, help="seed of the simulation")
+        up.add_argument(
+            "--mount-errors",
+            action="store_true",
+            help="the simulator renders its sensors as a real mast's: set-up errors, late "
+            "clocks, sway and settling drawn from the seed (WZ_SIM_MOUNT_ERRORS; a bump with "
+            "WZ_SIM_BUMP_SENSOR, WZ_SIM_BUMP_AT_S, WZ_SIM_BUMP_YAW_DEG); the services keep the "
+            "site file's poses",
+        )
         up.add_argument(
             "--listen",
             metavar="ENDPOINT",

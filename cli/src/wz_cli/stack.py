@@ -10,8 +10,9 @@ Every child learns where the bus is and which site it serves from the environmen
 - ``WZ_SITE_FILE`` and ``<prefix>SITE_FILE`` (each service reads its settings with its own env
   prefix, e.g. ``WZ_SIM_``);
 - ``WZ_LOG_FORMAT=json``: one JSON log line per event, re-emitted by the supervisor;
-- the options of ``wz up`` that a service takes (``--realtime-factor``, ``--seed``) as
-  ``<prefix>REALTIME_FACTOR`` and ``<prefix>SEED``;
+- the options of ``wz up`` that a service takes (``--realtime-factor``, ``--seed``,
+  ``--mount-errors``) as ``<prefix>REALTIME_FACTOR``, ``<prefix>SEED`` and
+  ``<prefix>MOUNT_ERRORS=true``;
 - its ``defaults`` (set unless the environment of ``wz up`` sets them: the simulator's
   warm-up), and its ``state_files`` under the run's state folder (see below), then its fixed
   ``env``.
@@ -58,6 +59,9 @@ class StackOptions:
     #: its own identity's (``WZ_BUS_TLS_DIR=<credentials>/<name>``), the router
     #: ``--tls-dir <credentials>/router``. None: no TLS (the open loopback stack).
     credentials: Path | None = None
+    #: The simulator renders its sensors as a real mast's (``WZ_SIM_MOUNT_ERRORS``:
+    #: wz_simulator.sensors.mast); False: the environment of ``wz up`` decides.
+    mount_errors: bool = False
 
 
 @dataclass(frozen=True)
@@ -75,7 +79,8 @@ class ServiceSpec:
     #: Prefix of the service's settings in the environment (``WZ_SIM_`` ...).
     env_prefix: str
     args: tuple[str, ...] = ()
-    #: Which ``wz up`` options the service takes: a subset of {"realtime_factor", "seed"}.
+    #: Which ``wz up`` options the service takes: a subset of {"realtime_factor", "seed",
+    #: "mount_errors"}.
     takes: frozenset[str] = frozenset()
     #: Environment set unless the supervisor's own environment sets it.
     defaults: Mapping[str, str] = field(default_factory=dict)
@@ -131,6 +136,8 @@ class ServiceSpec:
             env[f"{self.env_prefix}REALTIME_FACTOR"] = repr(options.realtime_factor)
         if options.seed is not None and "seed" in self.takes:
             env[f"{self.env_prefix}SEED"] = str(options.seed)
+        if options.mount_errors and "mount_errors" in self.takes:
+            env[f"{self.env_prefix}MOUNT_ERRORS"] = "true"
         for name, value in self.defaults.items():
             env.setdefault(name, value)
         if options.state_dir is not None:
@@ -167,7 +174,7 @@ STACK: tuple[ServiceSpec, ...] = (
         summary="SUMO work zone with LiDAR, camera and radar models; raw frames and truth",
         env_prefix="WZ_SIM_",
         standby=True,
-        takes=frozenset({"realtime_factor", "seed"}),
+        takes=frozenset({"realtime_factor", "seed", "mount_errors"}),
         # It starts, and restarts after a crash, on a road in steady traffic: a restarted
         # simulation is a new run from 0, and on an empty road the first vehicle would reach
         # the sensors half a minute later.

@@ -4,7 +4,7 @@ Usage::
 
     wz eval [--site FILE] [--duration-s 600] [--seed 7] [--max-range-m 150]
             [--drop SENSOR@START+SECONDS ...] [--bias-map FILE] [--write-bias-map FILE]
-            [--json FILE] [--out DIR]
+            [--mount-errors [--bump SENSOR@SECONDS[:DEG]]] [--json FILE] [--out DIR]
     wz eval --log LOG_DIR [--truth GPS_FILE] ...     (a field log: :mod:`wz_eval.field_run`)
     wz eval --sites N [--seed S] ...                 (generated sites: :mod:`wz_eval.sites`)
 
@@ -26,6 +26,7 @@ from wz_eval.fusion_report import markdown
 from wz_fusion_tracker.calibration import BiasMap, BiasMapError, load_bias_map, write_bias_map
 from wz_shared.logs import configure_logging
 from wz_shared.site import SiteFileError, load_site
+from wz_simulator.sensors.mast import Bump
 from wz_simulator.sensors.scene import WEATHER_PRESETS
 from wz_simulator.settings import SimulatorSettings
 
@@ -81,6 +82,19 @@ def main(argv: list[str] | None = None) -> int:
         metavar="FILE",
         help="write the lateral bias map this run measured",
     )
+    parser.add_argument(
+        "--mount-errors",
+        action="store_true",
+        help="render the sensors as a real mast's (set-up errors, late clocks, sway, settling, "
+        "drawn from --seed); the detectors and the tracker keep the site file's poses",
+    )
+    parser.add_argument(
+        "--bump",
+        default=None,
+        metavar="SENSOR@SECONDS[:DEG]",
+        help="with --mount-errors: knock SENSOR round its mast by DEG (default 2) SECONDS after "
+        "the warm-up",
+    )
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--out", type=Path, default=Path("runs/eval"))
     args = parser.parse_args(argv)
@@ -92,6 +106,20 @@ def main(argv: list[str] | None = None) -> int:
         site = load_site(args.site)
     except SiteFileError as exc:
         parser.error(str(exc))
+    bump = None
+    if args.bump is not None:
+        if not args.mount_errors:
+            parser.error("--bump needs --mount-errors (the bump is part of the mast model)")
+        try:
+            bump = Bump.parse(args.bump, after_s=args.warmup_s)
+        except ValueError as exc:
+            parser.error(str(exc))
+        known = [mount.sensor_id for mount in site.sensors]
+        if bump.sensor_id not in known:
+            parser.error(
+                f"--bump {args.bump!r}: site {site.site_id} has no sensor {bump.sensor_id!r} "
+                f"(its sensors: {', '.join(known)})"
+            )
     bias_map = None
     if args.bias_map is not None:
         try:
@@ -111,6 +139,8 @@ def main(argv: list[str] | None = None) -> int:
         truck_share=args.truck_share,
         aggressive_share=args.aggressive_share,
         bias_map=bias_map,
+        mount_errors=args.mount_errors,
+        bump=bump,
     )
     args.out.mkdir(parents=True, exist_ok=True)
     report = evaluate(site, options, plots_dir=args.out)

@@ -60,6 +60,12 @@ detections before the tracker takes them (as the fusion node does with
 run, it would be scored on its own training data. The sources scored alone (``camera``,
 ``lidar``, ``average``, ...) are the detectors' outputs as published, uncorrected.
 
+``--mount-errors`` renders the sensors as a real mast's (:mod:`wz_simulator.sensors.mast`:
+each sensor's set-up error, late clock, the mast's sway and settling, drawn from the seed) while
+the detectors and the tracker keep the site file's poses; ``--bump camera-mast@300:2`` also
+knocks that sensor round by 2 deg 300 s after the warm-up. The report's ``mount_errors`` gives
+what was drawn (None without).
+
 ``--drop lidar-mast@300+2`` removes that sensor's batches from 300 s to 302 s after the warm-up
 (a dropout); the report then gives, per dropout, the fused error and identity switches inside
 the window.
@@ -117,6 +123,7 @@ from wz_shared.coverage import SiteCoverage
 from wz_shared.messages import DetectionBatch, TrackBatch, VehicleTruth
 from wz_shared.motion import rts_smooth
 from wz_shared.site import Site
+from wz_simulator.sensors.mast import Bump
 
 log = logging.getLogger("wz_eval.fusion")
 
@@ -165,6 +172,11 @@ class EvalOptions:
     #: Score the fused tracks only where a sensor can see a car (:mod:`wz_shared.coverage`)
     #: inside the circle; False: the whole circle. Either way the report has both MOTAs.
     covered_only: bool = True
+    #: Render the sensors as a real mast's (:mod:`wz_simulator.sensors.mast`); the services
+    #: keep the site file's poses.
+    mount_errors: bool = False
+    #: A sensor knocked round at a simulation time (needs ``mount_errors``).
+    bump: Bump | None = None
 
 
 def pipeline_options(options: EvalOptions) -> PipelineOptions:
@@ -178,6 +190,8 @@ def pipeline_options(options: EvalOptions) -> PipelineOptions:
         truck_share=options.truck_share,
         aggressive_share=options.aggressive_share,
         camera_model=options.camera_model,
+        mount_errors=options.mount_errors,
+        bump=options.bump,
     )
 
 
@@ -444,6 +458,8 @@ def evaluate(
             "aggressive_share": record.options.aggressive_share,
         },
         "max_range_m": options.max_range_m,
+        # What the sensors were rendered with; nothing of it reached the services.
+        "mount_errors": None if record.mast is None else record.mast.describe(),
         "vehicles": len(
             {
                 v.vehicle_id

@@ -156,6 +156,46 @@ def _conditions(report: dict[str, Any]) -> str:
     )
 
 
+def mount_error_lines(report: dict[str, Any]) -> list[str]:
+    """The drawn mast model (``wz eval --mount-errors``) as Markdown: one row per sensor, a line
+    per mast and the bump; nothing for a run on the nominal poses."""
+    drawn = report.get("mount_errors")
+    if not drawn:
+        return []
+    lines = [
+        "",
+        "Sensors rendered as a real mast's (`--mount-errors`, drawn from the seed; the "
+        "detectors and the tracker kept the site file's poses):",
+        "",
+        "| sensor | yaw [deg] | pitch [deg] | roll [deg] | east [m] | north [m] | up [m] | "
+        "clock late [ms] |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for sensor, e in drawn["sensors"].items():
+        lines.append(
+            f"| {sensor} | {e['yaw_deg']:+.2f} | {e['pitch_deg']:+.2f} | {e['roll_deg']:+.2f} | "
+            f"{e['dx_m']:+.2f} | {e['dy_m']:+.2f} | {e['dz_m']:+.2f} | "
+            f"{1000.0 * e['clock_offset_s']:.0f} |"
+        )
+    lines.append("")
+    for mast in drawn["masts"]:
+        sway, settling = mast["sway"], mast["settling"]
+        lines.append(
+            f"- Mast of {', '.join(mast['sensors'])}: sway at its top (z {mast['top_z_m']:g} m) "
+            f"lean {sway['lean_amplitude_deg']:.3f} deg towards {sway['bearing_deg']:.0f} deg, "
+            f"twist {sway['twist_amplitude_deg']:.3f} deg, period {sway['period_s']:.2f} s; "
+            f"settling {settling['rate_deg_per_h']:.3f} deg/h towards "
+            f"{settling['bearing_deg']:.0f} deg."
+        )
+    bump = drawn.get("bump")
+    if bump is not None:
+        lines.append(
+            f"- Bump: {bump['sensor_id']} turned {bump['yaw_deg']:+.2f} deg at simulation "
+            f"time {bump['at_s']:g} s."
+        )
+    return lines
+
+
 def markdown(report: dict[str, Any]) -> str:
     def cell(value: float | None) -> str:
         return "-" if value is None else f"{value:.2f}"
@@ -171,6 +211,7 @@ def markdown(report: dict[str, Any]) -> str:
         f"**{report['idf1']:.3f}**, identity switches {report['id_switches']} "
         f"({report['id_switches_per_100_vehicles']:.2f} per 100 vehicles). Lateral bias map "
         f"given to the tracker: {report.get('bias_map') or 'none'}.{_conditions(report)}",
+        *mount_error_lines(report),
         "",
         "| source | RMSE longitudinal [m] | RMSE lateral [m] | RMSE speed [m/s] | matched | "
         "missed |",

@@ -12,7 +12,11 @@ image tracking, ranging, radar fusion). It records, in time order:
 - per camera frame, the camera-only positions (calibrated pinhole, before radar fusion);
 - per radar scan, the targets converted to the site frame (echo points, no camera).
 
-The last two exist only for evaluation ("camera alone", "radar alone"). No bus is involved:
+The last two exist only for evaluation ("camera alone", "radar alone"). With
+``PipelineOptions.mount_errors`` the sensors are a real mast's (:mod:`wz_simulator.sensors.mast`:
+set-up errors, late clocks, sway, settling and an optional bump, drawn from the seed): the
+frames come from the true poses while both detectors keep the site file's, as in the field;
+the drawn model is kept in :attr:`PipelineRecord.mast` for the report. No bus is involved:
 the same code as the nodes, without serialisation, deterministic for a seed. Processes and
 Zenoh are tested elsewhere (``tests/*/test_node*.py``, ``tests/integration``).
 """
@@ -39,6 +43,7 @@ from wz_lidar_detector.node import LidarDetector
 from wz_lidar_detector.settings import LidarDetectorSettings, lidar_mount
 from wz_shared.messages import Detection, DetectionBatch, VehicleTruth
 from wz_shared.site import Site
+from wz_simulator.sensors.mast import Bump, MastModel
 from wz_simulator.sensors.rig import CameraOutput, LidarOutput, RadarOutput, SensorRig
 from wz_simulator.sensors.scene import WEATHER_PRESETS
 from wz_simulator.settings import SimulatorSettings
@@ -61,6 +66,10 @@ class PipelineOptions:
     aggressive_share: float = 0.2
     camera_model: Path | None = None
     work_dir: Path | None = None
+    #: A real mast's sensors (:mod:`wz_simulator.sensors.mast`); False: exactly at the site's.
+    mount_errors: bool = False
+    #: A sensor knocked round at a simulation time (needs ``mount_errors``).
+    bump: Bump | None = None
 
 
 @dataclass(frozen=True)
@@ -84,6 +93,8 @@ class PipelineRecord:
     radar_only: list[tuple[float, list[SourcePoint]]] = field(default_factory=list)
     problems: dict[str, int] = field(default_factory=dict)
     wall_s: float = 0.0
+    #: The mast model the sensors were rendered with (None: the nominal poses).
+    mast: MastModel | None = None
 
     def sensor_ids(self) -> list[str]:
         return sorted({batch.source_id for batch in self.batches})
@@ -94,9 +105,18 @@ def run_pipeline(
     options: PipelineOptions,
     progress: Callable[[float, float], None] | None = None,
 ) -> PipelineRecord:
-    """Simulate and detect; ``progress(sim_s, total_s)`` is called about once a simulated second."""
+    """Simulate and detect; ``progress(sim_s, total_s)`` is called about once a simulated second.
+
+    Raises
+    ------
+    ValueError
+        When a bump is asked for without ``mount_errors``, or names a sensor the site lacks.
+    """
     started = time.perf_counter()
-    record = PipelineRecord(site=site, options=options)
+    if options.bump is not None and not options.mount_errors:
+        raise ValueError("a bump needs mount_errors (the mast model it is part of)")
+    mast = MastModel.draw(site, options.seed, options.bump) if options.mount_errors else None
+    record = PipelineRecord(site=site, options=options, mast=mast)
 
     def report(reason: str, detail: str) -> None:
         record.problems[reason] = record.problems.get(reason, 0) + 1
@@ -116,7 +136,9 @@ def run_pipeline(
     camera_detector = CameraDetector(site, camera, radar, camera_settings, report, rendered=True)
     association = AssociationSettings()
     sensor_ids = [lidar.sensor_id, camera.sensor_id] + ([radar.sensor_id] if radar else [])
-    rig = SensorRig(site, WEATHER_PRESETS[options.weather], options.seed, sensor_ids=sensor_ids)
+    rig = SensorRig(
+        site, WEATHER_PRESETS[options.weather], options.seed, sensor_ids=sensor_ids, mast=mast
+    )
     total_s = options.warmup_s + options.duration_s
     sim_settings: dict[str, object] = {
         "seed": options.seed,

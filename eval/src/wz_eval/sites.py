@@ -8,7 +8,9 @@ picture and its ``wz eval`` report; ``sites.json`` and ``sites.md`` hold, per si
 distribution, the accuracy, tracking and alert figures against the targets of
 :data:`SITE_TARGETS`, and the worst site's figures and picture. ``--resume`` reuses the sites
 that a run cut short already finished in ``--out`` (same site file, seed, conditions and
-durations), so a long run can be taken up again.
+durations), so a long run can be taken up again. ``--mount-errors`` renders every site's
+sensors as a real mast's (:mod:`wz_simulator.sensors.mast`, drawn from the site's seed), as
+``wz eval --mount-errors`` does; each site's report states what was drawn.
 """
 
 from __future__ import annotations
@@ -115,6 +117,8 @@ class SiteJob:
     #: Reuse this site's ``eval.json`` in ``out_dir`` when it is of this very job (see
     #: :func:`finished_report`): a run cut short goes on where it stopped.
     resume: bool = False
+    #: Render the sensors as a real mast's (``wz eval --mount-errors``).
+    mount_errors: bool = False
 
 
 def plan_jobs(
@@ -124,6 +128,7 @@ def plan_jobs(
     warmup_s: float,
     out_dir: Path,
     resume: bool = False,
+    mount_errors: bool = False,
 ) -> list[SiteJob]:
     """The runs of ``--sites count --seed seed``: site seeds ``seed .. seed + count - 1``."""
     jobs = []
@@ -141,6 +146,7 @@ def plan_jobs(
                 warmup_s=warmup_s,
                 out_dir=out_dir / f"gen-{site_seed}",
                 resume=resume,
+                mount_errors=mount_errors,
             )
         )
     return jobs
@@ -165,6 +171,7 @@ def run_job(job: SiteJob) -> dict[str, Any]:
         weather=job.weather,
         vehicles_per_hour=job.vehicles_per_hour,
         truck_share=job.truck_share,
+        mount_errors=job.mount_errors,
     )
     report = evaluate(site, options, plots_dir=job.out_dir)
     (job.out_dir / "eval.json").write_text(json.dumps(report, indent=2, default=str) + "\n")
@@ -173,8 +180,8 @@ def run_job(job: SiteJob) -> dict[str, Any]:
 
 def finished_report(job: SiteJob, site_text: str) -> dict[str, Any] | None:
     """The ``eval.json`` a run of this very job left in its folder, or None: the same site
-    file, seed, scored and warm-up seconds, weather, demand and truck share (all seeded, so a
-    run of the same code gives the same figures)."""
+    file, seed, scored and warm-up seconds, weather, demand, truck share and mast model (all
+    seeded, so a run of the same code gives the same figures)."""
     try:
         saved_site = (job.out_dir / "site.yaml").read_text(encoding="utf-8")
         report: dict[str, Any] = json.loads((job.out_dir / "eval.json").read_text())
@@ -189,6 +196,7 @@ def finished_report(job: SiteJob, site_text: str) -> dict[str, Any] | None:
         and conditions.get("weather") == job.weather
         and conditions.get("vehicles_per_hour") == job.vehicles_per_hour
         and conditions.get("truck_share") == job.truck_share
+        and (report.get("mount_errors") is not None) == job.mount_errors
     )
     return report if same else None
 
@@ -212,6 +220,7 @@ def summarise(site_id: str, name: str, job: SiteJob, report: dict[str, Any]) -> 
         "weather": job.weather,
         "vehicles_per_hour": job.vehicles_per_hour,
         "truck_share": job.truck_share,
+        "mount_errors": job.mount_errors,
         "duration_s": job.duration_s,
         "vehicles": report.get("vehicles"),
         "figures": figures,
@@ -271,10 +280,18 @@ def _cell(value: float | None) -> str:
 def markdown(report: dict[str, Any]) -> str:
     rows = report["sites"]
     lines = [
-        f"# `wz eval --sites {len(rows)} --seed {report['seed']}`",
+        f"# `wz eval --sites {len(rows)} --seed {report['seed']}"
+        f"{' --mount-errors' if report.get('mount_errors') else ''}`",
         "",
         f"{len(rows)} generated sites, {report['duration_s']:.0f} s scored each after a "
-        f"{report['warmup_s']:.0f} s warm-up; the live fused track within 150 m of the mast "
+        f"{report['warmup_s']:.0f} s warm-up"
+        + (
+            ", the sensors rendered as a real mast's (`--mount-errors`: each site's eval.json "
+            "gives what was drawn)"
+            if report.get("mount_errors")
+            else ""
+        )
+        + "; the live fused track within 150 m of the mast "
         "where a sensor of the site can see a car (wz_shared.coverage: downstream, as far as "
         "the LiDAR's beams are sure to hit one); alerts scored against the same rules on the "
         "truth. A site meets the bar when every figure holds ('-': the run cannot tell, e.g. "
@@ -345,10 +362,12 @@ def run_sites(
     out_dir: Path,
     jobs: int | None = None,
     resume: bool = False,
+    mount_errors: bool = False,
 ) -> dict[str, Any]:
     """Run the sites (in parallel), write ``sites.json`` and ``sites.md`` in ``out_dir``;
-    ``resume``: reuse the sites a run cut short already finished there."""
-    plan = plan_jobs(count, seed, duration_s, warmup_s, out_dir, resume)
+    ``resume``: reuse the sites a run cut short already finished there; ``mount_errors``: each
+    site's sensors a real mast's."""
+    plan = plan_jobs(count, seed, duration_s, warmup_s, out_dir, resume, mount_errors)
     workers = max(1, min(count, jobs or os.cpu_count() or 1))
     rows: list[dict[str, Any]] = []
     with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
@@ -368,6 +387,7 @@ def run_sites(
         "count": count,
         "duration_s": duration_s,
         "warmup_s": warmup_s,
+        "mount_errors": mount_errors,
         "sites": rows,
         "distribution": distribution(rows),
         "worst_site": worst_site(rows),
@@ -392,6 +412,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="reuse each site's eval.json already in --out from a run of the same site, seed, "
         "conditions and durations (a run cut short goes on where it stopped)",
     )
+    parser.add_argument(
+        "--mount-errors",
+        action="store_true",
+        help="render each site's sensors as a real mast's (set-up errors, late clocks, sway, "
+        "settling, drawn from the site's seed), as wz eval --mount-errors does",
+    )
     args = parser.parse_args(argv)
     if args.sites < 1:
         parser.error(f"--sites must be at least 1, got {args.sites}")
@@ -400,7 +426,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.jobs is not None and args.jobs < 1:
         parser.error(f"--jobs must be at least 1, got {args.jobs}")
     report = run_sites(
-        args.sites, args.seed, args.duration_s, args.warmup_s, args.out, args.jobs, args.resume
+        args.sites,
+        args.seed,
+        args.duration_s,
+        args.warmup_s,
+        args.out,
+        args.jobs,
+        args.resume,
+        args.mount_errors,
     )
     sys.stdout.write(markdown(report))
     failing = sum(1 for row in report["sites"] if row["failed"])

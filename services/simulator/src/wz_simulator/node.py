@@ -14,6 +14,11 @@ Run it as ``python -m wz_simulator.node`` (``wz up`` does). Settings come from t
   road in steady traffic), then ``running``;
 
 and answers queries on ``wz/<site>/config/site`` with the site description as JSON.
+
+With ``WZ_SIM_MOUNT_ERRORS=true`` the sensors are a real mast's (:mod:`wz_simulator.sensors.mast`:
+set-up errors, late clocks, sway, settling, ``WZ_SIM_BUMP_*``): the frames are rendered from
+the true poses and the node logs the drawn errors at start, but what it publishes, the site
+on ``config/site`` included, keeps the site file's nominal poses.
 """
 
 from __future__ import annotations
@@ -36,6 +41,7 @@ from wz_shared.messages import (
 from wz_shared.service import NodeApp, ServiceRuntime
 from wz_shared.site import Site
 from wz_shared.timebase import Pacer, SimClock
+from wz_simulator.sensors.mast import Bump, MastModel
 from wz_simulator.sensors.rig import (
     CameraOutput,
     LidarOutput,
@@ -122,6 +128,26 @@ def run_loop(
     return steps
 
 
+def sensor_rig(site: Site, settings: SimulatorSettings) -> SensorRig:
+    """The site's sensors as the settings say, a real mast's when ``mount_errors`` (its draws
+    logged, one line each: for the people running it; no service reads the log)."""
+    mast = None
+    if settings.mount_errors:
+        bump = None
+        if settings.bump_sensor is not None and settings.bump_at_s is not None:
+            bump = Bump(settings.bump_sensor, settings.bump_at_s, settings.bump_yaw_deg)
+        mast = MastModel.draw(site, settings.seed, bump)
+        for line in mast.lines():
+            log.info("mount errors (seed %d): %s", settings.seed, line)
+    return SensorRig(
+        site,
+        WEATHER_PRESETS[settings.weather],
+        settings.seed,
+        jpeg_quality=settings.jpeg_quality,
+        mast=mast,
+    )
+
+
 def warm_up(world: TrafficWorld, until_s: float, stop: threading.Event) -> int:
     """Step the world to ``until_s`` as fast as possible, publishing nothing; the steps taken."""
     steps = 0
@@ -159,12 +185,7 @@ def simulate(
     rig = None
     publish_sensor = None
     if settings.sensors_enabled and site.sensors:
-        rig = SensorRig(
-            site,
-            WEATHER_PRESETS[settings.weather],
-            settings.seed,
-            jpeg_quality=settings.jpeg_quality,
-        )
+        rig = sensor_rig(site, settings)
         publish_sensor = SensorPublisher(bus, site).publish
         log.info("sensors: %s (%s)", [m.sensor_id for m in rig.mounts], settings.weather)
     if settings.warmup_s > 0:

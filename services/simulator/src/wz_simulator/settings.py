@@ -6,7 +6,7 @@ import tempfile
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import Field
+from pydantic import Field, model_validator
 from pydantic_settings import SettingsConfigDict
 
 from wz_shared.settings import ServiceSettings
@@ -57,3 +57,21 @@ class SimulatorSettings(ServiceSettings):
     jpeg_quality: Annotated[int, Field(ge=1, le=100)] = 90
     #: Folder for the SUMO network cache and route files.
     work_dir: Path = Field(default_factory=_default_work_dir)
+    #: A real mast (:mod:`wz_simulator.sensors.mast`): each sensor rendered from its true pose
+    #: (set-up error, sway, settling) with its own late clock, drawn from ``seed``; the bus
+    #: still carries the site file's poses. False: every sensor exactly where the site says.
+    mount_errors: bool = False
+    #: Knock this sensor round its mast at ``bump_at_s`` (needs ``mount_errors``); None: no bump.
+    bump_sensor: str | None = None
+    #: Simulation time of the bump [s] (stamps; the warm-up counts).
+    bump_at_s: Annotated[float, Field(ge=0.0)] | None = None
+    #: Yaw of the bump [deg] (counter-clockwise seen from above).
+    bump_yaw_deg: Annotated[float, Field(ge=-45.0, le=45.0)] = 2.0
+
+    @model_validator(mode="after")
+    def _bump_needs_the_mast(self) -> SimulatorSettings:
+        if self.bump_sensor is not None and not self.mount_errors:
+            raise ValueError("WZ_SIM_BUMP_SENSOR needs WZ_SIM_MOUNT_ERRORS=true (the mast model)")
+        if (self.bump_sensor is None) != (self.bump_at_s is None):
+            raise ValueError("set WZ_SIM_BUMP_SENSOR and WZ_SIM_BUMP_AT_S together, or neither")
+        return self

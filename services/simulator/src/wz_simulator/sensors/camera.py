@@ -143,6 +143,8 @@ class CameraModel:
         # The renderer draws an ideal pinhole (a calibrated camera's focal lengths and principal
         # point, not its lens distortion): truth boxes and pixels agree with each other.
         self.camera = PinholeCamera(mount, LensDistortion())
+        #: Rotation from the sensor frame to the site frame of the mount drawn from, (3, 3).
+        self.rotation: F64 = mount.pose.rotation()
         self.weather = weather if weather is not None else Weather()
         self.blur_sigma_px = blur_sigma_px
         self.motion_blur_px = motion_blur_px
@@ -303,6 +305,8 @@ class CameraModel:
         vehicle_ids: Sequence[str],
         stamp: float,
         vehicle_classes: Sequence[VehicleClass] | None = None,
+        *,
+        rotation: F64 | None = None,
     ) -> CameraFrame:
         """Render one frame of the vehicles in front of the static background.
 
@@ -318,6 +322,11 @@ class CameraModel:
         vehicle_classes
             Class of each vehicle; None to guess (truck when it has TRUCK_BODY boxes or is
             longer than 7.5 m, else car).
+        rotation
+            The camera's true orientation at capture (sensor to site, (3, 3)) when it has
+            turned from :attr:`rotation` (a real mast's sway and settling, see
+            :mod:`~wz_simulator.sensors.mast`): the frame is drawn from the mount, then turned
+            (:meth:`_turned`) before the sensor effects. None: as mounted.
 
         Returns
         -------
@@ -360,12 +369,91 @@ class CameraModel:
                     )
             labels = self._draw_vehicles(image, face_buffer, arrays, vehicle_ids, classes)
             face_vehicle = np.repeat(vehicle_of_box, 6).astype(np.int16)
+        if rotation is not None:
+            image, face_buffer, labels = self._turned(
+                image, face_buffer, labels, face_vehicle, rotation
+            )
         self._effects.apply(image)
         ordered = tuple(
             labels.get(i) or CameraTruthLabel(vid, i, classes[i], None, None, 0, 0)
             for i, vid in enumerate(vehicle_ids)
         )
         return CameraFrame(stamp, image, ordered, face_buffer, face_vehicle)
+
+    def _turned(
+        self,
+        image: U8,
+        face_buffer: npt.NDArray[np.int16] | npt.NDArray[np.int32],
+        labels: dict[int, CameraTruthLabel],
+        face_vehicle: npt.NDArray[np.int16],
+        rotation: F64,
+    ) -> tuple[U8, npt.NDArray[np.int16] | npt.NDArray[np.int32], dict[int, CameraTruthLabel]]:
+        """The frame as the camera turned to ``rotation`` (sensor to site) sees it.
+
+        A pinhole turning about its centre sees the same rays, re-sorted: a pixel ``x`` of the
+        mount's view is at ``x' ~ K R'^T R K^-1 x`` in the turned one (``R, R'``: optical to
+        site, before and after; ``K`` the intrinsics), exact for everything in view, near or
+        far. The image is resampled bilinearly, the borders newly in view repeat the edge's
+        pixels (a pixel or two for a mast's sway), the face buffer takes the nearest face and
+        the truth boxes the bounding box of their turned corners, clipped to the image; the
+        visible pixels are counted again, the silhouette's are kept (a turn of a fraction of a
+        degree keeps areas).
+        """
+        cam = self.camera
+        width, height = cam.width_px, cam.height_px
+        optical_turned = rotation @ self.rotation.T @ cam.rotation_site_from_camera
+        homography = cam.K @ optical_turned.T @ cam.rotation_site_from_camera @ np.linalg.inv(cam.K)
+        # OpenCV puts pixel centres at integers, the continuous coordinates at + 0.5.
+        centre = np.array([[1.0, 0.0, 0.5], [0.0, 1.0, 0.5], [0.0, 0.0, 1.0]])
+        opencv = np.linalg.inv(centre) @ homography @ centre
+        turned_image: U8 = np.asarray(
+            cv2.warpPerspective(
+                image,
+                opencv,
+                (width, height),
+                flags=cv2.INTER_LINEAR,
+                borderMode=cv2.BORDER_REPLICATE,
+            ),
+            dtype=np.uint8,
+        )
+        turned_faces = face_buffer.copy()
+        cv2.warpPerspective(
+            face_buffer,
+            opencv,
+            (width, height),
+            dst=turned_faces,
+            flags=cv2.INTER_NEAREST,
+            borderMode=cv2.BORDER_CONSTANT,
+            borderValue=-1,
+        )
+        if not labels:
+            return turned_image, turned_faces, labels
+        lookup = np.append(face_vehicle, np.int16(-1)).astype(np.intp)
+        visible = np.bincount(lookup[turned_faces].ravel() + 1, minlength=len(face_vehicle) + 1)
+
+        def turned_box(
+            box: tuple[float, float, float, float] | None,
+        ) -> tuple[float, float, float, float] | None:
+            if box is None:
+                return None
+            x0, y0, x1, y1 = box
+            corners = np.array([[x0, y0, 1.0], [x1, y0, 1.0], [x1, y1, 1.0], [x0, y1, 1.0]])
+            mapped = corners @ homography.T
+            xy = mapped[:, :2] / mapped[:, 2:3]
+            left, right = (float(np.clip(v, 0.0, width)) for v in (xy[:, 0].min(), xy[:, 0].max()))
+            top, bottom = (float(np.clip(v, 0.0, height)) for v in (xy[:, 1].min(), xy[:, 1].max()))
+            return (left, top, right, bottom) if right > left and bottom > top else None
+
+        turned_labels = {}
+        for index, label in labels.items():
+            count = int(visible[index + 1])
+            turned_labels[index] = replace(
+                label,
+                box_xyxy_px=turned_box(label.box_xyxy_px) if count else None,
+                full_box_xyxy_px=turned_box(label.full_box_xyxy_px),
+                visible_pixels=count,
+            )
+        return turned_image, turned_faces, turned_labels
 
     def _draw_vehicles(
         self,

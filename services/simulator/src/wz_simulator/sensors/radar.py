@@ -276,6 +276,12 @@ class RadarModel:
         self.azimuth_resolution_rad = math.radians(self.intrinsics.azimuth_resolution_deg)
         self.azimuth_noise_std_rad = math.radians(self.intrinsics.azimuth_noise_std_deg)
 
+    def turn_to(self, rotation: F64) -> None:
+        """Turn the radar to ``rotation`` (sensor to site, (3, 3)), its position kept: the next
+        scans see the road from there (a real mast's sway, settling or a bump, see
+        :mod:`~wz_simulator.sensors.mast`). Exact: nothing is cached from the orientation."""
+        self.rotation = np.array(rotation, dtype=np.float64)
+
     # --- radar equation ----------------------------------------------------------------
 
     @property

@@ -6,13 +6,27 @@ time. :meth:`SensorRig.fire` takes the truth of a step and produces every frame 
 step's time, each at its exact firing time: vehicles are moved from the truth's time to the
 firing time along their heading at their speed (|dt| < one step). Frames are numbered per sensor
 from 0, and the n-th firing happens at ``n / rate_hz`` exactly (no drift).
+
+A real mast (``mast``: :class:`~wz_simulator.sensors.mast.MastModel`, off by default). Each
+model is built on its sensor's mount as it really stands (the site file's pose plus the set-up
+error), and every capture renders from the sensor's true orientation at that instant: the LiDAR
+turns its head (:meth:`LidarModel.turn_to`, the static scene cast again) to its orientation
+half-way through the sweep, the radar turns (:meth:`RadarModel.turn_to`), the camera's frame is
+turned by the homography of its sway and settling (:meth:`CameraModel.render`'s ``rotation``;
+a bumped camera has a second model, built on its bumped mount, for the frames after the bump).
+Stamps stay on the schedule: frame n is still stamped ``n / rate_hz`` and fires then, but it
+was captured ``clock_offset_s`` earlier (vehicles moved back to that instant, at most one step
+plus 150 ms, along their heading at their speed): a frame captured at ``t`` carries ``t +
+offset``, and arrives no earlier than its stamp, as a late-stamping sensor's does. Everything
+published stays nominal: the metadata carries no pose and :attr:`SensorRig.site` is the site
+given. Without a mast every frame is the same, bit for bit, as before the model existed.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -20,6 +34,7 @@ from wz_shared.messages import CameraFrameMeta, VehicleTruth
 from wz_shared.site import SensorMount, Site
 from wz_simulator.sensors.camera import CameraFrame, CameraModel, encode_jpeg
 from wz_simulator.sensors.lidar import LidarModel, LidarScan
+from wz_simulator.sensors.mast import MastModel
 from wz_simulator.sensors.radar import RadarModel, RadarScanResult
 from wz_simulator.sensors.scene import StaticScene, Weather, static_scene, vehicle_boxes
 
@@ -29,10 +44,15 @@ CAMERA_CULL_STATION_M = 600.0
 LIDAR_CULL_MARGIN_M = 30.0
 
 
+# Each output's ``capture_s`` is the true time the frame shows [s]: its stamp less the sensor's
+# clock offset (the stamp itself without a mast model). It is not published.
+
+
 @dataclass(frozen=True)
 class LidarOutput:
     sensor_id: str
     scan: LidarScan
+    capture_s: float
 
 
 @dataclass(frozen=True)
@@ -41,12 +61,14 @@ class CameraOutput:
     meta: CameraFrameMeta
     frame: CameraFrame
     jpeg: bytes
+    capture_s: float
 
 
 @dataclass(frozen=True)
 class RadarOutput:
     sensor_id: str
     result: RadarScanResult
+    capture_s: float
 
 
 SensorOutput = LidarOutput | CameraOutput | RadarOutput
@@ -95,6 +117,11 @@ class SensorRig:
         Sensors to simulate (default: all of the site's).
     jpeg_quality
         Camera JPEG quality (1-100).
+    scene
+        The static scene (default: ``static_scene(site)``).
+    mast
+        A real mast's errors, clocks and motion (see the module docstring); None: every sensor
+        exactly at its site pose, with a perfect clock.
     """
 
     def __init__(
@@ -106,8 +133,10 @@ class SensorRig:
         sensor_ids: Sequence[str] | None = None,
         jpeg_quality: int = 90,
         scene: StaticScene | None = None,
+        mast: MastModel | None = None,
     ) -> None:
         self.site = site
+        self.mast = mast
         self.weather = weather
         self.jpeg_quality = jpeg_quality
         self.scene = scene if scene is not None else static_scene(site)
@@ -118,15 +147,20 @@ class SensorRig:
         if wanted is not None and wanted - {mount.sensor_id for mount in self.mounts}:
             missing = sorted(wanted - {mount.sensor_id for mount in self.mounts})
             raise ValueError(f"site {site.site_id} has no sensor {missing}")
+        self._mount_of = {mount.sensor_id: mount for mount in self.mounts}
         self._lidars: dict[str, LidarModel] = {}
         self._cameras: dict[str, CameraModel] = {}
+        #: A bumped camera's model on its bumped mount, and the bump's time.
+        self._bumped_cameras: dict[str, tuple[float, CameraModel]] = {}
         self._radars: dict[str, RadarModel] = {}
         self._camera_station_m: dict[str, float] = {}
         self._camera_forward_xy: dict[str, tuple[float, float]] = {}
         self._schedules: dict[str, _Schedule] = {}
-        for position, mount in enumerate(site.sensors):
-            if mount not in self.mounts:
+        for position, site_mount in enumerate(site.sensors):
+            if site_mount not in self.mounts:
                 continue
+            # Where the sensor really stands: its model draws from there.
+            mount = site_mount if mast is None else mast.mounted(site_mount)
             sensor_seed = seed * 1000 + position
             if mount.kind == "lidar":
                 self._lidars[mount.sensor_id] = LidarModel.from_scene(
@@ -141,6 +175,14 @@ class SensorRig:
                 self._cameras[mount.sensor_id] = CameraModel.from_scene(
                     mount, self.scene, weather, sensor_seed
                 )
+                bump = None if mast is None else mast.bump
+                if mast is not None and bump is not None and bump.sensor_id == mount.sensor_id:
+                    # Built now, not at the bump: a background takes up to a second to draw.
+                    bumped_mount = mast.mounted(site_mount, bump.at_s)
+                    self._bumped_cameras[mount.sensor_id] = (
+                        bump.at_s,
+                        CameraModel.from_scene(bumped_mount, self.scene, weather, sensor_seed),
+                    )
                 station, _ = site.road_frame.to_road(mount.pose.x_m, mount.pose.y_m)
                 self._camera_station_m[mount.sensor_id] = float(station)
                 forward = mount.pose.rotation()[:, 0]
@@ -187,18 +229,43 @@ class SensorRig:
         vehicles: Sequence[VehicleTruth],
         truth_stamp_s: float,
     ) -> SensorOutput:
-        """One frame of one sensor at ``fire_s``, outside the schedule (datasets, pictures)."""
+        """One frame of one sensor stamped ``fire_s``, outside the schedule (datasets, pictures).
+
+        It shows the road at ``fire_s`` less the sensor's clock offset (none without a mast
+        model; at 0 when that is negative), seen from the sensor's true pose then (see the
+        module docstring).
+        """
+        mast = self.mast
+        # A late clock's first frames (stamped before its offset) show the road at 0: there is
+        # no road before the simulation starts.
+        capture_s = fire_s if mast is None else max(0.0, fire_s - mast.clock_offset_s(sensor_id))
+        mount = self._mount_of[sensor_id]
         if sensor_id in self._lidars:
             lidar = self._lidars[sensor_id]
+            if mast is not None:
+                # The head's orientation half-way through the sweep (the sway turns it by at
+                # most a few hundredths of a degree in one).
+                mid_sweep_s = capture_s + 0.5 * lidar.sweep_duration_s
+                lidar.turn_to(mast.rotation_at(mount, mid_sweep_s))
             # Vehicles the beams cannot reach are left out: labels index the vehicles passed.
             reach_m = lidar.max_range_m + LIDAR_CULL_MARGIN_M
             x0, y0 = float(lidar.position_m[0]), float(lidar.position_m[1])
             near = [v for v in vehicles if math.hypot(v.x_m - x0, v.y_m - y0) < reach_m]
-            scan = lidar.scan(near, fire_s, index, truth_stamp_s=truth_stamp_s)
-            return LidarOutput(sensor_id, scan)
-        now = moved(vehicles, fire_s - truth_stamp_s)
+            scan = lidar.scan(near, capture_s, index, truth_stamp_s=truth_stamp_s)
+            if capture_s != fire_s:
+                scan = replace(scan, meta=scan.meta.model_copy(update={"stamp": fire_s}))
+            return LidarOutput(sensor_id, scan, capture_s)
+        now = moved(vehicles, capture_s - truth_stamp_s)
         if sensor_id in self._cameras:
             camera = self._cameras[sensor_id]
+            bumped = self._bumped_cameras.get(sensor_id)
+            if bumped is not None and capture_s >= bumped[0]:
+                camera = bumped[1]
+            rotation = None
+            if mast is not None:
+                rotation = mast.rotation_at(mount, capture_s)
+                if np.array_equal(rotation, camera.rotation):
+                    rotation = None  # as the model was drawn: nothing to turn
             station = self._camera_station_m[sensor_id]
             fx, fy = self._camera_forward_xy[sensor_id]
             cx, cy = camera.camera.position_m[0], camera.camera.position_m[1]
@@ -212,8 +279,9 @@ class SensorRig:
             frame = camera.render(
                 vehicle_boxes(seen),
                 [v.vehicle_id for v in seen],
-                fire_s,
+                capture_s,
                 [v.vehicle_class for v in seen],
+                rotation=rotation,
             )
             height, width = frame.image.shape[:2]
             meta = CameraFrameMeta(
@@ -225,6 +293,13 @@ class SensorRig:
                 height_px=height,
                 rendered=True,
             )
-            return CameraOutput(sensor_id, meta, frame, encode_jpeg(frame.image, self.jpeg_quality))
-        result = self._radars[sensor_id].scan(now, fire_s, index)
-        return RadarOutput(sensor_id, result)
+            jpeg = encode_jpeg(frame.image, self.jpeg_quality)
+            return CameraOutput(sensor_id, meta, frame, jpeg, capture_s)
+        radar = self._radars[sensor_id]
+        if mast is not None:
+            radar.turn_to(mast.rotation_at(mount, capture_s))
+        result = radar.scan(now, capture_s, index)
+        if capture_s != fire_s:
+            stamped = result.scan.model_copy(update={"stamp": fire_s})
+            result = RadarScanResult(scan=stamped, target_vehicle_ids=result.target_vehicle_ids)
+        return RadarOutput(sensor_id, result, capture_s)
