@@ -62,21 +62,37 @@ def _wait_listening(port: int, process: subprocess.Popen[bytes], timeout_s: floa
     raise RuntimeError(f"the router did not listen on {port} within {timeout_s:.0f} s")
 
 
-def flood_run(
-    flood_s: float, alerts: int, data_dir: Path, log_path: Path, rate_hz: float = RATE_HZ
-) -> dict[str, Any]:
-    """One run (see the module); the measurements, raw."""
-    site_id = load_site(DEFAULT_SITE_PATH).site_id
-    port, http_port = free_port(), free_port()
+def start_router() -> tuple[int, subprocess.Popen[bytes], BusSettings]:
+    """A `wz router` on a free loopback port, accepting connections: its port, its process and
+    a client's settings for it."""
+    port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     router = subprocess.Popen(
         [sys.executable, "-m", "wz_cli.main", "--log-level", "WARNING", "router", "--listen",
          endpoint],
         cwd=ROOT,
     )  # fmt: skip
-    settings = BusSettings(mode="client", connect_endpoints=[endpoint], listen_endpoints=[])
     try:
         _wait_listening(port, router)
+    except RuntimeError:
+        router.kill()
+        raise
+    return (
+        port,
+        router,
+        BusSettings(mode="client", connect_endpoints=[endpoint], listen_endpoints=[]),
+    )
+
+
+def flood_run(
+    flood_s: float, alerts: int, data_dir: Path, log_path: Path, rate_hz: float = RATE_HZ
+) -> dict[str, Any]:
+    """One run (see the module); the measurements, raw."""
+    site_id = load_site(DEFAULT_SITE_PATH).site_id
+    port, router, settings = start_router()
+    endpoint = settings.connect_endpoints[0]
+    http_port = free_port()
+    try:
         with (
             _Receiver() as receiver,
             Bus.open(settings, site=site_id, service="alert-service") as bus,

@@ -34,12 +34,11 @@ import time
 from pathlib import Path
 from typing import Any
 
-from benchmarks.alert_flood import RATE_HZ, _wait_listening
+from benchmarks.alert_flood import RATE_HZ, start_router
 from benchmarks.common import ROOT, TIMEOUT_S, free_port
 from benchmarks.webhook_latency import _gateway, _Receiver
 from wz_shared.bus import Bus
 from wz_shared.messages import Alert, AlertType, ServiceStatus, Track, TrackBatch
-from wz_shared.settings import BusSettings
 from wz_shared.site import DEFAULT_SITE_PATH, MPH_TO_MPS, load_site
 
 #: The issue's bound: the alert within this of the rule's hold time [s].
@@ -101,17 +100,11 @@ def speeding_run(
     """One run (see the module); the measurements, raw (None where it never came)."""
     site = load_site(DEFAULT_SITE_PATH)
     hold_s = float(site.alerts.speeding.hold_s)
-    port, http_port = free_port(), free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
-    router = subprocess.Popen(
-        [sys.executable, "-m", "wz_cli.main", "--log-level", "WARNING", "router", "--listen",
-         endpoint],
-        cwd=ROOT,
-    )  # fmt: skip
-    settings = BusSettings(mode="client", connect_endpoints=[endpoint], listen_endpoints=[])
+    port, router, settings = start_router()
+    endpoint = settings.connect_endpoints[0]
+    http_port = free_port()
     alerting = None
     try:
-        _wait_listening(port, router)
         alerting = _alert_service(port, folder / "alert-service.log", shed)
         with (
             _Receiver() as receiver,
