@@ -84,6 +84,33 @@ def start_router() -> tuple[int, subprocess.Popen[bytes], BusSettings]:
     )
 
 
+def start_flood(
+    endpoint: str, site_id: str, rate_hz: float, flood_s: float, tracks: int = 1
+) -> subprocess.Popen[str]:
+    """A :mod:`benchmarks.flood_peer` process flooding ``endpoint``'s tracks key with batches
+    of ``tracks`` tracks, returned once it says it floods; its stdout gives the last line."""
+    flood = subprocess.Popen(
+        [sys.executable, "-m", "benchmarks.flood_peer", endpoint, site_id, str(rate_hz),
+         str(flood_s), str(tracks)],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        text=True,
+    )  # fmt: skip
+    assert flood.stdout is not None
+    started = json.loads(flood.stdout.readline())
+    if started.get("event") != "flooding":
+        raise RuntimeError(f"flood peer: {started}")
+    return flood
+
+
+def flood_done(flood: subprocess.Popen[str]) -> dict[str, Any]:
+    """Wait for a :func:`start_flood` process to end; its last report (the rate reached)."""
+    assert flood.stdout is not None
+    done: dict[str, Any] = json.loads(flood.stdout.readline())
+    flood.wait(TIMEOUT_S)
+    return done
+
+
 def flood_run(
     flood_s: float, alerts: int, data_dir: Path, log_path: Path, rate_hz: float = RATE_HZ
 ) -> dict[str, Any]:
@@ -110,17 +137,7 @@ def flood_run(
                 ServiceStatus,
                 lambda _k, _s: status_at.append(time.monotonic()),
             )
-            flood = subprocess.Popen(
-                [sys.executable, "-m", "benchmarks.flood_peer", endpoint, site_id,
-                 str(rate_hz), str(flood_s)],
-                cwd=ROOT,
-                stdout=subprocess.PIPE,
-                text=True,
-            )  # fmt: skip
-            assert flood.stdout is not None
-            started = json.loads(flood.stdout.readline())
-            if started.get("event") != "flooding":
-                raise RuntimeError(f"flood peer: {started}")
+            flood = start_flood(endpoint, site_id, rate_hz, flood_s)
             flood_from = time.monotonic()
             time.sleep(1.0)
             # event id -> (alert id, wall clock and perf counter at its put)
@@ -143,8 +160,7 @@ def flood_run(
                 publisher.put_bytes(payload)
                 time.sleep(0.5)
             collector.join(TIMEOUT_S)
-            done = json.loads(flood.stdout.readline())
-            flood.wait(TIMEOUT_S)
+            done = flood_done(flood)
             flood_to = time.monotonic()
             for arrived, got_id, body, headers in arrivals:
                 stamp = int(headers["webhook-timestamp"])

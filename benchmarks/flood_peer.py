@@ -25,41 +25,26 @@ BURST_S = 0.005
 
 def payload(site: str, count: int = 1) -> bytes:
     """One batch of ``count`` tracks (a queue's batch holds 10-30), encoded."""
-    tracks = [_track(number) for number in range(1, count + 1)]
+    tracks = [lane_track(n, 600.0 - 10.0 * n, 25.0) for n in range(1, count + 1)]
     batch = TrackBatch(
         site=site, source_id="fusion-tracker", stamp=1.0, cycle_index=1, tracks=tracks
     )
     return encode_json(batch)
 
 
-def _track(track_id: int) -> Track:
+def lane_track(track_id: int, station_m: float, speed_mps: float) -> Track:
+    """A confirmed track in the default site's open lane (offset -1.83 m) on its straight
+    part (x = -offset, y = station), heading north at ``speed_mps``."""
     return Track(
         track_id=track_id,
-        x_m=-1.83,
-        y_m=600.0 - 10.0 * track_id,
+        x_m=1.83,
+        y_m=station_m,
         vx_mps=0.0,
-        vy_mps=25.0,
-        covariance=[
-            0.25,
-            0.0,
-            0.0,
-            0.0,
-            0.0,
-            0.25,
-            0.0,
-            0.0,
-            0.0,
-            0.0,
-            1.0,
-            0.0,
-            0.0,
-            0.0,
-            0.0,
-            1.0,
-        ],
-        station_m=600.0 - 10.0 * track_id,
+        vy_mps=speed_mps,
+        covariance=[0.25, 0, 0, 0, 0, 0.25, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0],
+        station_m=station_m,
         offset_m=-1.83,
-        speed_mps=25.0,
+        speed_mps=speed_mps,
         heading_rad=1.5707963,
         lane_index=0,
         age_s=1.0,

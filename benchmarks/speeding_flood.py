@@ -34,11 +34,12 @@ import time
 from pathlib import Path
 from typing import Any
 
-from benchmarks.alert_flood import RATE_HZ, start_router
+from benchmarks.alert_flood import RATE_HZ, flood_done, start_flood, start_router
 from benchmarks.common import ROOT, TIMEOUT_S, free_port
+from benchmarks.flood_peer import lane_track
 from benchmarks.webhook_latency import _gateway, _Receiver
 from wz_shared.bus import Bus
-from wz_shared.messages import Alert, AlertType, ServiceStatus, Track, TrackBatch
+from wz_shared.messages import Alert, AlertType, ServiceStatus, TrackBatch
 from wz_shared.site import DEFAULT_SITE_PATH, MPH_TO_MPS, load_site
 
 #: The issue's bound: the alert within this of the rule's hold time [s].
@@ -51,26 +52,6 @@ PERIOD_S = 0.1
 FLOOD_TRACKS = 20
 #: The flood's first seconds, before the car speeds up [s].
 LEAD_S = 2.0
-
-
-def _track(station_m: float, speed_mps: float) -> Track:
-    return Track(
-        track_id=TRACK_ID,
-        x_m=1.83,
-        y_m=station_m,
-        vx_mps=0.0,
-        vy_mps=speed_mps,
-        covariance=[0.25, 0, 0, 0, 0, 0.25, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0],
-        station_m=station_m,
-        offset_m=-1.83,
-        speed_mps=speed_mps,
-        heading_rad=1.5707963,
-        lane_index=0,
-        age_s=5.0,
-        hits=50,
-        confirmed=True,
-        sources=["lidar-mast"],
-    )
 
 
 def _alert_service(bus_port: int, log_path: Path, shed: bool) -> subprocess.Popen[bytes]:
@@ -135,17 +116,7 @@ def speeding_run(
             if not tracks.wait_for_subscribers(TIMEOUT_S):
                 raise TimeoutError("nobody subscribes to the tracks")
             time.sleep(1.0)
-            flood = subprocess.Popen(
-                [sys.executable, "-m", "benchmarks.flood_peer", endpoint, site.site_id,
-                 str(rate_hz), str(flood_s), str(FLOOD_TRACKS)],
-                cwd=ROOT,
-                stdout=subprocess.PIPE,
-                text=True,
-            )  # fmt: skip
-            assert flood.stdout is not None
-            started = json.loads(flood.stdout.readline())
-            if started.get("event") != "flooding":
-                raise RuntimeError(f"flood peer: {started}")
+            flood = start_flood(endpoint, site.site_id, rate_hz, flood_s, FLOOD_TRACKS)
             # The real tracker, on the wall clock: 10 Hz until the flood is over and 2 s on.
             onset_wall: float | None = None
             station = 400.0
@@ -161,7 +132,7 @@ def speeding_run(
                         source_id="fusion-tracker",
                         stamp=100.0 + k * PERIOD_S,
                         cycle_index=k,
-                        tracks=[_track(station, speed)],
+                        tracks=[lane_track(TRACK_ID, station, speed)],
                     )
                 )
                 if fast and onset_wall is None:
@@ -171,8 +142,7 @@ def speeding_run(
                 pause = began + k * PERIOD_S - time.perf_counter()
                 if pause > 0:
                     time.sleep(pause)
-            done = json.loads(flood.stdout.readline())
-            flood.wait(TIMEOUT_S)
+            done = flood_done(flood)
             time.sleep(1.5)  # the last webhook and status
             hooks: list[tuple[float, dict[str, Any]]] = []
             perf_to_wall = time.time() - time.perf_counter()

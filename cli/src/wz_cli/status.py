@@ -173,7 +173,7 @@ def _per_key(status: ServiceStatus) -> list[tuple[str, str, str, str, str]]:
                 key,
                 rate(status.published_hz, key),
                 rate(status.received_hz, key),
-                _with_reasons(sum(reasons.values()), reasons) if reasons else "0",
+                _with_reasons(sum(reasons.values()), reasons),
                 _with_reasons(dropped, shed_reasons),
             )
         )

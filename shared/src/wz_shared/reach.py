@@ -111,20 +111,16 @@ def endpoint_problem(
     family, kind, proto, _, address = addresses[0]
     ip = address[0] if isinstance(address[0], str) else endpoint.host
     where = f"{ip}:{endpoint.port}"
-    try:
-        sock = socket.socket(family, kind, proto)
+    with socket.socket(family, kind, proto) as sock:
         sock.settimeout(timeout_s)
-        sock.connect(address)
-    except ConnectionRefusedError:
-        sock.close()
-        return f"connection refused ({where}: nothing listens there)"
-    except TimeoutError:
-        sock.close()
-        return f"timed out after {timeout_s:g} s ({where})"
-    except OSError as error:
-        sock.close()
-        return f"cannot connect ({where}: {error.strerror or error})"
-    with sock:
+        try:
+            sock.connect(address)
+        except ConnectionRefusedError:
+            return f"connection refused ({where}: nothing listens there)"
+        except TimeoutError:
+            return f"timed out after {timeout_s:g} s ({where})"
+        except OSError as error:
+            return f"cannot connect ({where}: {error.strerror or error})"
         if endpoint.protocol != "tls":
             return None
         tls = tls or {}
