@@ -103,6 +103,14 @@ class Keys:
     def devices_state(self) -> str:
         return f"{self.prefix}/devices/state"
 
+    # self-calibration of each sensor (its pose correction and clock offset)
+    def calibration(self, sensor_id: str) -> str:
+        return f"{self.prefix}/calibration/{_check_chunk(sensor_id, 'sensor id')}"
+
+    @property
+    def calibration_all(self) -> str:
+        return f"{self.prefix}/calibration/*"
+
     # health and configuration
     def status(self, service: str) -> str:
         return f"{self.prefix}/status/{_check_chunk(service, 'service name')}"

@@ -543,6 +543,91 @@ class ServiceStatus(Message):
     devices: dict[Identifier, DeviceLink] = Field(default_factory=dict)
 
 
+# --- self-calibration -----------------------------------------------------------------------
+
+#: Largest pose correction a sensor's self-calibration may apply: a technician's set-up leaves
+#: at most about 3 deg of yaw, 1.5 deg of pitch and roll and 0.5 m of position (issue 39); past
+#: these bounds the evidence, not the mount, is wrong, and a survey is due.
+MAX_YAW_CORRECTION_DEG = 6.0
+MAX_TILT_CORRECTION_DEG = 3.0
+MAX_POSITION_CORRECTION_M = 1.0
+#: Largest clock offset a sensor's self-calibration may learn [s].
+MAX_CLOCK_OFFSET_S = 0.5
+
+_Yaw = Annotated[
+    float, Field(ge=-MAX_YAW_CORRECTION_DEG, le=MAX_YAW_CORRECTION_DEG, allow_inf_nan=False)
+]
+_Tilt = Annotated[
+    float, Field(ge=-MAX_TILT_CORRECTION_DEG, le=MAX_TILT_CORRECTION_DEG, allow_inf_nan=False)
+]
+_Shift = Annotated[
+    float, Field(ge=-MAX_POSITION_CORRECTION_M, le=MAX_POSITION_CORRECTION_M, allow_inf_nan=False)
+]
+
+
+class CalibrationState(StrEnum):
+    """Where a sensor's self-calibration stands."""
+
+    #: Nothing learned yet: the site file's pose and a zero clock offset are used.
+    PRIOR = "prior"
+    #: Evidence is being gathered; what is applied may still move.
+    LEARNING = "learning"
+    #: Every observable part of the pose and the clock is learned within its uncertainty.
+    CALIBRATED = "calibrated"
+    #: A sudden change (the sensor was knocked): its detections are down-weighted while the
+    #: pose is learned again.
+    BUMPED = "bumped"
+
+
+class PoseCorrection(BaseModel):
+    """What is added to the site file's pose: angles [deg] and a shift in the site frame [m].
+
+    A ``*_std`` of None means the data did not constrain that part (it stays the site file's):
+    a straight road tells nothing of a sensor's position along it.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    yaw_deg: _Yaw = 0.0
+    pitch_deg: _Tilt = 0.0
+    roll_deg: _Tilt = 0.0
+    x_m: _Shift = 0.0
+    y_m: _Shift = 0.0
+    z_m: _Shift = 0.0
+    yaw_std_deg: NonNegFloat | None = None
+    pitch_std_deg: NonNegFloat | None = None
+    roll_std_deg: NonNegFloat | None = None
+    x_std_m: NonNegFloat | None = None
+    y_std_m: NonNegFloat | None = None
+    z_std_m: NonNegFloat | None = None
+
+
+class SensorCalibration(Message):
+    """One sensor's self-calibration: its pose correction, its clock offset, its state.
+
+    Published by the service that makes the sensor's measurements (``source_id`` is the
+    sensor), on a change of state and every few seconds; ``stamp`` is the sensor time of the
+    newest evidence. The detector applies it where it measures: the published detections are
+    already in the corrected pose and on the corrected clock (``stamp - clock_offset_s``).
+    """
+
+    kind: Literal["sensor_calibration"] = "sensor_calibration"
+    sensor_kind: Literal["lidar", "camera", "radar"]
+    state: CalibrationState
+    #: Stamp at which the state was entered [s].
+    state_since_s: NonNegFloat
+    correction: PoseCorrection = Field(default_factory=PoseCorrection)
+    #: The sensor's stamps are this late against the LiDAR's (reference) clock [s].
+    clock_offset_s: Annotated[
+        float, Field(ge=-MAX_CLOCK_OFFSET_S, le=MAX_CLOCK_OFFSET_S, allow_inf_nan=False)
+    ] = 0.0
+    clock_offset_std_s: NonNegFloat | None = None
+    #: Measurements behind the estimate (matched vehicles, ground points, ...).
+    samples: Annotated[int, Field(ge=0)] = 0
+    #: Why the state is what it is, for people (``yaw moved 2.1 deg within 12 s``).
+    detail: Annotated[str, Field(max_length=500)] = ""
+
+
 def kind_of(cls: type[Message]) -> str:
     """The ``kind`` tag of a message type (its short name in logs, recordings and the codec)."""
     default = cls.model_fields["kind"].default
@@ -562,6 +647,7 @@ JSON_MESSAGES: dict[str, type[Message]] = {
         RoadsideDeviceState,
         ActiveAlerts,
         ServiceStatus,
+        SensorCalibration,
     )
 }
 #: Frame metadata types that travel in the binary envelope, by kind.

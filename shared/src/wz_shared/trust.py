@@ -110,8 +110,9 @@ ROLES: Mapping[str, Role] = {
     for role in (
         Role("simulator", publishes=(*RAW, "truth/vehicles"), serves=("config/site",)),
         Role("drivers", publishes=(*RAW, "detections/*")),
-        Role("lidar-detector", publishes=("detections/*",)),
-        Role("camera-detector", publishes=("detections/*",)),
+        # each detector publishes its sensors' self-calibration (pose correction, clock)
+        Role("lidar-detector", publishes=("detections/*", "calibration/*")),
+        Role("camera-detector", publishes=("detections/*", "calibration/*")),
         Role(TRACKER, publishes=("tracks",), serves=("tracks/latest",)),
         Role(ALERT_SERVICE, publishes=("alerts/*", "devices/state"), serves=("alerts/active",)),
         Role("gateway"),
@@ -329,7 +330,7 @@ def expected_source(key: str) -> str | None:
     if len(parts) < 3 or parts[0] != ROOT:
         return None
     rest = parts[2:]
-    if rest[0] in ("raw", "detections", "status") and len(rest) >= 2:
+    if rest[0] in ("raw", "detections", "calibration", "status") and len(rest) >= 2:
         return rest[-1]
     if rest == ["tracks"]:
         return TRACKER
