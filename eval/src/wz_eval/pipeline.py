@@ -41,7 +41,7 @@ from wz_camera_detector.node import CameraDetector
 from wz_camera_detector.settings import CameraDetectorSettings, camera_mount, radar_mount
 from wz_lidar_detector.node import LidarDetector
 from wz_lidar_detector.settings import LidarDetectorSettings, lidar_mount
-from wz_shared.messages import Detection, DetectionBatch, VehicleTruth
+from wz_shared.messages import Detection, DetectionBatch, SensorCalibration, VehicleTruth
 from wz_shared.site import Site
 from wz_simulator.sensors.mast import Bump, MastModel
 from wz_simulator.sensors.rig import CameraOutput, LidarOutput, RadarOutput, SensorRig
@@ -95,6 +95,10 @@ class PipelineRecord:
     wall_s: float = 0.0
     #: The mast model the sensors were rendered with (None: the nominal poses).
     mast: MastModel | None = None
+    #: Each sensor's self-calibration at the end of the run, by sensor id.
+    calibrations: dict[str, SensorCalibration] = field(default_factory=dict)
+    #: Each sensor's changes of calibration state: (stamp, state, detail), by sensor id.
+    calibration_history: dict[str, list[tuple[float, str, str]]] = field(default_factory=dict)
 
     def sensor_ids(self) -> list[str]:
         return sorted({batch.source_id for batch in self.batches})
@@ -125,7 +129,7 @@ def run_pipeline(
     camera = camera_mount(site, None)
     radar = radar_mount(site, None)
     lidar_settings = LidarDetectorSettings.model_validate({"path": "fast", "learn_frames": 40})
-    lidar_detector = LidarDetector(site.site_id, lidar, lidar_settings, report)
+    lidar_detector = LidarDetector(site.site_id, lidar, lidar_settings, report, site=site)
     camera_kwargs: dict[str, object] = {
         "backend": "yolo",
         "radar_id": radar.sensor_id if radar is not None else "none",
@@ -208,6 +212,12 @@ def run_pipeline(
                             detections=detections,
                         )
                     )
+    for log_owner in (lidar_detector.calibration,):
+        message = log_owner.message()
+        record.calibrations[message.source_id] = message
+        record.calibration_history[message.source_id] = [
+            (stamp, str(state), detail) for stamp, state, detail in log_owner.log.history
+        ]
     record.batches.sort(key=lambda b: (b.stamp, b.source_id))
     record.wall_s = time.perf_counter() - started
     return record

@@ -53,6 +53,7 @@ from wz_lidar_detector.background import (
     learn_background_from_frames,
     load_background,
 )
+from wz_lidar_detector.calibration import LidarSelfCalibration
 from wz_lidar_detector.detection import BoxDetection, DetectionResult, PointFrame
 from wz_lidar_detector.fast import FastPipeline
 from wz_lidar_detector.reference import ReferencePipeline
@@ -60,7 +61,14 @@ from wz_lidar_detector.settings import LidarDetectorSettings, lidar_mount
 from wz_lidar_detector.transform import box_to_site, to_detection
 from wz_shared.arrays import F32, F64
 from wz_shared.codec import Frame
-from wz_shared.messages import Detection, DetectionBatch, LidarFrameMeta, ServiceState
+from wz_shared.messages import (
+    Detection,
+    DetectionBatch,
+    LidarFrameMeta,
+    SensorCalibration,
+    ServiceState,
+)
+from wz_shared.self_calibration import angular_covariance
 from wz_shared.service import NodeApp, ServiceRuntime
 from wz_shared.site import LidarIntrinsics, SensorMount, Site
 from wz_shared.timebase import SimClock
@@ -249,10 +257,18 @@ class LidarDetector:
     report
         Called with ``(reason, detail)`` for every problem (the node counts them in the bus
         stats).
+    site
+        The site's road, which the sensor learns its pose from
+        (:mod:`wz_lidar_detector.calibration`); None: the mount's pose as it is.
     """
 
     def __init__(
-        self, site_id: str, mount: SensorMount, settings: LidarDetectorSettings, report: Report
+        self,
+        site_id: str,
+        mount: SensorMount,
+        settings: LidarDetectorSettings,
+        report: Report,
+        site: Site | None = None,
     ) -> None:
         self.site_id = site_id
         self.mount = mount
@@ -262,6 +278,10 @@ class LidarDetector:
             ReferencePipeline(settings.reference) if settings.path == "reference" else None
         )
         self.backgrounds = BackgroundLearner(settings)
+        #: The pose learned from the road and the traffic (:mod:`wz_lidar_detector.calibration`).
+        self.calibration = LidarSelfCalibration(site_id, mount, settings.calibration, site)
+        #: Whether the pose is learned (a site given and the calibration enabled).
+        self.calibrating = self.calibration.settings.enabled
         self._layout: Layout | None = None
         self._clock: ColumnClock | None = None
         self._logged: set[str] = set()
@@ -309,6 +329,9 @@ class LidarDetector:
         if frame is None:
             return None
         self.last_stamp_s = max(self.last_stamp_s, meta.stamp)
+        if self.calibrating:
+            xyz = frame.points[:, :3]
+            self.calibration.observe_frame(xyz[np.isfinite(xyz).all(axis=1)], meta.stamp)
         layout = layout_of(frame)
         if self._layout is not None and layout != self._layout:
             self.report(
@@ -337,6 +360,10 @@ class LidarDetector:
             return None
         if result is None:
             return None
+        if self.calibrating and result.detections:
+            self.calibration.observe_boxes(
+                np.array([box.center_xyz_m for box in result.detections]), meta.stamp
+            )
         detections = self._site_detections(result)
         return DetectionBatch(
             site=self.site_id,
@@ -427,10 +454,14 @@ class LidarDetector:
             centres = np.array([box.center_xyz_m[:2] for box in result.detections])
             offsets = [float(v) for v in self._clock.offsets_s(centres[:, 0], centres[:, 1])]
         detections = []
+        pose = self.calibration.pose
+        yaw_std = self.calibration.yaw_std_rad if self.calibrating else 0.0
         for box, offset in zip(result.detections, offsets, strict=True):
             try:
                 box = self._near_field(box)
-                detection = to_detection(box_to_site(box, self.mount.pose))
+                if yaw_std > 0.0:
+                    box = _with_angle_uncertainty(box, yaw_std)
+                detection = to_detection(box_to_site(box, pose))
                 if offset is not None:
                     detection = detection.model_copy(update={"time_offset_s": round(offset, 6)})
                 detections.append(detection)
@@ -445,11 +476,14 @@ def run(
     mount: SensorMount,
     settings: LidarDetectorSettings,
     clock: SimClock,
+    site: Site | None = None,
 ) -> int:
     """Build the detector on the runtime's bus and take frames until ``runtime.stop``.
 
     ``clock`` follows the newest frame's stamp (the status messages' time: simulation time in
-    simulation). Returns the number of frames processed.
+    simulation). With ``site``, the sensor learns its pose from the site's road and publishes
+    it on ``calibration/<sensor>`` on each change of state and every
+    :data:`CALIBRATION_PERIOD_S` of sensor time. Returns the number of frames processed.
     """
     bus = runtime.bus
     raw_key = bus.keys.raw_lidar(mount.sensor_id)
@@ -458,13 +492,16 @@ def run(
         mount,
         settings,
         report=lambda reason, detail: bus.stats.count_invalid(raw_key, reason, detail),
+        site=site,
     )
     if settings.path == "fast" and settings.background_file is not None:
         detector.backgrounds.load(settings.background_file)
     frames = bus.subscribe_frames(raw_key, LidarFrameMeta)  # a ring of one: latest wins
     publisher = bus.publisher(bus.keys.detections(mount.sensor_id), DetectionBatch)
+    calibration = bus.publisher(bus.keys.calibration(mount.sensor_id), SensorCalibration)
     log.info("detecting on %s with the %s path", raw_key, settings.path)
     processed = 0
+    calibration_sent_s = -math.inf
     runtime.state = detector.state
     while not runtime.stop.is_set():
         frame: Frame[LidarFrameMeta] | None = frames.recv(0.25)
@@ -478,7 +515,35 @@ def run(
         if batch is not None:
             publisher.put(batch)
             processed += 1
+        own = detector.calibration
+        if detector.calibrating and (
+            own.log.changed or detector.last_stamp_s >= calibration_sent_s + CALIBRATION_PERIOD_S
+        ):
+            if own.log.changed:
+                log.info(
+                    "calibration of %s: %s (%s)", mount.sensor_id, own.log.state, own.log.detail
+                )
+            calibration.put(own.message())
+            calibration_sent_s = detector.last_stamp_s
     return processed
+
+
+#: Seconds of sensor time between two calibration messages of an unchanged state [s].
+CALIBRATION_PERIOD_S = 5.0
+
+
+def _with_angle_uncertainty(box: BoxDetection, angle_std_rad: float) -> BoxDetection:
+    """``box`` with the covariance a yaw known to ``angle_std_rad`` adds (sensor frame: the
+    sensor at the origin), :func:`wz_shared.self_calibration.angular_covariance`."""
+    extra = angular_covariance((0.0, 0.0), np.array([box.center_xyz_m[:2]]), angle_std_rad)[0]
+    covariance = np.asarray(box.covariance_xy_m2, dtype=np.float64) + extra
+    return dataclasses.replace(
+        box,
+        covariance_xy_m2=(
+            (float(covariance[0, 0]), float(covariance[0, 1])),
+            (float(covariance[1, 0]), float(covariance[1, 1])),
+        ),
+    )
 
 
 def road_heading_in_sensor_frame(site: Site, mount: SensorMount) -> float:
@@ -509,7 +574,9 @@ def main() -> None:
         log.info(
             "heading prior from the site's road: %.1f deg in the sensor frame", math.degrees(prior)
         )
-    processed = node.serve(lambda runtime: run(runtime, site.site_id, mount, settings, node.clock))
+    processed = node.serve(
+        lambda runtime: run(runtime, site.site_id, mount, settings, node.clock, site)
+    )
     log.info("stopped after %d frames", processed)
 
 

@@ -14,6 +14,7 @@ from pydantic import Field
 from pydantic_settings import SettingsConfigDict
 
 from wz_lidar_detector.background import RangeBackgroundSettings
+from wz_lidar_detector.calibration import LidarCalibrationSettings
 from wz_lidar_detector.fast import FastSettings
 from wz_lidar_detector.reference import ReferenceSettings
 from wz_shared.sensor_mounts import mount_of_kind
@@ -57,6 +58,8 @@ class LidarDetectorSettings(ServiceSettings):
     #: ... and across it [m].
     near_field_across_std_m: Annotated[float, Field(ge=0.0)] = 1.0
     reference: ReferenceSettings = Field(default_factory=ReferenceSettings)
+    #: The sensor's pose learned from the road and its traffic (issue 39), on by default.
+    calibration: LidarCalibrationSettings = Field(default_factory=LidarCalibrationSettings)
     fast: FastSettings = Field(default_factory=FastSettings)
 
 
