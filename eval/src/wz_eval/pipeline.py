@@ -37,8 +37,10 @@ from wz_camera_detector.association import (
     radar_targets_to_site,
     to_detection,
 )
+from wz_camera_detector.calibration import CameraSelfCalibration, RadarSelfCalibration
 from wz_camera_detector.node import CameraDetector
 from wz_camera_detector.settings import CameraDetectorSettings, camera_mount, radar_mount
+from wz_lidar_detector.calibration import LidarSelfCalibration
 from wz_lidar_detector.node import LidarDetector
 from wz_lidar_detector.settings import LidarDetectorSettings, lidar_mount
 from wz_shared.messages import Detection, DetectionBatch, SensorCalibration, VehicleTruth
@@ -50,6 +52,10 @@ from wz_simulator.settings import SimulatorSettings
 from wz_simulator.traffic.world import TrafficWorld
 
 log = logging.getLogger("wz_eval.pipeline")
+
+#: The detectors start this many simulated seconds into the run at the latest [s]: traffic is
+#: on the road by then, and the rest of the warm-up is the sensors' self-calibration.
+DETECT_FROM_S = 30.0
 
 
 @dataclass(frozen=True)
@@ -155,8 +161,10 @@ def run_pipeline(
     }
     if options.work_dir is not None:
         sim_settings["work_dir"] = options.work_dir
-    # The LiDAR learns from frames in the last part of the warm-up (traffic on the road).
-    learn_from_s = max(0.0, options.warmup_s - 10.0)
+    # The detectors start before the scoring: the LiDAR learns its background from the first
+    # frames with traffic on the road, and every sensor learns its pose and clock from the
+    # warm-up's traffic (the self-calibration, on as in the services).
+    detect_from_s = max(0.0, min(options.warmup_s - 10.0, DETECT_FROM_S))
     next_progress_s = 0.0
     with TrafficWorld(site, SimulatorSettings.model_validate(sim_settings)) as world:
         while not world.finished:
@@ -169,31 +177,38 @@ def run_pipeline(
                 next_progress_s += 1.0
             for output in rig.fire(vehicles, now_s):
                 if isinstance(output, LidarOutput):
-                    if output.scan.meta.stamp < learn_from_s:
+                    if output.scan.meta.stamp < detect_from_s:
                         continue
                     batch = lidar_detector.handle(
                         output.scan.meta, output.scan.points, time.monotonic()
                     )
-                    if batch is not None and batch.stamp >= options.warmup_s:
+                    if batch is None:
+                        continue
+                    camera_detector.lidar_batch(batch)
+                    if batch.stamp >= options.warmup_s:
                         record.batches.append(batch)
                 elif isinstance(output, RadarOutput):
                     scan = output.result.scan
                     camera_detector.radar_scan(scan)
-                    if scan.stamp >= options.warmup_s and radar is not None:
-                        points = radar_targets_to_site(scan.targets, radar, association)
+                    own = camera_detector.radar_calibration
+                    stamp_s = scan.stamp - (own.clock_offset_s if own is not None else 0.0)
+                    if stamp_s >= options.warmup_s and camera_detector.radar_mount is not None:
+                        points = radar_targets_to_site(
+                            scan.targets, camera_detector.radar_mount, association
+                        )
                         record.radar_only.append(
-                            (scan.stamp, [SourcePoint(p.x_m, p.y_m) for p in points])
+                            (stamp_s, [SourcePoint(p.x_m, p.y_m) for p in points])
                         )
                 elif isinstance(output, CameraOutput):
-                    stamp_s = output.meta.stamp
-                    if stamp_s < options.warmup_s - 3.0:  # image tracks confirm before scoring
+                    if output.meta.stamp < detect_from_s:
                         continue
                     image = cv2.imdecode(np.frombuffer(output.jpeg, np.uint8), cv2.IMREAD_COLOR)
                     result = camera_detector.process_image(
-                        np.asarray(image, np.uint8), stamp_s, output.meta.frame_index
+                        np.asarray(image, np.uint8), output.meta.stamp, output.meta.frame_index
                     )
-                    if result is None or stamp_s < options.warmup_s:
+                    if result is None or result.stamp_s < options.warmup_s:
                         continue
+                    stamp_s = result.stamp_s
                     record.camera_only.append(
                         (stamp_s, [SourcePoint(o.x_m, o.y_m) for o in result.camera_objects])
                     )
@@ -212,11 +227,17 @@ def run_pipeline(
                             detections=detections,
                         )
                     )
-    for log_owner in (lidar_detector.calibration,):
-        message = log_owner.message()
+    owners: list[LidarSelfCalibration | CameraSelfCalibration | RadarSelfCalibration] = [
+        lidar_detector.calibration,
+        camera_detector.calibration,
+    ]
+    if camera_detector.radar_calibration is not None:
+        owners.append(camera_detector.radar_calibration)
+    for owner in owners:
+        message = owner.message()
         record.calibrations[message.source_id] = message
         record.calibration_history[message.source_id] = [
-            (stamp, str(state), detail) for stamp, state, detail in log_owner.log.history
+            (stamp, str(state), detail) for stamp, state, detail in owner.log.history
         ]
     record.batches.sort(key=lambda b: (b.stamp, b.source_id))
     record.wall_s = time.perf_counter() - started

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 
@@ -92,7 +93,7 @@ class CalibrationLog:
 
     site_id: str
     sensor_id: str
-    sensor_kind: str
+    sensor_kind: Literal["lidar", "camera", "radar"]
     state: CalibrationState = CalibrationState.PRIOR
     state_since_s: float = 0.0
     detail: str = ""
@@ -125,7 +126,7 @@ class CalibrationLog:
             site=self.site_id,
             source_id=self.sensor_id,
             stamp=max(0.0, stamp_s),
-            sensor_kind=self.sensor_kind,  # type: ignore[arg-type]
+            sensor_kind=self.sensor_kind,
             state=self.state,
             state_since_s=self.state_since_s,
             correction=bounded(correction),

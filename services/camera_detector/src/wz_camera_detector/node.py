@@ -75,6 +75,7 @@ from wz_camera_detector.association import (
     to_detection,
 )
 from wz_camera_detector.background import BACKEND, BackgroundSubtractionDetector
+from wz_camera_detector.calibration import CameraSelfCalibration, RadarSelfCalibration
 from wz_camera_detector.regions import detector_regions
 from wz_camera_detector.settings import (
     CameraDetectorSettings,
@@ -100,6 +101,7 @@ from wz_shared.messages import (
     Detection,
     DetectionBatch,
     RadarScan,
+    SensorCalibration,
     ServiceState,
     VehicleClass,
 )
@@ -112,6 +114,13 @@ log = logging.getLogger("wz_camera_detector.node")
 
 #: How a problem is reported: (reason, detail).
 Report = Callable[[str, str], None]
+
+#: Seconds of sensor time between two calibration messages of an unchanged state [s].
+CALIBRATION_PERIOD_S = 5.0
+
+#: A detector box scoring below this is not a calibration target (a false box would be paired
+#: with a LiDAR object now and then).
+CALIBRATION_MIN_SCORE = 0.5
 
 #: A box this close to the edge of the detector's view is cut by it: not ranged [px].
 TRUNCATION_MARGIN_PX = 3.0
@@ -139,6 +148,9 @@ class FrameResult:
     tracks: list[ImageTrack]
     camera_objects: list[CameraObject]
     fused: list[FusedObject]
+    #: The frame's capture time on the LiDAR's clock: its stamp less the camera's learned
+    #: clock offset [s].
+    stamp_s: float = 0.0
 
 
 class ImageBackend(Protocol):
@@ -309,6 +321,21 @@ class CameraDetector:
         self._radar_heading = (
             road_heading_at(site, radar.pose.x_m, radar.pose.y_m) if radar is not None else None
         )
+        #: The camera's pose and clock learned against the LiDAR's vehicles, and the radar's
+        #: (:mod:`wz_camera_detector.calibration`); fed by :meth:`lidar_batch`.
+        shapes = {str(bus_class): shape for bus_class, shape in CLASS_SHAPES.values()}
+        self.calibration = CameraSelfCalibration(site.site_id, camera, shapes, settings.calibration)
+        self.radar_calibration = (
+            RadarSelfCalibration(
+                site.site_id,
+                radar,
+                settings.calibration,
+                self.calibration.reference,
+                settings.association.target_height_m,
+            )
+            if radar is not None
+            else None
+        )
         self._scan: RadarScan | None = None
         self._logged: set[str] = set()
         self._frames_taken = 0
@@ -327,11 +354,33 @@ class CameraDetector:
         return ServiceState.RUNNING
 
     def radar_scan(self, scan: RadarScan) -> None:
-        """Keep ``scan`` if it is the newest seen (by stamp)."""
+        """Keep ``scan`` if it is the newest seen (by stamp), on the LiDAR's clock (the radar's
+        learned clock offset taken off its stamp)."""
         if self.radar_mount is None or scan.source_id != self.radar_mount.sensor_id:
             return
+        own = self.radar_calibration
+        if own is not None and own.settings.enabled:
+            own.observe(scan)
+            if own.pose != self.radar_mount.pose:
+                self.radar_mount = self.radar_mount.model_copy(update={"pose": own.pose})
+            if own.clock_offset_s:
+                scan = scan.model_copy(update={"stamp": max(0.0, scan.stamp - own.clock_offset_s)})
         if self._scan is None or scan.stamp >= self._scan.stamp:
             self._scan = scan
+
+    def lidar_batch(self, batch: DetectionBatch) -> None:
+        """The LiDAR's detections (site frame): what the camera and the radar calibrate
+        against."""
+        if not self.settings.calibration.enabled:
+            return
+        self.calibration.add_reference(batch)
+        if self.radar_calibration is not None:
+            self.radar_calibration.pair_pending()
+
+    @property
+    def clock_offset_s(self) -> float:
+        """The camera's learned clock offset [s]: its stamps are this late."""
+        return self.calibration.clock_offset_s if self.settings.calibration.enabled else 0.0
 
     def camera(self, width_px: int, height_px: int) -> PinholeCamera:
         """The pinhole model at a frame's size (the mount's, scaled; CalibrationError for
@@ -414,7 +463,7 @@ class CameraDetector:
         return DetectionBatch(
             site=self.site.site_id,
             source_id=self.camera_mount.sensor_id,
-            stamp=meta.stamp,
+            stamp=result.stamp_s,
             frame_index=meta.frame_index,
             detections=self._detections(result.fused),
             latency_s=max(0.0, time.monotonic() - taken_s),
@@ -468,8 +517,41 @@ class CameraDetector:
         tracks = self.tracker.update(boxes, stamp_s)
         if self.settings.confirmed_only:
             tracks = [track for track in tracks if track.confirmed]
-        objects = self._camera_objects(tracks, image.shape[1], image.shape[0], frame_index)
-        return FrameResult(tracks, objects, self._within_range(self._fuse(objects, stamp_s)))
+        width, height = image.shape[1], image.shape[0]
+        self._calibrate(boxes, stamp_s, width, height)
+        objects = self._camera_objects(tracks, width, height, frame_index)
+        stamp_s = max(0.0, stamp_s - self.clock_offset_s)  # on the LiDAR's clock from here
+        return FrameResult(
+            tracks, objects, self._within_range(self._fuse(objects, stamp_s)), stamp_s
+        )
+
+    def _calibrate(
+        self, boxes: list[ImageDetection], stamp_s: float, width: int, height: int
+    ) -> None:
+        """Feed the frame's whole boxes to the camera's calibration and take its pose.
+
+        The detector's own boxes of this frame, not the image tracks' filtered ones: a filter
+        lags a moving box, and the lag would be learned as a late clock.
+        """
+        own = self.calibration
+        if not self.settings.calibration.enabled:
+            return
+        whole = [
+            box
+            for box in boxes
+            if box.score >= CALIBRATION_MIN_SCORE
+            and not cut_by_view(box.box_xyxy_px, self.backend, width, height)
+        ]
+        own.observe(
+            stamp_s,
+            width,
+            height,
+            np.array([box.box_xyxy_px for box in whole], dtype=np.float64).reshape(-1, 4),
+            [str(CLASS_SHAPES[box.class_name][0]) for box in whole],
+        )
+        if own.pose != self.camera_mount.pose:
+            self.camera_mount = self.camera_mount.model_copy(update={"pose": own.pose})
+            self._cameras.clear()
 
     def _within_range(self, fused: list[FusedObject]) -> list[FusedObject]:
         """The fused objects without the camera-only ones ranged beyond ``max_range_m``.
@@ -510,12 +592,15 @@ class CameraDetector:
                 continue
             heading = road_heading_at(self.site, x0, y0)
             x_m, y_m = fit_box_to_ground(camera, track.box_xyxy_px, heading, shape)
+            covariance = camera_covariance(camera_xy, (x_m, y_m), self.settings)
+            if self.settings.calibration.enabled:
+                covariance = covariance + self._angle_covariance(camera, (x_m, y_m))
             objects.append(
                 CameraObject(
                     local_id=track.local_id,
                     x_m=x_m,
                     y_m=y_m,
-                    covariance_m2=camera_covariance(camera_xy, (x_m, y_m), self.settings),
+                    covariance_m2=covariance,
                     object_class=object_class,
                     score=track.score,
                     heading_rad=heading,
@@ -524,6 +609,20 @@ class CameraDetector:
                 )
             )
         return objects
+
+    def _angle_covariance(self, camera: PinholeCamera, xy_m: tuple[float, float]) -> F64:
+        """What the camera's angles' uncertainty adds at ``xy_m`` [m^2], shape (2, 2): a yaw
+        known to ``s`` moves it ``r s`` across the line of sight, a pitch known to ``s`` moves
+        its range ``r^2 s / h`` along it (a ray meeting the road at a grazing angle)."""
+        yaw_std, pitch_std = self.calibration.angle_std_rad
+        dx, dy = xy_m[0] - float(camera.position_m[0]), xy_m[1] - float(camera.position_m[1])
+        range_m = max(math.hypot(dx, dy), 1.0)
+        u = np.array([dx, dy]) / range_m
+        n = np.array([-u[1], u[0]])
+        height = max(float(camera.position_m[2]), 1.0)
+        along = min(range_m * range_m * pitch_std / height, 0.5 * range_m)
+        covariance: F64 = (range_m * yaw_std) ** 2 * np.outer(n, n) + along**2 * np.outer(u, u)
+        return covariance
 
     def _fuse(self, objects: list[CameraObject], stamp_s: float) -> list[FusedObject]:
         scan = self._scan
@@ -610,6 +709,23 @@ def run(
         else None
     )
     publisher = bus.publisher(bus.keys.detections(camera_id), DetectionBatch)
+    # The LiDAR's detections: what the camera and the radar learn their pose and clock from.
+    lidars = [mount for mount in site.sensors if mount.intrinsics.kind == "lidar"]
+    references = (
+        bus.subscribe(bus.keys.detections(lidars[0].sensor_id), DetectionBatch, capacity=256)
+        if lidars and settings.calibration.enabled
+        else None
+    )
+    owners = [detector.calibration]
+    if detector.radar_calibration is not None:
+        owners.append(detector.radar_calibration)  # type: ignore[arg-type]
+    calibrations = {
+        owner.mount.sensor_id: bus.publisher(
+            bus.keys.calibration(owner.mount.sensor_id), SensorCalibration
+        )
+        for owner in owners
+    }
+    calibration_sent_s = -math.inf
     log.info(
         "detecting on %s with the %s backend, fusing with %s",
         raw_key,
@@ -621,9 +737,26 @@ def run(
     while not runtime.stop.is_set():
         frame: Frame[CameraFrameMeta] | None = frames.recv(0.25)
         runtime.beat(processed=frame is not None)
+        if references is not None:
+            while (reference := references.recv(0.0)) is not None:
+                detector.lidar_batch(reference)
         if scans is not None:
             while (scan := scans.recv(0.0)) is not None:
                 detector.radar_scan(scan)
+        if references is not None and (
+            any(owner.log.changed for owner in owners)
+            or detector.last_stamp_s >= calibration_sent_s + CALIBRATION_PERIOD_S
+        ):
+            for owner in owners:
+                if owner.log.changed:
+                    log.info(
+                        "calibration of %s: %s (%s)",
+                        owner.mount.sensor_id,
+                        owner.log.state,
+                        owner.log.detail,
+                    )
+                calibrations[owner.mount.sensor_id].put(owner.message())
+            calibration_sent_s = detector.last_stamp_s
         if frame is None:
             continue
         taken_s = time.monotonic()

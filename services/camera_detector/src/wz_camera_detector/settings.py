@@ -15,6 +15,7 @@ from pydantic_settings import SettingsConfigDict
 
 from wz_camera_detector.association import AssociationSettings
 from wz_camera_detector.background import BackgroundSubtractionSettings
+from wz_camera_detector.calibration import SensorCalibrationSettings
 from wz_camera_detector.tracker import ImageTrackerSettings
 from wz_shared.sensor_mounts import mount_of_kind
 from wz_shared.settings import ServiceSettings
@@ -102,6 +103,9 @@ class CameraDetectorSettings(ServiceSettings):
     background: BackgroundSubtractionSettings = Field(default_factory=BackgroundSubtractionSettings)
     tracker: ImageTrackerSettings = Field(default_factory=ImageTrackerSettings)
     association: AssociationSettings = Field(default_factory=AssociationSettings)
+    #: The camera's and the radar's pose and clock learned against the LiDAR's vehicles
+    #: (issue 39), on by default; needs the LiDAR's detections on the bus.
+    calibration: SensorCalibrationSettings = Field(default_factory=SensorCalibrationSettings)
 
 
 def camera_mount(site: Site, camera_id: str | None) -> SensorMount:

@@ -45,6 +45,7 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field
 
 from wz_shared.arrays import F64
@@ -115,7 +116,7 @@ def tilt_from_normal(normal: F64) -> tuple[float, float]:
 
 
 def fit_ground(
-    xyz_sensor: F64,
+    xyz_sensor: npt.NDArray[np.floating],
     pose: Pose,
     ground_z_m: float = 0.0,
     range_m: tuple[float, float] = (4.0, 40.0),
@@ -304,7 +305,7 @@ class LidarSelfCalibration:
 
     # -- evidence ----------------------------------------------------------------------------
 
-    def observe_frame(self, xyz_sensor: F64, stamp_s: float) -> None:
+    def observe_frame(self, xyz_sensor: npt.NDArray[np.floating], stamp_s: float) -> None:
         """A frame's returns (sensor frame, finite rows): a ground fit when one is due."""
         self._last_stamp_s = max(self._last_stamp_s, stamp_s)
         if not self.settings.enabled or stamp_s < self._next_ground_s:
