@@ -200,6 +200,28 @@ def _nearest_lane(offsets_m: F64, lanes_m: F64) -> F64:
     return np.asarray(diff[np.arange(len(diff)), np.abs(diff).argmin(axis=1)], dtype=np.float64)
 
 
+def _vote(
+    offsets: F64,
+    lever_yaw: F64,
+    lever_shift: F64,
+    lanes: F64,
+    yaws: F64,
+    shifts: F64,
+    width_m: float,
+) -> tuple[float, float]:
+    """The (yaw, shift) of the grid that puts most centres near a lane centre (a soft count:
+    a Gaussian of ``width_m`` of each centre's distance to its nearest lane)."""
+    best = (-1.0, 0.0, 0.0)
+    for shift in shifts:
+        moved = offsets[None, :] + yaws[:, None] * lever_yaw[None, :] + shift * lever_shift[None, :]
+        gap = np.min(np.abs(moved[:, :, None] - lanes[None, None, :]), axis=2)
+        score = np.exp(-0.5 * (gap / width_m) ** 2).sum(axis=1)
+        index = int(score.argmax())
+        if score[index] > best[0]:
+            best = (float(score[index]), float(yaws[index]), float(shift))
+    return best[1], best[2]
+
+
 def fit_lane_alignment(
     site: Site,
     centres_xy_m: F64,
@@ -223,20 +245,16 @@ def fit_lane_alignment(
     offsets, lever_yaw, lever_shift, _ = _lane_terms(site, centres, sensor_xy_m)
     if start is None:
         sample = np.arange(len(centres))
-        if len(sample) > 1500:
-            sample = np.linspace(0, len(centres) - 1, 1500).astype(int)
-        yaws = np.radians(np.arange(-search_yaw_deg, search_yaw_deg + 1e-9, 0.05))
-        shifts = np.arange(-search_shift_m, search_shift_m + 1e-9, 0.05)
-        best = (-1.0, 0.0, 0.0)
+        if len(sample) > 800:
+            sample = np.linspace(0, len(centres) - 1, 800).astype(int)
         d, a, b = offsets[sample], lever_yaw[sample], lever_shift[sample]
-        for shift in shifts:
-            moved = d[None, :] + yaws[:, None] * a[None, :] + shift * b[None, :]  # (Y, N)
-            gap = np.min(np.abs(moved[:, :, None] - lanes[None, None, :]), axis=2)
-            score = np.exp(-0.5 * (gap / 0.25) ** 2).sum(axis=1)
-            index = int(score.argmax())
-            if score[index] > best[0]:
-                best = (float(score[index]), float(yaws[index]), float(shift))
-        yaw, shift = best[1], best[2]
+        # Coarse to fine: 0.2 deg x 0.1 m over the whole search, then 0.02 deg x 0.02 m.
+        coarse_yaws = np.radians(np.arange(-search_yaw_deg, search_yaw_deg + 1e-9, 0.2))
+        coarse_shifts = np.arange(-search_shift_m, search_shift_m + 1e-9, 0.1)
+        yaw, shift = _vote(d, a, b, lanes, coarse_yaws, coarse_shifts, 0.35)
+        fine_yaws = yaw + np.radians(np.arange(-0.2, 0.2 + 1e-9, 0.02))
+        fine_shifts = shift + np.arange(-0.1, 0.1 + 1e-9, 0.02)
+        yaw, shift = _vote(d, a, b, lanes, fine_yaws, fine_shifts, 0.2)
     else:
         yaw, shift = start
     design = np.stack([lever_yaw, lever_shift], axis=1)
@@ -397,12 +415,13 @@ class LidarSelfCalibration:
         if self._lane is not None and self.log.state == CalibrationState.CALIBRATED:
             recent = [c for t, c in self._boxes if t >= stamp_s - self.settings.bump_window_s]
             if recent and sum(len(c) for c in recent) >= self.settings.bump_min_samples:
+                # A vote over the whole grid: a knock of degrees sends far vehicles lanes away.
                 short = fit_lane_alignment(
                     self.site,
                     self._site_centres(np.concatenate(recent)),
                     sensor_xy,
-                    (self._lane.yaw_rad, self._lane.shift_m),
-                    trim_m=2.0 * self.settings.lane_trim_m,
+                    None,
+                    trim_m=self.settings.lane_trim_m,
                 )
                 moved = (
                     abs(math.degrees(short.yaw_rad - self._lane.yaw_rad))

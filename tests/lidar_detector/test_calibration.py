@@ -1,0 +1,165 @@
+"""The LiDAR's self-calibration (issue 39) on geometry made from a known true pose.
+
+The returns and the box centres are what a LiDAR at the *true* pose would measure, expressed in
+its own frame; the estimator only knows the site file's pose, as in the field. It must find the
+difference: pitch, roll and height from the ground, yaw and the cross-road shift from the
+vehicles on their lanes, and notice a bump.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from wz_lidar_detector.calibration import (
+    LidarCalibrationSettings,
+    LidarSelfCalibration,
+    fit_ground,
+    fit_lane_alignment,
+    tilt_from_normal,
+)
+from wz_shared.messages import CalibrationState
+from wz_shared.site import DEFAULT_SITE_PATH, Pose, load_site
+
+SITE = load_site(DEFAULT_SITE_PATH)
+MOUNT = next(m for m in SITE.sensors if m.intrinsics.kind == "lidar")
+
+
+def _true_pose(yaw: float, pitch: float, roll: float, dx: float, dy: float, dz: float) -> Pose:
+    p = MOUNT.pose
+    return Pose(
+        x_m=p.x_m + dx,
+        y_m=p.y_m + dy,
+        z_m=p.z_m + dz,
+        yaw_deg=p.yaw_deg + yaw,
+        pitch_deg=p.pitch_deg + pitch,
+        roll_deg=p.roll_deg + roll,
+    )
+
+
+def _to_sensor(points_site: np.ndarray, pose: Pose) -> np.ndarray:
+    return np.asarray((points_site - pose.position_m) @ pose.rotation(), dtype=np.float64)
+
+
+def _ground_frame(pose: Pose, rng: np.random.Generator, clutter: int = 3000) -> np.ndarray:
+    """Returns of a flat road (z = 0) round the sensor, 2 cm noise, with boxes of clutter."""
+    angle = rng.uniform(0, 2 * math.pi, 30_000)
+    radius = rng.uniform(3.0, 60.0, 30_000)
+    ground = np.column_stack(
+        [pose.x_m + radius * np.cos(angle), pose.y_m + radius * np.sin(angle), np.zeros(30_000)]
+    )
+    ground[:, 2] += rng.normal(0.0, 0.02, len(ground))
+    # vehicles and drums: points 0.3-2 m above the road
+    things = ground[:clutter].copy()
+    things[:, 2] = rng.uniform(0.3, 2.0, clutter)
+    return _to_sensor(np.vstack([ground, things]), pose)
+
+
+def _lane_centres(pose: Pose, rng: np.random.Generator, count: int) -> np.ndarray:
+    """Box centres of vehicles on the lanes 10-120 m from the sensor (site frame, 1 m up),
+    seen from ``pose`` (sensor frame), with 5 cm noise."""
+    road = SITE.road_frame
+    station0, _ = road.to_road(MOUNT.pose.x_m, MOUNT.pose.y_m)
+    stations = float(station0) + rng.uniform(-120.0, 120.0, count)
+    lanes = np.array([lane.center_offset_m for lane in SITE.lanes])
+    offsets = rng.choice(lanes, count) + rng.normal(0.0, 0.05, count)
+    x, y = road.to_site(stations, offsets)
+    centres = np.column_stack([x, y, np.full(count, 0.8)])
+    near = np.hypot(x - pose.x_m, y - pose.y_m) > 10.0
+    return _to_sensor(centres[near], pose)
+
+
+def test_tilt_from_normal_inverts_the_pose_rotation() -> None:
+    pose = Pose(x_m=0, y_m=0, z_m=5, yaw_deg=37.0, pitch_deg=-1.2, roll_deg=0.7)
+    normal = pose.rotation().T @ np.array([0.0, 0.0, 1.0])
+    pitch, roll = tilt_from_normal(normal)
+    assert pitch == pytest.approx(-1.2, abs=1e-9)
+    assert roll == pytest.approx(0.7, abs=1e-9)
+
+
+def test_ground_fit_finds_pitch_roll_and_height_through_clutter() -> None:
+    rng = np.random.default_rng(1)
+    truth = _true_pose(0.8, 1.1, -0.6, 0.2, -0.1, 0.12)
+    fit = fit_ground(_ground_frame(truth, rng), MOUNT.pose)
+    assert fit is not None
+    assert fit.pitch_deg == pytest.approx(truth.pitch_deg, abs=0.02)
+    assert fit.roll_deg == pytest.approx(truth.roll_deg, abs=0.02)
+    assert fit.height_m == pytest.approx(truth.z_m, abs=0.01)
+    assert fit.rms_m < 0.05
+
+
+def test_ground_fit_refuses_a_frame_without_ground() -> None:
+    sky = np.random.default_rng(2).uniform(-50, 50, (5000, 3))
+    sky[:, 2] = np.abs(sky[:, 2]) + 20.0
+    assert fit_ground(sky, MOUNT.pose) is None
+
+
+@pytest.mark.parametrize(("yaw_deg", "shift_m"), [(2.7, 0.4), (-1.3, -0.2), (0.0, 0.0)])
+def test_lane_alignment_finds_yaw_and_cross_road_shift(yaw_deg: float, shift_m: float) -> None:
+    rng = np.random.default_rng(3)
+    road = SITE.road_frame
+    station, _ = road.to_road(MOUNT.pose.x_m, MOUNT.pose.y_m)
+    normal = np.asarray(road.normal_at(station), dtype=np.float64).reshape(2)
+    truth = _true_pose(yaw_deg, 0.0, 0.0, shift_m * normal[0], shift_m * normal[1], 0.0)
+    centres = _lane_centres(truth, rng, 2000)
+    # Placed with the site file's pose, as the detector does before it has learned.
+    nominal = MOUNT.pose
+    site_xy = (centres @ nominal.rotation().T + nominal.position_m)[:, :2]
+    fit = fit_lane_alignment(SITE, site_xy, (nominal.x_m, nominal.y_m))
+    assert fit is not None
+    assert math.degrees(fit.yaw_rad) == pytest.approx(yaw_deg, abs=0.02)
+    assert fit.shift_m == pytest.approx(shift_m, abs=0.02)
+    assert math.degrees(fit.yaw_std_rad) < 0.05
+
+
+def _feed(
+    calibration: LidarSelfCalibration, truth: Pose, start_s: float, seconds: float, seed: int
+) -> None:
+    rng = np.random.default_rng(seed)
+    for k in range(int(seconds * 10)):
+        stamp = start_s + 0.1 * k
+        if k % 10 == 0:
+            calibration.observe_frame(_ground_frame(truth, rng, clutter=300), stamp)
+        calibration.observe_boxes(_lane_centres(truth, rng, 8), stamp)
+
+
+def test_the_lidar_learns_its_pose_then_flags_a_bump_and_learns_it_again() -> None:
+    settings = LidarCalibrationSettings()
+    calibration = LidarSelfCalibration(SITE.site_id, MOUNT, settings, SITE)
+    assert calibration.log.state == CalibrationState.PRIOR
+    truth = _true_pose(-1.4, 0.5, 0.3, 0.15, 0.0, -0.08)
+    _feed(calibration, truth, 0.0, 60.0, 4)
+    assert calibration.log.state == CalibrationState.CALIBRATED
+    c = calibration.correction
+    assert c.yaw_deg == pytest.approx(-1.4, abs=0.05)
+    assert c.pitch_deg == pytest.approx(0.5, abs=0.05)
+    assert c.roll_deg == pytest.approx(0.3, abs=0.05)
+    assert c.z_m == pytest.approx(-0.08, abs=0.02)
+    assert calibration.pose.yaw_deg == pytest.approx(MOUNT.pose.yaw_deg - 1.4, abs=0.05)
+    message = calibration.message()
+    assert message.state == CalibrationState.CALIBRATED
+    assert message.correction.yaw_std_deg is not None
+    # Knocked round by 2 deg at 60 s: flagged within seconds, then learned again.
+    bumped = truth.model_copy(update={"yaw_deg": truth.yaw_deg + 2.0})
+    _feed(calibration, bumped, 60.0, 10.0, 5)
+    states = [state for _, state, _ in calibration.log.history]
+    assert CalibrationState.BUMPED in states
+    bump_at = next(t for t, s, _ in calibration.log.history if s == CalibrationState.BUMPED)
+    assert 60.0 < bump_at <= 66.0
+    _feed(calibration, bumped, 70.0, 40.0, 6)
+    assert calibration.log.state == CalibrationState.CALIBRATED
+    assert calibration.correction.yaw_deg == pytest.approx(0.6, abs=0.05)
+
+
+def test_disabled_or_without_a_site_the_pose_stays_the_site_files() -> None:
+    off = LidarSelfCalibration(
+        SITE.site_id, MOUNT, LidarCalibrationSettings(enabled=False), SITE
+    )
+    no_site = LidarSelfCalibration(SITE.site_id, MOUNT, LidarCalibrationSettings(), None)
+    truth = _true_pose(2.0, 1.0, 0.0, 0.0, 0.0, 0.0)
+    for calibration in (off, no_site):
+        _feed(calibration, truth, 0.0, 5.0, 7)
+        assert calibration.pose == MOUNT.pose
+        assert calibration.log.state == CalibrationState.PRIOR
