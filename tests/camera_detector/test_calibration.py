@@ -131,7 +131,7 @@ def _run_camera(
     seed: int,
 ) -> None:
     rng = np.random.default_rng(seed)
-    for step in range(int(round((end_s - start_s) * 20))):
+    for step in range(round((end_s - start_s) * 20)):
         t = start_s + step / 20.0
         calibration.add_reference(_lidar_batch(traffic, t, rng))
         if step % 2 == 0:  # a 10 Hz camera whose frame of time t is stamped t + clock
@@ -156,9 +156,7 @@ def test_reference_objects_give_positions_and_velocities() -> None:
 
 def test_the_camera_learns_its_rotation_and_its_late_clock() -> None:
     true_camera = _moved(CAMERA, yaw=1.3, pitch=-0.6, roll=0.25, dz=0.05)
-    calibration = CameraSelfCalibration(
-        SITE.site_id, CAMERA, SHAPES, SensorCalibrationSettings()
-    )
+    calibration = CameraSelfCalibration(SITE.site_id, CAMERA, SHAPES, SensorCalibrationSettings())
     _run_camera(calibration, Traffic(2), true_camera, 0.09, 20.0, 140.0, 3)
     assert calibration.log.state == CalibrationState.CALIBRATED
     c = calibration.correction
@@ -173,9 +171,7 @@ def test_the_camera_learns_its_rotation_and_its_late_clock() -> None:
 
 def test_a_bumped_camera_is_flagged_and_learned_again() -> None:
     true_camera = _moved(CAMERA, yaw=-0.7, pitch=0.4)
-    calibration = CameraSelfCalibration(
-        SITE.site_id, CAMERA, SHAPES, SensorCalibrationSettings()
-    )
+    calibration = CameraSelfCalibration(SITE.site_id, CAMERA, SHAPES, SensorCalibrationSettings())
     traffic = Traffic(4)
     _run_camera(calibration, traffic, true_camera, 0.05, 20.0, 120.0, 5)
     assert calibration.log.state == CalibrationState.CALIBRATED
@@ -237,7 +233,7 @@ def test_the_radar_learns_its_yaw_and_clock() -> None:
     radar = RadarSelfCalibration(SITE.site_id, RADAR, settings, reference, 0.5)
     traffic = Traffic(8)
     rng = np.random.default_rng(9)
-    for step in range(int(120 * 20)):
+    for step in range(120 * 20):
         t = 20.0 + step / 20.0
         reference.add(_lidar_batch(traffic, t, rng))
         radar.pair_pending()
