@@ -460,6 +460,18 @@ def evaluate(
         "max_range_m": options.max_range_m,
         # What the sensors were rendered with; nothing of it reached the services.
         "mount_errors": None if record.mast is None else record.mast.describe(),
+        # What each sensor learned of its pose and clock (the self-calibration, on by default).
+        "calibration": {
+            sensor: {
+                **message.model_dump(
+                    mode="json",
+                    include={"sensor_kind", "state", "correction", "clock_offset_s", "samples"},
+                ),
+                "clock_offset_std_s": message.clock_offset_std_s,
+                "history": record.calibration_history.get(sensor, []),
+            }
+            for sensor, message in record.calibrations.items()
+        },
         "vehicles": len(
             {
                 v.vehicle_id

@@ -196,6 +196,49 @@ def mount_error_lines(report: dict[str, Any]) -> list[str]:
     return lines
 
 
+def calibration_lines(report: dict[str, Any]) -> list[str]:
+    """What each sensor learned of its pose and clock, against the drawn truth where the run
+    had a real mast (``--mount-errors``): one row per sensor."""
+    learned = report.get("calibration") or {}
+    if not learned:
+        return []
+    drawn = (report.get("mount_errors") or {}).get("sensors", {})
+    lines = [
+        "",
+        "Self-calibration at the end of the run (learned; drawn truth in brackets where the "
+        "sensors were a real mast's):",
+        "",
+        "| sensor | state | yaw [deg] | pitch [deg] | roll [deg] | across/east [m] | "
+        "north [m] | up [m] | clock late [ms] | samples |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+
+    def pair(
+        value: float,
+        truth: dict[str, float] | None,
+        key: str,
+        scale: float = 1.0,
+        digits: int = 2,
+    ) -> str:
+        text = f"{scale * value:+.{digits}f}"
+        if truth is not None:
+            text += f" ({scale * truth[key]:+.{digits}f})"
+        return text
+
+    for sensor, entry in learned.items():
+        c = entry["correction"]
+        e = drawn.get(sensor)
+        lines.append(
+            f"| {sensor} | {entry['state']} | {pair(c['yaw_deg'], e, 'yaw_deg')} | "
+            f"{pair(c['pitch_deg'], e, 'pitch_deg')} | {pair(c['roll_deg'], e, 'roll_deg')} | "
+            f"{pair(c['x_m'], e, 'dx_m')} | {pair(c['y_m'], e, 'dy_m')} | "
+            f"{pair(c['z_m'], e, 'dz_m')} | "
+            f"{pair(entry['clock_offset_s'], e, 'clock_offset_s', 1000.0, 0)} | "
+            f"{entry['samples']} |"
+        )
+    return lines
+
+
 def markdown(report: dict[str, Any]) -> str:
     def cell(value: float | None) -> str:
         return "-" if value is None else f"{value:.2f}"
@@ -212,6 +255,7 @@ def markdown(report: dict[str, Any]) -> str:
         f"({report['id_switches_per_100_vehicles']:.2f} per 100 vehicles). Lateral bias map "
         f"given to the tracker: {report.get('bias_map') or 'none'}.{_conditions(report)}",
         *mount_error_lines(report),
+        *calibration_lines(report),
         "",
         "| source | RMSE longitudinal [m] | RMSE lateral [m] | RMSE speed [m/s] | matched | "
         "missed |",

@@ -62,6 +62,7 @@ from wz_lidar_detector.transform import box_to_site, to_detection
 from wz_shared.arrays import F32, F64
 from wz_shared.codec import Frame
 from wz_shared.messages import (
+    CalibrationState,
     Detection,
     DetectionBatch,
     LidarFrameMeta,
@@ -329,6 +330,7 @@ class LidarDetector:
         if frame is None:
             return None
         self.last_stamp_s = max(self.last_stamp_s, meta.stamp)
+        state_before = self.calibration.log.state
         if self.calibrating:
             xyz = frame.points[:, :3]
             self.calibration.observe_frame(xyz[np.isfinite(xyz).all(axis=1)], meta.stamp)
@@ -364,6 +366,9 @@ class LidarDetector:
             self.calibration.observe_boxes(
                 np.array([box.center_xyz_m for box in result.detections]), meta.stamp
             )
+        bumped = self.calibration.log.state == CalibrationState.BUMPED
+        if bumped and state_before != CalibrationState.BUMPED:
+            self._relearn_background(self.calibration.log.detail)
         detections = self._site_detections(result)
         return DetectionBatch(
             site=self.site_id,
@@ -372,6 +377,20 @@ class LidarDetector:
             frame_index=meta.frame_index,
             detections=detections,
             latency_s=max(0.0, time.monotonic() - taken_s),
+        )
+
+    def _relearn_background(self, why: str) -> None:
+        """A knocked sensor sees its background turned: the drums, the signs and the barrier
+        would come out as vehicles. Learn it again from the next frames (fast path)."""
+        if self.reference is not None:
+            return
+        log.warning(
+            "the sensor was moved (%s): learning its background again",
+            why,
+            extra={"sensor": self.mount.sensor_id},
+        )
+        self.backgrounds = BackgroundLearner(
+            self.settings.model_copy(update={"background_file": None})
         )
 
     def _point_frame(self, meta: LidarFrameMeta, points: F32) -> PointFrame | None:
