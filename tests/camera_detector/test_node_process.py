@@ -21,9 +21,12 @@ from wz_camera_detector.settings import camera_mount, radar_mount
 from wz_shared.bus import Bus, Subscription
 from wz_shared.codec import encode_camera_frame
 from wz_shared.messages import (
+    CalibrationState,
     CameraFrameMeta,
     DetectionBatch,
+    PoseCorrection,
     RadarScan,
+    SensorCalibration,
     ServiceState,
     ServiceStatus,
     VehicleTruth,
@@ -89,6 +92,7 @@ def test_node_process_detects_fuses_and_survives_bad_input(port: int) -> None:
         status = bus.subscribe(
             bus.keys.status("camera-detector"), ServiceStatus, mode="ring", capacity=1
         )
+        calibrations = bus.subscribe(bus.keys.calibration_all, SensorCalibration)
         node = subprocess.Popen(
             [sys.executable, "-m", "wz_camera_detector.node"], cwd=ROOT, env=env
         )
@@ -172,6 +176,16 @@ def test_node_process_detects_fuses_and_survives_bad_input(port: int) -> None:
             health = wait_status(status, lambda s: s.state == ServiceState.RUNNING, "running")
             assert health.pid == node.pid
             assert node.poll() is None
+            # Each of its sensors' self-calibration went out; with no LiDAR on the bus to learn
+            # against, both stay at the site file's pose and clock.
+            learned = {m.source_id: m for m in iter(lambda: calibrations.recv(1.0), None)}
+            assert set(learned) == {CAMERA.sensor_id, RADAR.sensor_id}
+            assert learned[CAMERA.sensor_id].sensor_kind == "camera"
+            assert learned[RADAR.sensor_id].sensor_kind == "radar"
+            for message in learned.values():
+                assert message.state == CalibrationState.PRIOR
+                assert message.correction == PoseCorrection()
+                assert message.clock_offset_s == 0.0
         finally:
             node.send_signal(signal.SIGTERM)
             assert node.wait(15.0) == 0

@@ -28,8 +28,10 @@ from wz_lidar_detector.transform import box_to_site, detections_in_site, to_dete
 from wz_shared.bus import Bus, Subscription
 from wz_shared.codec import encode_lidar_frame
 from wz_shared.messages import (
+    CalibrationState,
     DetectionBatch,
     LidarFrameMeta,
+    SensorCalibration,
     ServiceState,
     ServiceStatus,
     VehicleClass,
@@ -345,6 +347,7 @@ def test_node_process_learns_detects_and_survives_bad_frames(port: int) -> None:
         status = bus.subscribe(
             bus.keys.status("lidar-detector"), ServiceStatus, mode="ring", capacity=1
         )
+        calibrations = bus.subscribe(bus.keys.calibration("lidar-mast"), SensorCalibration)
         raw = bus.publisher(raw_key, LidarFrameMeta, block=True)
         node = subprocess.Popen([sys.executable, "-m", "wz_lidar_detector.node"], cwd=ROOT, env=env)
         try:
@@ -412,6 +415,15 @@ def test_node_process_learns_detects_and_survives_bad_frames(port: int) -> None:
             assert health.state == ServiceState.RUNNING and health.pid == node.pid
             assert 0 < health.stamp <= index / RATE_HZ  # the newest frame's time, not wall time
             assert node.poll() is None
+            # The sensor's self-calibration went out on its key: the synthetic road is level
+            # 6 m under the sensor, as the site file says, so nothing is corrected.
+            learned = list(iter(lambda: calibrations.recv(0.5), None))
+            assert learned, "no calibration message from the node"
+            assert {m.source_id for m in learned} == {"lidar-mast"}
+            assert learned[0].sensor_kind == "lidar"
+            assert learned[-1].state in (CalibrationState.PRIOR, CalibrationState.LEARNING)
+            assert abs(learned[-1].correction.pitch_deg) < 0.05
+            assert abs(learned[-1].correction.z_m) < 0.02
         finally:
             node.send_signal(signal.SIGTERM)
             assert node.wait(15.0) == 0
