@@ -411,7 +411,8 @@ def score_alerts(
         ``duplicates``, ``alerts`` (alert episodes), ``truth_episodes``, ``lead_time_s`` and
         ``truth_lead_time_s`` (medians [s], None without samples), ``lead_time_samples``,
         ``false_positive_starts`` (where and when the first :data:`MAX_FALSE_STARTS` false
-        alerts started, to find why); for speeding also ``lead_time_aggressive_s``.
+        alerts started, to find why), ``false_positive_stamps_s`` (when every false alert
+        started [s]); for speeding also ``lead_time_aggressive_s``.
     """
     index = TruthIndex([(stamp, list(vehicles)) for stamp, vehicles in truth_frames])
     profile = {v.vehicle_id: v.driver_profile for _, vehicles in truth_frames for v in vehicles}
@@ -445,6 +446,7 @@ def score_alerts(
         true_positives: list[Episode] = []
         false_positives = duplicates = 0
         false_starts: list[dict[str, Any]] = []
+        false_stamps: list[float] = []
         for alert in (a for a in alert_episodes if a.alert_type is alert_type):
             overlapping = [
                 t
@@ -462,6 +464,7 @@ def score_alerts(
             else:
                 false_positives += 1
                 duplicates += bool(overlapping)
+                false_stamps.append(round(alert.start_s, 2))
                 start = starts.get(alert.episode_id)
                 if start is not None and len(false_starts) < MAX_FALSE_STARTS:
                     false_starts.append(
@@ -489,6 +492,7 @@ def score_alerts(
             "lead_time_samples": len(leads),
             "truth_lead_time_s": _median([x for x in map(lead, candidates) if x is not None]),
             "false_positive_starts": false_starts,
+            "false_positive_stamps_s": false_stamps,
         }
         if alert_type is AlertType.SPEEDING:
             aggressive = [

@@ -95,6 +95,12 @@ def main(argv: list[str] | None = None) -> int:
         help="with --mount-errors: knock SENSOR round its mast by DEG (default 2) SECONDS after "
         "the warm-up",
     )
+    parser.add_argument(
+        "--no-self-calibration",
+        action="store_true",
+        help="the detectors keep the site file's poses and the sensors' stamps (the sensors' "
+        "self-calibration off; it is on by default, as in the services)",
+    )
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--out", type=Path, default=Path("runs/eval"))
     args = parser.parse_args(argv)
@@ -141,6 +147,7 @@ def main(argv: list[str] | None = None) -> int:
         bias_map=bias_map,
         mount_errors=args.mount_errors,
         bump=bump,
+        self_calibration=not args.no_self_calibration,
     )
     args.out.mkdir(parents=True, exist_ok=True)
     report = evaluate(site, options, plots_dir=args.out)

@@ -177,6 +177,9 @@ class EvalOptions:
     mount_errors: bool = False
     #: A sensor knocked round at a simulation time (needs ``mount_errors``).
     bump: Bump | None = None
+    #: The sensors learn their poses and clocks from the warm-up's traffic (on, as in the
+    #: services); False: the site file's poses and the stamps as they come.
+    self_calibration: bool = True
 
 
 def pipeline_options(options: EvalOptions) -> PipelineOptions:
@@ -192,6 +195,7 @@ def pipeline_options(options: EvalOptions) -> PipelineOptions:
         camera_model=options.camera_model,
         mount_errors=options.mount_errors,
         bump=options.bump,
+        self_calibration=options.self_calibration,
     )
 
 
@@ -506,6 +510,13 @@ def evaluate(
             _dropout_report(d, options.warmup_s, fused_samples, mot, mot_times)
             for d in options.dropouts
         ],
+        "bump": (
+            None
+            if options.bump is None
+            else _bump_report(
+                options.bump, record, options.warmup_s, alerts, fused_samples, mot, mot_times
+            )
+        ),
         "pipeline_problems": record.problems,
         "timing": {
             "pipeline_wall_s": round(record.wall_s, 1),
@@ -684,6 +695,60 @@ def _dropout_report(
         "fused_rmse_lateral_m": float(np.sqrt(np.mean(lat**2))) if len(lat) else None,
         "fused_max_abs_error_m": float(np.max(np.hypot(lon, lat))) if len(lon) else None,
         "id_switches_from_start_to_2s_after": mot.switches_between(mot_times, start, end + 2.0),
+    }
+
+
+def _bump_report(
+    bump: Bump,
+    record: PipelineRecord,
+    warmup_s: float,
+    alerts: dict[str, dict[str, Any]],
+    fused_samples: Sequence[tuple[float, float, float]],
+    mot: _MotAccumulator,
+    mot_times: Sequence[float],
+) -> dict[str, Any]:
+    """A knocked sensor (issue 39): when its self-calibration flagged it and learned it again,
+    the false alerts in the minute after the knock against an undisturbed minute before it,
+    and the fused track's errors and identity switches before the knock and from five
+    minutes after it."""
+    at = bump.at_s
+    end = max((t for t, _ in record.truth), default=at)
+    history = record.calibration_history.get(bump.sensor_id, [])
+    flagged = next((t for t, state, _ in history if state == "bumped" and t >= at), None)
+    again = (
+        next((t for t, state, _ in history if state == "calibrated" and t > flagged), None)
+        if flagged is not None
+        else None
+    )
+    stamps = [t for entry in alerts.values() for t in entry.get("false_positive_stamps_s", [])]
+    before_minutes = max((at - warmup_s) / 60.0, 0.0)
+
+    def window(start: float, stop: float) -> dict[str, Any]:
+        inside = [(lon, lat) for t, lon, lat in fused_samples if start <= t < stop]
+        lon = np.array([v[0] for v in inside])
+        lat = np.array([v[1] for v in inside])
+        return {
+            "from_s": round(start, 1),
+            "to_s": round(stop, 1),
+            "fused_samples": len(inside),
+            "fused_rmse_longitudinal_m": float(np.sqrt(np.mean(lon**2))) if len(lon) else None,
+            "fused_rmse_lateral_m": float(np.sqrt(np.mean(lat**2))) if len(lat) else None,
+            "id_switches": mot.switches_between(mot_times, start, stop),
+            "false_alerts": sum(start <= t < stop for t in stamps),
+        }
+
+    return {
+        **vars(bump),
+        "flagged_after_s": None if flagged is None else round(flagged - at, 2),
+        "calibrated_again_after_s": None if again is None else round(again - at, 2),
+        "false_alerts_minute_after": sum(at <= t < at + 60.0 for t in stamps),
+        "false_alerts_per_minute_before": (
+            round(sum(warmup_s <= t < at for t in stamps) / before_minutes, 2)
+            if before_minutes > 0
+            else None
+        ),
+        "before": window(warmup_s, at),
+        "from_5_min_after": window(at + 300.0, end) if end > at + 300.0 else None,
     }
 
 

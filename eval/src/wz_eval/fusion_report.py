@@ -239,6 +239,34 @@ def calibration_lines(report: dict[str, Any]) -> list[str]:
     return lines
 
 
+def bump_lines(report: dict[str, Any]) -> list[str]:
+    """The knocked sensor's story (``--bump``): flagged, learned again, false alerts, errors."""
+    bump = report.get("bump")
+    if not bump:
+        return []
+
+    def cell(value: float | None, fmt: str = ".2f") -> str:
+        return "-" if value is None else format(value, fmt)
+
+    lines = [
+        "",
+        f"Bump: {bump['sensor_id']} turned {bump['yaw_deg']:+.1f} deg at {bump['at_s']:g} s. "
+        f"Flagged after {cell(bump['flagged_after_s'], '.1f')} s, calibrated again after "
+        f"{cell(bump['calibrated_again_after_s'], '.1f')} s. False alerts in the minute after: "
+        f"{bump['false_alerts_minute_after']} (before it: "
+        f"{cell(bump['false_alerts_per_minute_before'])} a minute).",
+    ]
+    for name in ("before", "from_5_min_after"):
+        w = bump.get(name)
+        if w:
+            lines.append(
+                f"- {name.replace('_', ' ')} ({w['from_s']:g}-{w['to_s']:g} s): fused RMSE "
+                f"{cell(w['fused_rmse_longitudinal_m'])} / {cell(w['fused_rmse_lateral_m'])} m, "
+                f"{w['id_switches']} identity switches, {w['false_alerts']} false alerts."
+            )
+    return lines
+
+
 def markdown(report: dict[str, Any]) -> str:
     def cell(value: float | None) -> str:
         return "-" if value is None else f"{value:.2f}"
@@ -256,6 +284,7 @@ def markdown(report: dict[str, Any]) -> str:
         f"given to the tracker: {report.get('bias_map') or 'none'}.{_conditions(report)}",
         *mount_error_lines(report),
         *calibration_lines(report),
+        *bump_lines(report),
         "",
         "| source | RMSE longitudinal [m] | RMSE lateral [m] | RMSE speed [m/s] | matched | "
         "missed |",

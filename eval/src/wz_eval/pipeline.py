@@ -76,6 +76,9 @@ class PipelineOptions:
     mount_errors: bool = False
     #: A sensor knocked round at a simulation time (needs ``mount_errors``).
     bump: Bump | None = None
+    #: The sensors learn their poses and clocks (the detectors' self-calibration, on by
+    #: default as in the services); False: the site file's poses and the stamps as they come.
+    self_calibration: bool = True
 
 
 @dataclass(frozen=True)
@@ -134,10 +137,17 @@ def run_pipeline(
     lidar = lidar_mount(site, None)
     camera = camera_mount(site, None)
     radar = radar_mount(site, None)
-    lidar_settings = LidarDetectorSettings.model_validate({"path": "fast", "learn_frames": 40})
+    lidar_settings = LidarDetectorSettings.model_validate(
+        {
+            "path": "fast",
+            "learn_frames": 40,
+            "calibration": {"enabled": options.self_calibration},
+        }
+    )
     lidar_detector = LidarDetector(site.site_id, lidar, lidar_settings, report, site=site)
     camera_kwargs: dict[str, object] = {
         "backend": "yolo",
+        "calibration": {"enabled": options.self_calibration},
         "radar_id": radar.sensor_id if radar is not None else "none",
     }
     if options.camera_model is not None:
