@@ -7,6 +7,7 @@ Usage::
             [--mount-errors [--bump SENSOR@SECONDS[:DEG]]] [--json FILE] [--out DIR]
     wz eval --log LOG_DIR [--truth GPS_FILE] ...     (a field log: :mod:`wz_eval.field_run`)
     wz eval --sites N [--seed S] ...                 (generated sites: :mod:`wz_eval.sites`)
+    wz eval --mast-check SURVEYED DISPLACED          (issue 39: :mod:`wz_eval.mast_check`)
 
 The command line only (``python -m wz_eval.cli``, what ``wz eval`` runs): its options and which
 evaluation they ask for. The simulated run and its scoring are :mod:`wz_eval.fusion`'s (its
@@ -39,6 +40,10 @@ def main(argv: list[str] | None = None) -> int:
         from wz_eval.field_run import main as field_main
 
         return field_main(arguments)
+    if any(a.split("=")[0] == "--mast-check" for a in arguments):  # two runs held together
+        from wz_eval.mast_check import main as mast_check_main
+
+        return mast_check_main(arguments)
     if any(a.split("=")[0] == "--sites" for a in arguments):  # generated sites
         from wz_eval.sites import main as sites_main
 
