@@ -50,7 +50,9 @@ def check_pair(surveyed: dict[str, Any], displaced: dict[str, Any]) -> list[dict
     """Every held figure of one pair: name, surveyed, displaced, bound, holds."""
     checks: list[dict[str, Any]] = []
 
-    def add(name: str, base: float | None, value: float | None, bound: str, ok: bool | None):
+    def add(
+        name: str, base: float | None, value: float | None, bound: str, ok: bool | None
+    ) -> None:
         checks.append(
             {"name": name, "surveyed": base, "displaced": value, "bound": bound, "holds": ok}
         )
