@@ -35,6 +35,7 @@ from benchmarks.report_sensors import (
     camera_models,
     generated_sites,
     lidar_detection,
+    self_calibration,
     sensors,
     sumo_step,
     tracker_cycle,
@@ -342,6 +343,10 @@ SECTIONS: dict[str, tuple[str, Callable[[dict[str, Any]], list[str]]]] = {
     "generated_sites": (
         "the whole pipeline on 12 generated sites it was never tuned on (issue 25)",
         generated_sites,
+    ),
+    "self_calibration": (
+        "the sensors' self-calibration: CPU at full rates, time to learn against traffic",
+        self_calibration,
     ),
 }
 

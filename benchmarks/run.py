@@ -40,6 +40,7 @@ from benchmarks import (
     lidar_detection,
     recovery,
     report,
+    self_calibration,
     sensors,
     speeding_flood,
     sumo_step,
@@ -67,6 +68,7 @@ BENCHMARKS: dict[str, Callable[[bool], dict[str, Any]]] = {
     "webhook_latency": webhook_latency.run,
     "recovery": recovery.run,
     "generated_sites": generated_sites.run,
+    "self_calibration": self_calibration.run,
 }
 RESULTS_PATH = ROOT / "benchmarks" / "results.json"
 MARKDOWN_PATH = ROOT / "BENCHMARKS.md"

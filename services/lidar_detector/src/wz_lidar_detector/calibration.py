@@ -76,8 +76,10 @@ class LidarCalibrationSettings(BaseModel):
     lane_window_s: float = Field(default=90.0, gt=0.0)
     #: Box centres before a yaw and shift are applied.
     lane_min_samples: int = Field(default=300, ge=10)
-    #: Seconds between lane fits [s].
+    #: Seconds between lane fits while learning, and once calibrated [s] (the bump check
+    #: runs every ``lane_every_s``).
     lane_every_s: float = Field(default=1.0, gt=0.0)
+    calibrated_lane_every_s: float = Field(default=10.0, gt=0.0)
     #: A residual beyond this is not on its lane (a lane change, a false box) [m].
     lane_trim_m: float = Field(default=0.8, gt=0.0)
     #: Box centres of one vehicle seen frame after frame are not independent: the formal
@@ -89,6 +91,11 @@ class LidarCalibrationSettings(BaseModel):
     bump_yaw_deg: float = Field(default=0.6, gt=0.0)
     bump_tilt_deg: float = Field(default=0.6, gt=0.0)
     bump_min_samples: int = Field(default=40, ge=5)
+    #: The bump check votes afresh when fewer of the recent centres than this share lie on a
+    #: lane under the learned pose (a lane change or a false box leaves most on).
+    bump_on_lane_share: float = Field(default=0.8, gt=0.0, le=1.0)
+    #: Ground fits once calibrated: every this many seconds [s].
+    calibrated_ground_every_s: float = Field(default=5.0, gt=0.0)
     #: Yaw std [deg] below which (with the ground fits done) the sensor is ``calibrated``.
     calibrated_yaw_std_deg: float = Field(default=0.1, gt=0.0)
 
@@ -130,7 +137,10 @@ def fit_ground(
     returns within a narrower band of the plane found (a vehicle's roof or a drum leaves it);
     None when fewer than 200 returns remain.
     """
-    xyz = np.asarray(xyz_sensor, dtype=np.float64).reshape(-1, 3)
+    xyz = np.asarray(xyz_sensor).reshape(-1, 3)
+    if len(xyz) > 4 * max_points:  # a sweep's 100 000+ returns: every k-th is plenty
+        xyz = xyz[:: len(xyz) // (2 * max_points)]
+    xyz = np.asarray(xyz, dtype=np.float64)
     horizontal = np.hypot(xyz[:, 0], xyz[:, 1])
     near = (horizontal >= range_m[0]) & (horizontal <= range_m[1])
     xyz = xyz[near]
@@ -316,6 +326,7 @@ class LidarSelfCalibration:
         #: Box centres in the sensor frame with their stamps.
         self._boxes: deque[tuple[float, F64]] = deque()
         self._lane: LaneFit | None = None
+        self._next_full_fit_s = -math.inf
         self._bump_votes = 0
         self._last_stamp_s = 0.0
         self.correction = PoseCorrection()
@@ -328,7 +339,10 @@ class LidarSelfCalibration:
         self._last_stamp_s = max(self._last_stamp_s, stamp_s)
         if not self.settings.enabled or stamp_s < self._next_ground_s:
             return
-        self._next_ground_s = stamp_s + self.settings.ground_every_s
+        every = self.settings.ground_every_s
+        if self.log.state == CalibrationState.CALIBRATED:
+            every = self.settings.calibrated_ground_every_s
+        self._next_ground_s = stamp_s + every
         fit = fit_ground(
             xyz_sensor,
             self.pose,
@@ -397,14 +411,19 @@ class LidarSelfCalibration:
         samples = sum(len(c) for _, c in self._boxes)
         if self.site is None or samples < self.settings.lane_min_samples // 3:
             return
-        every = np.concatenate([c for _, c in self._boxes])
         sensor_xy = (self.nominal.x_m, self.nominal.y_m)
+        calibrated = self._lane is not None and self.log.state == CalibrationState.CALIBRATED
+        if calibrated and self._bump_check(stamp_s, sensor_xy):
+            return
+        if calibrated and stamp_s < self._next_full_fit_s:
+            return  # learned: the whole window is fitted again only now and then
+        self._next_full_fit_s = stamp_s + self.settings.calibrated_lane_every_s
         start = None
         if self._lane is not None and self.log.state != CalibrationState.BUMPED:
             start = (self._lane.yaw_rad, self._lane.shift_m)
         fit = fit_lane_alignment(
             self.site,
-            self._site_centres(every),
+            self._site_centres(np.concatenate([c for _, c in self._boxes])),
             sensor_xy,
             start,
             trim_m=self.settings.lane_trim_m,
@@ -412,35 +431,44 @@ class LidarSelfCalibration:
         )
         if fit is None:
             return
-        if self._lane is not None and self.log.state == CalibrationState.CALIBRATED:
-            recent = [c for t, c in self._boxes if t >= stamp_s - self.settings.bump_window_s]
-            if recent and sum(len(c) for c in recent) >= self.settings.bump_min_samples:
-                # A vote over the whole grid: a knock of degrees sends far vehicles lanes away.
-                short = fit_lane_alignment(
-                    self.site,
-                    self._site_centres(np.concatenate(recent)),
-                    sensor_xy,
-                    None,
-                    trim_m=self.settings.lane_trim_m,
-                )
-                moved = (
-                    abs(math.degrees(short.yaw_rad - self._lane.yaw_rad))
-                    if short is not None
-                    else 0.0
-                )
-                self._bump_votes = self._bump_votes + 1 if moved > self.settings.bump_yaw_deg else 0
-                if self._bump_votes >= 2 and short is not None:
-                    self._bumped(
-                        stamp_s,
-                        f"its yaw moved {moved:.2f} deg in {self.settings.bump_window_s:g} s",
-                    )
-                    # Learn again from the vehicles seen since the bump only.
-                    while self._boxes and self._boxes[0][0] < stamp_s - self.settings.bump_window_s:
-                        self._boxes.popleft()
-                    fit = short
         if samples >= self.settings.lane_min_samples or self.log.state == CalibrationState.BUMPED:
             self._lane = fit
         self._update(stamp_s)
+
+    def _bump_check(self, stamp_s: float, sensor_xy: tuple[float, float]) -> bool:
+        """Whether the last seconds' vehicles say the sensor was turned (then it is
+        ``bumped`` and learns again from them). A cheap screen first: the share of recent
+        centres on a lane under the learned pose; only when it falls is the yaw voted afresh
+        (a knock of degrees sends far vehicles lanes away)."""
+        assert self._lane is not None and self.site is not None
+        recent = [c for t, c in self._boxes if t >= stamp_s - self.settings.bump_window_s]
+        if not recent or sum(len(c) for c in recent) < self.settings.bump_min_samples:
+            return False
+        centres = self._site_centres(np.concatenate(recent))
+        lanes = np.array([lane.center_offset_m for lane in self.site.lanes], dtype=np.float64)
+        offsets, lever_yaw, lever_shift, _ = _lane_terms(self.site, centres, sensor_xy)
+        residual = _nearest_lane(
+            offsets + self._lane.yaw_rad * lever_yaw + self._lane.shift_m * lever_shift, lanes
+        )
+        on_lane = float(np.mean(np.abs(residual) <= self.settings.lane_trim_m))
+        moved = 0.0
+        short = None
+        if on_lane < self.settings.bump_on_lane_share:
+            short = fit_lane_alignment(
+                self.site, centres, sensor_xy, None, trim_m=self.settings.lane_trim_m
+            )
+            if short is not None:
+                moved = abs(math.degrees(short.yaw_rad - self._lane.yaw_rad))
+        self._bump_votes = self._bump_votes + 1 if moved > self.settings.bump_yaw_deg else 0
+        if self._bump_votes < 2 or short is None:
+            return False
+        self._bumped(stamp_s, f"its yaw moved {moved:.2f} deg in {self.settings.bump_window_s:g} s")
+        # Learn again from the vehicles seen since the bump only.
+        while self._boxes and self._boxes[0][0] < stamp_s - self.settings.bump_window_s:
+            self._boxes.popleft()
+        self._lane = short
+        self._update(stamp_s)
+        return True
 
     def _update(self, stamp_s: float) -> None:
         correction = PoseCorrection()
