@@ -84,22 +84,27 @@ class SensorCalibrationSettings(BaseModel):
 
     #: Learn and apply; False: the site file's poses and the stamps as they come.
     enabled: bool = True
+    #: Vehicle classes whose pairs the camera's fit uses (both the image box's and the
+    #: LiDAR object's class): those of one typical shape.
+    target_classes: tuple[str, ...] = ("car",)
     #: Camera frames kept for the fit, per second of camera time.
     frames_per_s: float = Field(default=10.0, gt=0.0)
     #: Seconds of pairs the fit uses [s].
     window_s: float = Field(default=120.0, gt=0.0)
     #: Seconds between fits while learning, and once calibrated (the bump check runs with
     #: each) [s].
-    fit_every_s: float = Field(default=3.0, gt=0.0)
-    calibrated_fit_every_s: float = Field(default=10.0, gt=0.0)
+    fit_every_s: float = Field(default=5.0, gt=0.0)
+    calibrated_fit_every_s: float = Field(default=15.0, gt=0.0)
     #: Camera frames a fit uses at most (evenly over the window).
-    max_fit_frames: int = Field(default=500, ge=20)
+    max_fit_frames: int = Field(default=400, ge=20)
+    #: Seconds between bump checks once calibrated [s].
+    bump_every_s: float = Field(default=2.0, gt=0.0)
     #: Matched pairs before a correction is applied.
     min_pairs: int = Field(default=150, ge=10)
     #: Pairs before the state is ``calibrated`` (with the yaw std below
     #: ``calibrated_std_deg``).
-    calibrated_pairs: int = Field(default=400, ge=10)
-    calibrated_std_deg: float = Field(default=0.15, gt=0.0)
+    calibrated_pairs: int = Field(default=250, ge=10)
+    calibrated_std_deg: float = Field(default=0.2, gt=0.0)
     #: The clock offsets the vote tries [s]: from, to.
     clock_search_s: tuple[float, float] = (-0.05, 0.3)
     #: Bump check: the recent seconds [s] and the angle their residuals may stand off [deg].
@@ -119,7 +124,7 @@ class SensorCalibrationSettings(BaseModel):
     #: at the factory, so the offset is held near zero and the clock takes the rest.
     prior_range_m: float = Field(default=0.1, gt=0.0)
     #: Pairs of one vehicle in successive frames are not independent (formal std inflation).
-    frames_per_vehicle: float = Field(default=20.0, ge=1.0)
+    frames_per_vehicle: float = Field(default=10.0, ge=1.0)
 
 
 # --- the LiDAR's objects as a reference ------------------------------------------------------
@@ -297,6 +302,10 @@ class CameraSelfCalibration:
         self._shape_names = list(shapes)
         self._shapes = [shapes[name] for name in self._shape_names]
         self._outlines = np.stack([shape.outline_points() for shape in self._shapes])
+        self._target_shapes = np.array(
+            [i for i, name in enumerate(self._shape_names) if name in settings.target_classes],
+            dtype=int,
+        )
         self.reference = ReferenceObjects()
         self._pending: deque[tuple[float, F64, tuple[int, ...]]] = deque()
         self._frames: deque[_Frame] = deque()
@@ -355,7 +364,7 @@ class CameraSelfCalibration:
         if len(self._frames) < 10:
             return
         if self.log.state == CalibrationState.CALIBRATED and stamp_s >= self._next_check_s:
-            self._next_check_s = stamp_s + self.settings.fit_every_s
+            self._next_check_s = stamp_s + self.settings.bump_every_s
             if self._check_bump(stamp_s, list(self._frames)):
                 self._next_fit_s = stamp_s
         if stamp_s >= self._next_fit_s:
@@ -468,6 +477,14 @@ class CameraSelfCalibration:
             row_second = row[r, 1] if cost.shape[1] > 1 else np.full(len(r), np.inf)
             clear = np.minimum(col_second, row_second) >= np.maximum(2.0 * best, best + 8.0)
             r, c = r[clear], c[clear]
+            # Targets of a known shape only: a car is a car, a truck anything from a box van
+            # to a semitrailer (its outline would be a guess, its edges biased).
+            ref_shapes = np.asarray(frame.reference_shapes)[r]
+            box_shapes = np.asarray(frame.box_shapes)[c]
+            known = np.isin(ref_shapes, self._target_shapes) & np.isin(
+                box_shapes, self._target_shapes
+            )
+            r, c = r[known], c[known]
             if not len(r):
                 continue
             ref = frame.reference
