@@ -24,6 +24,7 @@ from wz_camera_detector.settings import (
 )
 from wz_camera_detector.yolo import ModelLoadError
 from wz_shared.messages import (
+    CalibrationState,
     CameraFrameMeta,
     DetectionBatch,
     ServiceState,
@@ -174,6 +175,9 @@ def test_camera_only_detections_at_the_vehicles(
     assert all(d.speed_mps is None for d in last.detections)
     assert all(d.local_track_id is not None for d in last.detections)
     assert reports == []
+    # A camera flagged as knocked: the node is degraded while it learns its pose again.
+    detector.calibration.log.enter(CalibrationState.BUMPED, last.stamp, "test: turned")
+    assert detector.state == ServiceState.DEGRADED
 
 
 def test_fused_detections_carry_the_radar_speed(

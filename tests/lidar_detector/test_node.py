@@ -448,3 +448,15 @@ def test_column_clock_times_each_detection_by_its_azimuth() -> None:
     assert ahead == pytest.approx(0.5 * sweep_s)
     assert left == pytest.approx(0.25 * sweep_s)
     assert behind == pytest.approx(1 / columns * sweep_s, abs=1.5 / columns * sweep_s)
+
+
+def test_a_knocked_sensor_makes_the_node_degraded_and_relearns_its_background() -> None:
+    node, _ = detector("fast")
+    node.calibration.site = SITE  # the site's road: the detector learns its pose from it
+    for index in range(3):
+        handle(node, index, synthetic_points(None, seed=index))
+    assert node.state == ServiceState.RUNNING
+    node.calibration.log.enter(CalibrationState.BUMPED, 1.0, "test: turned 2 deg")
+    assert node.state == ServiceState.DEGRADED
+    node._relearn_background("test")
+    assert not node.backgrounds.has_background  # learned again from the next frames

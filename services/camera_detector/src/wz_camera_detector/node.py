@@ -97,6 +97,7 @@ from wz_shared.camera_calibration import CalibrationError
 from wz_shared.camera_geometry import PinholeCamera, camera_at_size, camera_intrinsics
 from wz_shared.codec import Frame
 from wz_shared.messages import (
+    CalibrationState,
     CameraFrameMeta,
     Detection,
     DetectionBatch,
@@ -347,10 +348,15 @@ class CameraDetector:
 
     @property
     def state(self) -> ServiceState:
-        """``starting`` while the background backend warms up, else ``running``."""
+        """``starting`` while the background backend warms up; ``degraded`` while the camera
+        or the radar is flagged as knocked (its pose being learned again); else
+        ``running``."""
         backend = self.backend
         if isinstance(backend, BackgroundSubtractionDetector) and not backend.warmed_up:
             return ServiceState.STARTING
+        owners = [self.calibration, self.radar_calibration]
+        if any(o is not None and o.log.state == CalibrationState.BUMPED for o in owners):
+            return ServiceState.DEGRADED
         return ServiceState.RUNNING
 
     def radar_scan(self, scan: RadarScan) -> None:

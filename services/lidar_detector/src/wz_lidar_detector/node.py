@@ -292,8 +292,11 @@ class LidarDetector:
     @property
     def state(self) -> ServiceState:
         """``starting`` until a background exists; ``degraded`` while the layout of the newest
-        frame has none (learning it); else ``running``."""
+        frame has none (learning it) or while the sensor is flagged as knocked (its pose being
+        learned again); else ``running``."""
         has_background = self.backgrounds.has_background
+        if self.calibration.log.state == CalibrationState.BUMPED:
+            return ServiceState.DEGRADED
         if self.reference is not None:
             return ServiceState.RUNNING
         if self._layout is None:
