@@ -154,9 +154,7 @@ def test_the_lidar_learns_its_pose_then_flags_a_bump_and_learns_it_again() -> No
 
 
 def test_disabled_or_without_a_site_the_pose_stays_the_site_files() -> None:
-    off = LidarSelfCalibration(
-        SITE.site_id, MOUNT, LidarCalibrationSettings(enabled=False), SITE
-    )
+    off = LidarSelfCalibration(SITE.site_id, MOUNT, LidarCalibrationSettings(enabled=False), SITE)
     no_site = LidarSelfCalibration(SITE.site_id, MOUNT, LidarCalibrationSettings(), None)
     truth = _true_pose(2.0, 1.0, 0.0, 0.0, 0.0, 0.0)
     for calibration in (off, no_site):
