@@ -13,7 +13,7 @@ from wz_cli.main import build_parser
 from wz_cli.stack import StackOptions, select
 from wz_eval import cli as eval_cli
 from wz_eval.fusion import EvalOptions, pipeline_options
-from wz_eval.fusion_report import mount_error_lines
+from wz_eval.fusion_report import bump_lines, calibration_lines, mount_error_lines
 from wz_eval.pipeline import PipelineOptions, run_pipeline
 from wz_eval.sites import finished_report, plan_jobs
 from wz_shared.site import Site
@@ -121,3 +121,64 @@ def test_the_sites_sweep_carries_the_flag_and_resumes_only_its_own_runs(tmp_path
     (plain.out_dir / "eval.json").write_text(json.dumps(with_errors))
     assert finished_report(real, site_text) == with_errors
     assert finished_report(plain, site_text) is None
+
+
+def test_the_report_sets_what_was_learned_beside_what_was_drawn(site: Site) -> None:
+    drawn = json.loads(json.dumps(MastModel.draw(site, 7).describe()))
+    camera = next(m.sensor_id for m in site.sensors if m.intrinsics.kind == "camera")
+    truth = drawn["sensors"][camera]
+    report = {
+        "mount_errors": drawn,
+        "calibration": {
+            camera: {
+                "sensor_kind": "camera",
+                "state": "calibrated",
+                "correction": {
+                    "yaw_deg": truth["yaw_deg"] + 0.05,
+                    "pitch_deg": 0.1,
+                    "roll_deg": 0.0,
+                    "x_m": 0.0,
+                    "y_m": 0.0,
+                    "z_m": 0.0,
+                },
+                "clock_offset_s": 0.081,
+                "samples": 412,
+            }
+        },
+    }
+    lines = "\n".join(calibration_lines(report))
+    assert (
+        f"| {camera} | calibrated | {truth['yaw_deg'] + 0.05:+.2f} ({truth['yaw_deg']:+.2f}) |"
+        in lines
+    )
+    assert f"+81 ({1000 * truth['clock_offset_s']:+.0f}) | 412 |" in lines
+    # Without a real mast the learned values stand alone; without calibration, nothing.
+    alone = "\n".join(calibration_lines({"calibration": report["calibration"]}))
+    assert f"| {camera} | calibrated | {truth['yaw_deg'] + 0.05:+.2f} |" in alone
+    assert calibration_lines({}) == []
+
+
+def test_the_report_tells_the_bump() -> None:
+    bump = {
+        "sensor_id": "camera-mast",
+        "at_s": 360.0,
+        "yaw_deg": 2.0,
+        "flagged_after_s": 4.0,
+        "calibrated_again_after_s": 31.5,
+        "false_alerts_minute_after": 1,
+        "false_alerts_per_minute_before": 0.5,
+        "before": {
+            "from_s": 60.0,
+            "to_s": 360.0,
+            "fused_rmse_longitudinal_m": 0.2,
+            "fused_rmse_lateral_m": 0.1,
+            "id_switches": 0,
+            "false_alerts": 2,
+        },
+        "from_5_min_after": None,
+    }
+    lines = "\n".join(bump_lines({"bump": bump}))
+    assert "Flagged after 4.0 s, calibrated again after 31.5 s" in lines
+    assert "False alerts in the minute after: 1 (before it: 0.50 a minute)" in lines
+    assert "- before (60-360 s): fused RMSE 0.20 / 0.10 m, 0 identity switches" in lines
+    assert bump_lines({"bump": None}) == []
