@@ -114,8 +114,8 @@ class SensorCalibrationSettings(BaseModel):
     #: horizontal and vertical position [m] (a tape), of the clock offset [s].
     prior_yaw_deg: float = Field(default=2.0, gt=0.0)
     prior_tilt_deg: float = Field(default=1.0, gt=0.0)
-    prior_horizontal_m: float = Field(default=0.25, gt=0.0)
-    prior_vertical_m: float = Field(default=0.15, gt=0.0)
+    prior_horizontal_m: float = Field(default=0.2, gt=0.0)
+    prior_vertical_m: float = Field(default=0.1, gt=0.0)
     prior_clock_s: float = Field(default=0.2, gt=0.0)
     #: Radar: prior std of the range offset between its echoes and the LiDAR's objects [m].
     #: At one speed a late clock and a range offset look alike (``c + v dt``); only traffic of
@@ -734,11 +734,16 @@ class CameraSelfCalibration:
 
     @property
     def angle_std_rad(self) -> tuple[float, float]:
-        """(yaw, pitch) uncertainty now [rad]: 1 deg each until learned, and while bumped."""
-        if self.log.state in (CalibrationState.PRIOR, CalibrationState.BUMPED) or not np.isfinite(
+        """(yaw, pitch) uncertainty the detections carry now [rad]: 1 deg each until learned
+        and while bumped, the fit's while learning, none once calibrated (the camera's own
+        noise model then holds, as for a surveyed camera)."""
+        state = self.log.state
+        if state in (CalibrationState.PRIOR, CalibrationState.BUMPED) or not np.isfinite(
             self.std[0]
         ):
             return math.radians(1.0), math.radians(1.0)
+        if state == CalibrationState.CALIBRATED:
+            return 0.0, 0.0
         return math.radians(float(self.std[0])), math.radians(float(self.std[1]))
 
     def message(self) -> SensorCalibration:

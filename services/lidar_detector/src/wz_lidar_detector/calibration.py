@@ -382,9 +382,13 @@ class LidarSelfCalibration:
 
     @property
     def yaw_std_rad(self) -> float:
-        """The yaw's uncertainty now [rad]: the site file's (1 deg) until learned."""
-        if self._lane is None or self.log.state == CalibrationState.BUMPED:
+        """The yaw's uncertainty the detections carry now [rad]: 1 deg (the site file's)
+        until learned and while bumped, the fit's while learning, none once calibrated."""
+        state = self.log.state
+        if self._lane is None or state in (CalibrationState.PRIOR, CalibrationState.BUMPED):
             return math.radians(1.0)
+        if state == CalibrationState.CALIBRATED:
+            return 0.0
         return self._lane.yaw_std_rad
 
     def message(self) -> SensorCalibration:
