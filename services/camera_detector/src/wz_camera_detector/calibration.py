@@ -105,6 +105,8 @@ class SensorCalibrationSettings(BaseModel):
     #: ``calibrated_std_deg``).
     calibrated_pairs: int = Field(default=250, ge=10)
     calibrated_std_deg: float = Field(default=0.2, gt=0.0)
+    #: Camera frames paired with the LiDAR's objects before the first vote.
+    vote_min_frames: int = Field(default=50, ge=5)
     #: The clock offsets the vote tries [s]: from, to.
     clock_search_s: tuple[float, float] = (-0.05, 0.3)
     #: Bump check: the recent seconds [s] and the angle their residuals may stand off [deg].
@@ -542,6 +544,13 @@ class CameraSelfCalibration:
         edges = np.arange(-reach, reach + bin_px, bin_px)
         base = self.params.copy()
         base[:2] = 0.0
+        # The shifts a set-up error can make: a yaw or a pitch within the bounds turns the
+        # image by at most f tan(bound) (the clock's shift is the grid's, not searched here).
+        focal = self.camera_for(base).focal_px
+        centres = 0.5 * (edges[:-1] + edges[1:])
+        reach_u = focal * math.tan(math.radians(_BOUNDS[0])) + 2 * bin_px
+        reach_v = focal * math.tan(math.radians(_BOUNDS[1])) + 2 * bin_px
+        allowed = (np.abs(centres)[:, None] <= reach_u) & (np.abs(centres)[None, :] <= reach_v)
         for clock in np.arange(s.clock_search_s[0], s.clock_search_s[1] + 1e-9, 0.025):
             trial = base.copy()
             trial[6] = clock
@@ -568,6 +577,7 @@ class CameraSelfCalibration:
             smooth2 = smooth.copy()
             smooth2[:, 1:] += smooth[:, :-1]
             smooth2[:, :-1] += smooth[:, 1:]
+            smooth2[~allowed] = 0.0
             i, j = np.unravel_index(int(smooth2.argmax()), smooth2.shape)
             if smooth2[i, j] > best[0]:
                 best = (
@@ -611,6 +621,8 @@ class CameraSelfCalibration:
             pick = np.linspace(0, len(frames) - 1, self.settings.max_fit_frames).astype(int)
             frames = [frames[i] for i in pick]
         if not self._initialised or self.log.state == CalibrationState.BUMPED:
+            if len(frames) < self.settings.vote_min_frames:
+                return
             self.params = self._vote(frames)
             self._initialised = True
         prior_mean, prior_sigma = self._prior()
@@ -621,6 +633,7 @@ class CameraSelfCalibration:
             xy, velocity, heading, lag, det = self._match(params, frames, gate)
             pairs = len(xy)
             if pairs < 10:
+                self._initialised = False  # nothing meets: vote again with more frames
                 return
             for _ in range(3):
                 base = self._residuals(params, xy, velocity, heading, lag, det)
