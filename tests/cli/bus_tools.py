@@ -49,6 +49,7 @@ def _key_of(message: Message) -> str:
         "roadside_devices": KEYS.devices_state,
         "active_alerts": f"{KEYS.prefix}/test/active_alerts",
         "service_status": KEYS.status("tracker"),
+        "sensor_calibration": KEYS.calibration("cam-1"),
     }[getattr(message, "kind")]  # noqa: B009 (kind is declared on subclasses only)
 
 
