@@ -29,7 +29,13 @@ from tests.gateway.helpers import (
     service_status,
 )
 from wz_gateway.app import create_app
-from wz_shared.messages import AlertType, Message
+from wz_shared.messages import (
+    AlertType,
+    CalibrationState,
+    Message,
+    PoseCorrection,
+    SensorCalibration,
+)
 
 
 @pytest.fixture(scope="module")
@@ -49,6 +55,17 @@ def gateway_app(tmp_path_factory: pytest.TempPathFactory) -> Iterator[FastAPI]:
     messages += [
         devices_state(5.0, beacon_on=True, sign_text="SLOW DOWN", cause=AlertType.SPEEDING),
         service_status("alert-service", 5.0, {}),
+        SensorCalibration(
+            site=SITE.site_id,
+            source_id="camera-mast",
+            stamp=5.0,
+            sensor_kind="camera",
+            state=CalibrationState.BUMPED,
+            state_since_s=4.0,
+            correction=PoseCorrection(yaw_deg=1.2, yaw_std_deg=0.4),
+            clock_offset_s=0.08,
+            detail="yaw moved 1.2 deg within 4 s",
+        ),
     ]
     storage.ingest(messages, geo=SITE.geo_frame, received_at=1_750_000_000.0)
     yield create_app(gateway, storage, site=SITE)
@@ -68,7 +85,7 @@ def test_every_operation_conforms_and_never_fails_on_the_server(
     operations = [
         op for op in (result.ok() for result in api.get_all_operations()) if op.path != "/v1/stream"
     ]
-    assert len(operations) == 15 + 7  # 7: /v1/webhooks
+    assert len(operations) == 16 + 7  # 7: /v1/webhooks
     checked = 0
     for operation in operations:
         has_input = any(True for _ in operation.iter_parameters()) or bool(

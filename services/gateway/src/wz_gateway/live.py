@@ -12,6 +12,8 @@ Per client:
   sooner after the last one sent waits, and a newer one replaces it (counted as decimated),
   so a client always ends on the newest batch;
 - ``alert``: every alert stored, once (an ``alert_id`` the bus repeats is sent once);
+- ``calibration``: every sensor self-calibration stored (each sensor's detector sends one on
+  a change of state and every 5 s); a new client gets each sensor's newest at once;
 - a bounded queue of ``queue_capacity`` events: when a slow client lets it fill, the oldest
   event is dropped and counted (``wz_gateway_stream_dropped_events``), never the writer held.
 
@@ -26,7 +28,9 @@ The ``tracks`` event's data (JSON)::
 
 positions rounded to 1 cm, speeds to 0.01 m/s, headings to 1 mrad; ``length_m`` and
 ``width_m`` null when the tracker gave none. The ``alert`` event's data is the
-:class:`~wz_shared.messages.Alert` as ``GET /v1/alerts`` returns it.
+:class:`~wz_shared.messages.Alert` as ``GET /v1/alerts`` returns it; the ``calibration``
+event's the :class:`~wz_shared.messages.SensorCalibration` as the detector published it (and
+``GET /v1/calibration`` shows it).
 """
 
 from __future__ import annotations
@@ -44,12 +48,12 @@ from typing import Any, Literal
 from prometheus_client import CollectorRegistry, Counter, Gauge
 
 from wz_gateway.settings import GatewaySettings
-from wz_shared.messages import Alert, Message, TrackBatch
+from wz_shared.messages import Alert, Message, SensorCalibration, TrackBatch
 
 log = logging.getLogger(__name__)
 
-EventKind = Literal["tracks", "alert"]
-EVENT_KINDS: tuple[EventKind, ...] = ("tracks", "alert")
+EventKind = Literal["tracks", "alert", "calibration"]
+EVENT_KINDS: tuple[EventKind, ...] = ("tracks", "alert", "calibration")
 #: Alert ids remembered to send each alert once.
 _SEEN_ALERT_IDS = 4096
 
@@ -220,6 +224,8 @@ class Broadcaster:
         self._sequence = 0
         self._latest_tracks: LiveEvent | None = None
         self._recent_alerts: deque[LiveEvent] = deque(maxlen=recent_alerts)
+        #: Each sensor's newest calibration event, by (site, sensor id).
+        self._latest_calibrations: dict[tuple[str, str], LiveEvent] = {}
         self._seen_alerts: OrderedDict[tuple[str, str], None] = OrderedDict()
         self._closed = False
         self.dropped = 0
@@ -249,18 +255,22 @@ class Broadcaster:
     # --- the writer's side ----------------------------------------------------------------
 
     def publish(self, group: Sequence[Message]) -> None:
-        """Hand a stored group's newest track batch and its alerts to every client.
+        """Hand a stored group's newest track batch, its alerts and its sensor calibrations
+        to every client.
 
         Called by the writer thread after the group's transaction; returns at once.
         """
         batch: TrackBatch | None = None
         alerts: list[Alert] = []
+        calibrations: list[SensorCalibration] = []
         for message in group:
             if isinstance(message, TrackBatch):
                 batch = message  # the group is in arrival order: the last is the newest
             elif isinstance(message, Alert):
                 alerts.append(message)
-        if batch is None and not alerts:
+            elif isinstance(message, SensorCalibration):
+                calibrations.append(message)
+        if batch is None and not alerts and not calibrations:
             return
         received_at = self.clock()
         events: list[LiveEvent] = []
@@ -279,6 +289,10 @@ class Broadcaster:
                     self._seen_alerts.popitem(last=False)
                 event = self._event("alert", alert.model_dump_json)
                 self._recent_alerts.append(event)
+                events.append(event)
+            for calibration in calibrations:
+                event = self._event("calibration", calibration.model_dump_json)
+                self._latest_calibrations[(calibration.site, calibration.source_id)] = event
                 events.append(event)
             subscriptions = list(self._subscriptions)
         for subscription in subscriptions:
@@ -300,8 +314,9 @@ class Broadcaster:
     def subscribe(
         self, kinds: frozenset[EventKind], last_event_id: str | None = None
     ) -> Subscription:
-        """A new client, in the running event loop: first the newest track batch (when asked
-        for tracks) and, after a reconnect, the alerts missed since ``last_event_id``."""
+        """A new client, in the running event loop: first each sensor's newest calibration
+        and the newest track batch (when asked for them) and, after a reconnect, the alerts
+        missed since ``last_event_id``."""
         subscription = Subscription(
             self, asyncio.get_running_loop(), kinds, self.queue_capacity, self.tracks_interval_s
         )
@@ -316,7 +331,8 @@ class Broadcaster:
             self._subscriptions.add(subscription)
             missed = self._missed_alerts(last_event_id)
             latest = self._latest_tracks
-        for event in missed:
+            calibrations = sorted(self._latest_calibrations.values(), key=lambda e: e.sequence)
+        for event in [*calibrations, *missed]:
             subscription.offer(event)
         if latest is not None:
             subscription.offer(latest)

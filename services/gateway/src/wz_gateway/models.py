@@ -18,7 +18,9 @@ from wz_shared.messages import (
     Alert,
     AlertPhase,
     AlertSeverity,
+    CalibrationState,
     FiniteFloat,
+    SensorCalibration,
     Track,
     TrackStatus,
     VehicleClass,
@@ -106,6 +108,47 @@ class LiveTracks(_Model):
     #: Seconds since the gateway received the batch (wall clock); None before the first.
     age_s: FiniteFloat | None
     tracks: list[LiveTrack]
+
+
+class CalibrationStateChange(_Model):
+    """A sensor's self-calibration entering a state, as the gateway stored it."""
+
+    state: CalibrationState
+    #: The state before; None for the first message of the sensor this gateway stored.
+    previous_state: CalibrationState | None
+    #: Stamp of the message that brought the change [s, the sensor's time].
+    stamp: FiniteFloat
+    #: Stamp the state was entered at [s, the sensor's time].
+    state_since_s: FiniteFloat
+    #: Why, as the detector put it (``yaw moved 2.1 deg within 12 s``).
+    detail: str
+    #: When the gateway received it [Unix s].
+    received_at: FiniteFloat
+
+
+class SensorCalibrationStatus(_Model):
+    """One sensor's self-calibration: its newest message as its detector published it, when
+    it arrived, and its latest changes of state, newest first."""
+
+    sensor_id: str
+    sensor_kind: Literal["lidar", "camera", "radar"]
+    #: None: nothing received from this sensor of the site file (its detector is not running,
+    #: or does not learn its pose).
+    calibration: SensorCalibration | None
+    #: When the gateway received it [Unix s], and how long ago [s].
+    received_at: FiniteFloat | None
+    age_s: FiniteFloat | None
+    #: Nothing received for longer than ``calibration_stale_after_s``: the state may be old.
+    stale: bool
+    changes: list[CalibrationStateChange]
+
+
+class SiteCalibration(_Model):
+    """The self-calibration of each sensor of a site: the site file's sensors in its order,
+    then any other sensor heard from."""
+
+    site: str
+    sensors: list[SensorCalibrationStatus]
 
 
 class SiteSummary(_Model):

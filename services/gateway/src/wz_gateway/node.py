@@ -4,13 +4,16 @@ Run it as ``python -m wz_gateway.node`` (settings ``WZ_GATEWAY_*``, bus ``WZ_BUS
 
 - subscribes to ``wz/<site>/tracks`` (:class:`TrackBatch`), ``wz/<site>/alerts/*``
   (:class:`Alert`), ``wz/<site>/devices/state`` (:class:`RoadsideDeviceState`) and
-  ``wz/<site>/status/*`` (:class:`ServiceStatus`, for the WZDx devices' status); a central
+  ``wz/<site>/status/*`` (:class:`ServiceStatus`, for the WZDx devices' status) and
+  ``wz/<site>/calibration/*`` (:class:`SensorCalibration`, each sensor's self-calibration:
+  its latest, each change of state, and the WZDx devices' status); a central
   gateway given several sites (``WZ_GATEWAY_SITE_FILES``, :mod:`wz_gateway.sites`) subscribes
   to ``wz/*/...`` and keeps the sites it was given. Alerts and device states are subscribed
   with recovery: what the alert service published while this gateway was away (its link
   down, or itself restarting) is fetched from the alert service's history when it comes back,
   and stored once (by ``alert_id``). One writer thread (the main one) stores what arrives, a
-  group per transaction, **alerts first**: alerts, device states and statuses are decoded in
+  group per transaction, **alerts first**: alerts, device states, statuses and calibrations
+  are decoded in
   Zenoh's callbacks into the writer's queue (a full queue holds the callbacks: back-pressure,
   nothing dropped), and every round of the writer stores all of them before it takes any
   track batch. Track batches, the bulk, wait undecoded in a ring of their own
@@ -26,9 +29,10 @@ Run it as ``python -m wz_gateway.node`` (settings ``WZ_GATEWAY_*``, bus ``WZ_BUS
   groups (:mod:`wz_gateway.track_ends`), and at start those a stopped process left;
 - deletes what is older than the retention, at start and every ``retention_period_s``.
 
-Bad input never stops it: an undecodable message, or one of a site not served (or whose
-``site`` is not the one of its key), is counted in the
-status message's ``invalid_counts`` (``<key>|<reason>``) and on ``/metrics``, and dropped. A
+Bad input never stops it: an undecodable message, one of a site not served (or whose
+``site`` is not the one of its key), or one whose ``source_id`` is not the one its key carries
+(a calibration on ``calibration/cam-1`` from another sensor: ``wrong_source``), is counted in
+the status message's ``invalid_counts`` (``<key>|<reason>``) and on ``/metrics``, and dropped. A
 group the database refuses is retried, then logged and counted (``wz_gateway_write_errors``).
 """
 
@@ -56,7 +60,14 @@ from wz_gateway.track_ends import SiteFinishers, TrackFinisher
 from wz_gateway.webhook_store import WebhookStore
 from wz_shared.bus import Subscription
 from wz_shared.keys import site_of_key
-from wz_shared.messages import Alert, Message, RoadsideDeviceState, ServiceStatus, TrackBatch
+from wz_shared.messages import (
+    Alert,
+    Message,
+    RoadsideDeviceState,
+    SensorCalibration,
+    ServiceStatus,
+    TrackBatch,
+)
 from wz_shared.service import NodeApp, ServiceRuntime
 from wz_shared.site import Site, SiteFileError
 
@@ -252,6 +263,7 @@ class Writer:
             m.ingested.labels("alert").inc(result.alerts)
             m.ingested.labels("roadside_devices").inc(result.device_states)
             m.ingested.labels("service_status").inc(result.statuses)
+            m.ingested.labels("sensor_calibration").inc(result.calibrations)
             m.ingested_points.inc(result.points)
             m.duplicate_alerts.inc(result.duplicate_alerts)
             return True
@@ -378,6 +390,9 @@ def run(
     bus.on(sites.key("alerts/*"), Alert, writer.offer, recover=True)
     bus.on(sites.key("devices/state"), RoadsideDeviceState, writer.offer, recover=True)
     bus.on(sites.key("status/*"), ServiceStatus, writer.offer)
+    # A calibration's source must be the sensor its key names (the bus checks it, as for
+    # detections: wz_shared.trust.expected_source).
+    bus.on(sites.key("calibration/*"), SensorCalibration, writer.offer)
     metrics.watch_bus(bus.stats.snapshot)
     metrics.watch_queue(lambda: writer.queue.qsize() + tracks.pending)
     metrics.watch_webhooks(deliverer.store.pending_count)

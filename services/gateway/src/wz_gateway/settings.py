@@ -84,7 +84,8 @@ class GatewaySettings(ServiceSettings):
     rate_limit_burst: Annotated[int, Field(ge=1, le=1_000_000)] = 200
     #: Largest page of points or alerts.
     max_page_size: Annotated[int, Field(ge=10, le=100_000)] = 10_000
-    #: Track points and device states are deleted this long after they arrived [days].
+    #: Track points, device states and the sensors' changes of calibration state are deleted
+    #: this long after they arrived [days].
     retention_days: Annotated[float, Field(gt=0.0, le=36500.0)] = 30.0
     #: Alerts are kept longer: they are the record DOTs ask for [days].
     alert_retention_days: Annotated[float, Field(gt=0.0, le=36500.0)] = 365.0
@@ -94,6 +95,12 @@ class GatewaySettings(ServiceSettings):
     queue_capacity: Annotated[int, Field(ge=1, le=1_000_000)] = 4096
     #: A device whose data (or whose service's status) is older than this is in error [s].
     stale_after_s: Annotated[float, Field(gt=0.0, le=3600.0)] = 10.0
+    #: A sensor's self-calibration older than this is not judged (its detector sends one every
+    #: 5 s of sensor time; the device's own freshness says when the detector stopped) [s].
+    calibration_stale_after_s: Annotated[float, Field(gt=0.0, le=3600.0)] = 30.0
+    #: A sensor still ``prior`` or ``learning`` this long after it entered that state puts its
+    #: WZDx device in ``warning`` [s of the sensor's time].
+    calibration_learning_warning_s: Annotated[float, Field(gt=0.0, le=86400.0)] = 900.0
     #: The WZDx traffic sensor's collection interval [s] (counts over the newest interval).
     traffic_interval_s: Annotated[float, Field(ge=10.0, le=86400.0)] = 300.0
     #: Station of the virtual detector the traffic sensor counts at [m]; None: where the site's

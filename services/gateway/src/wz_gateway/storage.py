@@ -59,6 +59,7 @@ from wz_gateway.tables import (
     SCHEMA_VERSION,
     alerts,
     api_keys,
+    calibration_changes,
     device_states,
     latest,
     schema_version,
@@ -71,8 +72,10 @@ from wz_gateway.webhook_store import enqueue_alert
 from wz_shared.geometry import GeoFrame
 from wz_shared.messages import (
     Alert,
+    CalibrationState,
     Message,
     RoadsideDeviceState,
+    SensorCalibration,
     ServiceStatus,
     Track,
     TrackBatch,
@@ -82,6 +85,8 @@ from wz_shared.timebase import NEW_RUN_STEP_BACK_S, stamp_went_back
 log = logging.getLogger(__name__)
 
 _DIALECTS = ("sqlite", "postgresql")
+#: The ``latest`` rows of the sensors' self-calibration are named this and the sensor's id.
+CALIBRATION_PREFIX = "calibration/"
 #: A track batch this much older than the newest one starts a new run [s] (see ``run_start``).
 RESTART_TOLERANCE_S = NEW_RUN_STEP_BACK_S
 _DAY_S = 86400.0
@@ -185,6 +190,25 @@ class LatestRow:
     body: str
 
 
+@dataclass(frozen=True)
+class CalibrationChange:
+    """A sensor's self-calibration entering a state (a row of ``calibration_changes``).
+
+    ``stamp`` is the stamp of the message that brought it and ``state_since_s`` the stamp the
+    state was entered at [s, the sensor's time]; ``received_at`` the gateway's wall clock
+    [Unix s]; ``previous_state`` None for the first message of the sensor stored.
+    """
+
+    sensor_id: str
+    sensor_kind: str
+    state: CalibrationState
+    previous_state: CalibrationState | None
+    stamp: float
+    state_since_s: float
+    detail: str
+    received_at: float
+
+
 @dataclass
 class IngestResult:
     """What one :meth:`Storage.ingest` wrote."""
@@ -195,6 +219,9 @@ class IngestResult:
     duplicate_alerts: int = 0
     device_states: int = 0
     statuses: int = 0
+    #: Sensor calibrations stored, and those that changed a sensor's state.
+    calibrations: int = 0
+    calibration_changes: int = 0
     #: Webhook events queued (one per alert and subscription that wants it).
     webhook_events: int = 0
 
@@ -375,8 +402,11 @@ class Storage:
         A :class:`TrackBatch` adds one point per track and becomes the live view; an
         :class:`Alert` is added once (a repeated ``alert_id`` is counted, not written twice);
         a :class:`RoadsideDeviceState` is added to the history and becomes the devices' state;
-        a :class:`ServiceStatus` becomes that service's latest status. Other messages are
-        refused with ``TypeError`` before anything is written.
+        a :class:`ServiceStatus` becomes that service's latest status; a
+        :class:`SensorCalibration` becomes that sensor's latest calibration, and is added to
+        ``calibration_changes`` when its state differs from the one before (or was entered at
+        another stamp: knocked again). Other messages are refused with ``TypeError`` before
+        anything is written.
 
         Parameters
         ----------
@@ -390,7 +420,10 @@ class Storage:
         """
         items = list(messages)
         for message in items:
-            if not isinstance(message, TrackBatch | Alert | RoadsideDeviceState | ServiceStatus):
+            if not isinstance(
+                message,
+                TrackBatch | Alert | RoadsideDeviceState | ServiceStatus | SensorCalibration,
+            ):
                 raise TypeError(f"cannot store a {type(message).__name__}")
         result = IngestResult()
         with self.engine.begin() as connection:
@@ -426,7 +459,42 @@ class Storage:
                         connection, message.site, f"status/{message.service}", message, received_at
                     )
                     result.statuses += 1
+                elif isinstance(message, SensorCalibration):
+                    if self._write_calibration(connection, message, received_at):
+                        result.calibration_changes += 1
+                    result.calibrations += 1
         return result
+
+    def _write_calibration(
+        self, connection: Connection, calibration: SensorCalibration, received_at: float
+    ) -> bool:
+        """The sensor's latest calibration; a row of its history if its state changed."""
+        name = CALIBRATION_PREFIX + calibration.source_id
+        previous_body = connection.scalar(
+            select(latest.c.body).where(latest.c.site == calibration.site, latest.c.name == name)
+        )
+        previous = _calibration_or_none(previous_body)
+        changed = (
+            previous is None
+            or previous.state != calibration.state
+            or previous.state_since_s != calibration.state_since_s
+        )
+        if changed:
+            connection.execute(
+                insert(calibration_changes).values(
+                    site=calibration.site,
+                    sensor_id=calibration.source_id,
+                    sensor_kind=calibration.sensor_kind,
+                    state=calibration.state.value,
+                    previous_state=None if previous is None else previous.state.value,
+                    stamp=calibration.stamp,
+                    state_since_s=calibration.state_since_s,
+                    detail=calibration.detail,
+                    received_at=received_at,
+                )
+            )
+        self._upsert_latest(connection, calibration.site, name, calibration, received_at)
+        return changed
 
     def _write_batch(
         self, connection: Connection, batch: TrackBatch, geo: GeoFrame, received_at: float
@@ -511,6 +579,59 @@ class Storage:
             )
             for row in rows
         }
+
+    def latest_calibrations(self, site: str) -> dict[str, LatestRow]:
+        """Every sensor's newest self-calibration at ``site``, by sensor id."""
+        with self.engine.connect() as connection:
+            rows = connection.execute(
+                select(latest).where(
+                    latest.c.site == site, latest.c.name.startswith(CALIBRATION_PREFIX)
+                )
+            ).all()
+        return {
+            row.name.removeprefix(CALIBRATION_PREFIX): LatestRow(
+                row.name, row.stamp, row.received_at, row.body
+            )
+            for row in rows
+        }
+
+    def calibration_changes(
+        self, site: str, *, per_sensor: int, sensor_id: str | None = None
+    ) -> dict[str, list[CalibrationChange]]:
+        """The newest ``per_sensor`` changes of state of each sensor at ``site`` (of
+        ``sensor_id`` alone if given), newest first, by sensor id."""
+        c = calibration_changes.c
+        conditions: list[ColumnElement[bool]] = [c.site == site]
+        if sensor_id is not None:
+            conditions.append(c.sensor_id == sensor_id)
+        if per_sensor <= 0:
+            return {}
+        rank = func.row_number().over(partition_by=c.sensor_id, order_by=c.id.desc()).label("rank")
+        ranked = select(calibration_changes, rank).where(*conditions).subquery()
+        stmt = (
+            select(ranked)
+            .where(ranked.c.rank <= per_sensor)
+            .order_by(ranked.c.sensor_id, ranked.c.id.desc())
+        )
+        with self.engine.connect() as connection:
+            rows = connection.execute(stmt).all()
+        found: dict[str, list[CalibrationChange]] = {}
+        for row in rows:
+            found.setdefault(row.sensor_id, []).append(
+                CalibrationChange(
+                    sensor_id=row.sensor_id,
+                    sensor_kind=row.sensor_kind,
+                    state=CalibrationState(row.state),
+                    previous_state=(
+                        None if row.previous_state is None else CalibrationState(row.previous_state)
+                    ),
+                    stamp=row.stamp,
+                    state_since_s=row.state_since_s,
+                    detail=row.detail,
+                    received_at=row.received_at,
+                )
+            )
+        return found
 
     # --- reading: history -----------------------------------------------------------------
 
@@ -687,9 +808,10 @@ class Storage:
 
     def count(self, table_name: str) -> int:
         """Rows in one of the gateway's tables (for tests and metrics)."""
-        table = {t.name: t for t in (track_points, alerts, device_states, latest, api_keys)}[
-            table_name
-        ]
+        table = {
+            t.name: t
+            for t in (track_points, alerts, device_states, calibration_changes, latest, api_keys)
+        }[table_name]
         with self.engine.connect() as connection:
             return int(connection.scalar(select(func.count()).select_from(table)) or 0)
 
@@ -700,7 +822,8 @@ class Storage:
     ) -> dict[str, int]:
         """Delete what arrived longer ago than the retention; rows deleted per table.
 
-        Track points and device states go after ``retention_days``; alerts and webhook
+        Track points, device states and the sensors' changes of calibration state go after
+        ``retention_days``; alerts and webhook
         deliveries (and delivered, failed or expired outbox entries) after
         ``alert_retention_days``.
         """
@@ -711,6 +834,7 @@ class Storage:
             for table, limit in (
                 (track_points, cutoff),
                 (device_states, cutoff),
+                (calibration_changes, cutoff),
                 (alerts, alert_cutoff),
             ):
                 outcome = connection.execute(delete(table).where(table.c.received_at < limit))
@@ -793,6 +917,18 @@ def _track_point(row: Any) -> TrackPoint:
         width_m=row.width_m,
         smoothed=bool(row.smoothed),
     )
+
+
+def _calibration_or_none(body: str | None) -> SensorCalibration | None:
+    """A stored calibration, or None for none or one this gateway cannot read (written by
+    another version: the next message starts its history afresh)."""
+    if body is None:
+        return None
+    try:
+        return SensorCalibration.model_validate_json(body)
+    except ValueError:
+        log.warning("a stored sensor calibration is unreadable; its history restarts")
+        return None
 
 
 def _alert(row: Any) -> Alert:

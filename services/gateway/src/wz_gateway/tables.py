@@ -170,8 +170,33 @@ device_states = Table(
     Index("ix_device_states_received_at", "received_at"),
 )
 
-#: The newest message of each kind per site (``tracks``, ``devices``, ``status/<service>``):
-#: the live view, read by any number of API workers.
+#: Each sensor's self-calibration state as it changed (migration 7): a row when a sensor's
+#: first :class:`~wz_shared.messages.SensorCalibration` arrives and each time its ``state``
+#: (or the stamp it was entered at) differs from the one before, so that a technician can see
+#: when a sensor was knocked and when it was learned again. The newest message of each sensor
+#: is in ``latest`` (``calibration/<sensor>``).
+calibration_changes = Table(
+    "calibration_changes",
+    metadata,
+    Column("id", RowId, primary_key=True, autoincrement=True),
+    Column("site", String(64), nullable=False),
+    Column("sensor_id", String(64), nullable=False),
+    Column("sensor_kind", String(16), nullable=False),
+    Column("state", String(16), nullable=False),
+    #: The state before; None for the first message of a sensor this gateway stored.
+    Column("previous_state", String(16), nullable=True),
+    #: The stamp of the message that brought the change, and the one the state was entered at
+    #: [s, the sensor's time].
+    Column("stamp", Double, nullable=False),
+    Column("state_since_s", Double, nullable=False),
+    Column("detail", String(500), nullable=False),
+    Column("received_at", Double, nullable=False),
+    Index("ix_calibration_changes_site_sensor", "site", "sensor_id", "id"),
+    Index("ix_calibration_changes_received_at", "received_at"),
+)
+
+#: The newest message of each kind per site (``tracks``, ``devices``, ``status/<service>``,
+#: ``calibration/<sensor>``): the live view, read by any number of API workers.
 latest = Table(
     "latest",
     metadata,
@@ -473,6 +498,10 @@ def _v6_dev_mode_keys(connection: Connection) -> None:
     )
 
 
+def _v7_calibration_changes(connection: Connection) -> None:
+    metadata.create_all(connection, tables=[calibration_changes])
+
+
 #: Every migration, in order; the last one's version is the schema this code reads and writes.
 MIGRATIONS: tuple[Migration, ...] = (
     Migration(1, "trajectories, alerts, device states, latest, API keys, webhooks", _v1_initial),
@@ -492,6 +521,11 @@ MIGRATIONS: tuple[Migration, ...] = (
         6,
         "API keys: marked when made in dev mode (revoked when dev mode is off)",
         _v6_dev_mode_keys,
+    ),
+    Migration(
+        7,
+        "the sensors' self-calibration: each change of state",
+        _v7_calibration_changes,
     ),
 )
 SCHEMA_VERSION = MIGRATIONS[-1].version

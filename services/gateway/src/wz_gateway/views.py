@@ -1,5 +1,5 @@
-"""What the API shows that is assembled from several stored things: the live tracks and the
-WZDx device feed. Reads storage, calls the pure cores (:mod:`wz_gateway.traffic`,
+"""What the API shows that is assembled from several stored things: the live tracks, the
+sensors' self-calibration and the WZDx device feed. Reads storage, calls the pure cores (:mod:`wz_gateway.traffic`,
 :mod:`wz_gateway.wzdx`), returns values.
 
 Time: stamps are capture times; in simulation they count from the start of the run, so the
@@ -15,10 +15,17 @@ from typing import Any
 import numpy as np
 from pydantic import ValidationError
 
-from wz_gateway.models import LiveTrack, LiveTracks
+from wz_gateway.models import (
+    CalibrationStateChange,
+    LiveTrack,
+    LiveTracks,
+    SensorCalibrationStatus,
+    SiteCalibration,
+)
 from wz_gateway.storage import LatestRow, Storage
 from wz_gateway.traffic import TrafficSummary, find_crossings, summarize
 from wz_gateway.wzdx import (
+    CalibrationRules,
     DeviceHealth,
     FeedInputs,
     combine,
@@ -36,6 +43,7 @@ from wz_shared.messages import (
     BEACON_DEVICE,
     SIGN_DEVICE,
     RoadsideDeviceState,
+    SensorCalibration,
     ServiceStatus,
     TrackBatch,
 )
@@ -95,6 +103,56 @@ def _statuses(storage: Storage, site: Site) -> dict[str, tuple[ServiceStatus, fl
     return found
 
 
+def calibrations(storage: Storage, site: Site) -> dict[str, tuple[SensorCalibration, float]]:
+    """Each sensor's newest self-calibration at ``site`` and when it arrived [Unix s]."""
+    found: dict[str, tuple[SensorCalibration, float]] = {}
+    for sensor_id, row in storage.latest_calibrations(site.site_id).items():
+        try:
+            found[sensor_id] = (SensorCalibration.model_validate_json(row.body), row.received_at)
+        except ValidationError:  # written by another version: not worth failing the answer
+            log.warning("stored calibration of %s is unreadable; ignored", sensor_id)
+    return found
+
+
+def site_calibration(
+    storage: Storage, site: Site, *, now: float, stale_after_s: float, changes: int
+) -> SiteCalibration:
+    """Every sensor's self-calibration: the site file's sensors in order (those never heard
+    from without a message), then any other sensor heard from; with its newest ``changes``
+    changes of state."""
+    latest = calibrations(storage, site)
+    history = storage.calibration_changes(site.site_id, per_sensor=changes)
+    kinds = {sensor.sensor_id: sensor.kind for sensor in site.sensors}
+    for sensor_id, (heard, _) in latest.items():
+        kinds.setdefault(sensor_id, heard.sensor_kind)
+    sensors = []
+    for sensor_id, kind in kinds.items():
+        message, received_at = latest.get(sensor_id) or (None, None)
+        age_s = None if received_at is None else max(0.0, now - received_at)
+        sensors.append(
+            SensorCalibrationStatus(
+                sensor_id=sensor_id,
+                sensor_kind=kind,
+                calibration=message,
+                received_at=received_at,
+                age_s=age_s,
+                stale=age_s is not None and age_s > stale_after_s,
+                changes=[
+                    CalibrationStateChange(
+                        state=change.state,
+                        previous_state=change.previous_state,
+                        stamp=change.stamp,
+                        state_since_s=change.state_since_s,
+                        detail=change.detail,
+                        received_at=change.received_at,
+                    )
+                    for change in history.get(sensor_id, [])
+                ],
+            )
+        )
+    return SiteCalibration(site=site.site_id, sensors=sensors)
+
+
 def traffic_summary(
     storage: Storage,
     site: Site,
@@ -144,6 +202,7 @@ def device_feed_of(
     traffic_interval_s: float,
     detector_station_override_m: float | None = None,
     contact_email: str | None = None,
+    calibration_rules: CalibrationRules | None = None,
 ) -> dict[str, Any]:
     """The site's WZDx 4.2 DeviceFeed as of ``now`` (wall clock, Unix s)."""
     keys = Keys(site.site_id)
@@ -203,6 +262,8 @@ def device_feed_of(
         stamp_offset_s=stamp_offset_s(tracks),
         traffic_interval_s=traffic_interval_s,
         contact_email=contact_email,
+        calibrations=calibrations(storage, site),
+        calibration_rules=calibration_rules or CalibrationRules(),
     )
     return device_feed(inputs)
 

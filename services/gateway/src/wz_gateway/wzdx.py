@@ -12,14 +12,19 @@ A DeviceFeed is a GeoJSON FeatureCollection of FieldDevice features. This site's
 Each device's ``device_status`` comes from how fresh its data is (:func:`freshness`): ``ok``,
 ``error`` when its data or its service's status stopped arriving (``status_messages`` says
 which and for how long), ``warning`` when part of it is missing (a LiDAR with no frames behind
-a tracker that still runs), ``unknown`` before anything arrived. Units are WZDx's: km/h,
-vehicles per hour, percent; dates are RFC 3339 UTC.
+a tracker that still runs), ``unknown`` before anything arrived. A sensor's self-calibration
+(:func:`calibration_health`) makes its device ``warning`` at least while the sensor is
+``bumped`` (knocked: its pose is being learned again and its detections weigh less), or
+``prior`` or ``learning`` for longer than :attr:`CalibrationRules.learning_warning_s`: WZDx's
+"functional but impaired". A camera is its own device; the LiDARs and the radars count
+through the traffic sensor, whose counts come from their fused tracks. Units are WZDx's:
+km/h, vehicles per hour, percent; dates are RFC 3339 UTC.
 """
 
 from __future__ import annotations
 
 import uuid
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Any, Literal
 
@@ -32,7 +37,9 @@ from wz_shared.messages import (
     BEACON_DEVICE,
     SIGN_DEVICE,
     AlertType,
+    CalibrationState,
     RoadsideDeviceState,
+    SensorCalibration,
     ServiceState,
     ServiceStatus,
 )
@@ -158,6 +165,81 @@ def frames_health(
 
 
 @dataclass(frozen=True)
+class CalibrationRules:
+    """When a sensor's self-calibration makes its device ``warning``.
+
+    Attributes
+    ----------
+    stale_after_s : float
+        A calibration received longer ago than this is not judged [s of wall clock]: the
+        device's freshness already says when its detector stopped.
+    learning_warning_s : float
+        ``prior`` or ``learning`` for longer than this is a warning [s of the sensor's time].
+    """
+
+    stale_after_s: float = 30.0
+    learning_warning_s: float = 900.0
+
+
+def calibration_health(
+    sensor_id: str,
+    calibration: tuple[SensorCalibration, float] | None,
+    now: float,
+    rules: CalibrationRules,
+) -> DeviceHealth | None:
+    """What the sensor's newest self-calibration (and its arrival [Unix s]) says of its
+    device, or None when it says nothing (calibrated, still learning within
+    ``rules.learning_warning_s``, none received, or received too long ago)."""
+    if calibration is None:
+        return None
+    message, received_at = calibration
+    if now - received_at > rules.stale_after_s:
+        return None
+    in_state_s = max(0.0, message.stamp - message.state_since_s)
+    name = f"{message.sensor_kind} {sensor_id}"
+    why = f" ({message.detail})" if message.detail else ""
+    if message.state == CalibrationState.BUMPED:
+        return DeviceHealth(
+            "warning",
+            (
+                f"{name} moved {_duration(in_state_s)} ago{why}: its pose is being re-learned; "
+                "its detections are down-weighted",
+            ),
+            received_at,
+        )
+    if in_state_s <= rules.learning_warning_s:
+        return None
+    if message.state == CalibrationState.LEARNING:
+        return DeviceHealth(
+            "warning",
+            (
+                f"{name} still learning its pose after {_duration(in_state_s)}{why}: its "
+                "detections are down-weighted until it is calibrated",
+            ),
+            received_at,
+        )
+    if message.state == CalibrationState.PRIOR:
+        return DeviceHealth(
+            "warning",
+            (
+                f"{name} has learned nothing of its pose in {_duration(in_state_s)}{why}: the "
+                "site file's pose is used",
+            ),
+            received_at,
+        )
+    return None
+
+
+def _duration(seconds: float) -> str:
+    """``40 s``, ``12 min``, ``3 h``."""
+    if seconds < 120.0:
+        return f"{seconds:.0f} s"
+    if seconds < 7200.0:
+        return f"{seconds / 60.0:.0f} min"
+    return f"{seconds / 3600.0:.0f} h"
+
+
+@dataclass(frozen=True)
 class FeedInputs:
     """Everything the feed shows, gathered by the caller.
 
@@ -180,6 +262,15 @@ class FeedInputs:
     stamp_offset_s: float = 0.0
     traffic_interval_s: float = 300.0
     contact_email: str | None = None
+    #: Each sensor's newest self-calibration and its arrival [Unix s], by sensor id.
+    calibrations: dict[str, tuple[SensorCalibration, float]] = field(default_factory=dict)
+    calibration_rules: CalibrationRules = field(default_factory=CalibrationRules)
+
+    def calibration_health(self, sensor_id: str) -> DeviceHealth | None:
+        """:func:`calibration_health` of one sensor."""
+        return calibration_health(
+            sensor_id, self.calibrations.get(sensor_id), self.now, self.calibration_rules
+        )
 
 
 def rfc3339(unix_s: float) -> str:
@@ -352,12 +443,20 @@ def traffic_sensor_feature(inputs: FeedInputs) -> dict[str, Any] | None:
         end = summary.end_stamp + inputs.stamp_offset_s
     else:
         start, end = inputs.now - inputs.traffic_interval_s, inputs.now
+    # The LiDARs and radars have no device of their own: their tracks make the counts.
+    calibration = [
+        health
+        for sensor in site.sensors
+        if sensor.kind != "camera"
+        and (health := inputs.calibration_health(sensor.sensor_id)) is not None
+    ]
+    health = combine(inputs.traffic_health, *calibration)
     properties: dict[str, Any] = {
         "core_details": _core(
             site,
             "traffic-sensor",
             f"Traffic sensor at {mast.sensor_id}",
-            inputs.traffic_health,
+            health,
             "Volumes, speeds and occupancy per lane, counted at a virtual loop detector from "
             "the fused LiDAR, camera and radar trajectories"
             + ("" if summary is None else f" (station {summary.detector_station_m:.0f} m)"),
@@ -394,6 +493,9 @@ def camera_features(inputs: FeedInputs) -> list[dict[str, Any]]:
     features = []
     for camera in (s for s in site.sensors if s.kind == "camera"):
         health = inputs.cameras.get(camera.sensor_id, DeviceHealth("unknown", (), inputs.now))
+        calibration = inputs.calibration_health(camera.sensor_id)
+        if calibration is not None:
+            health = combine(health, calibration)
         features.append(
             {
                 "id": device_id(site, f"camera/{camera.sensor_id}"),

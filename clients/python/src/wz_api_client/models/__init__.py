@@ -12,6 +12,8 @@ from .api_key_info import ApiKeyInfo
 from .api_key_info_origin import ApiKeyInfoOrigin
 from .api_key_info_scope import ApiKeyInfoScope
 from .area_kind import AreaKind
+from .calibration_state import CalibrationState
+from .calibration_state_change import CalibrationStateChange
 from .camera_intrinsics import CameraIntrinsics
 from .conflict import Conflict
 from .conflict_conflict_type import ConflictConflictType
@@ -56,6 +58,7 @@ from .new_webhook import NewWebhook
 from .new_webhook_phases_type_0_item import NewWebhookPhasesType0Item
 from .point_page import PointPage
 from .pose import Pose
+from .pose_correction import PoseCorrection
 from .problem import Problem
 from .problem_field import ProblemField
 from .queue_rule import QueueRule
@@ -64,9 +67,14 @@ from .readiness import Readiness
 from .readiness_checks import ReadinessChecks
 from .readiness_status import ReadinessStatus
 from .schedule import Schedule
+from .sensor_calibration import SensorCalibration
+from .sensor_calibration_sensor_kind import SensorCalibrationSensorKind
+from .sensor_calibration_status import SensorCalibrationStatus
+from .sensor_calibration_status_sensor_kind import SensorCalibrationStatusSensorKind
 from .sensor_mount import SensorMount
 from .short_ttc_rule import ShortTtcRule
 from .site import Site
+from .site_calibration import SiteCalibration
 from .site_road_direction import SiteRoadDirection
 from .site_summary import SiteSummary
 from .speed_limit import SpeedLimit
@@ -97,6 +105,8 @@ __all__ = (
     "ApiKeyInfoOrigin",
     "ApiKeyInfoScope",
     "AreaKind",
+    "CalibrationState",
+    "CalibrationStateChange",
     "CameraIntrinsics",
     "Conflict",
     "ConflictConflictType",
@@ -131,6 +141,7 @@ __all__ = (
     "NewWebhookPhasesType0Item",
     "PointPage",
     "Pose",
+    "PoseCorrection",
     "Problem",
     "ProblemField",
     "QueueRule",
@@ -139,9 +150,14 @@ __all__ = (
     "ReadinessChecks",
     "ReadinessStatus",
     "Schedule",
+    "SensorCalibration",
+    "SensorCalibrationSensorKind",
+    "SensorCalibrationStatus",
+    "SensorCalibrationStatusSensorKind",
     "SensorMount",
     "ShortTtcRule",
     "Site",
+    "SiteCalibration",
     "SiteRoadDirection",
     "SiteSummary",
     "SpeedingRule",

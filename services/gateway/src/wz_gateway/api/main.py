@@ -7,6 +7,7 @@ from fastapi import APIRouter
 
 from wz_gateway.api.routes import (
     alerts,
+    calibration,
     conflicts,
     health,
     keys,
@@ -24,6 +25,7 @@ for _router in (
     tracks.router,
     conflicts.router,
     alerts.router,
+    calibration.router,
     wzdx.router,
     keys.router,
     webhooks.router,

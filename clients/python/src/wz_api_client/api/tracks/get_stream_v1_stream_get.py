@@ -120,8 +120,10 @@ def sync_detailed(
     """Get Stream
 
      Live events as Server-Sent Events: ``tracks`` (the newest track batch, compact, at
-    most ``stream_max_hz`` a second) and ``alert`` (each alert as it is stored), each with
-    an ``id``; a ``retry`` hint first and a comment every ``stream_heartbeat_s``. A client
+    most ``stream_max_hz`` a second), ``alert`` (each alert as it is stored) and
+    ``calibration`` (each sensor's self-calibration as it is stored; each sensor's newest
+    first on connecting), each with an ``id``; a ``retry`` hint first and a comment every
+    ``stream_heartbeat_s``. A client
     that reads too slowly loses its oldest events, never holds up the gateway.
 
     Args:
@@ -159,8 +161,10 @@ def sync(
     """Get Stream
 
      Live events as Server-Sent Events: ``tracks`` (the newest track batch, compact, at
-    most ``stream_max_hz`` a second) and ``alert`` (each alert as it is stored), each with
-    an ``id``; a ``retry`` hint first and a comment every ``stream_heartbeat_s``. A client
+    most ``stream_max_hz`` a second), ``alert`` (each alert as it is stored) and
+    ``calibration`` (each sensor's self-calibration as it is stored; each sensor's newest
+    first on connecting), each with an ``id``; a ``retry`` hint first and a comment every
+    ``stream_heartbeat_s``. A client
     that reads too slowly loses its oldest events, never holds up the gateway.
 
     Args:
@@ -193,8 +197,10 @@ async def asyncio_detailed(
     """Get Stream
 
      Live events as Server-Sent Events: ``tracks`` (the newest track batch, compact, at
-    most ``stream_max_hz`` a second) and ``alert`` (each alert as it is stored), each with
-    an ``id``; a ``retry`` hint first and a comment every ``stream_heartbeat_s``. A client
+    most ``stream_max_hz`` a second), ``alert`` (each alert as it is stored) and
+    ``calibration`` (each sensor's self-calibration as it is stored; each sensor's newest
+    first on connecting), each with an ``id``; a ``retry`` hint first and a comment every
+    ``stream_heartbeat_s``. A client
     that reads too slowly loses its oldest events, never holds up the gateway.
 
     Args:
@@ -230,8 +236,10 @@ async def asyncio(
     """Get Stream
 
      Live events as Server-Sent Events: ``tracks`` (the newest track batch, compact, at
-    most ``stream_max_hz`` a second) and ``alert`` (each alert as it is stored), each with
-    an ``id``; a ``retry`` hint first and a comment every ``stream_heartbeat_s``. A client
+    most ``stream_max_hz`` a second), ``alert`` (each alert as it is stored) and
+    ``calibration`` (each sensor's self-calibration as it is stored; each sensor's newest
+    first on connecting), each with an ``id``; a ``retry`` hint first and a comment every
+    ``stream_heartbeat_s``. A client
     that reads too slowly loses its oldest events, never holds up the gateway.
 
     Args:

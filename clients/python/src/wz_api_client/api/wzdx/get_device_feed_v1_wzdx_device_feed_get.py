@@ -116,7 +116,8 @@ def sync_detailed(
     """Get Device Feed
 
      The WZDx 4.2 DeviceFeed: traffic sensor (per-lane volumes, speeds, occupancy over the
-    newest collection interval), cameras, flashing beacon and message sign, with status.
+    newest collection interval), cameras, flashing beacon and message sign, with status (a
+    knocked sensor, or one that has not learned its pose for long, is ``warning``).
 
     Args:
         site (None | str | Unset): Only this site's devices (default: every site's)
@@ -148,7 +149,8 @@ def sync(
     """Get Device Feed
 
      The WZDx 4.2 DeviceFeed: traffic sensor (per-lane volumes, speeds, occupancy over the
-    newest collection interval), cameras, flashing beacon and message sign, with status.
+    newest collection interval), cameras, flashing beacon and message sign, with status (a
+    knocked sensor, or one that has not learned its pose for long, is ``warning``).
 
     Args:
         site (None | str | Unset): Only this site's devices (default: every site's)
@@ -175,7 +177,8 @@ async def asyncio_detailed(
     """Get Device Feed
 
      The WZDx 4.2 DeviceFeed: traffic sensor (per-lane volumes, speeds, occupancy over the
-    newest collection interval), cameras, flashing beacon and message sign, with status.
+    newest collection interval), cameras, flashing beacon and message sign, with status (a
+    knocked sensor, or one that has not learned its pose for long, is ``warning``).
 
     Args:
         site (None | str | Unset): Only this site's devices (default: every site's)
@@ -205,7 +208,8 @@ async def asyncio(
     """Get Device Feed
 
      The WZDx 4.2 DeviceFeed: traffic sensor (per-lane volumes, speeds, occupancy over the
-    newest collection interval), cameras, flashing beacon and message sign, with status.
+    newest collection interval), cameras, flashing beacon and message sign, with status (a
+    knocked sensor, or one that has not learned its pose for long, is ``warning``).
 
     Args:
         site (None | str | Unset): Only this site's devices (default: every site's)

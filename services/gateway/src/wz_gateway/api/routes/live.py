@@ -1,9 +1,9 @@
 """The live stream (``GET /v1/stream``, Server-Sent Events) and the live page (``/live``).
 
 The page is static (HTML, vanilla JavaScript, a canvas; ``static/`` beside this file): it
-reads ``/v1/site`` and ``/v1/alerts`` once, then follows the stream. It is served without a
-key (it holds no data); what it reads needs one, as every ``/v1`` route does, except in dev
-mode. Browsers' ``EventSource`` cannot send a header, so the page reads the stream with
+reads ``/v1/site``, ``/v1/alerts`` and ``/v1/calibration`` once, then follows the stream. It
+is served without a key (it holds no data); what it reads needs one, as every ``/v1`` route
+does, except in dev mode. Browsers' ``EventSource`` cannot send a header, so the page reads the stream with
 ``fetch`` and sends its key as ``X-API-Key``.
 """
 
@@ -70,8 +70,8 @@ async def _event_stream(
     response_class=StreamingResponse,
     responses={
         200: {
-            "description": "An endless text/event-stream: events `tracks` and `alert`, "
-            "`: keep-alive` comments in between",
+            "description": "An endless text/event-stream: events `tracks`, `alert` and "
+            "`calibration`, `: keep-alive` comments in between",
             "content": {EVENT_STREAM: {"schema": {"type": "string"}}},
         },
         503: {
@@ -96,8 +96,9 @@ async def get_stream(
     ] = None,
 ) -> StreamingResponse:
     """Live events as Server-Sent Events: ``tracks`` (the newest track batch, compact, at
-    most ``stream_max_hz`` a second) and ``alert`` (each alert as it is stored), each with
-    an ``id``; a ``retry`` hint first and a comment every ``stream_heartbeat_s``. A client
+    most ``stream_max_hz`` a second), ``alert`` (each alert as it is stored) and
+    ``calibration`` (each sensor's self-calibration as it is stored; each sensor's newest
+    first on connecting), each with an ``id``; a ``retry`` hint first and a comment every ``stream_heartbeat_s``. A client
     that reads too slowly loses its oldest events, never holds up the gateway."""
     kinds = frozenset(event or EVENT_KINDS)
     try:

@@ -13,6 +13,7 @@ from fastapi.responses import JSONResponse
 from wz_gateway import views, wzdx_workzone
 from wz_gateway.api.deps import SITE_PATTERN, SITE_RESPONSES, Ctx, Reader, site_of
 from wz_gateway.api.errors import V1_RESPONSES
+from wz_gateway.wzdx import CalibrationRules
 
 router = APIRouter(prefix="/v1", responses=V1_RESPONSES)
 
@@ -41,8 +42,13 @@ def get_device_feed(
     ] = None,
 ) -> JSONResponse:
     """The WZDx 4.2 DeviceFeed: traffic sensor (per-lane volumes, speeds, occupancy over the
-    newest collection interval), cameras, flashing beacon and message sign, with status."""
+    newest collection interval), cameras, flashing beacon and message sign, with status (a
+    knocked sensor, or one that has not learned its pose for long, is ``warning``)."""
     settings = context.settings
+    rules = CalibrationRules(
+        stale_after_s=settings.calibration_stale_after_s,
+        learning_warning_s=settings.calibration_learning_warning_s,
+    )
     served = [site_of(context, site)] if site is not None else list(context.sites)
     feeds = [
         views.device_feed_of(
@@ -54,6 +60,7 @@ def get_device_feed(
             traffic_interval_s=settings.traffic_interval_s,
             detector_station_override_m=settings.traffic_detector_station_m,
             contact_email=settings.contact_email,
+            calibration_rules=rules,
         )
         for one in served
     ]
