@@ -1,13 +1,15 @@
-// The gateway's live page: the site from /v1/site, the alerts from /v1/alerts, then the live
-// stream /v1/stream (Server-Sent Events read with fetch, so that a key can go in a header).
+// The gateway's live page: the site from /v1/site, the alerts from /v1/alerts, the sensors'
+// self-calibration from /v1/calibration, then the live stream /v1/stream (Server-Sent Events
+// read with fetch, so that a key can go in a header).
 //
 // Frames: the site's road frame, station s [m] along the centerline in the direction of
 // travel and offset d [m] from it, positive to the left. Both views straighten the road:
 // travel runs left to right, the left side of the road is up.
 //
-// For tests and scripts: document.body.dataset.{connection, trackCount, alertCount} and
-// window.wzLive {connection, batches, stamp, tracks: [{track_id, x_m, y_m, station_m,
-// offset_m, speed_mps}], alerts: [alert_id, newest first]}.
+// For tests and scripts: document.body.dataset.{connection, trackCount, alertCount,
+// calibrationBumped} and window.wzLive {connection, batches, stamp, tracks: [{track_id, x_m,
+// y_m, station_m, offset_m, speed_mps}], alerts: [alert_id, newest first], calibration:
+// {sensor_id: {kind, state, yaw_deg, pitch_deg, clock_offset_ms, stale}}}.
 "use strict";
 
 (() => {
@@ -17,6 +19,7 @@
   const STALE_AFTER_S = 3.0; // no track batch for this long: the data is stale
   const SILENT_STREAM_S = 45.0; // nothing at all (not even a heartbeat): reconnect
   const MAX_ALERTS = 200;
+  const CALIBRATION_STALE_S = 30.0; // no calibration for this long: shown as old (greyed)
   const TABLE_ROWS = 8;
   const SIZES = { // default length and width [m] when the tracker gave none
     car: [4.6, 1.85], truck: [14.0, 2.55], bus: [12.0, 2.55], motorcycle: [2.2, 0.8],
@@ -39,7 +42,9 @@
   };
 
   const $ = (id) => document.getElementById(id);
-  const live = { connection: "connecting", batches: 0, stamp: null, tracks: [], alerts: [] };
+  const live = {
+    connection: "connecting", batches: 0, stamp: null, tracks: [], alerts: [], calibration: {},
+  };
   window.wzLive = live;
 
   const state = {
@@ -50,6 +55,8 @@
     trails: new Map(), // track_id -> [{s, d, t}]
     alerts: [], // newest first
     alertIds: new Set(),
+    calibration: new Map(), // sensor_id -> {kind, message (or null), receivedAt [performance s]}
+    calibrationTick: null, // the second the calibration table was last drawn
     view: null, // plan view: {s, d, scale [px/m]}
     highlight: null, // {trackId, until}
     drawQueued: false,
@@ -155,6 +162,7 @@
     const payload = JSON.parse(data.join("\n"));
     if (type === "tracks") onTracks(payload);
     else if (type === "alert") onAlert(payload, true);
+    else if (type === "calibration") onCalibration(payload, 0);
   }
 
   // --- connection and figures -----------------------------------------------------------
@@ -175,6 +183,11 @@
       setConnection("stale");
     } else if (live.connection === "stale" && age !== null && age <= STALE_AFTER_S) {
       setConnection("live");
+    }
+    const second = Math.floor(performance.now() / 1000);
+    if (state.calibration.size && second !== state.calibrationTick) {
+      state.calibrationTick = second; // ages and staleness move on
+      renderCalibration();
     }
   }
 
@@ -364,6 +377,102 @@
         await sleep(2000);
       }
     }
+  }
+
+  // The sensors' self-calibration: each sensor's newest SensorCalibration message, as its
+  // detector published it; ageS: how long ago the gateway received it.
+  function onCalibration(message, ageS) {
+    if (state.road && message.site !== state.road.site.site_id) return; // another site's
+    const receivedAt = performance.now() / 1000 - ageS;
+    const known = state.calibration.get(message.source_id);
+    if (known && known.message && known.receivedAt > receivedAt) return; // we have a newer one
+    state.calibration.set(message.source_id, { kind: message.sensor_kind, message, receivedAt });
+    renderCalibration();
+  }
+
+  async function loadCalibration(site) {
+    for (let attempt = 0; attempt < 5; attempt++) {
+      try {
+        const answer = await getJson(`/v1/calibration?site=${encodeURIComponent(site.site_id)}&changes=0`);
+        for (const sensor of answer.sensors) {
+          if (sensor.calibration) onCalibration(sensor.calibration, sensor.age_s);
+          else if (!state.calibration.has(sensor.sensor_id)) {
+            state.calibration.set(sensor.sensor_id, { kind: sensor.sensor_kind, message: null, receivedAt: null });
+          }
+        }
+        renderCalibration();
+        return;
+      } catch (error) {
+        if (error instanceof AuthError) return;
+        await sleep(2000);
+      }
+    }
+  }
+
+  function signed(value, digits, unit) {
+    const text = value.toFixed(digits);
+    return `${value > 0 && Number(text) !== 0 ? "+" : ""}${text}${unit}`;
+  }
+
+  function stdText(std, digits, unit) {
+    return std === null || std === undefined ? "not observed" : `\u00b1 ${std.toFixed(digits)}${unit}`;
+  }
+
+  function duration(seconds) {
+    if (seconds < 120) return `${Math.round(seconds)} s`;
+    if (seconds < 7200) return `${Math.round(seconds / 60)} min`;
+    return `${Math.round(seconds / 3600)} h`;
+  }
+
+  function renderCalibration() {
+    const now = performance.now() / 1000;
+    const view = {};
+    let bumped = 0;
+    const order = state.road ? state.road.sensors.map((sensor) => sensor.id) : [];
+    const rank = (id) => (order.includes(id) ? order.indexOf(id) : order.length);
+    const entries = [...state.calibration.entries()].sort((a, b) => rank(a[0]) - rank(b[0]));
+    const rows = entries.map(([sensorId, entry]) => {
+      const row = document.createElement("tr");
+      row.dataset.sensorId = sensorId;
+      const message = entry.message;
+      if (!message) {
+        row.className = "silent";
+        row.append(element("td", "", sensorId), element("td", "", entry.kind),
+          element("td", "state", "not heard"), element("td", "", "--"), element("td", "", "--"),
+          element("td", "", "--"), element("td", "", "--"));
+        row.title = "Nothing received from this sensor's detector";
+        return row;
+      }
+      const stale = now - entry.receivedAt > CALIBRATION_STALE_S;
+      const c = message.correction;
+      const clockMs = message.clock_offset_s * 1000;
+      row.className = `${message.state}${stale ? " stale" : ""}`;
+      if (message.state === "bumped") bumped += 1;
+      const yaw = element("td", "", signed(c.yaw_deg, 2, "\u00b0"));
+      yaw.title = stdText(c.yaw_std_deg, 2, "\u00b0");
+      const pitch = element("td", "", signed(c.pitch_deg, 2, "\u00b0"));
+      pitch.title = stdText(c.pitch_std_deg, 2, "\u00b0");
+      const clock = element("td", "", signed(clockMs, 0, " ms"));
+      const clockStd = message.clock_offset_std_s;
+      clock.title = clockStd === null ? "not observed" : `\u00b1 ${(clockStd * 1000).toFixed(0)} ms`;
+      row.append(element("td", "", sensorId), element("td", "", message.sensor_kind),
+        element("td", "state", message.state), yaw, pitch, clock,
+        element("td", "", duration(Math.max(0, message.stamp - message.state_since_s))));
+      const heard = `received ${duration(now - entry.receivedAt)} ago`;
+      row.title = message.detail ? `${message.detail} (${heard})` : heard;
+      view[sensorId] = {
+        kind: message.sensor_kind, state: message.state, yaw_deg: c.yaw_deg,
+        pitch_deg: c.pitch_deg, clock_offset_ms: clockMs, stale,
+      };
+      return row;
+    });
+    $("calibration-rows").replaceChildren(...rows);
+    $("no-calibration").hidden = rows.length > 0;
+    live.calibration = view;
+    document.body.dataset.calibrationBumped = String(bumped);
+    $("calibration-summary").textContent = bumped
+      ? `${bumped} sensor${bumped === 1 ? "" : "s"} moved: pose being learned again`
+      : "";
   }
 
   // --- the alert list and the table ------------------------------------------------------
@@ -972,6 +1081,7 @@
     applySite(site);
     follow(); // the stream first, so that no alert falls between the list and the stream
     loadAlerts();
+    loadCalibration(site);
   }
 
   start();
