@@ -219,9 +219,10 @@ def _demo_banner(site_id: str, endpoint: str) -> None:
 
 def cmd_status(args: argparse.Namespace) -> int:
     from wz_cli.stack import select
-    from wz_cli.status import collect, health_notes, problems, render_json, render_table
+    from wz_cli.status import health_notes, problems, render_json, render_table, survey
 
     site = args.site or default_site_id()
+    sensors = _site_sensors(site)
     if args.expect is None:
         expected = [spec.name for spec in select(None)]  # what `wz up` runs
     else:
@@ -238,15 +239,28 @@ def cmd_status(args: argparse.Namespace) -> int:
             emit(f"{name}: {note}")
         return 1
     with bus:
-        views = collect(bus, site, args.timeout, expected, notes)
+        found = survey(bus, site, args.timeout, expected, notes, sensors)
+    views = found.services
     if args.json:
-        emit(render_json(site, views))
+        emit(render_json(site, views, found.sensors, found.listened_s))
     else:
-        for line in render_table(site, views):
+        for line in render_table(site, views, found.sensors, found.listened_s):
             emit(line)
     if not expected:
         return 0 if any(view.alive for view in views) else 1
     return 1 if problems(views) else 0
+
+
+def _site_sensors(site_id: str) -> list[tuple[str, str]]:
+    """``(sensor_id, kind)`` of the site file of :func:`site_file_from_env` when it is
+    ``site_id``'s (the sensors `wz status` expects a calibration from); else none."""
+    try:
+        site = load_site(site_file_from_env())
+    except SiteFileError:
+        return []
+    if site.site_id != site_id:
+        return []
+    return [(sensor.sensor_id, sensor.kind) for sensor in site.sensors]
 
 
 def cmd_tap(args: argparse.Namespace) -> int:
@@ -566,7 +580,9 @@ def build_parser() -> argparse.ArgumentParser:
         "status",
         help="which services are alive, with their rates and drops",
         description="Query the services' liveliness tokens under wz/<site>/status/* and listen "
-        "to their status messages.",
+        "to their status messages, and to the sensors' self-calibration under "
+        "wz/<site>/calibration/* (a CALIBRATION table: state, learned yaw, pitch and roll "
+        "corrections, clock offset, samples, time in that state).",
         epilog="Exit code: 0 when every expected service is up (its loop goes round), 1 when "
         "one is down, silent or stalled; with --expect '': 0 if any service is alive.",
     )
@@ -574,9 +590,11 @@ def build_parser() -> argparse.ArgumentParser:
     status.add_argument(
         "--timeout",
         type=_positive_float,
-        default=3.0,
+        default=6.0,
         metavar="S",
-        help="how long to wait for status messages [s] (default 3)",
+        help="how long to wait for status and calibration messages [s] (default 6: the "
+        "detectors send each sensor's calibration every 5 s; it returns as soon as every "
+        "service and sensor has reported)",
     )
     status.add_argument("--json", action="store_true", help="one JSON object instead of a table")
     status.add_argument(

@@ -18,12 +18,22 @@ With ``--health-dir`` (``wz up``'s state folder), a service that is not up also 
 health file says: a service still waiting for its router writes why there
 (:mod:`wz_shared.reach`: ``waiting for the bus: tcp/127.0.0.1:7447: connection refused``).
 
+It also listens to the sensors' self-calibration (``wz/<site>/calibration/<sensor>``, the
+:class:`SensorCalibration` each detector publishes for each of its sensors on a change of state
+and every 5 s of sensor time) and shows one row per sensor: the site file's sensors when the
+site is the one of ``WZ_SITE_FILE`` (or the default), and any other heard from. As for the
+services, only what comes while listening counts: a sensor not heard from shows ``-``, with a
+line saying why (its detector is not running, or nothing came in the time given); it waits
+for the sensors whose detector is alive, up to the timeout. A knocked sensor (``bumped``) gets
+a line too; neither changes the exit code (the detector already reports itself ``degraded``).
+
 The command exits 1 when an expected service is anything but up.
 """
 
 from __future__ import annotations
 
 import json
+import queue
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -34,7 +44,20 @@ from wz_cli.common import format_duration, format_table
 from wz_shared.bus import Bus
 from wz_shared.health import waiting_reason
 from wz_shared.keys import Keys
-from wz_shared.messages import ServiceState, ServiceStatus
+from wz_shared.messages import (
+    CalibrationState,
+    Message,
+    SensorCalibration,
+    ServiceState,
+    ServiceStatus,
+)
+
+#: The service that publishes each kind of sensor's calibration (``wz up``'s names).
+DETECTOR_OF_KIND = {
+    "lidar": "lidar-detector",
+    "camera": "camera-detector",
+    "radar": "camera-detector",
+}
 
 
 @dataclass(frozen=True)
@@ -59,6 +82,37 @@ class ServiceView:
         return "silent" if self.alive else "down"
 
 
+@dataclass(frozen=True)
+class SensorView:
+    """What was heard of one sensor's self-calibration while listening."""
+
+    sensor_id: str
+    #: ``lidar``, ``camera`` or ``radar``: the message's, else the site file's.
+    kind: str
+    #: The newest message; None if none came.
+    calibration: SensorCalibration | None
+    #: Seconds between receiving ``calibration`` and the end of collection.
+    age_s: float | None
+    #: Whether the site file lists it.
+    expected: bool = False
+    #: Whether the service that publishes its calibration is alive on the bus.
+    detector_alive: bool = False
+
+    @property
+    def detector(self) -> str:
+        return DETECTOR_OF_KIND.get(self.kind, "its detector")
+
+
+@dataclass(frozen=True)
+class Survey:
+    """Every service's view and every sensor's, from one collection."""
+
+    services: list[ServiceView]
+    sensors: list[SensorView]
+    #: How long it listened [s].
+    listened_s: float
+
+
 def _name(key: str) -> str:
     return key.rsplit("/", 1)[-1]
 
@@ -81,28 +135,60 @@ def collect(
     expected: Iterable[str] = (),
     notes: dict[str, str] | None = None,
 ) -> list[ServiceView]:
-    """Ask who is alive at ``site`` and listen to status messages for up to ``timeout_s``;
-    one view per service alive, heard or ``expected``; ``notes`` (:func:`health_notes`) go
-    to the services that did not report.
+    """The services of :func:`survey` (no sensor expected)."""
+    return survey(bus, site, timeout_s, expected, notes).services
 
-    Returns early once every alive and expected service has reported.
+
+def survey(
+    bus: Bus,
+    site: str,
+    timeout_s: float,
+    expected: Iterable[str] = (),
+    notes: dict[str, str] | None = None,
+    sensors: Iterable[tuple[str, str]] = (),
+) -> Survey:
+    """Ask who is alive at ``site`` and listen to status and calibration messages for up to
+    ``timeout_s``; one view per service alive, heard or ``expected``; ``notes``
+    (:func:`health_notes`) go to the services that did not report; one view per sensor of
+    ``sensors`` (``(sensor_id, kind)``, the site file's) or heard from.
+
+    Returns early once every alive and expected service has reported, and every sensor of
+    ``sensors`` whose detector is alive has sent its calibration.
     """
     wanted = set(expected)
     keys = Keys(site)
-    deadline = time.monotonic() + timeout_s
-    statuses = bus.subscribe(keys.status_all, ServiceStatus, mode="fifo", capacity=1024)
+    started = time.monotonic()
+    deadline = started + timeout_s
+    arrivals: queue.Queue[tuple[str, Message, float]] = queue.Queue()
+
+    def arrived(key: str, message: Message) -> None:  # Zenoh's thread
+        arrivals.put((key, message, time.monotonic()))
+
+    bus.on(keys.status_all, ServiceStatus, arrived)
+    bus.on(keys.calibration_all, SensorCalibration, arrived)
     alive = {_name(key) for key in bus.alive(keys.status_all, timeout_s=min(timeout_s, 2.0))}
+    site_sensors = dict(sensors)
+    waited_sensors = {s for s, kind in site_sensors.items() if DETECTOR_OF_KIND.get(kind) in alive}
     latest: dict[str, tuple[ServiceStatus, float]] = {}
-    while not ((alive or wanted) and alive | wanted <= latest.keys()):
+    calibrations: dict[str, tuple[SensorCalibration, float]] = {}
+    while not (
+        (alive or wanted)
+        and alive | wanted <= latest.keys()
+        and waited_sensors <= calibrations.keys()
+    ):
         remaining = deadline - time.monotonic()
         if remaining <= 0:
             break
-        received = statuses.recv_with_key(remaining)
-        if received is None:
+        try:
+            key, message, at = arrivals.get(timeout=remaining)
+        except queue.Empty:
             break
-        latest[_name(received.key)] = (received.value, time.monotonic())
+        if isinstance(message, ServiceStatus):
+            latest[_name(key)] = (message, at)
+        elif isinstance(message, SensorCalibration):
+            calibrations[_name(key)] = (message, at)
     end = time.monotonic()
-    return [
+    services = [
         ServiceView(
             name=name,
             alive=name in alive,
@@ -113,6 +199,22 @@ def collect(
         )
         for name in sorted(alive | latest.keys() | wanted)
     ]
+    heard_only = sorted(calibrations.keys() - site_sensors.keys())
+    sensor_views = []
+    for sensor_id in [*site_sensors, *heard_only]:
+        heard, heard_at = calibrations.get(sensor_id) or (None, None)
+        kind = heard.sensor_kind if heard is not None else site_sensors[sensor_id]
+        sensor_views.append(
+            SensorView(
+                sensor_id=sensor_id,
+                kind=kind,
+                calibration=heard,
+                age_s=None if heard_at is None else end - heard_at,
+                expected=sensor_id in site_sensors,
+                detector_alive=DETECTOR_OF_KIND.get(kind) in alive,
+            )
+        )
+    return Survey(services, sensor_views, end - started)
 
 
 def problems(views: list[ServiceView]) -> list[str]:
@@ -180,13 +282,101 @@ def _per_key(status: ServiceStatus) -> list[tuple[str, str, str, str, str]]:
     return rows
 
 
-def render_table(site: str, views: list[ServiceView]) -> list[str]:
-    """The human-readable report: one block of rows per service, one row per key."""
+def _signed(value: float, digits: int) -> str:
+    return f"{value:+.{digits}f}"
+
+
+def calibration_rows(sensors: list[SensorView]) -> list[tuple[str, ...]]:
+    """One row per sensor: sensor, kind, state, the learned yaw, pitch and roll corrections
+    [deg], clock offset [ms], samples, how long in that state (``-`` where nothing came)."""
+    rows: list[tuple[str, ...]] = []
+    for view in sensors:
+        message = view.calibration
+        if message is None:
+            rows.append((view.sensor_id, view.kind, *("-",) * 7))
+            continue
+        correction = message.correction
+        rows.append(
+            (
+                view.sensor_id,
+                message.sensor_kind,
+                message.state.value,
+                _signed(correction.yaw_deg, 2),
+                _signed(correction.pitch_deg, 2),
+                _signed(correction.roll_deg, 2),
+                _signed(message.clock_offset_s * 1000.0, 0),
+                str(message.samples),
+                format_duration(max(0.0, message.stamp - message.state_since_s)),
+            )
+        )
+    return rows
+
+
+def calibration_notes(sensors: list[SensorView], listened_s: float) -> list[str]:
+    """One line per sensor not heard from (and why, as far as the bus tells) and per sensor
+    knocked."""
+    out = []
+    for view in sensors:
+        message = view.calibration
+        if message is None:
+            if view.detector_alive:
+                out.append(
+                    f"{view.sensor_id}: no calibration heard in {listened_s:.1f} s "
+                    f"({view.detector} is alive; it sends one every 5 s of sensor time, or "
+                    "none when it does not learn its pose)"
+                )
+            else:
+                out.append(f"{view.sensor_id}: no calibration ({view.detector} is not running)")
+        elif message.state == CalibrationState.BUMPED:
+            since = format_duration(max(0.0, message.stamp - message.state_since_s))
+            why = f" ({message.detail})" if message.detail else ""
+            out.append(
+                f"{view.sensor_id}: bumped {since} ago{why}: its pose is being learned again, "
+                "its detections weigh less"
+            )
+    return out
+
+
+def render_table(
+    site: str,
+    views: list[ServiceView],
+    sensors: list[SensorView] | None = None,
+    listened_s: float = 0.0,
+) -> list[str]:
+    """The human-readable report: one block of rows per service, one row per key; then, with
+    ``sensors``, the CALIBRATION table, one row per sensor, and what is to be said of them
+    (:func:`calibration_notes`, ``listened_s``: how long it listened)."""
     up = sum(view.health == "up" for view in views)
     lines = [f"site {site}: {up} of {len(views)} service(s) up"]
     if not views:
         lines.append("no service answered (is the stack running? `wz up`)")
-        return lines
+    else:
+        lines.extend(_services_table(views))
+        lines.extend(problems(views))
+    if sensors:
+        lines.append("")
+        lines.append("CALIBRATION")
+        lines.extend(
+            format_table(
+                (
+                    "SENSOR",
+                    "KIND",
+                    "STATE",
+                    "DYAW DEG",
+                    "DPITCH DEG",
+                    "DROLL DEG",
+                    "CLOCK MS",
+                    "SAMPLES",
+                    "SINCE",
+                ),
+                calibration_rows(sensors),
+            )
+        )
+        lines.extend(calibration_notes(sensors, listened_s))
+    return lines
+
+
+def _services_table(views: list[ServiceView]) -> list[str]:
     header = (
         "SERVICE",
         "HEALTH",
@@ -217,12 +407,15 @@ def render_table(site: str, views: list[ServiceView]) -> list[str]:
             rows.append((*ident, "-", "-", "-", "-", "-"))
         for i, key_row in enumerate(per_key):
             rows.append((*(ident if i == 0 else ("",) * len(ident)), *key_row))
-    lines.extend(format_table(header, rows))
-    lines.extend(problems(views))
-    return lines
+    return format_table(header, rows)
 
 
-def render_json(site: str, views: list[ServiceView]) -> str:
+def render_json(
+    site: str,
+    views: list[ServiceView],
+    sensors: list[SensorView] | None = None,
+    listened_s: float | None = None,
+) -> str:
     """The report as one JSON object (for scripts)."""
     report: dict[str, Any] = {
         "site": site,
@@ -243,5 +436,21 @@ def render_json(site: str, views: list[ServiceView]) -> str:
             }
             for view in views
         ],
+        "calibration": [
+            {
+                "sensor": sensor.sensor_id,
+                "kind": sensor.kind,
+                "expected": sensor.expected,
+                "detector_alive": sensor.detector_alive,
+                "calibration": (
+                    None
+                    if sensor.calibration is None
+                    else sensor.calibration.model_dump(mode="json")
+                ),
+                "age_s": None if sensor.age_s is None else round(sensor.age_s, 3),
+            }
+            for sensor in sensors or []
+        ],
+        "calibration_notes": calibration_notes(sensors or [], listened_s or 0.0),
     }
     return json.dumps(report)
