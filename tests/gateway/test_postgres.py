@@ -29,6 +29,7 @@ from tests.gateway.helpers import (
     open_storage,
     sample_alert,
 )
+from tests.gateway.test_calibration import CAMERA_STORY
 from tests.gateway.tracking import car_tracks, filtered_car, merged_batches
 from tests.gateway.webhook_receiver import Receiver, eventually
 from wz_gateway import auth, webhooks
@@ -40,6 +41,7 @@ from wz_gateway.tables import SCHEMA_VERSION
 from wz_gateway.track_ends import TrackFinisher
 from wz_gateway.track_lives import TrackLifeStore
 from wz_gateway.webhook_store import WebhookStore
+from wz_shared.messages import SensorCalibration
 from wz_shared.motion import ProcessNoise, rts_smooth
 
 NOW = 1_750_000_000.0
@@ -105,8 +107,11 @@ def test_storage_round_trip_on_postgresql(postgres_url: str) -> None:
         for a, b in zip(left, right, strict=True)
     ]
     alert = sample_alert("pg-1", 1.0, track=make_track(1, 830.0, 30.0))
-    result = storage.ingest([*batches, alert, alert], geo=SITE.geo_frame, received_at=NOW)
+    result = storage.ingest(
+        [*batches, alert, alert, *CAMERA_STORY], geo=SITE.geo_frame, received_at=NOW
+    )
     assert (result.points, result.alerts, result.duplicate_alerts) == (40, 1, 1)
+    assert (result.calibrations, result.calibration_changes) == (len(CAMERA_STORY), 6)
     secret = auth.new_secret()
     info = KeyStore(storage.engine).add("admin", secret, name="pg", origin="api", now=NOW)
     storage.close()
@@ -126,12 +131,17 @@ def test_storage_round_trip_on_postgresql(postgres_url: str) -> None:
         assert len(seen) == 40 == len(set(seen))
         assert reopened.alerts(AlertQuery(site=SITE.site_id)).items == [alert]
         assert KeyStore(reopened.engine).find(secret) == info
+        changes = reopened.calibration_changes(SITE.site_id, per_sensor=3)
+        assert [c.stamp for c in changes["camera-mast"]] == [50.0, 40.0, 30.0]
+        newest = reopened.latest_calibrations(SITE.site_id)["camera-mast"]
+        assert SensorCalibration.model_validate_json(newest.body) == CAMERA_STORY[-1]
         live = reopened.latest(SITE.site_id, "tracks")
         assert live is not None and live.stamp == pytest.approx(1.9)
         deleted = reopened.purge(
             NOW + 31 * 86400.0, retention_days=30.0, alert_retention_days=365.0
         )
         assert deleted["track_points"] == 40 and deleted["alerts"] == 0
+        assert deleted["calibration_changes"] == 6
     finally:
         reopened.close()
 
