@@ -23,6 +23,8 @@ from tests.gateway.helpers import (
     open_storage,
     sample_alert,
 )
+from tests.gateway.test_calibration import calibration
+from wz_gateway import wzdx
 from wz_gateway.metrics import GatewayMetrics
 from wz_gateway.node import Writer
 from wz_gateway.sites import Sites, load_sites
@@ -30,7 +32,7 @@ from wz_gateway.storage import AlertQuery, PointQuery, Storage
 from wz_gateway.tables import MIGRATIONS, SCHEMA_VERSION, alerts, schema_version
 from wz_gateway.track_ends import SiteFinishers
 from wz_gateway.track_lives import TrackLifeStore
-from wz_shared.messages import Alert, TrackBatch
+from wz_shared.messages import Alert, CalibrationState, TrackBatch
 from wz_shared.site import SiteFileError
 
 NOW = 1_750_000_000.0
@@ -131,8 +133,16 @@ def test_api_serves_each_site_with_a_site_parameter(tmp_path: Path) -> None:
     settings = gateway_settings(tmp_path)
     storage = open_storage(settings)
     try:
-        for site, speed in ((SITE, 25.0), (OTHER, 31.0)):
+        for site, speed, state in (
+            (SITE, 25.0, CalibrationState.BUMPED),
+            (OTHER, 31.0, CalibrationState.CALIBRATED),
+        ):
             messages = [of_site(m, site.site_id) for m in car_batches(4, 600.0, speed, 0.0, 5)]
+            messages.append(
+                calibration("camera-mast", 0.4, state, 0.1).model_copy(
+                    update={"site": site.site_id}
+                )
+            )
             messages.append(of_site(sample_alert("ep-7-0", 0.2), site.site_id))
             messages.append(
                 devices_state(0.3, beacon_on=True, sign_text="SLOW DOWN", cause=None).model_copy(
@@ -177,6 +187,23 @@ def test_api_serves_each_site_with_a_site_parameter(tmp_path: Path) -> None:
             } == sources
             one = http.get("/v1/wzdx/device-feed", params={"site": OTHER.site_id}).json()
             assert len(one["features"]) * 2 == len(feed["features"])
+            # Each site's sensors' calibration, and its camera's status in the feed.
+            for site_id, state in ((SITE.site_id, "bumped"), (OTHER.site_id, "calibrated")):
+                sensors = http.get("/v1/calibration", params={"site": site_id}).json()["sensors"]
+                camera = next(s for s in sensors if s["sensor_id"] == "camera-mast")
+                assert camera["calibration"]["state"] == state
+                assert camera["calibration"]["site"] == site_id
+            cameras = {
+                f["properties"]["core_details"]["data_source_id"]: f["properties"]["core_details"]
+                for f in feed["features"]
+                if f["properties"]["core_details"]["device_type"] == "camera"
+            }
+            moved = {
+                source
+                for source, core in cameras.items()
+                if any("moved" in m for m in core.get("status_messages", []))
+            }
+            assert len(cameras) == 2 and moved == {wzdx.data_source_id(SITE)}
     finally:
         storage.close()
 
