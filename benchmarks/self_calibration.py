@@ -29,10 +29,10 @@ import numpy as np
 
 from wz_camera_detector.calibration import (
     CameraSelfCalibration,
-    RadarSelfCalibration,
     SensorCalibrationSettings,
 )
 from wz_camera_detector.node import CLASS_SHAPES
+from wz_camera_detector.radar_calibration import RadarSelfCalibration
 from wz_camera_detector.world import vehicle_image_boxes
 from wz_lidar_detector.calibration import LidarCalibrationSettings, LidarSelfCalibration
 from wz_shared.camera_geometry import camera_at_size

@@ -16,11 +16,11 @@ import pytest
 
 from wz_camera_detector.calibration import (
     CameraSelfCalibration,
-    RadarSelfCalibration,
     ReferenceObjects,
     SensorCalibrationSettings,
 )
 from wz_camera_detector.node import CLASS_SHAPES
+from wz_camera_detector.radar_calibration import RadarSelfCalibration
 from wz_camera_detector.world import vehicle_image_boxes
 from wz_shared.camera_geometry import camera_at_size
 from wz_shared.messages import (

@@ -37,8 +37,9 @@ from wz_camera_detector.association import (
     radar_targets_to_site,
     to_detection,
 )
-from wz_camera_detector.calibration import CameraSelfCalibration, RadarSelfCalibration
+from wz_camera_detector.calibration import CameraSelfCalibration
 from wz_camera_detector.node import CameraDetector
+from wz_camera_detector.radar_calibration import RadarSelfCalibration
 from wz_camera_detector.settings import CameraDetectorSettings, camera_mount, radar_mount
 from wz_lidar_detector.calibration import LidarSelfCalibration
 from wz_lidar_detector.node import LidarDetector

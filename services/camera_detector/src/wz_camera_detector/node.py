@@ -75,7 +75,8 @@ from wz_camera_detector.association import (
     to_detection,
 )
 from wz_camera_detector.background import BACKEND, BackgroundSubtractionDetector
-from wz_camera_detector.calibration import CameraSelfCalibration, RadarSelfCalibration
+from wz_camera_detector.calibration import CameraSelfCalibration
+from wz_camera_detector.radar_calibration import RadarSelfCalibration
 from wz_camera_detector.regions import detector_regions
 from wz_camera_detector.settings import (
     CameraDetectorSettings,
