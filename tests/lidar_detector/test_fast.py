@@ -526,3 +526,24 @@ def test_a_vehicle_cut_by_the_lowest_beam_gets_an_unknown_length(
     plain = FastPipeline(settings.model_copy(update={"fov_cut_std_m": 0.0}), range_background)
     near_plain = min(plain.detect(frame).detections, key=lambda d: d.center_xyz_m[0])
     assert np.array(near_plain.covariance_xy_m2).max() < 4.0
+
+
+def test_a_flickering_near_surface_is_background_when_asked() -> None:
+    """A slot that sees a post in 40 % of the learning frames and the ground behind it in the
+    rest: by default the ground is its background (the post comes out as foreground); with
+    ``near_support_fraction=0.3`` the post is."""
+    from wz_lidar_detector.background import RangeBackgroundSettings, RangeImageBackground
+    from wz_lidar_detector.detection import PointFrame
+
+    def frame(post: bool) -> PointFrame:
+        points = np.array(
+            [(10.0 if post else 30.0, 0.0, -1.0, 1.0), (40.0, 0.0, -2.0, 1.0)], dtype=np.float32
+        )
+        return PointFrame(points=points, rows=2, columns=1, stamp_s=0.0)
+
+    frames = [frame(i % 5 < 2) for i in range(20)]
+    default = RangeImageBackground.learn(frames, RangeBackgroundSettings())
+    near = RangeImageBackground.learn(frames, RangeBackgroundSettings(near_support_fraction=0.3))
+    post = frame(True)
+    assert default.foreground_mask(post)[0]
+    assert not near.foreground_mask(post)[0]
