@@ -1,6 +1,6 @@
 """The ``wz`` command: run the local stack, watch it, record and replay the bus.
 
-Subcommands: ``router``, ``up``, ``demo``, ``status``, ``tap``, ``alerts``, ``record``, ``replay``, ``recording``, and the
+Subcommands: ``router``, ``up``, ``demo``, ``status``, ``tap``, ``alerts``, ``record``, ``replay``, ``recording``, ``calibrate``, and the
 services' tools ``dataset``, ``pictures``, ``detect-lidar``, ``detect-camera``, ``eval`` and ``eval-camera`` (``wz <command> --help`` for each).
 The command's own logs go to stderr (structured, see :mod:`wz_shared.logs`); stdout carries only
 its output (tables, tapped messages, children's lines), so it can be piped.
@@ -402,6 +402,51 @@ def _replay_field_log(args: argparse.Namespace) -> int:
         raise CliError(str(exc), 1) from exc
 
 
+def _ground_range(text: str) -> tuple[float, float]:
+    try:
+        low, high = (float(part) for part in text.split(","))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"expected MIN,MAX in metres, got {text!r}") from exc
+    if not 0 <= low < high:
+        raise argparse.ArgumentTypeError(f"expected 0 <= MIN < MAX, got {text!r}")
+    return low, high
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    from wz_cli.calibrate import run_command
+
+    if args.frame is None and args.height is not None:
+        raise CliError("--height goes with --frame")
+    if args.frame is not None:
+        for flag, given in (
+            ("--write-site", args.write_site is not None),
+            ("--pictures", args.pictures is not None),
+            ("--no-camera", args.no_camera),
+        ):
+            if given:
+                raise CliError(f"{flag} does not go with --frame (the ground of one frame)")
+    if args.pictures is not None and args.recording is None:
+        raise CliError("--pictures needs --recording (the frames to draw)")
+    if args.include_learning and args.write_site is None:
+        raise CliError("--include-learning goes with --write-site")
+    site_path: Path = args.site or site_file_from_env()
+    site: Site | None = None
+    if args.frame is None or args.site is not None:
+        try:
+            site = load_site(site_path)
+        except SiteFileError as exc:
+            raise CliError(str(exc)) from exc
+    stop = stop_on_signals()
+    site_id = site.site_id if site is not None else ANY_SITE
+    return run_command(
+        args,
+        site,
+        site_path,
+        stop,
+        lambda: open_bus(args.connect, site=site_id, service="wz-calibrate"),
+    )
+
+
 #: Commands that run a tool of a service in its own process: the CLI stays light (no SUMO,
 #: open3d or OpenCV imports) and works where that service is not installed.
 SERVICE_TOOLS = {
@@ -723,6 +768,95 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_connect(replay)
     replay.set_defaults(handler=cmd_replay)
+
+    calibrate = commands.add_parser(
+        "calibrate",
+        help="the sensors' learned poses and clocks, from a recording, the stack or a frame",
+        description="Show what the sensors' self-calibration learns (issue 39; "
+        "docs/calibration.md). --recording: run the LiDAR and camera detectors here on a "
+        "`wz record` file's raw frames, in the order of their stamps; --minutes: listen to "
+        "a running stack's calibration messages; --frame: the ground plane under a LiDAR "
+        "from one frame (no lanes needed). Prints each sensor's correction with its "
+        "uncertainty (yaw, pitch, roll [deg], x, y, z [m], clock [ms]; 'not observed' where "
+        "the data say nothing) and its state; --write-site writes the site file with each "
+        "calibrated sensor's pose corrected.",
+        epilog="Exit codes: 0 every sensor with data calibrated (--frame: a plane found); 1 "
+        "cannot read the input, or it holds no frame of the site's sensors (--frame: no "
+        "plane); 2 usage; 3 the recording was cut short (everything readable was used); 4 a "
+        "sensor is not calibrated yet (its correction is partial: a longer recording or more "
+        "traffic).",
+    )
+    what = calibrate.add_mutually_exclusive_group(required=True)
+    what.add_argument(
+        "--recording",
+        type=Path,
+        metavar="FILE.mcap",
+        help="a `wz record` file with the sensors' raw frames (wz/<site>/raw/**)",
+    )
+    what.add_argument(
+        "--minutes",
+        type=_positive_float,
+        metavar="N",
+        help="listen to the running stack's wz/<site>/calibration/* for at most N minutes "
+        "(returns once every sensor of the site file is calibrated)",
+    )
+    what.add_argument(
+        "--frame",
+        type=Path,
+        metavar="FILE",
+        help="ground only: fit the ground plane under a LiDAR in one frame (PCD, PLY, NPZ in "
+        "the sensor's frame): its height, pitch and roll against the road",
+    )
+    calibrate.add_argument(
+        "--site",
+        type=Path,
+        metavar="SITE.yaml",
+        help="the site file (default: WZ_SITE_FILE or the default site; with --frame: none, "
+        "a level sensor, unless given)",
+    )
+    calibrate.add_argument(
+        "--write-site",
+        type=Path,
+        metavar="OUT.yaml",
+        help="write the site file with each calibrated sensor's pose = the site file's + its "
+        "learned correction (everything else kept)",
+    )
+    calibrate.add_argument(
+        "--include-learning",
+        action="store_true",
+        help="--write-site also corrects sensors still learning (their estimate is partial)",
+    )
+    calibrate.add_argument("--overwrite", action="store_true", help="replace OUT.yaml if it exists")
+    calibrate.add_argument(
+        "--pictures",
+        type=Path,
+        metavar="DIR",
+        help="with --recording: before/after PNGs: the LiDAR's detections on the lanes, the "
+        "LiDAR's vehicles projected into a camera frame (site file's vs learned pose)",
+    )
+    calibrate.add_argument(
+        "--no-camera",
+        action="store_true",
+        help="with --recording: the LiDAR only (the camera and radar are not run: faster)",
+    )
+    calibrate.add_argument(
+        "--height",
+        type=_positive_float,
+        metavar="M",
+        help="with --frame: the sensor's height above the road to start from (default: "
+        "the site file's, or the most common level of the returns below the sensor)",
+    )
+    calibrate.add_argument(
+        "--ground-range",
+        type=_ground_range,
+        default=(4.0, 40.0),
+        metavar="MIN,MAX",
+        help="with --frame: returns within this horizontal range are fitted [m] (default 4,40, "
+        "as the detector)",
+    )
+    calibrate.add_argument("--json", action="store_true", help="one JSON object instead of text")
+    _add_connect(calibrate)
+    calibrate.set_defaults(handler=cmd_calibrate)
 
     for name, (module, summary) in SERVICE_TOOLS.items():
         tool = commands.add_parser(
