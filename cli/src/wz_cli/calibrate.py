@@ -544,7 +544,10 @@ def listen(bus: Bus, site: Site, minutes: float, stop: threading.Event) -> list[
 def _value(value: float, std: float | None, unit: str, scale: float = 1.0, digits: int = 2) -> str:
     if std is None:
         return "not observed (the site file's)"
-    return f"{scale * value:+.{digits}f} {unit} ± {scale * std:.{digits}f}"
+    spread = scale * std
+    # A tight estimate keeps a significant digit of its std (± 0.004, not ± 0.00).
+    extra = 1 if 0 < spread < 0.5 * 10.0**-digits and digits > 0 else 0
+    return f"{scale * value:+.{digits}f} {unit} ± {spread:.{digits + extra}f}"
 
 
 def describe_result(result: SensorResult) -> list[str]:
@@ -833,7 +836,8 @@ def draw_pictures(site: Site, run: RecordingRun, folder: Path, header: list[str]
             continue
         written.append(out)
         header.append(
-            f"picture {out}: {figures.boxes} detections, median distance to a lane centre "
+            f"picture {out}: {figures.boxes} detections on the road ({figures.off_road} off "
+            "it, not scored), median distance to a lane centre "
             f"{figures.median_before_m:.2f} m with the site file's pose, "
             f"{figures.median_after_m:.2f} m with the learned one"
         )

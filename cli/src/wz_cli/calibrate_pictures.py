@@ -4,8 +4,8 @@
   frame (station from the sensor along the road, offset across it), placed with the site
   file's pose (above) and with the learned pose (below), the lanes' centres dashed and their
   edges solid. A sensor turned by a degree puts far vehicles off their lanes; learned, they
-  sit on the centres. The titles give the median distance of a detection to its nearest lane
-  centre.
+  sit on the centres. The titles give the median distance of a detection on the road (under
+  either pose) to its nearest lane centre.
 - ``<camera>-projection.png``: one camera frame with the LiDAR's vehicles (placed with the
   LiDAR's learned pose) drawn as 3D boxes, projected with the site file's camera pose at the
   frame's stamp (left) and with the learned pose at the learned clock's time (right); white:
@@ -28,6 +28,8 @@ from wz_shared.site import Pose, SensorMount, Site
 
 #: Detections within this horizontal range of the LiDAR are drawn [m] (the lane fit's).
 LANE_RANGE_M = (8.0, 150.0)
+#: Detections this far beyond the outer lanes' edges count as on the road [m].
+ROAD_MARGIN_M = 1.0
 #: A LiDAR batch this far in time from a camera frame is not drawn on it [s].
 MAX_GAP_S = 0.2
 #: Box edges: pairs of corner indices (bottom 0-3, top 4-7).
@@ -40,7 +42,9 @@ EDGES = (
 class LaneFigures:
     """How far the detections sit from their lanes' centres, before and after [m]."""
 
+    #: Detections scored (on the road under either pose), and those off it (not scored).
     boxes: int
+    off_road: int
     median_before_m: float
     median_after_m: float
 
@@ -65,11 +69,18 @@ def lanes_picture(
         return None
     road = site.road_frame
     sensor_station, _ = road.to_road(result.nominal.x_m, result.nominal.y_m)
+    lanes = site.lanes
+    road_low = min(lane.center_offset_m - lane.width_m / 2 for lane in lanes) - ROAD_MARGIN_M
+    road_high = max(lane.center_offset_m + lane.width_m / 2 for lane in lanes) + ROAD_MARGIN_M
+    # The same detections in both panels: those within range of the sensor.
+    near = np.concatenate([v.centres_site(result.nominal)[:, :2] for v in views])
+    rel = np.hypot(near[:, 0] - result.nominal.x_m, near[:, 1] - result.nominal.y_m)
+    chosen = (rel >= LANE_RANGE_M[0]) & (rel <= LANE_RANGE_M[1])
+    if not chosen.any():
+        return None
     panels = []
     for pose in (result.nominal, result.learned):
-        xy = np.concatenate([v.centres_site(pose)[:, :2] for v in views])
-        rel = np.hypot(xy[:, 0] - pose.x_m, xy[:, 1] - pose.y_m)
-        xy = xy[(rel >= LANE_RANGE_M[0]) & (rel <= LANE_RANGE_M[1])]
+        xy = np.concatenate([v.centres_site(pose)[:, :2] for v in views])[chosen]
         stations, offsets = road.to_road(xy[:, 0], xy[:, 1])
         panels.append(
             (
@@ -77,15 +88,19 @@ def lanes_picture(
                 np.asarray(offsets, dtype=np.float64).reshape(-1),
             )
         )
-    if not len(panels[0][0]):
+    # Scored: the detections on the road under either pose (a drum, a sign or a false box
+    # off the road is on no lane under any pose, and would only swamp the figure).
+    on_road = np.zeros(len(panels[0][1]), dtype=bool)
+    for _, offsets in panels:
+        on_road |= (offsets >= road_low) & (offsets <= road_high)
+    if not on_road.any():
         return None
-    before = float(np.median(_to_lane(site, panels[0][1])))
-    after = float(np.median(_to_lane(site, panels[1][1])))
+    before = float(np.median(_to_lane(site, panels[0][1][on_road])))
+    after = float(np.median(_to_lane(site, panels[1][1][on_road])))
     _agg()
     import matplotlib.pyplot as plt
 
     figure, axes = plt.subplots(2, 1, figsize=(12, 6.5), sharex=True)
-    lanes = site.lanes
     low = min(lane.center_offset_m - lane.width_m / 2 for lane in lanes) - 2.5
     high = max(lane.center_offset_m + lane.width_m / 2 for lane in lanes) + 2.5
     c = result.message.correction if result.message is not None else None
@@ -113,15 +128,16 @@ def lanes_picture(
         axis.grid(True, axis="x", color="0.9")
     axes[-1].set_xlabel(f"station along the road from the LiDAR {result.sensor_id} [m]")
     figure.suptitle(
-        f"{result.sensor_id}: {sum(len(v.centres) for v in views)} detections of the last "
-        f"{views[-1].stamp_s - views[0].stamp_s:.0f} s on the lanes (dashed: lane centres)",
+        f"{result.sensor_id}: detections {LANE_RANGE_M[0]:g}-{LANE_RANGE_M[1]:g} m from it over "
+        f"the last {views[-1].stamp_s - views[0].stamp_s:.0f} s: {int(on_road.sum())} on the "
+        f"road, scored, {int((~on_road).sum())} off it (dashed: lane centres)",
         fontsize=11,
     )
     figure.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(out, dpi=110)
     plt.close(figure)
-    return LaneFigures(len(panels[1][0]), before, after)
+    return LaneFigures(int(on_road.sum()), int((~on_road).sum()), before, after)
 
 
 def _nearest(views: Sequence[LidarView], stamp_s: float) -> LidarView | None:
