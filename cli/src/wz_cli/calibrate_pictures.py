@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from wz_cli.calibrate import CameraShot, LidarView, SensorResult
+from wz_cli.calibrate_views import CameraShot, LidarView, SensorResult
 from wz_shared.arrays import F64, U8
 from wz_shared.site import Pose, SensorMount, Site
 
