@@ -317,3 +317,9 @@ def test_live_from_the_stacks_calibration_messages(router: str, tmp_path: Path) 
         before, after = site.sensor(message.source_id).pose, written.sensor(message.source_id).pose
         assert after.yaw_deg == pytest.approx(before.yaw_deg + message.correction.yaw_deg)
         assert after.pitch_deg == pytest.approx(before.pitch_deg - 0.3)
+
+
+def test_live_with_no_detector_running_says_so(router: str) -> None:
+    result = run_wz("calibrate", "--minutes", "0.03", "--connect", router, timeout_s=60.0)
+    assert result.returncode == 1, result.stderr
+    assert "no calibration heard on wz/us75-lincoln/calibration/*" in result.stderr

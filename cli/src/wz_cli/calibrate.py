@@ -723,6 +723,13 @@ def run_command(
             results = listen(bus, site, args.minutes, stop)
         source_name = f"the stack's calibration messages ({args.minutes:g} min at most)"
         heard = sum(r.message is not None for r in results)
+        if not heard:
+            raise CliError(
+                f"no calibration heard on {Keys(site.site_id).calibration_all} in "
+                f"{args.minutes:g} min: are the detectors of site {site.site_id} running "
+                "(`wz status`)?",
+                1,
+            )
         header = [f"wz calibrate: {heard} of {len(results)} sensor(s) heard on the bus"]
     if args.pictures is not None and args.recording is not None:
         extra["pictures"] = [str(p) for p in draw_pictures(site, run, args.pictures, header)]

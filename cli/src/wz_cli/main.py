@@ -782,7 +782,7 @@ def build_parser() -> argparse.ArgumentParser:
         "calibrated sensor's pose corrected.",
         epilog="Exit codes: 0 every sensor with data calibrated (--frame: a plane found); 1 "
         "cannot read the input, or it holds no frame of the site's sensors (--frame: no "
-        "plane); 2 usage; 3 the recording was cut short (everything readable was used); 4 a "
+        "plane; --minutes: no sensor heard); 2 usage; 3 the recording was cut short (everything readable was used); 4 a "
         "sensor is not calibrated yet (its correction is partial: a longer recording or more "
         "traffic).",
     )
