@@ -23,7 +23,6 @@ until its angles are known again, and nothing else in the tracker changes.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -60,15 +59,39 @@ def bounded(correction: PoseCorrection) -> PoseCorrection:
     )
 
 
+def offset_pose(
+    pose: Pose,
+    *,
+    yaw_deg: float = 0.0,
+    pitch_deg: float = 0.0,
+    roll_deg: float = 0.0,
+    x_m: float = 0.0,
+    y_m: float = 0.0,
+    z_m: float = 0.0,
+) -> Pose:
+    """``pose`` with each angle and coordinate moved by the given amount (unbounded: an
+    estimator's trial step, a simulated set-up error)."""
+    return Pose(
+        x_m=pose.x_m + x_m,
+        y_m=pose.y_m + y_m,
+        z_m=pose.z_m + z_m,
+        yaw_deg=pose.yaw_deg + yaw_deg,
+        pitch_deg=pose.pitch_deg + pitch_deg,
+        roll_deg=pose.roll_deg + roll_deg,
+    )
+
+
 def corrected_pose(nominal: Pose, correction: PoseCorrection) -> Pose:
     """The pose the sensor is learned to have: the site file's plus the correction."""
-    return Pose(
-        x_m=nominal.x_m + correction.x_m,
-        y_m=nominal.y_m + correction.y_m,
-        z_m=nominal.z_m + correction.z_m,
-        yaw_deg=nominal.yaw_deg + correction.yaw_deg,
-        pitch_deg=nominal.pitch_deg + correction.pitch_deg,
-        roll_deg=nominal.roll_deg + correction.roll_deg,
+    c = correction
+    return offset_pose(
+        nominal,
+        yaw_deg=c.yaw_deg,
+        pitch_deg=c.pitch_deg,
+        roll_deg=c.roll_deg,
+        x_m=c.x_m,
+        y_m=c.y_m,
+        z_m=c.z_m,
     )
 
 
@@ -143,7 +166,3 @@ def robust_std(values: F64) -> float:
     if values.size < 2:
         return 0.0
     return float(1.4826 * np.median(np.abs(values - np.median(values))))
-
-
-def deg(angle_rad: float) -> float:
-    return math.degrees(angle_rad)

@@ -69,8 +69,8 @@ from wz_shared.messages import (
     PoseCorrection,
     SensorCalibration,
 )
-from wz_shared.self_calibration import CalibrationLog, bounded, corrected_pose
-from wz_shared.site import Pose, SensorMount
+from wz_shared.self_calibration import CalibrationLog, bounded, corrected_pose, offset_pose
+from wz_shared.site import SensorMount
 
 log = logging.getLogger("wz_camera_detector.calibration")
 
@@ -403,14 +403,14 @@ class CameraSelfCalibration:
     # -- the model ---------------------------------------------------------------------------
 
     def camera_for(self, params: F64) -> PinholeCamera:
-        nominal = self.nominal
-        pose = Pose(
-            x_m=nominal.x_m + params[3],
-            y_m=nominal.y_m + params[4],
-            z_m=nominal.z_m + params[5],
-            yaw_deg=nominal.yaw_deg + params[0],
-            pitch_deg=nominal.pitch_deg + params[1],
-            roll_deg=nominal.roll_deg + params[2],
+        pose = offset_pose(
+            self.nominal,
+            yaw_deg=params[0],
+            pitch_deg=params[1],
+            roll_deg=params[2],
+            x_m=params[3],
+            y_m=params[4],
+            z_m=params[5],
         )
         assert self._size is not None
         return camera_at_size(self.mount.model_copy(update={"pose": pose}), *self._size)

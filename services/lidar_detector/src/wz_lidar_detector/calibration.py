@@ -335,7 +335,8 @@ class LidarSelfCalibration:
     # -- evidence ----------------------------------------------------------------------------
 
     def observe_frame(self, xyz_sensor: npt.NDArray[np.floating], stamp_s: float) -> None:
-        """A frame's returns (sensor frame, finite rows): a ground fit when one is due."""
+        """A frame's returns (sensor frame; no-return rows NaN): a ground fit when one is due
+        (the frame is only read then)."""
         self._last_stamp_s = max(self._last_stamp_s, stamp_s)
         if not self.settings.enabled or stamp_s < self._next_ground_s:
             return
@@ -344,7 +345,7 @@ class LidarSelfCalibration:
             every = self.settings.calibrated_ground_every_s
         self._next_ground_s = stamp_s + every
         fit = fit_ground(
-            xyz_sensor,
+            xyz_sensor[np.isfinite(xyz_sensor).all(axis=1)],
             self.pose,
             range_m=self.settings.ground_range_m,
             band_m=self.settings.ground_band_m,

@@ -335,8 +335,7 @@ class LidarDetector:
         self.last_stamp_s = max(self.last_stamp_s, meta.stamp)
         state_before = self.calibration.log.state
         if self.calibrating:
-            xyz = frame.points[:, :3]
-            self.calibration.observe_frame(xyz[np.isfinite(xyz).all(axis=1)], meta.stamp)
+            self.calibration.observe_frame(frame.points[:, :3], meta.stamp)
         layout = layout_of(frame)
         if self._layout is not None and layout != self._layout:
             self.report(

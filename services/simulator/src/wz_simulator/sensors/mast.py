@@ -82,6 +82,7 @@ from typing import Any
 import numpy as np
 
 from wz_shared.arrays import F64
+from wz_shared.self_calibration import offset_pose
 from wz_shared.site import Pose, SensorMount, Site
 
 #: Set-up error: standard deviation and bound of the yaw (heading) [deg].
@@ -168,13 +169,14 @@ class MountError:
 
     def applied_to(self, pose: Pose) -> Pose:
         """``pose`` with this error added: where the sensor really stands."""
-        return Pose(
-            x_m=pose.x_m + self.dx_m,
-            y_m=pose.y_m + self.dy_m,
-            z_m=pose.z_m + self.dz_m,
-            yaw_deg=pose.yaw_deg + self.yaw_deg,
-            pitch_deg=pose.pitch_deg + self.pitch_deg,
-            roll_deg=pose.roll_deg + self.roll_deg,
+        return offset_pose(
+            pose,
+            yaw_deg=self.yaw_deg,
+            pitch_deg=self.pitch_deg,
+            roll_deg=self.roll_deg,
+            x_m=self.dx_m,
+            y_m=self.dy_m,
+            z_m=self.dz_m,
         )
 
     def describe(self) -> dict[str, float]:
