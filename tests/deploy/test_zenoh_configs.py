@@ -189,7 +189,7 @@ def routers() -> Iterator[list[subprocess.Popen[bytes]]]:
     try:
         yield started
     finally:
-        codes = [stop_process(process) for process in reversed(started)]
+        codes = [stop_process(process, timeout_s=20.0) for process in reversed(started)]
         for process in started:
             if process.stderr is not None:
                 process.stderr.close()
