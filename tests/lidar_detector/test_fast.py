@@ -140,9 +140,11 @@ def test_range_background_ignores_passing_car_and_marks_open_sky(
     truth = np.linalg.norm(empty_frame.points[:, :3], axis=1).reshape(ROWS, COLUMNS)
     model = range_background.background_range_m
     returned = np.isfinite(truth)
-    # Every slot that sees the static scene has the static range (the passing car is ignored)...
+    # Every slot that sees the static scene has the static range (the passing car is ignored),
+    # to within half its margin: the learning counts ranges in bins one margin wide...
     assert np.all(np.isfinite(model[returned]))
-    assert np.max(np.abs(model[returned] - truth[returned])) < 0.1
+    margin = np.maximum(0.3, 0.01 * truth[returned])
+    assert np.all(np.abs(model[returned] - truth[returned]) <= 0.5 * margin + 3 * NOISE_M)
     # ... and slots that never return are open sky.
     assert np.all(np.isinf(model[~returned]))
     # Nothing of an empty frame is foreground.
@@ -173,9 +175,9 @@ def test_range_background_needs_a_surface_that_shows() -> None:
         for k in range(ranges.shape[1])
     ]
     model = RangeImageBackground.learn(frames).background_range_m.reshape(-1)
-    assert model[0] == pytest.approx(50.0)
+    assert model[0] == pytest.approx(50.0, abs=0.25)
     assert np.isinf(model[1])
-    assert model[2] == pytest.approx(60.0)
+    assert model[2] == pytest.approx(60.0, abs=0.3)
     assert np.isinf(model[3])
 
 
@@ -187,8 +189,16 @@ def test_range_background_foreground_is_the_vehicles(
     mask = range_background.foreground_mask(frame)
     vehicle = label >= 0
     assert vehicle.sum() > 300
+    # The neighbour check costs the returns that lie on a neighbouring slot's background: on
+    # this coarse sensor (32 beams, 0.75 deg columns) the lowest row of each body, whose range
+    # is the road's in the beam below: under 5 %.
     recall = (mask & vehicle).sum() / vehicle.sum()
-    assert recall > 0.98
+    assert recall > 0.95
+    plain = RangeImageBackground(
+        range_background.background_range_m,
+        range_background.settings.model_copy(update={"neighbour_slots": False}),
+    )
+    assert (plain.foreground_mask(frame) & vehicle).sum() / vehicle.sum() > 0.99
     assert (mask & ~vehicle).sum() <= 2
     # The truck's top stands against the sky above the wall: open-sky slots give foreground.
     sky = np.isinf(range_background.background_range_m.reshape(-1))
@@ -236,7 +246,7 @@ def test_update_reveals_a_parked_vehicle_that_left() -> None:
     for _ in range(settings.reveal_frames):
         background.update(_cast([], rng)[0])  # it left: its slots now see farther
     mask = background.foreground_mask(_cast([parked], rng)[0])
-    assert mask.sum() >= 0.95 * (label >= 0).sum()  # back again: foreground
+    assert mask.sum() >= 0.9 * (label >= 0).sum()  # back again: foreground
 
 
 # --------------------------------------------------------------------------------------------
@@ -528,10 +538,57 @@ def test_a_vehicle_cut_by_the_lowest_beam_gets_an_unknown_length(
     assert np.array(near_plain.covariance_xy_m2).max() < 4.0
 
 
-def test_a_flickering_near_surface_is_background_when_asked() -> None:
+def test_a_return_on_a_neighbouring_slots_background_is_not_foreground() -> None:
+    """Three columns: a drum at 10 m in the first, the road at 30 m behind in the others. The
+    mast's sway turns the middle beam onto the drum's edge: with ``neighbour_slots`` that
+    return lies on the first slot's background and is not a vehicle; a car at 20 m is; without
+    the check both are foreground."""
+    from wz_lidar_detector.background import RangeBackgroundSettings, RangeImageBackground
+
+    def frame(middle_m: float) -> PointFrame:
+        ranges = np.array([10.0, middle_m, 30.0])
+        azimuth = np.radians([0.0, 0.2, 0.4])
+        points = np.column_stack(
+            [ranges * np.cos(azimuth), ranges * np.sin(azimuth), np.zeros(3), np.ones(3)]
+        ).astype(np.float32)
+        sky = np.full((3, 4), np.nan, dtype=np.float32)  # a second beam, above everything
+        return PointFrame(points=np.concatenate([points, sky]), rows=2, columns=3)
+
+    learning = [frame(30.0) for _ in range(10)]
+    checked = RangeImageBackground.learn(learning)
+    plain = RangeImageBackground.learn(learning, RangeBackgroundSettings(neighbour_slots=False))
+    assert checked.foreground_mask(frame(10.1))[:3].tolist() == [False, False, False]
+    assert checked.foreground_mask(frame(20.0))[:3].tolist() == [False, True, False]
+    assert plain.foreground_mask(frame(10.1))[:3].tolist() == [False, True, False]
+
+
+def test_the_learner_counts_frame_by_frame_in_fixed_memory() -> None:
+    """Frames added one at a time give the same model as ``learn``; at most 255 frames (one
+    byte per bin); a frame of another layout is refused."""
+    from wz_lidar_detector.background import RangeBackgroundLearner
+
+    rng = np.random.default_rng(5)
+    frames = _learning_frames(rng, 12)
+    learner = RangeBackgroundLearner(ROWS, COLUMNS)
+    for frame in frames:
+        learner.add(frame)
+    assert np.array_equal(
+        learner.finish().background_range_m, RangeImageBackground.learn(frames).background_range_m
+    )
+    with pytest.raises(ShapeMismatchError, match="16x8 slots"):
+        learner.add(PointFrame(np.zeros((128, 4), np.float32), rows=16, columns=8))
+    while not learner.full:
+        learner.add(frames[0])
+    assert learner.frames == RangeBackgroundLearner.MAX_FRAMES
+    with pytest.raises(ValueError, match="at most 255 frames"):
+        learner.add(frames[0])
+
+
+def test_a_flickering_near_surface_is_background() -> None:
     """A slot that sees a post in 40 % of the learning frames and the ground behind it in the
-    rest: by default the ground is its background (the post comes out as foreground); with
-    ``near_support_fraction=0.3`` the post is."""
+    rest (a beam the mast's sway swings across the post's edge): by default the post is its
+    background; with ``near_support_fraction=1`` the ground is, and the post comes out as
+    foreground."""
     from wz_lidar_detector.background import RangeBackgroundSettings, RangeImageBackground
     from wz_lidar_detector.detection import PointFrame
 
@@ -543,7 +600,7 @@ def test_a_flickering_near_surface_is_background_when_asked() -> None:
 
     frames = [frame(i % 5 < 2) for i in range(20)]
     default = RangeImageBackground.learn(frames, RangeBackgroundSettings())
-    near = RangeImageBackground.learn(frames, RangeBackgroundSettings(near_support_fraction=0.3))
+    far = RangeImageBackground.learn(frames, RangeBackgroundSettings(near_support_fraction=1.0))
     post = frame(True)
-    assert default.foreground_mask(post)[0]
-    assert not near.foreground_mask(post)[0]
+    assert not default.foreground_mask(post)[0]
+    assert far.foreground_mask(post)[0]

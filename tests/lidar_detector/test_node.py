@@ -244,6 +244,28 @@ def test_reference_path_detects_from_the_first_frame() -> None:
     assert_car_at(batch, (20.0, 6.0))
 
 
+def test_the_quick_background_is_refined_over_the_refine_span(tmp_path: Path) -> None:
+    """A car parked through the quick learning (3 frames) is learned as background; the
+    refinement, 10 frames spread over the next second of an empty road, replaces it (and the
+    saved file), so a car there is found again: long before ``reveal_frames`` (100) would."""
+    saved = tmp_path / "background.npz"
+    node, _ = detector("fast", refine_span_s=1.0, refine_frames=10, background_file=saved)
+    parked = (20.0, 6.0)
+    for index in range(3):
+        assert handle(node, index, synthetic_points(parked, seed=index)) is None
+    quick = saved.read_bytes()
+    batch = handle(node, 3, synthetic_points(parked, seed=3))
+    assert batch is not None and batch.detections == []  # part of the quick background
+    index = 4
+    while index < 4 + 20:  # one second at 20 Hz: the refinement takes every other frame
+        handle(node, index, synthetic_points(None, seed=index))
+        index += 1
+    assert saved.read_bytes() != quick
+    batch = handle(node, index, synthetic_points(parked, seed=index))
+    assert batch is not None
+    assert_car_at(batch, parked)
+
+
 def test_fast_path_learns_then_detects_and_keeps_layouts(tmp_path: Path) -> None:
     saved = tmp_path / "background.npz"
     node, reports = detector("fast", background_file=saved)

@@ -48,6 +48,7 @@ from pydantic import ValidationError
 from wz_lidar_detector.background import (
     BackgroundFileError,
     BackgroundModel,
+    RangeBackgroundLearner,
     RangeImageBackground,
     VoxelBackground,
     learn_background_from_frames,
@@ -111,6 +112,8 @@ class BackgroundLearner:
         self._learning: Layout | None = None
         self._frames: list[PointFrame] = []
         self._started_s = 0.0
+        #: Per layout: the long learning that replaces the quick one (see :meth:`refine`).
+        self._refining: dict[Layout, _Refinement] = {}
 
     def use(self, background: BackgroundModel) -> None:
         """Take a model (loaded from a file, or given by the caller) instead of learning one."""
@@ -193,7 +196,48 @@ class BackgroundLearner:
         self._learning, self._frames = None, []
         if self.settings.background_file is not None:
             self._save(background, self.settings.background_file)
+        if isinstance(background, RangeImageBackground) and self.settings.refine_span_s > 0:
+            self._refining[layout] = _Refinement(
+                RangeBackgroundLearner(layout[0], layout[1], self.settings.range_background),
+                self.settings.refine_span_s / self.settings.refine_frames,
+            )
+            log.info(
+                "refining the background over the next %.0f s (%d frames)",
+                self.settings.refine_span_s,
+                self.settings.refine_frames,
+            )
         return pipeline
+
+    def refine(self, frame: PointFrame, layout: Layout, pipeline: FastPipeline) -> None:
+        """Go on learning a quickly learned range background over ``refine_span_s``.
+
+        The quick background comes from ``learn_frames`` frames in a row, a second or two: less
+        than one period of a mast's sway (1-4 s), so a slot at the edge of a kerb, a drum or a
+        barrier, which the sway swings between two surfaces, may have seen only one of them.
+        The refinement samples ``refine_frames`` frames spread over ``refine_span_s`` and then
+        replaces the pipeline's background (and writes ``background_file``).
+        """
+        refinement = self._refining.get(layout)
+        if refinement is None:
+            return
+        if frame.stamp_s > 0 and frame.stamp_s < refinement.next_take_s:
+            return
+        refinement.learner.add(frame)
+        refinement.next_take_s = frame.stamp_s + refinement.every_s
+        if refinement.learner.frames < min(
+            self.settings.refine_frames, RangeBackgroundLearner.MAX_FRAMES
+        ):
+            return
+        del self._refining[layout]
+        background = refinement.learner.finish()
+        pipeline.background = background
+        log.info(
+            "refined the background of %s frames from %d frames",
+            describe(layout),
+            refinement.learner.frames,
+        )
+        if self.settings.background_file is not None:
+            self._save(background, self.settings.background_file)
 
     @staticmethod
     def _save(background: RangeImageBackground | VoxelBackground, path: Path) -> None:
@@ -204,6 +248,13 @@ class BackgroundLearner:
             log.warning("could not save the background to %s: %s", path, exc)
         else:
             log.info("saved the background to %s", path)
+
+
+@dataclasses.dataclass
+class _Refinement:
+    learner: RangeBackgroundLearner
+    every_s: float
+    next_take_s: float = 0.0
 
 
 class ColumnClock:
@@ -433,6 +484,7 @@ class LidarDetector:
         if pipeline is None:
             self.backgrounds.learn(frame)
             return None
+        self.backgrounds.refine(frame, layout, pipeline)
         return pipeline.detect(frame)
 
     def _near_field(self, box: BoxDetection) -> BoxDetection:

@@ -43,6 +43,12 @@ class LidarDetectorSettings(ServiceSettings):
     background_file: Path | None = None
     #: Fast path: frames to learn the background from before detecting [frames].
     learn_frames: Annotated[int, Field(ge=1, le=10_000)] = 20
+    #: Fast path, organized frames: after the quick learning, go on learning for this long
+    #: [s] and then replace the background (0: do not). It must span several periods of a
+    #: mast's sway (1-4 s); see :meth:`BackgroundLearner.refine`.
+    refine_span_s: Annotated[float, Field(ge=0.0, le=3600.0)] = 20.0
+    #: Frames sampled, evenly in time, over ``refine_span_s``.
+    refine_frames: Annotated[int, Field(ge=1, le=255)] = 100
     #: Fast path, organized frames: the per-slot range background's parameters.
     range_background: RangeBackgroundSettings = Field(default_factory=RangeBackgroundSettings)
     #: Fast path, unorganized frames and background clouds: voxel edge of the occupancy
