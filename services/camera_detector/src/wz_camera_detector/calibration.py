@@ -128,7 +128,8 @@ class SensorCalibrationSettings(BaseModel):
     #: (:func:`~wz_camera_detector.association.setback_m`) and a radar's range is calibrated
     #: at the factory, so the offset is held near zero and the clock takes the rest.
     prior_range_m: float = Field(default=0.1, gt=0.0)
-    #: Pairs of one vehicle in successive frames are not independent (formal std inflation).
+    #: Radar: pairs of one vehicle in successive scans are not independent (formal std
+    #: inflation; the camera counts its vehicles instead).
     frames_per_vehicle: float = Field(default=10.0, ge=1.0)
 
 
@@ -144,12 +145,16 @@ class Snapshot:
     velocity_mps: F64
     heading_rad: F64
     object_class: tuple[str, ...]
+    #: Which vehicle each is (the reference tracker's number): pairs of one vehicle in
+    #: successive frames share its box's error, so the fits count vehicles, not pairs.
+    track_id: tuple[int, ...] = ()
 
 
 @dataclass
 class _RefTrack:
     points: deque[tuple[float, float, float]] = field(default_factory=lambda: deque(maxlen=10))
     misses: int = 0
+    track_id: int = 0
 
     def velocity(self) -> tuple[float, float] | None:
         if len(self.points) < 4:
@@ -180,6 +185,7 @@ class ReferenceObjects:
         self.gate_m = gate_m
         self._tracks: list[_RefTrack] = []
         self._snapshots: deque[Snapshot] = deque()
+        self._next_id = 0
 
     @property
     def newest_s(self) -> float:
@@ -217,10 +223,11 @@ class ReferenceObjects:
         self._tracks = [track for track in self._tracks if track.misses <= 3]
         for index in np.flatnonzero(~taken):
             x, y, offset = dets[index]
-            track = _RefTrack()
+            track = _RefTrack(track_id=self._next_id)
+            self._next_id += 1
             track.points.append((stamp + offset, x, y))
             self._tracks.append(track)
-        xy, velocity, heading, classes = [], [], [], []
+        xy, velocity, heading, classes, ids = [], [], [], [], []
         by_index = {id(t): t for t in self._tracks}
         for track in by_index.values():
             if track.misses != 0:
@@ -233,6 +240,7 @@ class ReferenceObjects:
             velocity.append(v)
             heading.append(math.atan2(v[1], v[0]))
             classes.append("car")
+            ids.append(track.track_id)
         # Classes and sizes: the batch's detection nearest each kept position.
         if xy and len(dets):
             for i, (x, y) in enumerate(xy):
@@ -245,6 +253,7 @@ class ReferenceObjects:
                 velocity_mps=np.array(velocity, dtype=np.float64).reshape(-1, 2),
                 heading_rad=np.array(heading, dtype=np.float64),
                 object_class=tuple(classes),
+                track_id=tuple(ids),
             )
         )
         while self._snapshots and self._snapshots[0].stamp_s < stamp - self.history_s:
@@ -262,6 +271,13 @@ class ReferenceObjects:
 
 
 # --- the camera -----------------------------------------------------------------------------
+
+
+def _track_ids(snapshot: Snapshot, count: int) -> F64:
+    """The snapshot's vehicle numbers (one per object; -1 each when not given)."""
+    if len(snapshot.track_id) == count:
+        return np.asarray(snapshot.track_id, dtype=np.float64)
+    return np.full(count, -1.0)
 
 
 @dataclass(frozen=True)
@@ -323,6 +339,7 @@ class CameraSelfCalibration:
         self.params = np.zeros(len(_NAMES))
         self.std = np.full(len(_NAMES), np.nan)
         self.pairs = 0
+        self.vehicles = 0
         self.correction = PoseCorrection()
         self.clock_offset_s = 0.0
         self.pose = mount.pose
@@ -452,9 +469,10 @@ class CameraSelfCalibration:
 
     def _match(
         self, params: F64, frames: list[_Frame], gate_px: float
-    ) -> tuple[F64, F64, F64, F64, F64]:
+    ) -> tuple[F64, F64, F64, F64, F64, F64]:
         """Pairs under ``params``: reference centre at the stamp, velocity, heading, stamp
-        offset, and the detected box with its shape, as arrays."""
+        offset, the detected box with its shape, and the reference vehicle's number, as
+        arrays."""
         predicted = self._predict(params, frames)
         rows: list[F64] = []
         for frame, boxes in zip(frames, predicted, strict=True):
@@ -502,11 +520,12 @@ class CameraSelfCalibration:
                         np.full(len(r), frame.stamp_s - ref.stamp_s),
                         det[c],
                         np.asarray(frame.box_shapes, dtype=np.float64)[c],
+                        _track_ids(ref, len(ref.xy_m))[r],
                     ]
                 )
             )
-        arr = np.concatenate(rows) if rows else np.zeros((0, 11))
-        return arr[:, 0:2], arr[:, 2:4], arr[:, 4], arr[:, 5], arr[:, 6:11]
+        arr = np.concatenate(rows) if rows else np.zeros((0, 12))
+        return arr[:, 0:2], arr[:, 2:4], arr[:, 4], arr[:, 5], arr[:, 6:11], arr[:, 11]
 
     def _residuals(
         self, params: F64, xy: F64, velocity: F64, heading: F64, lag: F64, det: F64
@@ -633,8 +652,15 @@ class CameraSelfCalibration:
         pairs = 0
         covariance = None
         for gate in (60.0, 15.0, 15.0):
-            xy, velocity, heading, lag, det = self._match(params, frames, gate)
+            xy, velocity, heading, lag, det, vehicle = self._match(params, frames, gate)
             pairs = len(xy)
+            known = vehicle >= 0
+            # Pairs of an unnumbered reference count as ``frames_per_vehicle`` to a vehicle.
+            vehicles = max(
+                1,
+                len(np.unique(vehicle[known]))
+                + round(int((~known).sum()) / self.settings.frames_per_vehicle),
+            )
             if pairs < 10:
                 self._initialised = False  # nothing meets: vote again with more frames
                 return
@@ -672,10 +698,11 @@ class CameraSelfCalibration:
         )
         self.params = params
         self.pairs = pairs
+        self.vehicles = vehicles
         if covariance is not None:
-            self.std = np.sqrt(
-                np.maximum(np.diag(covariance), 0.0) * self.settings.frames_per_vehicle
-            )
+            # Pairs of one vehicle share its LiDAR box's error: as if each vehicle were one
+            # pair of its weight (the conservative end of a cluster-robust covariance).
+            self.std = np.sqrt(np.maximum(np.diag(covariance), 0.0) * pairs / max(vehicles, 1))
         if pairs >= self.settings.min_pairs:
             self._apply()
         self._update_state(stamp_s)
@@ -685,7 +712,7 @@ class CameraSelfCalibration:
         recent = [f for f in frames if f.stamp_s >= stamp_s - self.settings.bump_window_s]
         if len(recent) < 5:
             return False
-        xy, velocity, heading, lag, det = self._match(self.params, recent, 120.0)
+        xy, velocity, heading, lag, det, _ = self._match(self.params, recent, 120.0)
         # Too few pairs tells nothing: a gap in the traffic both sensors see, or cars outside
         # the detector's region. A knock shows as the pairs' shift.
         matched = len(xy) >= 8
@@ -745,7 +772,8 @@ class CameraSelfCalibration:
                 CalibrationState.CALIBRATED,
                 stamp_s,
                 f"yaw {self.params[0]:+.2f} deg, pitch {self.params[1]:+.2f} deg, clock "
-                f"{1000 * self.params[6]:+.0f} ms from {self.pairs} vehicle boxes",
+                f"{1000 * self.params[6]:+.0f} ms from {self.pairs} boxes of {self.vehicles} "
+                "vehicles",
             )
 
     @property
