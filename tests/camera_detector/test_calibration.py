@@ -253,3 +253,23 @@ def test_disabled_the_camera_keeps_its_site_pose() -> None:
     assert calibration.pose == CAMERA.pose
     assert calibration.clock_offset_s == 0.0
     assert calibration.log.state == CalibrationState.PRIOR
+
+
+def test_once_calibrated_the_applied_pose_follows_the_fits_smoothly() -> None:
+    """While learning a fit is applied as it is; once calibrated each fit moves the applied
+    pose ``calibrated_gain`` of the way, so one noisy fit does not jump every detection."""
+    settings = SensorCalibrationSettings(calibrated_gain=0.25)
+    calibration = CameraSelfCalibration(SITE.site_id, CAMERA, SHAPES, settings)
+    calibration.std = np.full(7, 0.05)  # what a fit leaves beside its parameters
+    first = np.array([1.0, -0.4, 0.2, 0.1, 0.3, 0.05, 0.08])
+    calibration.take(first)
+    assert calibration.correction.yaw_deg == pytest.approx(1.0)
+    assert calibration.clock_offset_s == pytest.approx(0.08)
+    calibration.log.enter(CalibrationState.CALIBRATED, 10.0, "test")
+    calibration.take(first + np.array([0.4, 0.0, 0.0, 0.0, -0.6, 0.0, 0.02]))
+    assert calibration.correction.yaw_deg == pytest.approx(1.1)
+    assert calibration.correction.y_m == pytest.approx(0.15)
+    assert calibration.clock_offset_s == pytest.approx(0.085)
+    calibration.log.enter(CalibrationState.BUMPED, 20.0, "test")
+    calibration.take(first + 2.0 * np.array([1, 0, 0, 0, 0, 0, 0]))
+    assert calibration.correction.yaw_deg == pytest.approx(3.0)  # knocked: taken at once

@@ -94,6 +94,8 @@ class SensorCalibrationSettings(BaseModel):
     #: each) [s].
     fit_every_s: float = Field(default=5.0, gt=0.0)
     calibrated_fit_every_s: float = Field(default=15.0, gt=0.0)
+    #: Once calibrated, each fit moves the applied pose this share of the way (1: all).
+    calibrated_gain: float = Field(default=0.3, gt=0.0, le=1.0)
     #: Camera frames a fit uses at most (evenly over the window).
     max_fit_frames: int = Field(default=400, ge=20)
     #: Seconds between bump checks once calibrated [s].
@@ -337,6 +339,8 @@ class CameraSelfCalibration:
         self._bump_votes = 0
         self._initialised = False
         self.params = np.zeros(len(_NAMES))
+        #: What is applied: the fits themselves while learning, smoothed once calibrated.
+        self._applied: F64 | None = None
         self.std = np.full(len(_NAMES), np.nan)
         self.pairs = 0
         self.vehicles = 0
@@ -704,7 +708,7 @@ class CameraSelfCalibration:
             # pair of its weight (the conservative end of a cluster-robust covariance).
             self.std = np.sqrt(np.maximum(np.diag(covariance), 0.0) * pairs / max(vehicles, 1))
         if pairs >= self.settings.min_pairs:
-            self._apply()
+            self.take(params)
         self._update_state(stamp_s)
 
     def _check_bump(self, stamp_s: float, frames: list[_Frame]) -> bool:
@@ -737,8 +741,23 @@ class CameraSelfCalibration:
             return True
         return False
 
+    def take(self, params: F64) -> None:
+        """Apply a fit's parameters (the order of ``_NAMES``): as they are while learning or
+        just bumped; once calibrated, ``calibrated_gain`` of the way from the applied ones.
+        Successive fits then share most of their window and differ by noise (the camera's
+        position along its line of sight is weakly observed: fits 15 s apart moved it 0.6 m),
+        and the applied pose follows them smoothly, still fast enough for a mast's settling
+        (tenths of a degree an hour)."""
+        if self.log.state == CalibrationState.CALIBRATED and self._applied is not None:
+            gain = self.settings.calibrated_gain
+            self._applied = self._applied + gain * (np.asarray(params) - self._applied)
+        else:
+            self._applied = np.array(params, dtype=np.float64)
+        self._apply()
+
     def _apply(self) -> None:
-        p, std = self.params, self.std
+        assert self._applied is not None
+        p, std = self._applied, self.std
         self.correction = bounded(
             PoseCorrection(
                 yaw_deg=p[0],
