@@ -582,6 +582,11 @@ def test_the_learner_counts_frame_by_frame_in_fixed_memory() -> None:
     assert learner.frames == RangeBackgroundLearner.MAX_FRAMES
     with pytest.raises(ValueError, match="at most 255 frames"):
         learner.add(frames[0])
+    # ``learn`` takes 255 of more frames, evenly spread.
+    many = RangeImageBackground.learn(frames * 25)  # 300
+    assert np.array_equal(
+        np.isinf(many.background_range_m), np.isinf(learner.finish().background_range_m)
+    )
 
 
 def test_a_flickering_near_surface_is_background() -> None:

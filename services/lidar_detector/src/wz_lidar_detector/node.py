@@ -220,7 +220,9 @@ class BackgroundLearner:
         refinement = self._refining.get(layout)
         if refinement is None:
             return
-        if frame.stamp_s > 0 and frame.stamp_s < refinement.next_take_s:
+        # Not yet due; a stamp that went back further than that (a replay started over) is.
+        due_s = refinement.next_take_s
+        if 0 < frame.stamp_s < due_s and frame.stamp_s >= due_s - 2.0 * refinement.every_s:
             return
         refinement.learner.add(frame)
         refinement.next_take_s = frame.stamp_s + refinement.every_s
