@@ -403,13 +403,14 @@ class RangeImageBackground:
         with np.errstate(invalid="ignore"):
             ranges = _ranges(xyz)
             # NaN ranges compare False, so no-return slots are never foreground.
-            nearer = ranges < self._range_m - self._margin_m()
+            margin = self._margin_m()
+            nearer = ranges < self._range_m - margin
             mask: Bool = nearer & (ranges <= np.float32(self.settings.max_range_m))
         if self.settings.neighbour_slots:
-            self._drop_neighbours_background(mask, ranges)
+            self._drop_neighbours_background(mask, ranges, margin)
         return mask
 
-    def _drop_neighbours_background(self, mask: Bool, ranges: F32) -> None:
+    def _drop_neighbours_background(self, mask: Bool, ranges: F32, margin_m: F32) -> None:
         """Clear the candidates that lie on a neighbouring slot's background (in place).
 
         A mast sways by hundredths of a degree, a fraction of a slot (0.18 deg for 2048
@@ -427,7 +428,7 @@ class RangeImageBackground:
         row, column = np.divmod(candidates, columns)
         candidate_range = ranges[candidates]
         background = self._range_m.reshape(self._shape)
-        margin = self._margin_m().reshape(self._shape)
+        margin = margin_m.reshape(self._shape)
         explained = np.zeros(len(candidates), dtype=bool)
         with np.errstate(invalid="ignore"):
             for d_row in (-1, 0, 1):
