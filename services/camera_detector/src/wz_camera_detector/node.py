@@ -127,6 +127,16 @@ CALIBRATION_MIN_SCORE = 0.5
 #: A box this close to the edge of the detector's view is cut by it: not ranged [px].
 TRUNCATION_MARGIN_PX = 3.0
 
+#: (yaw, pitch) [deg] the detector's regions allow for while the camera's pose is not known:
+#: what a technician's compass and level leave at most (issue 39), or a knocked camera.
+SETUP_MARGIN_DEG = (3.0, 1.5)
+#: ... once it is calibrated: the mast's sway and what the calibration may still be off.
+CALIBRATED_MARGIN_DEG = (0.2, 0.2)
+#: ... while it is learned: this many of the fit's standard deviations (between the two above).
+LEARNING_MARGIN_SIGMAS = 3.0
+#: The regions are drawn again when the pose they were drawn for is this far off [deg].
+REGIONS_REDRAW_DEG = 0.1
+
 #: A passenger car: 4.6 x 1.8 x 1.5 m, its bumpers 0.28 m up, the front wheels' foot about
 #: half a metre behind the bumper (a 0.85 m overhang less a 0.32 m tyre radius).
 CAR_SHAPE = VehicleShape(4.6, 1.8, 1.5, clearance_m=0.28, wheel_inset_m=0.53)
@@ -164,12 +174,14 @@ def make_backend(
     site: Site | None = None,
     camera: SensorMount | None = None,
     rendered: bool = False,
+    margin_deg: tuple[float, float] = SETUP_MARGIN_DEG,
 ) -> ImageBackend:
     """The image detector the settings name.
 
     With ``site`` and ``camera``, YOLO looks at the region of interest and far-field tiles the
-    road's geometry gives (:func:`~wz_camera_detector.regions.detector_regions`), unless the
-    settings give their own; without them, at the model's metadata regions, else the frame.
+    road's geometry gives (:func:`~wz_camera_detector.regions.detector_regions`, for any aim
+    within ``margin_deg`` of yaw and pitch of the camera's pose), unless the settings give
+    their own; without them, at the model's metadata regions, else the frame.
     Without a model in the settings: the shipped one for real frames, or for the simulator's
     ``rendered`` ones (:func:`~wz_camera_detector.settings.shipped_model`).
 
@@ -191,7 +203,7 @@ def make_backend(
     if site is not None and camera is not None:
         intrinsics = camera_intrinsics(camera)
         detector.follow_frame_size(
-            _geometry_regions(settings, site, camera, detector),
+            _geometry_regions(settings, site, camera, detector, margin_deg),
             (intrinsics.width_px, intrinsics.height_px),
         )
     return detector
@@ -202,13 +214,19 @@ def _geometry_regions(
     site: Site,
     camera: SensorMount,
     detector: YoloOnnxDetector,
+    margin_deg: tuple[float, float],
 ) -> RegionsForSize:
     """Where YOLO looks in frames of each size: the settings' ROI and tiles where given, the
     road's geometry (:func:`~wz_camera_detector.regions.detector_regions`) otherwise."""
 
     def regions_for(width_px: int, height_px: int) -> tuple[Box | None, tuple[Box, ...]]:
         regions = detector_regions(
-            site, camera, max(detector.input_size), width_px=width_px, height_px=height_px
+            site,
+            camera,
+            max(detector.input_size),
+            width_px=width_px,
+            height_px=height_px,
+            margin_deg=margin_deg,
         )
         roi = settings.roi_xyxy_px if settings.roi_xyxy_px is not None else regions.roi_xyxy_px
         tiles = (
@@ -221,7 +239,9 @@ def _geometry_regions(
             height_px,
             roi,
             list(tiles),
-            "the settings" if settings.roi_xyxy_px is not None else "the road's geometry",
+            "the settings"
+            if settings.roi_xyxy_px is not None
+            else f"the road's geometry, +-{margin_deg[0]:.2f} deg yaw, +-{margin_deg[1]:.2f} deg pitch",
         )
         return roi, tiles
 
@@ -234,13 +254,20 @@ def cut_by_view(
     width_px: int,
     height_px: int,
 ) -> bool:
-    """Whether a box touches the left, right or bottom edge of what the detector sees (its
-    ROI, else the frame), within :data:`TRUNCATION_MARGIN_PX`: a vehicle cut by the view."""
+    """Whether a box touches the left, right or bottom edge of every region the detector
+    looks at (its ROI, else the frame, and its far-field tiles), within
+    :data:`TRUNCATION_MARGIN_PX`: a vehicle cut by the view. A far car at the ROI's edge that
+    a tile holds whole was seen whole."""
     roi = getattr(backend, "roi_xyxy_px", None) or (0, 0, width_px, height_px)
-    left, right, bottom = roi[0], min(roi[2], width_px), min(roi[3], height_px)
+    regions = [roi, *getattr(backend, "tiles_xyxy_px", ())]
     x1, _, x2, y2 = box_xyxy_px
     margin = TRUNCATION_MARGIN_PX
-    return bool(y2 >= bottom - margin or x1 <= left + margin or x2 >= right - margin)
+    return not any(
+        x1 > left + margin
+        and x2 < min(right, width_px) - margin
+        and y2 < min(bottom, height_px) - margin
+        for left, _, right, bottom in regions
+    )
 
 
 def road_heading_at(site: Site, x_m: float, y_m: float) -> float:
@@ -318,6 +345,14 @@ class CameraDetector:
         )
         #: The shipped models loaded so far, by ``rendered`` (each is loaded once).
         self._shipped: dict[bool, ImageBackend] = {rendered: self.backend}
+        #: Whether this node draws its backends' regions from the road's geometry (a backend
+        #: given to it keeps its own), and the (yaw, pitch, margin) they were drawn for.
+        self._draws_regions = backend is None
+        self._regions_drawn: tuple[float, float, tuple[float, float]] | None = (
+            camera.pose.yaw_deg,
+            camera.pose.pitch_deg,
+            SETUP_MARGIN_DEG,
+        )
         self.tracker = ImageTracker(settings.tracker)
         self._cameras: dict[tuple[int, int], PinholeCamera] = {}
         self._radar_heading = (
@@ -487,9 +522,10 @@ class CameraDetector:
         )
         if rendered not in self._shipped:
             self._shipped[rendered] = make_backend(
-                self.settings, self.site, self.camera_mount, rendered
+                self.settings, self.site, self.camera_mount, rendered, self._regions_margin_deg()
             )
         self.backend = self._shipped[rendered]
+        self._regions_drawn = None  # drawn again at its next frame, for the pose of then
         self._rendered = rendered
         self.tracker.restart()
 
@@ -556,9 +592,57 @@ class CameraDetector:
             np.array([box.box_xyxy_px for box in whole], dtype=np.float64).reshape(-1, 4),
             [str(CLASS_SHAPES[box.class_name][0]) for box in whole],
         )
+        self.follow_calibration(width, height)
+
+    def follow_calibration(self, width_px: int, height_px: int) -> None:
+        """Take the camera's learned pose, and draw the detector's regions again where it and
+        its margin moved the road by :data:`REGIONS_REDRAW_DEG` or more: a camera turned by a
+        degree would otherwise have its far cars cut by an ROI drawn for the site file's aim
+        (``width_px`` x ``height_px``: the frames')."""
+        own = self.calibration
         if own.pose != self.camera_mount.pose:
             self.camera_mount = self.camera_mount.model_copy(update={"pose": own.pose})
             self._cameras.clear()
+        if not self._draws_regions or not isinstance(self.backend, YoloOnnxDetector):
+            return
+        pose, margin = self.camera_mount.pose, self._regions_margin_deg()
+        drawn = self._regions_drawn
+        if (
+            drawn is not None
+            and drawn[2] == margin
+            and abs(pose.yaw_deg - drawn[0]) < REGIONS_REDRAW_DEG
+            and abs(pose.pitch_deg - drawn[1]) < REGIONS_REDRAW_DEG
+        ):
+            return
+        self._regions_drawn = (pose.yaw_deg, pose.pitch_deg, margin)
+        self.backend.follow_frame_size(
+            _geometry_regions(self.settings, self.site, self.camera_mount, self.backend, margin),
+            (width_px, height_px),
+        )
+
+    def _regions_margin_deg(self) -> tuple[float, float]:
+        """(yaw, pitch) [deg] the detector's regions allow for now: the set-up tolerance until
+        the pose is learned (or after a knock), what the fit leaves while learning (rounded up
+        to a tenth), the sway once calibrated."""
+        own = self.calibration
+        state = own.log.state
+        if not self.settings.calibration.enabled or state in (
+            CalibrationState.PRIOR,
+            CalibrationState.BUMPED,
+        ):
+            return SETUP_MARGIN_DEG
+        if state == CalibrationState.CALIBRATED:
+            return CALIBRATED_MARGIN_DEG
+        yaw_std, pitch_std = own.angle_std_rad
+
+        def margin(std_rad: float, low: float, high: float) -> float:
+            wanted = LEARNING_MARGIN_SIGMAS * math.degrees(std_rad)
+            return min(high, max(low, math.ceil(wanted * 10.0) / 10.0))
+
+        return (
+            margin(yaw_std, CALIBRATED_MARGIN_DEG[0], SETUP_MARGIN_DEG[0]),
+            margin(pitch_std, CALIBRATED_MARGIN_DEG[1], SETUP_MARGIN_DEG[1]),
+        )
 
     def _within_range(self, fused: list[FusedObject]) -> list[FusedObject]:
         """The fused objects without the camera-only ones ranged beyond ``max_range_m``.

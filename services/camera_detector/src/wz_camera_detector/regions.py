@@ -15,7 +15,11 @@ image and returns, for any resolution, field of view and aim:
   ``f h / r`` pixels of the frame (``f`` the focal length), times the letterbox's scale.
 
 Everything comes from the mount (pose, resolution, field of view) and the road frame; nothing
-is a pixel of one camera. ``--roi`` / ``--tiles`` (or the settings) override it.
+is a pixel of one camera. No camera stands exactly at its site file's pose: with
+``margin_deg`` the regions hold the road for every aim within that many degrees of yaw and
+pitch of the pose given (the union of its projections), so a vehicle at the far end is not cut
+by a region drawn for a pose the camera does not have. The detector gives the set-up
+tolerance until the camera's pose is learned, then what is left of it (the node). ``--roi`` / ``--tiles`` (or the settings) override it.
 """
 
 from __future__ import annotations
@@ -103,6 +107,27 @@ def _projected(camera: PinholeCamera, points: F64) -> tuple[F64, np.ndarray]:
     return uv, visible
 
 
+def _turned(mount: SensorMount, margin_deg: tuple[float, float]) -> list[SensorMount]:
+    """``mount`` turned by the margin's yaw and pitch, each way, alone and together."""
+    yaw, pitch = margin_deg
+    if not (math.isfinite(yaw) and math.isfinite(pitch)) or yaw < 0.0 or pitch < 0.0:
+        raise ValueError(f"margin_deg must be finite and non-negative, got {margin_deg}")
+    pose = mount.pose
+    turns = {
+        (dy, dp) for dy in (-yaw, 0.0, yaw) for dp in (-pitch, 0.0, pitch) if (dy, dp) != (0.0, 0.0)
+    }
+    return [
+        mount.model_copy(
+            update={
+                "pose": pose.model_copy(
+                    update={"yaw_deg": pose.yaw_deg + dy, "pitch_deg": pose.pitch_deg + dp}
+                )
+            }
+        )
+        for dy, dp in sorted(turns)
+    ]
+
+
 def _clip_square(box: Box, width_px: int, height_px: int, min_side_px: int) -> Box:
     """Grow ``box`` about its centre to at least ``min_side_px`` each way, inside the frame."""
     x0, y0, x1, y1 = box
@@ -127,6 +152,7 @@ def detector_regions(
     max_range_m: float = 200.0,
     min_car_px: float = 16.0,
     max_magnification: float = 4.0,
+    margin_deg: tuple[float, float] = (0.0, 0.0),
 ) -> DetectorRegions:
     """The ROI and far-field tiles of ``mount`` at ``site`` (module docstring).
 
@@ -146,6 +172,9 @@ def detector_regions(
     max_magnification
         A tile is never magnified more than this (a tile of at least ``input / this`` pixels):
         beyond it, the frame's own pixels are the limit.
+    margin_deg
+        (yaw, pitch) [deg]: the regions hold the road for the mount's pose turned by up to
+        this much either way (each alone and both together).
 
     Returns
     -------
@@ -159,6 +188,12 @@ def detector_regions(
     camera = camera_at_size(mount, width, height)
     points, ranges = _road_points(site, camera, max_range_m)
     uv, visible = _projected(camera, points)
+    if margin_deg != (0.0, 0.0):
+        for turned in _turned(mount, margin_deg):
+            more_uv, more_visible = _projected(camera_at_size(turned, width, height), points)
+            uv = np.concatenate([uv, more_uv])
+            visible = np.concatenate([visible, more_visible])
+        ranges = np.tile(ranges, len(uv) // len(ranges))
     roi = _bounds(uv[visible], width, height, snap=True)
     if roi is None:
         return DetectorRegions(None, ())
