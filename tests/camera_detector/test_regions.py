@@ -131,11 +131,8 @@ def _far_road_px(site: Site, mount: SensorMount) -> np.ndarray:
 def _holds(box: tuple[int, int, int, int] | None, uv: np.ndarray, inset_px: float) -> bool:
     assert box is not None
     x0, y0, x1, y1 = box
-    return bool(
-        ((uv[:, 0] >= x0 + inset_px) & (uv[:, 0] <= x1 - inset_px))
-        .__and__((uv[:, 1] >= y0) & (uv[:, 1] <= y1))
-        .all()
-    )
+    across = (uv[:, 0] >= x0 + inset_px) & (uv[:, 0] <= x1 - inset_px)
+    return bool((across & (uv[:, 1] >= y0) & (uv[:, 1] <= y1)).all())
 
 
 @pytest.mark.parametrize("seed", [None, 3, 8])

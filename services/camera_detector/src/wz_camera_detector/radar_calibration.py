@@ -188,7 +188,9 @@ class RadarSelfCalibration:
             if chosen.sum() < 20:
                 return
             self.pairs = int(chosen.sum())
-            self._step(rows[chosen], d_bearing[chosen], d_range[chosen], bearing[chosen])
+            self._step(
+                rows[chosen], d_bearing[chosen], d_range[chosen], bearing[chosen], rho_pred[chosen]
+            )
             bias = d_bearing[chosen]
             yaw_std = (
                 1.4826
@@ -231,10 +233,10 @@ class RadarSelfCalibration:
                 f"{1000 * self.clock_offset_s:+.0f} ms from {self.pairs} targets",
             )
 
-    def _step(self, rows: F64, d_bearing: F64, d_range: F64, bearing: F64) -> None:
+    def _step(self, rows: F64, d_bearing: F64, d_range: F64, bearing: F64, range_now: F64) -> None:
         """One Gauss-Newton step of the yaw, the clock, the range offset (and the shift across
         the boresight with ``radar_shift``) from the paired rows' bearing and range residuals
-        together.
+        together (``bearing``, ``range_now``: the rows' predicted echo at the current clock).
 
         A late clock moves each object along its path: its range by ``-rate dt`` and its
         bearing by ``-bearing_rate dt``. Near the radar the bearing moves fast (a car 8 m to
@@ -244,10 +246,9 @@ class RadarSelfCalibration:
         """
         eps = 1e-3
         bearing_late, range_late, _ = self._predicted(rows, self.clock_offset_s + eps)
-        rho_now = rows[:, 0] - d_range - self.range_offset_m
         # d(predicted)/d(clock): the residuals move the other way.
         bearing_rate = np.asarray(_wrap(bearing_late - bearing), dtype=np.float64) / eps
-        range_rate = (range_late - rho_now) / eps
+        range_rate = (range_late - range_now) / eps
         n = rows.shape[0]
         sigma_b = max(1.4826 * float(np.median(np.abs(d_bearing - np.median(d_bearing)))), 1e-4)
         sigma_r = max(1.4826 * float(np.median(np.abs(d_range - np.median(d_range)))), 0.05)

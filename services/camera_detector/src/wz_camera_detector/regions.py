@@ -19,7 +19,8 @@ is a pixel of one camera. No camera stands exactly at its site file's pose: with
 ``margin_deg`` the regions hold the road for every aim within that many degrees of yaw and
 pitch of the pose given (the union of its projections), so a vehicle at the far end is not cut
 by a region drawn for a pose the camera does not have. The detector gives the set-up
-tolerance until the camera's pose is learned, then what is left of it (the node). ``--roi`` / ``--tiles`` (or the settings) override it.
+tolerance until the camera's pose is learned, then what is left of it (the node).
+``--roi`` / ``--tiles`` (or the settings) override it.
 """
 
 from __future__ import annotations
@@ -189,11 +190,13 @@ def detector_regions(
     points, ranges = _road_points(site, camera, max_range_m)
     uv, visible = _projected(camera, points)
     if margin_deg != (0.0, 0.0):
-        for turned in _turned(mount, margin_deg):
-            more_uv, more_visible = _projected(camera_at_size(turned, width, height), points)
-            uv = np.concatenate([uv, more_uv])
-            visible = np.concatenate([visible, more_visible])
-        ranges = np.tile(ranges, len(uv) // len(ranges))
+        views = [(uv, visible)] + [
+            _projected(camera_at_size(turned, width, height), points)
+            for turned in _turned(mount, margin_deg)
+        ]
+        uv = np.concatenate([view[0] for view in views])
+        visible = np.concatenate([view[1] for view in views])
+        ranges = np.tile(ranges, len(views))
     roi = _bounds(uv[visible], width, height, snap=True)
     if roi is None:
         return DetectorRegions(None, ())
