@@ -64,16 +64,24 @@ def test_wz_up_runs_the_pipeline_from_sensors_to_fused_tracks(tmp_path: Path, st
             )
             sources: set[str] = set()
             errors: list[float] = []
+            first_stamp: float | None = None
             deadline = time.monotonic() + 240.0
-            while time.monotonic() < deadline and (len(sources) < 2 or len(errors) < 20):
+            while time.monotonic() < deadline and (len(sources) < 2 or len(errors) < 200):
                 batch = tracks.recv(1.0)
                 if batch is None:
                     continue
                 at_stamp = truths.get(round(batch.stamp / 0.05))
                 if at_stamp is None:
                     continue
+                first_stamp = batch.stamp if first_stamp is None else first_stamp
                 for track in batch.tracks:
                     sources.update(track.sources)
+                # A track's first second is its filter converging (a young camera-only track
+                # was measured up to 2 m off its car); the tracks that start while the stack
+                # starts are all young, so they are scored from 3 s on.
+                if batch.stamp < first_stamp + 3.0:
+                    continue
+                for track in batch.tracks:
                     nearest = min(
                         (
                             math.hypot(v.x_m - track.x_m, v.y_m - track.y_m)
@@ -88,10 +96,11 @@ def test_wz_up_runs_the_pipeline_from_sensors_to_fused_tracks(tmp_path: Path, st
             )
     text = (tmp_path / "up.log").read_text()
     assert sources >= {"lidar-mast", "camera-mast"}, (sources, text[-3000:])
-    assert len(errors) >= 20
-    # Within a metre of a true vehicle at the same time (measured: 0.1 m median; the tracks
-    # start while `wz up` starts, the simulator's warm-up having filled the road).
-    assert sorted(errors)[len(errors) // 2] < 1.0, errors
+    assert len(errors) >= 200
+    # Within half a metre of a true vehicle at the same time (measured: 0.11-0.16 m median,
+    # idle and with three busy processes beside it; the first 20 samples, young tracks
+    # included, had 0.56 m idle and 1.08 m in CI).
+    assert sorted(errors)[len(errors) // 2] < 0.5, errors
     assert stored.status_code == 200 and stored.json()["count"] == 10, stored.text
     for service in (
         "simulator",
