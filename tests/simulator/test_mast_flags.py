@@ -12,7 +12,7 @@ from pydantic import ValidationError
 from wz_cli.main import build_parser
 from wz_cli.stack import StackOptions, select
 from wz_eval import cli as eval_cli
-from wz_eval.fusion import EvalOptions, pipeline_options
+from wz_eval.fusion import EvalOptions, _undisturbed_minutes, pipeline_options
 from wz_eval.fusion_report import bump_lines, calibration_lines, mount_error_lines
 from wz_eval.pipeline import PipelineOptions, run_pipeline
 from wz_eval.sites import finished_report, plan_jobs
@@ -167,6 +167,7 @@ def test_the_report_tells_the_bump() -> None:
         "calibrated_again_after_s": 31.5,
         "false_alerts_minute_after": 1,
         "false_alerts_per_minute_before": 0.5,
+        "false_alerts_by_undisturbed_minute": [0, 1, 0, 1, 3],
         "before": {
             "from_s": 60.0,
             "to_s": 360.0,
@@ -179,6 +180,24 @@ def test_the_report_tells_the_bump() -> None:
     }
     lines = "\n".join(bump_lines({"bump": bump}))
     assert "Flagged after 4.0 s, calibrated again after 31.5 s" in lines
-    assert "False alerts in the minute after: 1 (before it: 0.50 a minute)" in lines
+    assert (
+        "False alerts in the minute after: 1 (before it: 0.50 a minute; the 5 other whole "
+        "minutes: 1.00 a minute, 0 to 3)" in lines
+    )
     assert "- before (60-360 s): fused RMSE 0.20 / 0.10 m, 0 identity switches" in lines
     assert bump_lines({"bump": None}) == []
+
+
+def test_the_knocks_minute_is_compared_with_every_whole_undisturbed_minute() -> None:
+    # Scored 120-600 s, knocked at 180 s: one whole minute before, six after the knock's.
+    assert _undisturbed_minutes(180.0, 120.0, 600.0) == [
+        120.0,
+        240.0,
+        300.0,
+        360.0,
+        420.0,
+        480.0,
+        540.0,
+    ]
+    # A minute cut by the run's start or end is not one.
+    assert _undisturbed_minutes(150.0, 100.0, 260.0) == []

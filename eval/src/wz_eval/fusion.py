@@ -747,9 +747,23 @@ def _bump_report(
             if before_minutes > 0
             else None
         ),
+        # Every whole undisturbed minute of the scored run, on the knock's minute grid (one
+        # minute before it holds a handful of alerts: too few to compare with alone).
+        "false_alerts_by_undisturbed_minute": [
+            sum(start <= t < start + 60.0 for t in stamps)
+            for start in _undisturbed_minutes(at, warmup_s, end)
+        ],
         "before": window(warmup_s, at),
         "from_5_min_after": window(at + 300.0, end) if end > at + 300.0 else None,
     }
+
+
+def _undisturbed_minutes(at_s: float, from_s: float, to_s: float) -> list[float]:
+    """Starts of the whole minutes within [``from_s``, ``to_s``] before and after the minute
+    from ``at_s``, on its grid."""
+    before = [at_s - 60.0 * k for k in range(1, int((at_s - from_s) // 60.0) + 1)]
+    after = [at_s + 60.0 * k for k in range(1, int((to_s - at_s) // 60.0))]
+    return sorted(before) + after
 
 
 #: Identity switches listed in the report (where each happened).

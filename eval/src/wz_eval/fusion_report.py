@@ -239,6 +239,16 @@ def calibration_lines(report: dict[str, Any]) -> list[str]:
     return lines
 
 
+def _undisturbed(bump: dict[str, Any]) -> str:
+    minutes = bump.get("false_alerts_by_undisturbed_minute") or []
+    if not minutes:
+        return ""
+    return (
+        f"; the {len(minutes)} other whole minutes: {sum(minutes) / len(minutes):.2f} a minute, "
+        f"{min(minutes)} to {max(minutes)}"
+    )
+
+
 def bump_lines(report: dict[str, Any]) -> list[str]:
     """The knocked sensor's story (``--bump``): flagged, learned again, false alerts, errors."""
     bump = report.get("bump")
@@ -254,7 +264,7 @@ def bump_lines(report: dict[str, Any]) -> list[str]:
         f"Flagged after {cell(bump['flagged_after_s'], '.1f')} s, calibrated again after "
         f"{cell(bump['calibrated_again_after_s'], '.1f')} s. False alerts in the minute after: "
         f"{bump['false_alerts_minute_after']} (before it: "
-        f"{cell(bump['false_alerts_per_minute_before'])} a minute).",
+        f"{cell(bump['false_alerts_per_minute_before'])} a minute{_undisturbed(bump)}).",
     ]
     for name in ("before", "from_5_min_after"):
         w = bump.get(name)

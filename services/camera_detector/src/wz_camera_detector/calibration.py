@@ -45,7 +45,10 @@ fits. A vote over the bearing residuals starts it.
 
 Bumps: the residuals of the last seconds' pairs are checked against the learned pose at every
 fit; twice past the threshold (``bump_deg``) the sensor is ``bumped``: the window restarts from
-the recent frames and the vote runs again. Meanwhile the detections carry the angles'
+the recent frames. A knock turns a sensor on its bracket, so the camera is turned back at once
+by the shift the check measured (known to the pairs' spread), and its fits after the knock
+keep the position and clock learned before it and free the rotation (applied from
+``knock_min_pairs``); the radar votes again. Meanwhile the detections carry the angles'
 uncertainty in their covariance.
 """
 
@@ -113,6 +116,13 @@ class SensorCalibrationSettings(BaseModel):
     #: Bump check: the recent seconds [s] and the angle their residuals may stand off [deg].
     bump_window_s: float = Field(default=5.0, gt=0.0)
     bump_deg: float = Field(default=0.6, gt=0.0)
+    #: After a knock the fit keeps the position and clock learned before it, to these [m],
+    #: [s]: a knock turns a sensor on its bracket (the bolts hold its place; the clock is the
+    #: electronics').
+    knock_position_m: float = Field(default=0.05, gt=0.0)
+    knock_clock_s: float = Field(default=0.005, gt=0.0)
+    #: Matched pairs before a fit after a knock is applied: only the rotation is free then.
+    knock_min_pairs: int = Field(default=30, ge=10)
     #: Prior std of the yaw and of the pitch and roll [deg] (a compass and a level), of the
     #: horizontal and vertical position [m] (a tape), of the clock offset [s].
     prior_yaw_deg: float = Field(default=2.0, gt=0.0)
@@ -338,6 +348,11 @@ class CameraSelfCalibration:
         self._next_check_s = -math.inf
         self._bump_votes = 0
         self._initialised = False
+        #: What was applied, and its std, when the camera was last found knocked: a knock turns
+        #: the camera on its bracket; it neither moves it nor changes its clock.
+        self._before_knock: tuple[F64, F64] | None = None
+        #: Whether a fit was applied since the knock was found.
+        self._fit_since_knock = False
         self.params = np.zeros(len(_NAMES))
         #: What is applied: the fits themselves while learning, smoothed once calibrated.
         self._applied: F64 | None = None
@@ -547,6 +562,11 @@ class CameraSelfCalibration:
         )
 
     def _prior(self) -> tuple[F64, F64]:
+        """The fit's prior (mean, std): the set-up tolerance about the site file's pose; after a
+        knock, the same rotation tolerance about the pose learned before it, and the position
+        and clock learned before it to ``knock_position_m`` and ``knock_clock_s`` (a few
+        seconds of pairs after a knock would move the weakly seen ones, the position along
+        the line of sight above all, where the knock did not)."""
         s = self.settings
         sigma = np.array(
             [
@@ -559,7 +579,11 @@ class CameraSelfCalibration:
                 s.prior_clock_s,
             ]
         )
-        return np.zeros(len(_NAMES)), sigma
+        if self._before_knock is None:
+            return np.zeros(len(_NAMES)), sigma
+        sigma[3:6] = s.knock_position_m
+        sigma[6] = s.knock_clock_s
+        return self._before_knock[0].copy(), sigma
 
     def _vote(self, frames: list[_Frame]) -> F64:
         """Clock offset and the yaw and pitch of the sharpest image shift (module docstring)."""
@@ -570,6 +594,12 @@ class CameraSelfCalibration:
         edges = np.arange(-reach, reach + bin_px, bin_px)
         base = self.params.copy()
         base[:2] = 0.0
+        clocks = np.arange(s.clock_search_s[0], s.clock_search_s[1] + 1e-9, 0.025)
+        if self._before_knock is not None:
+            # A knock turns the camera: the shift is searched from the pose learned before it,
+            # at the clock learned before it.
+            base = self._before_knock[0].copy()
+            clocks = np.array([base[6]])
         # The shifts a set-up error can make: a yaw or a pitch within the bounds turns the
         # image by at most f tan(bound) (the clock's shift is the grid's, not searched here).
         focal = self.camera_for(base).focal_px
@@ -577,7 +607,7 @@ class CameraSelfCalibration:
         reach_u = focal * math.tan(math.radians(_BOUNDS[0])) + 2 * bin_px
         reach_v = focal * math.tan(math.radians(_BOUNDS[1])) + 2 * bin_px
         allowed = (np.abs(centres)[:, None] <= reach_u) & (np.abs(centres)[None, :] <= reach_v)
-        for clock in np.arange(s.clock_search_s[0], s.clock_search_s[1] + 1e-9, 0.025):
+        for clock in clocks:
             trial = base.copy()
             trial[6] = clock
             predicted = self._predict(trial, frames)
@@ -613,40 +643,45 @@ class CameraSelfCalibration:
                     float(edges[j]) + bin_px / 2,
                 )
         _, clock, du, dv = best
-        # The image shift of a yaw and of a pitch at a point ahead of the camera.
-        camera = self.camera_for(base)
-        ahead = camera.position_m + 50.0 * camera.mount.pose.rotation()[:, 0]
-        ahead[2] = 0.0
-        jac = np.zeros((2, 2))
-        u0, _ = camera.project(ahead[None, :])
-        for k in range(2):
-            trial = base.copy()
-            trial[k] += 0.1
-            uk, _ = self.camera_for(trial).project(ahead[None, :])
-            jac[:, k] = (uk[0] - u0[0]) / 0.1
-        try:
-            angles = np.linalg.solve(jac, [du, dv])
-        except np.linalg.LinAlgError:
-            angles = np.zeros(2)
+        angles = self._turn_for_shift(base, du, dv)
         result = base.copy()
-        result[0], result[1], result[6] = angles[0], angles[1], clock
+        result[0], result[1], result[6] = base[0] + angles[0], base[1] + angles[1], clock
         log.debug(
             "camera %s vote: clock %.3f s, shift (%.0f, %.0f) px: yaw %.2f deg, pitch %.2f deg",
             self.mount.sensor_id,
             clock,
             du,
             dv,
-            angles[0],
-            angles[1],
+            result[0],
+            result[1],
         )
         return np.clip(result, -_BOUNDS, _BOUNDS)
+
+    def _turn_for_shift(self, params: F64, du_px: float, dv_px: float) -> F64:
+        """The (yaw, pitch) [deg] that move the image by (``du_px``, ``dv_px``) at a point on
+        the road 50 m ahead of the camera posed by ``params``."""
+        camera = self.camera_for(params)
+        ahead = camera.position_m + 50.0 * camera.mount.pose.rotation()[:, 0]
+        ahead[2] = 0.0
+        jac = np.zeros((2, 2))
+        u0, _ = camera.project(ahead[None, :])
+        for k in range(2):
+            trial = params.copy()
+            trial[k] += 0.1
+            uk, _ = self.camera_for(trial).project(ahead[None, :])
+            jac[:, k] = (uk[0] - u0[0]) / 0.1
+        try:
+            return np.asarray(np.linalg.solve(jac, [du_px, dv_px]), dtype=np.float64)
+        except np.linalg.LinAlgError:
+            return np.zeros(2)
 
     def _fit(self, stamp_s: float) -> None:
         frames = list(self._frames)
         if len(frames) > self.settings.max_fit_frames:  # evenly over the window
             pick = np.linspace(0, len(frames) - 1, self.settings.max_fit_frames).astype(int)
             frames = [frames[i] for i in pick]
-        if not self._initialised or self.log.state == CalibrationState.BUMPED:
+        revote = self.log.state == CalibrationState.BUMPED and not self._fit_since_knock
+        if not self._initialised or revote:
             if len(frames) < self.settings.vote_min_frames:
                 return
             self.params = self._vote(frames)
@@ -707,8 +742,10 @@ class CameraSelfCalibration:
             # Pairs of one vehicle share its LiDAR box's error: as if each vehicle were one
             # pair of its weight (the conservative end of a cluster-robust covariance).
             self.std = np.sqrt(np.maximum(np.diag(covariance), 0.0) * pairs / max(vehicles, 1))
-        if pairs >= self.settings.min_pairs:
+        knocked = self.log.state == CalibrationState.BUMPED and self._before_knock is not None
+        if pairs >= (self.settings.knock_min_pairs if knocked else self.settings.min_pairs):
             self.take(params)
+            self._fit_since_knock = True
         self._update_state(stamp_s)
 
     def _check_bump(self, stamp_s: float, frames: list[_Frame]) -> bool:
@@ -716,21 +753,30 @@ class CameraSelfCalibration:
         recent = [f for f in frames if f.stamp_s >= stamp_s - self.settings.bump_window_s]
         if len(recent) < 5:
             return False
-        xy, velocity, heading, lag, det, _ = self._match(self.params, recent, 120.0)
+        xy, velocity, heading, lag, det, vehicle = self._match(self.params, recent, 120.0)
         # Too few pairs tells nothing: a gap in the traffic both sensors see, or cars outside
         # the detector's region. A knock shows as the pairs' shift.
         matched = len(xy) >= 8
-        shift_deg = 0.0
+        shift_deg = du = dv = 0.0
+        spread_px = (0.0, 0.0)
         if matched:
             res = self._residuals(self.params, xy, velocity, heading, lag, det).reshape(3, -1)
-            du = np.nanmedian(0.5 * (res[0] + res[1]))
-            dv = np.nanmedian(res[2])
+            across, down = 0.5 * (res[0] + res[1]), res[2]
+            du, dv = float(np.nanmedian(across)), float(np.nanmedian(down))
+            spread_px = (
+                1.4826 * float(np.nanmedian(np.abs(across - du))),
+                1.4826 * float(np.nanmedian(np.abs(down - dv))),
+            )
             camera = self.camera_for(self.params)
             shift_deg = math.degrees(math.hypot(du, dv) / camera.focal_px)
         moved = matched and shift_deg > self.settings.bump_deg
         self._bump_votes = self._bump_votes + 1 if moved else 0
         if self._bump_votes >= 2:
             self._bump_votes = 0
+            self._fit_since_knock = False
+            if self._applied is not None:
+                self._before_knock = (self._applied.copy(), self.std.copy())
+                self._turn_by_shift(du, dv, spread_px, len(np.unique(vehicle)))
             self.log.enter(
                 CalibrationState.BUMPED,
                 stamp_s,
@@ -740,6 +786,23 @@ class CameraSelfCalibration:
                 self._frames.popleft()
             return True
         return False
+
+    def _turn_by_shift(
+        self, du_px: float, dv_px: float, spread_px: tuple[float, float], vehicles: int
+    ) -> None:
+        """Apply the knock the bump check measured (its pairs' median shift, predicted minus
+        seen) at once: the rotation that undoes it, known to the pairs' spread over the
+        vehicles they come from. The fits then refine it from the frames after the knock."""
+        turn = self._turn_for_shift(self.params, -du_px, -dv_px)
+        yaw_spread = abs(float(self._turn_for_shift(self.params, spread_px[0], 0.0)[0]))
+        pitch_spread = abs(float(self._turn_for_shift(self.params, 0.0, spread_px[1])[1]))
+        self.params = self.params.copy()
+        self.params[:2] += turn
+        self._applied = self.params.copy()
+        self.std = self.std.copy()
+        self.std[:2] = np.array([yaw_spread, pitch_spread]) / math.sqrt(max(vehicles, 1))
+        self._fit_since_knock = True
+        self._apply()
 
     def take(self, params: F64) -> None:
         """Apply a fit's parameters (the order of ``_NAMES``): as they are while learning or
@@ -798,12 +861,11 @@ class CameraSelfCalibration:
     @property
     def angle_std_rad(self) -> tuple[float, float]:
         """(yaw, pitch) uncertainty the detections carry now [rad]: 1 deg each until learned
-        and while bumped, the fit's while learning, none once calibrated (the camera's own
-        noise model then holds, as for a surveyed camera)."""
+        and after a knock until a fit is applied, the fit's while learning (again), none once
+        calibrated (the camera's own noise model then holds, as for a surveyed camera)."""
         state = self.log.state
-        if state in (CalibrationState.PRIOR, CalibrationState.BUMPED) or not np.isfinite(
-            self.std[0]
-        ):
+        unfitted = state == CalibrationState.BUMPED and not self._fit_since_knock
+        if state == CalibrationState.PRIOR or unfitted or not np.isfinite(self.std[0]):
             return math.radians(1.0), math.radians(1.0)
         if state == CalibrationState.CALIBRATED:
             return 0.0, 0.0
