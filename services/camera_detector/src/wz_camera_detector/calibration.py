@@ -348,9 +348,9 @@ class CameraSelfCalibration:
         self._next_check_s = -math.inf
         self._bump_votes = 0
         self._initialised = False
-        #: What was applied, and its std, when the camera was last found knocked: a knock turns
-        #: the camera on its bracket; it neither moves it nor changes its clock.
-        self._before_knock: tuple[F64, F64] | None = None
+        #: What was applied when the camera was last found knocked: a knock turns the camera
+        #: on its bracket; it neither moves it nor changes its clock.
+        self._before_knock: F64 | None = None
         #: Whether a fit was applied since the knock was found.
         self._fit_since_knock = False
         self.params = np.zeros(len(_NAMES))
@@ -583,7 +583,7 @@ class CameraSelfCalibration:
             return np.zeros(len(_NAMES)), sigma
         sigma[3:6] = s.knock_position_m
         sigma[6] = s.knock_clock_s
-        return self._before_knock[0].copy(), sigma
+        return self._before_knock.copy(), sigma
 
     def _vote(self, frames: list[_Frame]) -> F64:
         """Clock offset and the yaw and pitch of the sharpest image shift (module docstring)."""
@@ -598,7 +598,7 @@ class CameraSelfCalibration:
         if self._before_knock is not None:
             # A knock turns the camera: the shift is searched from the pose learned before it,
             # at the clock learned before it.
-            base = self._before_knock[0].copy()
+            base = self._before_knock.copy()
             clocks = np.array([base[6]])
         # The shifts a set-up error can make: a yaw or a pitch within the bounds turns the
         # image by at most f tan(bound) (the clock's shift is the grid's, not searched here).
@@ -775,7 +775,7 @@ class CameraSelfCalibration:
             self._bump_votes = 0
             self._fit_since_knock = False
             if self._applied is not None:
-                self._before_knock = (self._applied.copy(), self.std.copy())
+                self._before_knock = self._applied.copy()
                 self._turn_by_shift(du, dv, spread_px, len(np.unique(vehicle)))
             self.log.enter(
                 CalibrationState.BUMPED,
