@@ -351,8 +351,6 @@ class CameraSelfCalibration:
         #: What was applied when the camera was last found knocked: a knock turns the camera
         #: on its bracket; it neither moves it nor changes its clock.
         self._before_knock: F64 | None = None
-        #: Whether a fit was applied since the knock was found.
-        self._fit_since_knock = False
         self.params = np.zeros(len(_NAMES))
         #: What is applied: the fits themselves while learning, smoothed once calibrated.
         self._applied: F64 | None = None
@@ -680,7 +678,8 @@ class CameraSelfCalibration:
         if len(frames) > self.settings.max_fit_frames:  # evenly over the window
             pick = np.linspace(0, len(frames) - 1, self.settings.max_fit_frames).astype(int)
             frames = [frames[i] for i in pick]
-        revote = self.log.state == CalibrationState.BUMPED and not self._fit_since_knock
+        # Knocked with nothing applied before (no turn to start from): vote afresh.
+        revote = self.log.state == CalibrationState.BUMPED and self._before_knock is None
         if not self._initialised or revote:
             if len(frames) < self.settings.vote_min_frames:
                 return
@@ -745,7 +744,6 @@ class CameraSelfCalibration:
         knocked = self.log.state == CalibrationState.BUMPED and self._before_knock is not None
         if pairs >= (self.settings.knock_min_pairs if knocked else self.settings.min_pairs):
             self.take(params)
-            self._fit_since_knock = True
         self._update_state(stamp_s)
 
     def _check_bump(self, stamp_s: float, frames: list[_Frame]) -> bool:
@@ -773,7 +771,7 @@ class CameraSelfCalibration:
         self._bump_votes = self._bump_votes + 1 if moved else 0
         if self._bump_votes >= 2:
             self._bump_votes = 0
-            self._fit_since_knock = False
+            self._before_knock = None
             if self._applied is not None:
                 self._before_knock = self._applied.copy()
                 self._turn_by_shift(du, dv, spread_px, len(np.unique(vehicle)))
@@ -801,7 +799,6 @@ class CameraSelfCalibration:
         self._applied = self.params.copy()
         self.std = self.std.copy()
         self.std[:2] = np.array([yaw_spread, pitch_spread]) / math.sqrt(max(vehicles, 1))
-        self._fit_since_knock = True
         self._apply()
 
     def take(self, params: F64) -> None:
@@ -861,11 +858,12 @@ class CameraSelfCalibration:
     @property
     def angle_std_rad(self) -> tuple[float, float]:
         """(yaw, pitch) uncertainty the detections carry now [rad]: 1 deg each until learned
-        and after a knock until a fit is applied, the fit's while learning (again), none once
-        calibrated (the camera's own noise model then holds, as for a surveyed camera)."""
+        and after a knock with no turn to start from, the fit's (or the knock's measured turn's)
+        while learning again, none once calibrated (the camera's own noise model then holds, as
+        for a surveyed camera)."""
         state = self.log.state
-        unfitted = state == CalibrationState.BUMPED and not self._fit_since_knock
-        if state == CalibrationState.PRIOR or unfitted or not np.isfinite(self.std[0]):
+        unturned = state == CalibrationState.BUMPED and self._before_knock is None
+        if state == CalibrationState.PRIOR or unturned or not np.isfinite(self.std[0]):
             return math.radians(1.0), math.radians(1.0)
         if state == CalibrationState.CALIBRATED:
             return 0.0, 0.0
