@@ -157,6 +157,8 @@ def test_wz_eval_refuses_a_bad_bias_map_before_it_simulates(tmp_path: Path) -> N
         (["--max-range-m", "0"], "argument --max-range-m: 0 is not above 0"),
         (["--vehicles-per-hour", "lots"], "argument --vehicles-per-hour: 'lots' is not a number"),
         (["--truck-share", "1.5"], "argument --truck-share: 1.5 is not a share from 0 to 1"),
+        (["--demand-ratio", "4"], "argument --demand-ratio: 4 is not a demand ratio above 0"),
+        (["--demand-profile", "wave"], "argument --demand-profile: invalid choice"),
         (["--aggressive-share", "-0.1"], "-0.1 is not a share from 0 to 1"),
         (["--weather", "snow"], "argument --weather: invalid choice: 'snow'"),
         (["--site", "/nonexistent/site.yaml"], "cannot read site file /nonexistent/site.yaml"),

@@ -88,6 +88,24 @@ def test_the_sites_cycle_the_weather_and_vary_the_traffic(tmp_path: Path) -> Non
     assert plan_jobs(12, 500, 300.0, 60.0, tmp_path) == jobs  # seeded
 
 
+def test_the_traffic_sets_state_demand_against_the_closure_s_capacity(tmp_path: Path) -> None:
+    free = plan_jobs(12, 500, 300.0, 60.0, tmp_path, traffic="free-flow")
+    congested = plan_jobs(12, 500, 300.0, 60.0, tmp_path, traffic="congested")
+    assert all(0.5 <= job.demand_ratio <= 0.85 for job in free if job.demand_ratio)
+    assert all(1.05 <= job.demand_ratio <= 1.3 for job in congested if job.demand_ratio)
+    assert {job.demand_profile for job in free} == {"steady"}
+    assert {job.demand_profile for job in congested} == {"ramp"}
+    assert len({job.demand_ratio for job in free}) > 6
+    # The same sites, weather and trucks as the volume set: only the demand differs.
+    volume = plan_jobs(12, 500, 300.0, 60.0, tmp_path)
+    assert [(j.seed, j.weather, j.truck_share) for j in volume] == [
+        (j.seed, j.weather, j.truck_share) for j in free
+    ]
+    assert all(job.demand_ratio is None for job in volume)
+    with pytest.raises(ValueError, match="traffic 'jammed'"):
+        plan_jobs(2, 500, 300.0, 60.0, tmp_path, traffic="jammed")
+
+
 def _report(mota: float, hard_braking_fp: int, late_merge: dict[str, float | int]) -> dict:
     return {
         "duration_s": 150.0,

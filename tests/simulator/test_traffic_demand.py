@@ -12,8 +12,10 @@ from wz_shared.messages import DriverProfile, VehicleClass
 from wz_simulator.traffic.demand import (
     DemandConfig,
     DemandGenerator,
+    DemandProfile,
     default_vehicle_types,
     type_id_for,
+    work_zone_tau_increase,
     write_routes,
 )
 
@@ -93,3 +95,56 @@ def test_bad_config_is_refused() -> None:
         DemandConfig(vehicles_per_hour=100.0, truck_share=1.5, aggressive_share=0.1, seed=1)
     with pytest.raises(ValueError, match="vehicles_per_hour"):
         DemandConfig(vehicles_per_hour=0.0, truck_share=0.1, aggressive_share=0.1, seed=1)
+
+
+def test_a_steady_profile_gives_exactly_the_steady_departures() -> None:
+    steady = DemandGenerator(CONFIG).until(3600.0)
+    profiled = DemandConfig(**{**CONFIG.__dict__, "profile": DemandProfile.steady(1400.0)})
+    assert DemandGenerator(profiled).until(3600.0) == steady
+
+
+def test_a_ramp_brings_the_flow_of_each_of_its_stretches() -> None:
+    """Many seeds: the mean arrivals in each stretch of a ramp are its flow's integral."""
+    ramp = DemandProfile.ramp(800.0, 2000.0, start_s=60.0, rise_s=30.0, hold_s=120.0, fall_s=30.0)
+    assert ramp.vehicles_per_hour(0.0) == 800.0 and ramp.vehicles_per_hour(75.0) == 1400.0
+    assert ramp.vehicles_per_hour(150.0) == 2000.0 and ramp.vehicles_per_hour(1e6) == 800.0
+    # The running integral's inverse: 800 veh/h for 60 s is 13.33 vehicles; the rise adds 11.67.
+    assert ramp.time_after(0.0, 800.0 / 60.0) == pytest.approx(60.0)
+    assert ramp.time_after(0.0, 800.0 / 60.0 + 1400.0 / 120.0) == pytest.approx(90.0)
+    assert ramp.time_after(200.0, 2000.0 / 360.0) == pytest.approx(210.0)
+    stretches = {(0.0, 60.0): 800.0, (90.0, 210.0): 2000.0, (240.0, 600.0): 800.0}
+    counts = dict.fromkeys(stretches, 0)
+    seeds = 300
+    for seed in range(seeds):
+        config = DemandConfig(**{**CONFIG.__dict__, "seed": seed, "profile": ramp})
+        times = np.array([d.depart_s for d in DemandGenerator(config).until(600.0)])
+        for low, high in stretches:
+            counts[(low, high)] += int(((times >= low) & (times < high)).sum())
+    for (low, high), flow in stretches.items():
+        expected = flow * (high - low) / 3600.0 * seeds
+        assert counts[(low, high)] == pytest.approx(expected, rel=0.04), (low, high)
+
+
+@pytest.mark.parametrize(
+    "knots",
+    [(), ((10.0, 100.0), (5.0, 100.0)), ((0.0, 0.0),), ((0.0, float("nan")),)],
+)
+def test_a_bad_profile_is_refused(knots: tuple[tuple[float, float], ...]) -> None:
+    with pytest.raises(ValueError, match="demand profile"):
+        DemandProfile(knots)
+
+
+def test_work_zone_headways_bring_the_fleet_to_the_lane_capacity() -> None:
+    types = default_vehicle_types()
+    speed_mps, capacity_vph = 20.0, 1400.0
+    increase_s = work_zone_tau_increase(types, 0.2, 0.15, speed_mps, capacity_vph)
+    # The fleet's mean Krauss headway with the increase is 3600 / capacity.
+    mean_s = 0.0
+    for spec in types.values():
+        share = 0.2 if spec.vehicle_class is VehicleClass.TRUCK else 0.8
+        share *= 0.15 if spec.driver_profile is DriverProfile.AGGRESSIVE else 0.85
+        mean_s += share * (spec.tau_s + increase_s + (spec.length_m + spec.min_gap_m) / speed_mps)
+    assert mean_s == pytest.approx(3600.0 / capacity_vph)
+    assert 0.5 < increase_s < 1.5  # a work zone's headway: some 2-2.5 s for a car
+    # A capacity above what open-road headways carry (some 2300 veh/h) needs nothing added.
+    assert work_zone_tau_increase(types, 0.2, 0.15, speed_mps, 3000.0) == 0.0

@@ -14,8 +14,10 @@ import libsumo
 import numpy as np
 import pytest
 
+from wz_shared.capacity import closure_capacity_vph
 from wz_shared.messages import DriverProfile, VehicleClass, VehicleTruth
 from wz_shared.site import AreaKind, Site
+from wz_shared.site_generator import generate_site
 from wz_simulator.settings import SimulatorSettings
 from wz_simulator.traffic.demand import default_vehicle_types
 from wz_simulator.traffic.world import TrafficCounters, TrafficWorld
@@ -259,6 +261,50 @@ def test_same_seed_gives_identical_truth(site: Site, sim_work_dir: Path) -> None
     assert sum(len(t) for t in first) > 1000
     assert first == second
     assert run(22) != first
+
+
+def _closure_run(site: Site, work_dir: Path, ratio: float, headways: bool) -> tuple[int, float]:
+    """Six minutes at ``ratio`` of the closure's capacity: the most vehicles stopped (< 5 m/s)
+    upstream of the taper's end at once, and the flow past it in the last 150 s over HCM's
+    capacity."""
+    taper = site.area(AreaKind.TRANSITION)
+    settings = settings_for(
+        work_dir,
+        seed=5,
+        duration_s=360.0,
+        demand_ratio=ratio,
+        truck_share=0.2,
+        work_zone_headways=headways,
+    )
+    passed: dict[str, float] = {}
+    stopped = 0
+    with TrafficWorld(site, settings) as world:
+        while not world.finished:
+            vehicles = world.step()
+            for vehicle in vehicles:
+                if vehicle.station_m > taper.end_station_m:
+                    passed.setdefault(vehicle.vehicle_id, world.sim_time_s)
+            stopped = max(
+                stopped,
+                sum(1 for v in vehicles if v.station_m < taper.end_station_m and v.speed_mps < 5),
+            )
+    late = sum(1 for t in passed.values() if t >= 210.0) * 3600.0 / 150.0
+    return stopped, late / closure_capacity_vph(site, 0.2)
+
+
+def test_demand_over_the_closure_s_capacity_queues_and_discharges_at_it(
+    sim_work_dir: Path,
+) -> None:
+    """With work-zone headways, 1.4 times HCM's capacity queues from the taper and the queue
+    discharges at about that capacity (a little under: real queues discharge 5-15 % below
+    it); 0.7 flows freely. Open-road headways carry far more than HCM's work-zone lanes."""
+    site = generate_site(9302)  # two lanes dropping to one
+    stopped, discharge = _closure_run(site, sim_work_dir, 1.4, headways=True)
+    assert stopped >= 20 and 0.75 <= discharge <= 1.05, (stopped, discharge)
+    stopped, discharge = _closure_run(site, sim_work_dir, 1.4, headways=False)
+    assert discharge >= 1.2, discharge
+    stopped, discharge = _closure_run(site, sim_work_dir, 0.7, headways=True)
+    assert stopped <= 2, stopped
 
 
 def test_one_simulation_per_process(site: Site, sim_work_dir: Path) -> None:

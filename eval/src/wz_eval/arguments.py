@@ -37,3 +37,10 @@ def share(text: str) -> float:
     if not 0.0 <= (value := number(text)) <= 1.0:
         raise argparse.ArgumentTypeError(f"{text} is not a share from 0 to 1")
     return value
+
+
+def demand_ratio(text: str) -> float:
+    """Demand over capacity: above 0, at most 3 (three times capacity jams any closure)."""
+    if not 0.0 < (value := number(text)) <= 3.0:
+        raise argparse.ArgumentTypeError(f"{text} is not a demand ratio above 0 and at most 3")
+    return value

@@ -5,6 +5,10 @@ sees, and beyond its reach nothing does. One MOTA over a 150 m circle hides that
 report adds, per 50 m of road (negative: upstream of the mast, where traffic comes from), the
 vehicles scored, the share missed (no track within the match), and the RMSE of the matched
 tracks' speed and lateral offset.
+
+:meth:`StationBreakdown.mast_stretch` sets the speed error within 50 m of the mast, where the
+camera and radar hand over to the LiDAR (and under it no sensor sees), against the approach's
+further upstream, where every sensor faces the traffic.
 """
 
 from __future__ import annotations
@@ -18,6 +22,8 @@ from wz_shared.messages import VehicleTruth
 
 #: Bin width along the road [m].
 BIN_M = 50.0
+#: The mast's stretch: this far either side of it [m] (one bin each way).
+MAST_STRETCH_M = 50.0
 
 
 class StationBreakdown:
@@ -53,6 +59,34 @@ class StationBreakdown:
             speed = speeds_mps[index]
             if speed is not None:
                 self._speed_sq[key].append((speed - vehicle.speed_mps) ** 2)
+
+    def mast_stretch(self) -> dict[str, Any]:
+        """Speed RMSE within ``MAST_STRETCH_M`` of the mast, on the approach upstream of that,
+        and their ratio (None where either has no sample)."""
+        mast: list[float] = []
+        approach: list[float] = []
+        for key, squares in self._speed_sq.items():
+            low_m, high_m = key * BIN_M, (key + 1) * BIN_M
+            if low_m >= -MAST_STRETCH_M and high_m <= MAST_STRETCH_M:
+                mast += squares
+            elif high_m <= -MAST_STRETCH_M:
+                approach += squares
+
+        def rmse(squares: list[float]) -> float | None:
+            return round(math.sqrt(sum(squares) / len(squares)), 3) if squares else None
+
+        mast_rmse, approach_rmse = rmse(mast), rmse(approach)
+        ratio = (
+            round(mast_rmse / approach_rmse, 3) if mast_rmse is not None and approach_rmse else None
+        )
+        return {
+            "within_m": MAST_STRETCH_M,
+            "rmse_speed_mps": mast_rmse,
+            "samples": len(mast),
+            "approach_rmse_speed_mps": approach_rmse,
+            "approach_samples": len(approach),
+            "ratio": ratio,
+        }
 
     def report(self) -> list[dict[str, Any]]:
         rows = []

@@ -21,7 +21,7 @@ import json
 import sys
 from pathlib import Path
 
-from wz_eval.arguments import not_negative, positive, share
+from wz_eval.arguments import demand_ratio, not_negative, positive, share
 from wz_eval.fusion import Dropout, EvalOptions, evaluate
 from wz_eval.fusion_report import markdown
 from wz_fusion_tracker.calibration import BiasMap, BiasMapError, load_bias_map, write_bias_map
@@ -62,6 +62,22 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--max-range-m", type=positive, default=150.0)
     parser.add_argument("--weather", choices=sorted(WEATHER_PRESETS), default="day")
     parser.add_argument("--vehicles-per-hour", type=positive, default=1400.0)
+    parser.add_argument(
+        "--demand-ratio",
+        type=demand_ratio,
+        default=None,
+        help="demand as a share of the closure's capacity (HCM work-zone lanes with the truck "
+        "share; 0.5-0.85 flows freely, 1.05-1.3 queues); replaces --vehicles-per-hour, and "
+        "drivers keep work-zone headways from the taper so that the closure carries that capacity",
+    )
+    parser.add_argument(
+        "--demand-profile",
+        choices=("steady", "ramp"),
+        default="steady",
+        help="ramp: free flow (0.6 of capacity) through the warm-up, up to the demand over the "
+        "first tenth of the scored time, held half of it, down over a tenth: a queue forms and "
+        "dissolves",
+    )
     parser.add_argument("--truck-share", type=share, default=0.15, help="0 to 1")
     parser.add_argument("--aggressive-share", type=share, default=0.2, help="0 to 1")
     parser.add_argument(
@@ -146,6 +162,8 @@ def main(argv: list[str] | None = None) -> int:
         dropouts=dropouts,
         camera_model=args.model,
         vehicles_per_hour=args.vehicles_per_hour,
+        demand_ratio=args.demand_ratio,
+        demand_profile=args.demand_profile,
         weather=args.weather,
         truck_share=args.truck_share,
         aggressive_share=args.aggressive_share,

@@ -96,7 +96,7 @@ from wz_eval.coverage_report import coverage_report, weather_coverage
 from wz_eval.fusion_report import ALERT_TRUTH_RANGE_M, must_show, table_summary
 from wz_eval.lane_counts import lane_volume_report
 from wz_eval.metrics import TruthIndex, in_range, match
-from wz_eval.pipeline import PipelineOptions, PipelineRecord, run_pipeline
+from wz_eval.pipeline import PipelineOptions, PipelineRecord, demand_conditions, run_pipeline
 from wz_eval.scores import SOURCE_GATE_M, SOURCES, Scores
 from wz_fusion_tracker.calibration import BiasMap, LateralBiasCorrector, fit_bias_map
 from wz_fusion_tracker.node import (
@@ -161,6 +161,10 @@ class EvalOptions:
     camera_model: Path | None = None
     #: Traffic and weather of the simulated run (:class:`~wz_eval.pipeline.PipelineOptions`).
     vehicles_per_hour: float = 1400.0
+    #: Demand as a share of the closure's capacity (replaces ``vehicles_per_hour``); None: off.
+    demand_ratio: float | None = None
+    #: ``steady`` or ``ramp`` (:func:`wz_eval.pipeline.ramp_settings`).
+    demand_profile: str = "steady"
     weather: str = "day"
     truck_share: float = 0.15
     aggressive_share: float = 0.2
@@ -190,6 +194,8 @@ def pipeline_options(options: EvalOptions) -> PipelineOptions:
         warmup_s=options.warmup_s,
         weather=options.weather,
         vehicles_per_hour=options.vehicles_per_hour,
+        demand_ratio=options.demand_ratio,
+        demand_profile=options.demand_profile,
         truck_share=options.truck_share,
         aggressive_share=options.aggressive_share,
         camera_model=options.camera_model,
@@ -457,7 +463,7 @@ def evaluate(
         "warmup_s": options.warmup_s,
         "conditions": {
             "weather": record.options.weather,
-            "vehicles_per_hour": record.options.vehicles_per_hour,
+            **demand_conditions(site, record.options),
             "truck_share": record.options.truck_share,
             "aggressive_share": record.options.aggressive_share,
         },
@@ -501,6 +507,7 @@ def evaluate(
         # SSAM's conflicts on the published tracks and the same truth (CSV tables beside)
         "conflicts": conflict_report(alert_batches, alert_truth, plots_dir),
         "fused_by_station": by_station.report(),
+        "mast_stretch": by_station.mast_stretch(),
         "lane_volumes": (
             lane_volume_report(site, alert_batches, record.truth, *_scored_interval(record))
             if record.truth

@@ -150,8 +150,15 @@ def _conditions(report: dict[str, Any]) -> str:
     c = report.get("conditions")
     if not c:
         return ""
+    demand = f"{c['vehicles_per_hour']:.0f} vehicles/h"
+    if c.get("share_of_capacity") is not None:
+        demand = (
+            f"demand {c['share_of_capacity']:.2f} of the closure's capacity "
+            f"({c['capacity_vph']:.0f} veh/h, so {demand}"
+            + (", the ramp's peak)" if c.get("demand_profile") == "ramp" else ")")
+        )
     return (
-        f" Weather {c['weather']}, {c['vehicles_per_hour']:g} vehicles/h, "
+        f" Weather {c['weather']}, {demand}, "
         f"{100 * c['truck_share']:g} % trucks, {100 * c['aggressive_share']:g} % aggressive."
     )
 
@@ -391,6 +398,15 @@ def markdown(report: dict[str, Any]) -> str:
                 f"{ratio(row['missed_share'])} | {cell(row['rmse_speed_mps'])} | "
                 f"{cell(row['rmse_lateral_m'])} |"
             )
+    stretch = report.get("mast_stretch")
+    if stretch and stretch.get("ratio") is not None:
+        lines += [
+            "",
+            f"Speed within {stretch['within_m']:.0f} m of the mast (where the camera and radar "
+            f"hand over to the LiDAR): RMSE {stretch['rmse_speed_mps']:.2f} m/s, "
+            f"{stretch['ratio']:.2f} times the approach's {stretch['approach_rmse_speed_mps']:.2f}"
+            f" m/s further upstream.",
+        ]
     lines += [
         "",
         "Alerts (the alert service on the fused tracks against the same rules on the "

@@ -28,6 +28,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -44,6 +45,7 @@ from wz_camera_detector.settings import CameraDetectorSettings, camera_mount, ra
 from wz_lidar_detector.calibration import LidarSelfCalibration
 from wz_lidar_detector.node import LidarDetector
 from wz_lidar_detector.settings import LidarDetectorSettings, lidar_mount
+from wz_shared.capacity import closure_capacity_vph
 from wz_shared.messages import Detection, DetectionBatch, SensorCalibration, VehicleTruth
 from wz_shared.site import Site
 from wz_simulator.sensors.mast import Bump, MastModel
@@ -59,6 +61,36 @@ log = logging.getLogger("wz_eval.pipeline")
 DETECT_FROM_S = 30.0
 
 
+def ramp_settings(warmup_s: float, duration_s: float) -> dict[str, float]:
+    """A ramp inside the scored window: free flow (0.6 of capacity) through the warm-up, the
+    flow rising over the first tenth of the scored time, held for half of it, falling over a
+    tenth and free flow for the last three tenths, in which the queue dissolves."""
+    return {
+        "ramp_base_ratio": 0.6,
+        "ramp_start_s": warmup_s,
+        "ramp_rise_s": 0.1 * duration_s,
+        "ramp_hold_s": 0.5 * duration_s,
+        "ramp_fall_s": 0.1 * duration_s,
+    }
+
+
+def demand_conditions(site: Site, options: PipelineOptions) -> dict[str, Any]:
+    """The run's demand for its report: the flow (the ramp's peak), the ratio asked (None: a
+    flow was asked), the flow's share of the closure's capacity, the capacity and the profile."""
+    capacity_vph = closure_capacity_vph(site, options.truck_share)
+    flow_vph = options.vehicles_per_hour
+    if options.demand_ratio is not None:
+        flow_vph = options.demand_ratio * capacity_vph
+    return {
+        "vehicles_per_hour": round(flow_vph, 1) if options.demand_ratio is not None else flow_vph,
+        "demand_ratio": options.demand_ratio,
+        "share_of_capacity": round(flow_vph / capacity_vph, 3),
+        "capacity_vph": round(capacity_vph, 1),
+        "demand_profile": options.demand_profile,
+        "work_zone_headways": options.demand_ratio is not None,
+    }
+
+
 @dataclass(frozen=True)
 class PipelineOptions:
     """What to simulate. Times in simulated seconds."""
@@ -69,6 +101,11 @@ class PipelineOptions:
     warmup_s: float = 60.0
     weather: str = "day"
     vehicles_per_hour: float = 1400.0
+    #: Demand as a share of the closure's capacity (replaces ``vehicles_per_hour``); None: off.
+    demand_ratio: float | None = None
+    #: ``steady``, or ``ramp``: a queue forms and dissolves in the scored window
+    #: (:func:`ramp_settings`).
+    demand_profile: str = "steady"
     truck_share: float = 0.15
     aggressive_share: float = 0.2
     camera_model: Path | None = None
@@ -166,6 +203,15 @@ def run_pipeline(
         "realtime_factor": 0.0,
         "sensors_enabled": False,
         "vehicles_per_hour": options.vehicles_per_hour,
+        "demand_ratio": options.demand_ratio,
+        "demand_profile": options.demand_profile,
+        # Demand stated against HCM's capacity needs a closure that carries it.
+        "work_zone_headways": options.demand_ratio is not None,
+        **(
+            ramp_settings(options.warmup_s, options.duration_s)
+            if options.demand_profile == "ramp"
+            else {}
+        ),
         "truck_share": options.truck_share,
         "aggressive_share": options.aggressive_share,
         "duration_s": total_s,

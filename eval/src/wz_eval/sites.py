@@ -2,7 +2,13 @@
 
 Site ``i`` (0-based) is :func:`~wz_shared.site_generator.generate_site` of seed ``S + i``,
 simulated with the same seed under conditions that cycle and vary with it: the weather day,
-dusk, rain, fog in turn, 1200-2000 veh/h and 15-30 % trucks drawn from the seed. Sites run in
+dusk, rain, fog in turn, 15-30 % trucks, and the demand drawn from the seed by ``--traffic``:
+
+- ``volume`` (the default, as before): 1200-2000 veh/h whatever the site's lanes;
+- ``free-flow``: 0.5-0.85 of the closure's capacity (:mod:`wz_shared.capacity`), steady;
+- ``congested``: a ramp (:func:`wz_eval.pipeline.ramp_settings`) peaking at 1.05-1.3 of it, so
+  a queue forms from the taper and dissolves inside the scored time.
+ Sites run in
 parallel, one process per core (``--jobs``). Each site's folder holds its site file, its plan
 picture and its ``wz eval`` report; ``sites.json`` and ``sites.md`` hold, per site and in
 distribution, the accuracy, tracking and alert figures against the targets of
@@ -99,7 +105,19 @@ SITE_TARGETS: tuple[Target, ...] = (
     Target("late-merge precision", _alert("late_merge", "precision"), 0.9, False),
     Target("late-merge recall", _alert("late_merge", "recall"), 0.9, False),
     Target("false hard braking / 5 min", _false_hard_braking, 1.0, True),
+    Target(
+        "mast-stretch speed / approach",
+        lambda r: (r.get("mast_stretch") or {}).get("ratio"),
+        1.5,
+        True,
+    ),
 )
+
+#: The demand sets of ``--traffic``: demand over capacity drawn in this range, and its profile.
+TRAFFIC_SETS: dict[str, tuple[tuple[float, float], str]] = {
+    "free-flow": ((0.5, 0.85), "steady"),
+    "congested": ((1.05, 1.3), "ramp"),
+}
 
 
 @dataclass(frozen=True)
@@ -119,6 +137,9 @@ class SiteJob:
     resume: bool = False
     #: Render the sensors as a real mast's (``wz eval --mount-errors``).
     mount_errors: bool = False
+    #: Demand as a share of the closure's capacity (replaces ``vehicles_per_hour``); None: off.
+    demand_ratio: float | None = None
+    demand_profile: str = "steady"
 
 
 def plan_jobs(
@@ -129,12 +150,18 @@ def plan_jobs(
     out_dir: Path,
     resume: bool = False,
     mount_errors: bool = False,
+    traffic: str = "volume",
 ) -> list[SiteJob]:
     """The runs of ``--sites count --seed seed``: site seeds ``seed .. seed + count - 1``."""
+    if traffic != "volume" and traffic not in TRAFFIC_SETS:
+        raise ValueError(f"traffic {traffic!r}: volume, {', '.join(TRAFFIC_SETS)}")
     jobs = []
     for index in range(count):
         site_seed = seed + index
         rng = np.random.default_rng(np.random.SeedSequence([site_seed, 0xC0D]))
+        ratio_rng = np.random.default_rng(np.random.SeedSequence([site_seed, 0xCA9]))
+        ratio_range, profile = TRAFFIC_SETS.get(traffic, ((0.0, 0.0), "steady"))
+        ratio = None if traffic == "volume" else round(float(ratio_rng.uniform(*ratio_range)), 2)
         jobs.append(
             SiteJob(
                 index=index,
@@ -147,6 +174,8 @@ def plan_jobs(
                 out_dir=out_dir / f"gen-{site_seed}",
                 resume=resume,
                 mount_errors=mount_errors,
+                demand_ratio=ratio,
+                demand_profile=profile,
             )
         )
     return jobs
@@ -170,6 +199,8 @@ def run_job(job: SiteJob) -> dict[str, Any]:
         warmup_s=job.warmup_s,
         weather=job.weather,
         vehicles_per_hour=job.vehicles_per_hour,
+        demand_ratio=job.demand_ratio,
+        demand_profile=job.demand_profile,
         truck_share=job.truck_share,
         mount_errors=job.mount_errors,
     )
@@ -194,7 +225,12 @@ def finished_report(job: SiteJob, site_text: str) -> dict[str, Any] | None:
         and report.get("duration_s") == job.duration_s
         and report.get("warmup_s") == job.warmup_s
         and conditions.get("weather") == job.weather
-        and conditions.get("vehicles_per_hour") == job.vehicles_per_hour
+        and conditions.get("demand_ratio") == job.demand_ratio
+        and (
+            job.demand_ratio is not None
+            or conditions.get("vehicles_per_hour") == job.vehicles_per_hour
+        )
+        and conditions.get("demand_profile", "steady") == job.demand_profile
         and conditions.get("truck_share") == job.truck_share
         and (report.get("mount_errors") is not None) == job.mount_errors
     )
@@ -218,7 +254,11 @@ def summarise(site_id: str, name: str, job: SiteJob, report: dict[str, Any]) -> 
         "circle_mota": report.get("circle", {}).get("mota"),
         "seed": job.seed,
         "weather": job.weather,
-        "vehicles_per_hour": job.vehicles_per_hour,
+        "vehicles_per_hour": report.get("conditions", {}).get(
+            "vehicles_per_hour", job.vehicles_per_hour
+        ),
+        "demand_ratio": job.demand_ratio,
+        "demand_profile": job.demand_profile,
         "truck_share": job.truck_share,
         "mount_errors": job.mount_errors,
         "duration_s": job.duration_s,
@@ -281,7 +321,8 @@ def markdown(report: dict[str, Any]) -> str:
     rows = report["sites"]
     lines = [
         f"# `wz eval --sites {len(rows)} --seed {report['seed']}"
-        f"{' --mount-errors' if report.get('mount_errors') else ''}`",
+        f"{' --mount-errors' if report.get('mount_errors') else ''}"
+        f"{' --traffic ' + report['traffic'] if report.get('traffic', 'volume') != 'volume' else ''}`",
         "",
         f"{len(rows)} generated sites, {report['duration_s']:.0f} s scored each after a "
         f"{report['warmup_s']:.0f} s warm-up"
@@ -326,7 +367,13 @@ def markdown(report: dict[str, Any]) -> str:
             text = _cell(figure["value"])
             cells.append(f"**{text}**" if figure["holds"] is False else text)
         conditions = (
-            f"{row['weather']}, {row['vehicles_per_hour']:.0f} veh/h, "
+            f"{row['weather']}, {row['vehicles_per_hour']:.0f} veh/h"
+            + (
+                f" ({row['demand_ratio']:.2f} of capacity{', ramp' if row.get('demand_profile') == 'ramp' else ''})"
+                if row.get("demand_ratio") is not None
+                else ""
+            )
+            + ", "
             f"{100 * row['truck_share']:.0f} % trucks"
         )
         missed = f"{_cell(row.get('missed_upstream'))} / {_cell(row.get('missed_downstream'))}"
@@ -363,11 +410,12 @@ def run_sites(
     jobs: int | None = None,
     resume: bool = False,
     mount_errors: bool = False,
+    traffic: str = "volume",
 ) -> dict[str, Any]:
     """Run the sites (in parallel), write ``sites.json`` and ``sites.md`` in ``out_dir``;
     ``resume``: reuse the sites a run cut short already finished there; ``mount_errors``: each
     site's sensors a real mast's."""
-    plan = plan_jobs(count, seed, duration_s, warmup_s, out_dir, resume, mount_errors)
+    plan = plan_jobs(count, seed, duration_s, warmup_s, out_dir, resume, mount_errors, traffic)
     workers = max(1, min(count, jobs or os.cpu_count() or 1))
     rows: list[dict[str, Any]] = []
     with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
@@ -388,6 +436,7 @@ def run_sites(
         "duration_s": duration_s,
         "warmup_s": warmup_s,
         "mount_errors": mount_errors,
+        "traffic": traffic,
         "sites": rows,
         "distribution": distribution(rows),
         "worst_site": worst_site(rows),
@@ -418,6 +467,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="render each site's sensors as a real mast's (set-up errors, late clocks, sway, "
         "settling, drawn from the site's seed), as wz eval --mount-errors does",
     )
+    parser.add_argument(
+        "--traffic",
+        choices=("volume", *TRAFFIC_SETS),
+        default="volume",
+        help="volume: 1200-2000 veh/h; free-flow: 0.5-0.85 of the closure's capacity, steady; "
+        "congested: a ramp peaking at 1.05-1.3 of it (a queue forms and dissolves)",
+    )
     args = parser.parse_args(argv)
     if args.sites < 1:
         parser.error(f"--sites must be at least 1, got {args.sites}")
@@ -434,6 +490,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.jobs,
         args.resume,
         args.mount_errors,
+        args.traffic,
     )
     sys.stdout.write(markdown(report))
     failing = sum(1 for row in report["sites"] if row["failed"])

@@ -31,6 +31,25 @@ class SimulatorSettings(ServiceSettings):
     step_s: Annotated[float, Field(gt=0.0, le=1.0)] = 0.05
     #: Arrival flow over all lanes [veh/h].
     vehicles_per_hour: Annotated[float, Field(gt=0.0, le=10000.0)] = 1400.0
+    #: Demand as a share of the closure's capacity (:func:`wz_shared.capacity.
+    #: closure_capacity_vph`, HCM's work-zone lanes with this truck share): 0.5-0.85 flows
+    #: freely, 1.05-1.3 queues. Set, it replaces ``vehicles_per_hour`` [-].
+    demand_ratio: Annotated[float, Field(gt=0.0, le=3.0)] | None = None
+    #: ``steady``: the flow throughout. ``ramp``: ``ramp_base_ratio`` of capacity, then up to
+    #: the flow over ``ramp_rise_s`` from ``ramp_start_s``, held ``ramp_hold_s``, down over
+    #: ``ramp_fall_s`` and the base after: a queue forms and dissolves.
+    demand_profile: Literal["steady", "ramp"] = "steady"
+    ramp_base_ratio: Annotated[float, Field(gt=0.0, le=3.0)] = 0.6
+    ramp_start_s: Annotated[float, Field(ge=0.0)] = 60.0
+    ramp_rise_s: Annotated[float, Field(gt=0.0)] = 30.0
+    ramp_hold_s: Annotated[float, Field(ge=0.0)] = 120.0
+    ramp_fall_s: Annotated[float, Field(gt=0.0)] = 30.0
+    #: Drivers keep work-zone headways from the taper on: each adds the same time headway
+    #: (:func:`~wz_simulator.traffic.demand.work_zone_tau_increase`) so that the open lanes
+    #: carry HCM's work-zone capacity. Off: open-road headways through the zone (some 2300
+    #: veh/h a lane, so a lane drop hardly ever queues). ``wz eval`` turns it on with
+    #: ``--demand-ratio``.
+    work_zone_headways: bool = False
     #: Fraction of semi-trailer trucks [-].
     truck_share: Annotated[float, Field(ge=0.0, le=1.0)] = 0.15
     #: Fraction of aggressive drivers [-].

@@ -21,13 +21,18 @@ vehicle's ``lcStrategic`` at -1 (no strategic changes) until it reaches the stat
 takes notice of the closure (``notice_fraction`` of the advance-warning area), then sets the
 drawn value (see :mod:`wz_simulator.traffic.world`).
 
-Departures are a Poisson process at the configured flow; each vehicle's class, profile and entry
-lane are drawn from one seeded random generator in a fixed order, so the same seed gives the
-same vehicles however the departures are fetched (all at once, or in chunks).
+Departures are a Poisson process at the configured flow, steady or following a
+:class:`DemandProfile` over time (a ramp that makes a queue form and dissolve): the unit
+exponential draws are spent on the flow's running integral, so a steady profile gives exactly
+the steady process's departures. Each vehicle's class, profile and entry lane are drawn from one
+seeded random generator in a fixed order, so the same seed gives the same vehicles however the
+departures are fetched (all at once, or in chunks).
 """
 
 from __future__ import annotations
 
+import itertools
+import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -264,6 +269,118 @@ def type_id_for(vehicle_class: VehicleClass, driver_profile: DriverProfile) -> s
     return f"{vehicle_class.value}_{driver_profile.value}"
 
 
+def work_zone_tau_increase(
+    vehicle_types: Mapping[str, VehicleTypeSpec],
+    truck_share: float,
+    aggressive_share: float,
+    speed_mps: float,
+    lane_capacity_vph: float,
+) -> float:
+    """The time headway every driver adds inside the work zone so that its lanes carry
+    ``lane_capacity_vph`` (HCM's work-zone capacity) [s].
+
+    A Krauss driver follows at ``tau + (length + minGap) / v`` seconds at speed ``v``; the
+    fleet's mean of that, weighted by the class and profile shares, is the lane's mean headway
+    at capacity. Real drivers keep longer headways through a work zone than on the open road
+    (narrow lanes, workers, the merge): HCM's 1600 pc/h/ln against some 2300 on an open
+    freeway. The increase closes the gap: ``3600 / capacity - mean headway`` (0 if the open-road
+    headways already keep the flow under it). SUMO's driver imperfection (``sigma``) lowers the
+    flow a little further; the simulated discharge is measured in ``docs/sites.md``.
+    """
+    if not speed_mps > 0.0 or not lane_capacity_vph > 0.0:
+        raise ValueError("the zone's speed and lane capacity must be positive")
+    mean_headway_s = 0.0
+    for spec in vehicle_types.values():
+        share = truck_share if spec.vehicle_class is VehicleClass.TRUCK else 1.0 - truck_share
+        share *= (
+            aggressive_share
+            if spec.driver_profile is DriverProfile.AGGRESSIVE
+            else 1.0 - aggressive_share
+        )
+        mean_headway_s += share * (spec.tau_s + (spec.length_m + spec.min_gap_m) / speed_mps)
+    return max(0.0, 3600.0 / lane_capacity_vph - mean_headway_s)
+
+
+@dataclass(frozen=True)
+class DemandProfile:
+    """Arrival flow over time: straight lines between knots, flat before the first and after
+    the last.
+
+    Attributes
+    ----------
+    knots
+        ``(time [s], flow [veh/h])`` in increasing time, every flow positive.
+    """
+
+    knots: tuple[tuple[float, float], ...]
+
+    def __post_init__(self) -> None:
+        if not self.knots:
+            raise ValueError("a demand profile needs at least one knot")
+        times = [t for t, _ in self.knots]
+        if any(b <= a for a, b in itertools.pairwise(times)):
+            raise ValueError(f"demand profile times must increase, got {times}")
+        for t, flow in self.knots:
+            if not (math.isfinite(t) and math.isfinite(flow) and flow > 0.0):
+                raise ValueError(f"demand profile knot ({t}, {flow}): flow must be positive")
+
+    @classmethod
+    def steady(cls, vehicles_per_hour: float) -> DemandProfile:
+        return cls(((0.0, vehicles_per_hour),))
+
+    @classmethod
+    def ramp(
+        cls,
+        base_vph: float,
+        peak_vph: float,
+        start_s: float,
+        rise_s: float,
+        hold_s: float,
+        fall_s: float,
+    ) -> DemandProfile:
+        """``base_vph`` until ``start_s``, up to ``peak_vph`` over ``rise_s``, held for
+        ``hold_s``, back down over ``fall_s`` and ``base_vph`` after (a peak hour in brief)."""
+        if min(rise_s, fall_s) <= 0.0 or hold_s < 0.0 or start_s < 0.0:
+            raise ValueError("a ramp needs a start >= 0, rise and fall > 0 and a hold >= 0")
+        times = [start_s, start_s + rise_s, start_s + rise_s + hold_s]
+        times.append(times[-1] + fall_s)
+        flows = [base_vph, peak_vph, peak_vph, base_vph]
+        knots = [(t, f) for t, f in zip(times, flows, strict=True)]
+        if hold_s == 0.0:
+            del knots[2]
+        return cls(tuple(knots))
+
+    def vehicles_per_hour(self, t_s: float) -> float:
+        """The flow at a time [veh/h]."""
+        times = [t for t, _ in self.knots]
+        flows = [f for _, f in self.knots]
+        return float(np.interp(t_s, times, flows))
+
+    def time_after(self, start_s: float, vehicles: float) -> float:
+        """The time by which ``vehicles`` (expected arrivals, a float) have come after
+        ``start_s``: the inverse of the flow's running integral [s]."""
+        remaining = vehicles
+        t = start_s
+        for t_next, _ in (*self.knots, (math.inf, 0.0)):
+            if t_next <= t:
+                continue
+            rate0 = self.vehicles_per_hour(t) / 3600.0
+            if math.isinf(t_next):
+                return t + remaining / rate0
+            rate1 = self.vehicles_per_hour(t_next) / 3600.0
+            span = t_next - t
+            area = 0.5 * (rate0 + rate1) * span
+            if area >= remaining:
+                slope = (rate1 - rate0) / span
+                if abs(slope) < 1e-12:
+                    return t + remaining / rate0
+                # rate0 dt + slope dt^2 / 2 = remaining, the root in [0, span]
+                return t + (math.sqrt(rate0 * rate0 + 2.0 * slope * remaining) - rate0) / slope
+            remaining -= area
+            t = t_next
+        raise AssertionError("unreachable: the last segment is open-ended")
+
+
 @dataclass(frozen=True)
 class DemandConfig:
     """How much traffic arrives and of what kind.
@@ -280,6 +397,8 @@ class DemandConfig:
         Seed of the random generator.
     entry_lanes
         Number of lanes at the entry; each vehicle's entry lane is drawn uniformly.
+    profile
+        The flow over time; None: ``vehicles_per_hour`` throughout.
     """
 
     vehicles_per_hour: float
@@ -287,6 +406,7 @@ class DemandConfig:
     aggressive_share: float
     seed: int
     entry_lanes: int = 2
+    profile: DemandProfile | None = None
 
     def __post_init__(self) -> None:
         if not self.vehicles_per_hour > 0.0:
@@ -340,7 +460,8 @@ class DemandGenerator:
 
     Notes
     -----
-    For each vehicle, in this order: headway ~ Exp(mean 3600 / vehicles_per_hour s), truck with
+    For each vehicle, in this order: headway from a unit exponential draw spent on the flow's
+    running integral (Exp(mean 3600 / vehicles_per_hour s) when steady), truck with
     probability ``truck_share``, aggressive with probability ``aggressive_share``, entry lane
     uniform, lcStrategic uniform in the type's range, notice fraction uniform in
     ``NOTICE_FRACTION_RANGE``. :meth:`until` hands out departures in time order and remembers where it stopped.
@@ -353,12 +474,16 @@ class DemandGenerator:
         self.vehicle_types = dict(vehicle_types or default_vehicle_types())
         self._rng = np.random.default_rng(config.seed)
         self._mean_headway_s = 3600.0 / config.vehicles_per_hour
+        self._profile = config.profile
         self._count = 0
         self._pending = self._draw(0.0)
 
     def _draw(self, after_s: float) -> Departure:
         config = self.config
-        depart_s = after_s + float(self._rng.exponential(self._mean_headway_s))
+        if self._profile is None:
+            depart_s = after_s + float(self._rng.exponential(self._mean_headway_s))
+        else:
+            depart_s = self._profile.time_after(after_s, float(self._rng.exponential(1.0)))
         is_truck = bool(self._rng.random() < config.truck_share)
         is_aggressive = bool(self._rng.random() < config.aggressive_share)
         lane = int(self._rng.integers(config.entry_lanes))

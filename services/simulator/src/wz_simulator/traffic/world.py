@@ -37,6 +37,7 @@ first is closed.
 from __future__ import annotations
 
 import logging
+import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,6 +45,7 @@ from pathlib import Path
 import libsumo
 import numpy as np
 
+from wz_shared.capacity import closure_capacity_vph, open_lanes
 from wz_shared.messages import DriverProfile, VehicleClass, VehicleTruth
 from wz_shared.site import AreaKind, Site
 from wz_simulator.settings import SimulatorSettings
@@ -51,9 +53,11 @@ from wz_simulator.traffic.demand import (
     ROUTE_ID,
     DemandConfig,
     DemandGenerator,
+    DemandProfile,
     Departure,
     VehicleTypeSpec,
     default_vehicle_types,
+    work_zone_tau_increase,
     write_routes,
 )
 from wz_simulator.traffic.network import RoadNetwork, build_network
@@ -122,6 +126,26 @@ def _set_lc_strategic(vehicle_id: str, lc_strategic: float) -> None:
     libsumo.vehicle.setParameter(vehicle_id, "laneChangeModel.lcStrategic", f"{lc_strategic}")
 
 
+def demand_of(site: Site, settings: SimulatorSettings) -> tuple[float, DemandProfile | None]:
+    """The settings' arrival flow [veh/h] (their ``demand_ratio`` of the closure's capacity,
+    or ``vehicles_per_hour``) and its profile over time (None: steady)."""
+    capacity_vph = closure_capacity_vph(site, settings.truck_share)
+    flow_vph = settings.vehicles_per_hour
+    if settings.demand_ratio is not None:
+        flow_vph = settings.demand_ratio * capacity_vph
+    if settings.demand_profile == "steady":
+        return flow_vph, None
+    profile = DemandProfile.ramp(
+        base_vph=settings.ramp_base_ratio * capacity_vph,
+        peak_vph=flow_vph,
+        start_s=settings.ramp_start_s,
+        rise_s=settings.ramp_rise_s,
+        hold_s=settings.ramp_hold_s,
+        fall_s=settings.ramp_fall_s,
+    )
+    return flow_vph, profile
+
+
 def _sumo_binary() -> str:
     # libsumo only reads the first argument as a program name; no binary is run.
     return "sumo"
@@ -172,9 +196,11 @@ class TrafficWorld:
         self._closed_lane_end_m = self.network.closed_lane_end_station_m
         self._frame = site.road_frame
 
+        flow_vph, profile = demand_of(site, settings)
         self._demand = DemandGenerator(
             DemandConfig(
-                vehicles_per_hour=settings.vehicles_per_hour,
+                vehicles_per_hour=flow_vph,
+                profile=profile,
                 truck_share=settings.truck_share,
                 aggressive_share=settings.aggressive_share,
                 seed=settings.seed,
@@ -182,6 +208,23 @@ class TrafficWorld:
             ),
             self.vehicle_types,
         )
+        # Work-zone headways: each vehicle's tau grows by the same increase at the taper.
+        self._zone_tau: dict[str, float] = {}
+        self._taper_start_m = math.inf
+        self._outside_zone: dict[str, float] = {}  # vehicle id -> its tau in the zone [s]
+        if settings.work_zone_headways:
+            self._taper_start_m = site.area(AreaKind.TRANSITION).start_station_m
+            increase_s = work_zone_tau_increase(
+                self.vehicle_types,
+                settings.truck_share,
+                settings.aggressive_share,
+                site.speed_limit_mps_at(site.area(AreaKind.TRANSITION).end_station_m),
+                closure_capacity_vph(site, settings.truck_share) / open_lanes(site),
+            )
+            self._zone_tau = {
+                type_id: spec.tau_s + increase_s for type_id, spec in self.vehicle_types.items()
+            }
+            logger.info("work-zone headways: every driver's tau +%.2f s from the taper", increase_s)
         # Drivers learn of the closure in the advance-warning area, each at its own station
         # (its sign): until then their lcStrategic is -1 (no strategic lane changes), then the
         # drawn value. Without this, SUMO's LC2013 sees the lane end from 3 km away and moves
@@ -257,11 +300,12 @@ class TrafficWorld:
         libsumo.start(command)
         _active_world = self
         logger.info(
-            "traffic world started: site %s, seed %d, step %.3f s, %.0f veh/h, %d edges",
+            "traffic world started: site %s, seed %d, step %.3f s, %.0f veh/h (%s), %d edges",
             site.site_id,
             settings.seed,
             settings.step_s,
-            settings.vehicles_per_hour,
+            flow_vph,
+            settings.demand_profile,
             len(self.network.edges),
         )
 
@@ -331,13 +375,17 @@ class TrafficWorld:
                     _set_lc_strategic(vehicle_id, -1.0)
                 else:
                     _set_lc_strategic(vehicle_id, planned.lc_strategic)
-            self._info[vehicle_id] = self._type_info[libsumo.vehicle.getTypeID(vehicle_id)]
+            type_id = libsumo.vehicle.getTypeID(vehicle_id)
+            self._info[vehicle_id] = self._type_info[type_id]
+            if type_id in self._zone_tau:
+                self._outside_zone[vehicle_id] = self._zone_tau[type_id]
             counters.departed += 1
         arrived = libsumo.simulation.getArrivedIDList()
         for vehicle_id in arrived:
             self._info.pop(vehicle_id, None)
             self._last_lane.pop(vehicle_id, None)
             self._uninformed.pop(vehicle_id, None)
+            self._outside_zone.pop(vehicle_id, None)
             counters.arrived += 1
         if arrived and self._collided_pairs:
             gone = set(arrived)
@@ -429,6 +477,8 @@ class TrafficWorld:
                     if len(merges) > MERGE_HISTORY:  # a forever run must not grow without end
                         del merges[next(iter(merges))]
             last_lane[vehicle_id] = lane_index
+            if s >= self._taper_start_m and (tau := self._outside_zone.pop(vehicle_id, None)):
+                libsumo.vehicle.setTau(vehicle_id, tau)
             notice = uninformed.get(vehicle_id)
             if notice is not None and s >= notice[0]:
                 _set_lc_strategic(vehicle_id, notice[1])
