@@ -609,3 +609,28 @@ def test_a_flickering_near_surface_is_background() -> None:
     post = frame(True)
     assert not default.foreground_mask(post)[0]
     assert far.foreground_mask(post)[0]
+
+
+def test_a_truck_whose_near_end_a_nearer_truck_hides_is_not_completed_away_from_it(
+    range_background: RangeImageBackground,
+) -> None:
+    """A semitrailer in the far lane, its near end hidden behind a box truck in the near lane
+    (a low mast sees over neither): the end of its points nearer the sensor is where the box
+    truck's shadow ends, not its face. Completed away from the sensor, the box stood 12 m
+    beyond the truck's centre with a 2 m std along it (6 std off), and ran ahead of it as it
+    came out of the shadow; grown evenly at both ends, it is within half the truck's length
+    and 2 std of its covariance."""
+    hidden = Box(40.0, 12.0, 0.0, 16.5, 2.5, -4.6, -1.6)  # 3.4 m high
+    occluder = Box(24.0, 8.0, 0.0, 7.0, 2.5, -4.7, -0.9)  # 4.1 m high, 7 m long
+    frame, _ = _cast([occluder, hidden], np.random.default_rng(5))
+    settings = FastSettings(heading_prior_rad=0.0, update_background=False)
+    detections = FastPipeline(settings, range_background).detect(frame).detections
+    assert len(detections) == 2
+    truck = max(detections, key=lambda d: d.center_xyz_m[1])
+    error = truck.center_xyz_m[0] - hidden.x_m
+    along_std = math.sqrt(truck.covariance_xy_m2[0][0])
+    assert abs(error) < hidden.length_m / 2 and abs(error) < 2.0 * along_std, (error, along_std)
+    # The box truck in front, its near end in the clear, is still completed from that end
+    # (seen end-on, as a semitrailer: its length is hidden, not its near face).
+    front = min(detections, key=lambda d: d.center_xyz_m[1])
+    assert front.center_xyz_m[0] - front.size_lwh_m[0] / 2 == pytest.approx(20.5, abs=0.3)

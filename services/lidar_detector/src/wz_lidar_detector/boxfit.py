@@ -31,7 +31,12 @@ than the vehicle's centre. This module fits the box instead:
    grown to at least the class's typical dimension (:data:`CLASS_SHAPES`), *away from the
    sensor*: the visible face is the one nearer the sensor, so the far edge moves. When the
    sensor's projection on the axis falls inside the visible span (a vehicle abeam), the box grows
-   evenly at both ends. The class used for the completion comes from the visible extents (lower
+   evenly at both ends. The near end is not always a face: where a nearer vehicle hides what
+   lies just beyond it (a truck in the far lane behind a car in the near one,
+   :func:`hidden_near_end`, the caller's test with the other clusters' points), the vehicle may
+   go on either way and its length is grown evenly at both ends too (completed away from the
+   sensor, a truck whose cab is hidden came out 14 m behind its centre, its box running ahead
+   of it at 20 m/s as the truck came out). The class used for the completion comes from the visible extents (lower
    bounds): heavy when the visible length or the height passes the reference path's heavy
    thresholds, a motorcycle when an L no bigger than a motorcycle is seen along a known length
    axis (without it, such an L is more likely a car end-on), otherwise a car (4.5 x 1.8 m).
@@ -322,6 +327,55 @@ def _complete(low: float, high: float, dimension: float) -> tuple[float, float, 
     return middle - 0.5 * dimension, middle + 0.5 * dimension, "both_ends"
 
 
+def hidden_near_end(
+    cluster_xyz_m: F64,
+    heading_rad: float,
+    others_xyz_m: F64,
+    probe_m: float = 1.0,
+    clearance_m: float = 0.3,
+    angle_tolerance_rad: float = math.radians(0.6),
+) -> bool:
+    """Whether a nearer object hides what lies just beyond the near end of a vehicle's points.
+
+    Sensor at the origin. Along the vehicle's length axis (``heading_rad``), the end of its
+    points nearer the sensor is probed ``probe_m`` further on, at the points' median height and
+    lateral position: the end is hidden when some point of ``others_xyz_m`` lies on the line of
+    sight to that probe (within ``angle_tolerance_rad`` of its azimuth, ``clearance_m`` or more
+    nearer, and at or above the sight line's height there). A vehicle abeam of the sensor (its
+    points on both sides of it along the axis) has no near end: False.
+    """
+    if len(others_xyz_m) == 0 or len(cluster_xyz_m) == 0:
+        return False
+    axis = np.array([math.cos(heading_rad), math.sin(heading_rad)])
+    normal = np.array([-axis[1], axis[0]])
+    along = cluster_xyz_m[:, :2] @ axis
+    if along.min() >= 0.0:
+        probe_along = float(along.min()) - probe_m
+    elif along.max() <= 0.0:
+        probe_along = float(along.max()) + probe_m
+    else:
+        return False
+    probe_xy = probe_along * axis + float(np.median(cluster_xyz_m[:, :2] @ normal)) * normal
+    probe_z = float(np.median(cluster_xyz_m[:, 2]))
+    probe_range = float(np.hypot(*probe_xy))
+    if probe_range <= clearance_m:
+        return False
+    ranges = np.hypot(others_xyz_m[:, 0], others_xyz_m[:, 1])
+    azimuth_gap = np.angle(
+        np.exp(
+            1j * (np.arctan2(others_xyz_m[:, 1], others_xyz_m[:, 0]) - math.atan2(*probe_xy[::-1]))
+        )
+    )
+    nearer = ranges <= probe_range - clearance_m
+    sight_z = probe_z * ranges / probe_range  # the sight line's height at each point's range
+    blocking = (
+        nearer
+        & (np.abs(azimuth_gap) <= angle_tolerance_rad)
+        & (others_xyz_m[:, 2] >= sight_z - clearance_m)
+    )
+    return bool(blocking.any())
+
+
 def _rotated_covariance(variance_a: float, variance_b: float, angle_rad: float) -> F64:
     """``R diag(a, b) R^T``, R the rotation by ``angle_rad``: a 2x2 covariance [m^2] with
     variance ``a`` along ``angle_rad`` and ``b`` across it."""
@@ -343,6 +397,7 @@ def fit_box(
     heading_tolerance_rad: float = math.radians(20.0),
     ground_z_m: float | None = None,
     settings: BoxFitSettings | None = None,
+    near_end_hidden: bool = False,
 ) -> BoxFit:
     """Fit a vehicle's box to the points of its visible faces (see the module docstring).
 
@@ -358,6 +413,11 @@ def fit_box(
         Ground height under the vehicle [m], or None to use the lowest point.
     settings
         Search and noise parameters; defaults if None.
+    near_end_hidden
+        The end of the visible points nearer the sensor is not a face: a nearer object hides
+        what lies beyond it (:func:`hidden_near_end`). The vehicle may go on either way, so a
+        length completed from one end is grown evenly at both, with that spread in its
+        variance, instead of away from the sensor.
 
     Returns
     -------
@@ -446,6 +506,13 @@ def fit_box(
     along_edge = half_step_m * abs(math.sin(sight_rad - heading))
     across_edge = half_step_m * abs(math.cos(sight_rad - heading))
     low_l, high_l, how_l = _complete(along_min - along_edge, along_max + along_edge, shape.length_m)
+    if near_end_hidden and how_l == "one_end":
+        middle = 0.5 * (along_min + along_max)
+        low_l, high_l, how_l = (
+            middle - 0.5 * shape.length_m,
+            middle + 0.5 * shape.length_m,
+            "both_ends",
+        )
     low_w, high_w, how_w = _complete(
         across_min - across_edge, across_max + across_edge, shape.width_m
     )

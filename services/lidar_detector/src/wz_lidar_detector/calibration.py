@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -241,12 +241,15 @@ def fit_lane_alignment(
     search_yaw_deg: float = 6.0,
     search_shift_m: float = 1.0,
     frames_per_vehicle: float = 30.0,
+    hold_shift_m: float | None = None,
 ) -> LaneFit | None:
     """Yaw [rad] and cross-road shift [m] that put ``centres_xy_m`` (site frame, placed with
     the pose to correct) on the site's lane centres; None with under 10 centres on a lane.
 
     ``start`` None: a vote over the whole search grid first (robust to large errors); else
-    refine from ``start`` (yaw, shift).
+    refine from ``start`` (yaw, shift). ``hold_shift_m``: the shift is known (a knock turns a
+    sensor on its mast, it does not move it sideways), only the yaw is fitted; with few
+    vehicles in few lanes a free yaw and shift together can carry one lane onto the next.
     """
     centres = np.asarray(centres_xy_m, dtype=np.float64).reshape(-1, 2)
     if len(centres) < 10:
@@ -261,13 +264,20 @@ def fit_lane_alignment(
         # Coarse to fine: 0.2 deg x 0.1 m over the whole search, then 0.02 deg x 0.02 m.
         coarse_yaws = np.radians(np.arange(-search_yaw_deg, search_yaw_deg + 1e-9, 0.2))
         coarse_shifts = np.arange(-search_shift_m, search_shift_m + 1e-9, 0.1)
+        if hold_shift_m is not None:
+            coarse_shifts = np.array([hold_shift_m])
         yaw, shift = _vote(d, a, b, lanes, coarse_yaws, coarse_shifts, 0.35)
         fine_yaws = yaw + np.radians(np.arange(-0.2, 0.2 + 1e-9, 0.02))
         fine_shifts = shift + np.arange(-0.1, 0.1 + 1e-9, 0.02)
+        if hold_shift_m is not None:
+            fine_shifts = coarse_shifts
         yaw, shift = _vote(d, a, b, lanes, fine_yaws, fine_shifts, 0.2)
     else:
         yaw, shift = start
+    if hold_shift_m is not None:
+        shift = hold_shift_m
     design = np.stack([lever_yaw, lever_shift], axis=1)
+    fitted = 1 if hold_shift_m is not None else 2
     inliers = np.zeros(len(centres), dtype=bool)
     residual = np.zeros(len(centres))
     for _ in range(6):
@@ -275,19 +285,21 @@ def fit_lane_alignment(
         inliers = np.abs(residual) <= trim_m
         if inliers.sum() < 10:
             return None
-        step, *_ = np.linalg.lstsq(design[inliers], -residual[inliers], rcond=None)
+        step, *_ = np.linalg.lstsq(design[inliers, :fitted], -residual[inliers], rcond=None)
         yaw += float(step[0])
-        shift += float(step[1])
-        if abs(step[0]) < 1e-6 and abs(step[1]) < 1e-4:
+        shift += float(step[1]) if fitted == 2 else 0.0
+        if abs(step[0]) < 1e-6 and (fitted == 1 or abs(step[1]) < 1e-4):
             break
     residual = _nearest_lane(offsets + yaw * lever_yaw + shift * lever_shift, lanes)
     inliers = np.abs(residual) <= trim_m
     sigma = max(robust_std(residual[inliers]), 0.02)
-    normal = design[inliers].T @ design[inliers]
+    normal = design[inliers, :fitted].T @ design[inliers, :fitted]
     try:
         covariance = np.linalg.inv(normal) * sigma**2 * frames_per_vehicle
     except np.linalg.LinAlgError:
         return None
+    if fitted == 1:
+        covariance = np.diag([covariance[0, 0], 0.0])
     return LaneFit(
         yaw_rad=yaw,
         shift_m=shift,
@@ -328,6 +340,7 @@ class LidarSelfCalibration:
         self._lane: LaneFit | None = None
         self._next_full_fit_s = -math.inf
         self._bump_votes = 0
+        self._bump_yaw_rad = 0.0  # the yaw the last vote found
         self._last_stamp_s = 0.0
         self.correction = PoseCorrection()
         self.pose = mount.pose
@@ -459,19 +472,42 @@ class LidarSelfCalibration:
         moved = 0.0
         short = None
         if on_lane < self.settings.bump_on_lane_share:
+            # A knock turns the sensor: the yaw alone, at the learned shift, must put the
+            # recent vehicles back on their lanes.
             short = fit_lane_alignment(
-                self.site, centres, sensor_xy, None, trim_m=self.settings.lane_trim_m
+                self.site,
+                centres,
+                sensor_xy,
+                None,
+                trim_m=self.settings.lane_trim_m,
+                hold_shift_m=self._lane.shift_m,
             )
             if short is not None:
-                moved = abs(math.degrees(short.yaw_rad - self._lane.yaw_rad))
-        self._bump_votes = self._bump_votes + 1 if moved > self.settings.bump_yaw_deg else 0
+                turned = _nearest_lane(
+                    offsets + short.yaw_rad * lever_yaw + short.shift_m * lever_shift, lanes
+                )
+                explains = np.mean(np.abs(turned) <= self.settings.lane_trim_m)
+                if explains >= self.settings.bump_on_lane_share:
+                    moved = abs(math.degrees(short.yaw_rad - self._lane.yaw_rad))
+        # Two checks in a row must find the same turn: a knock stays; a few vehicles that a
+        # wrong yaw happens to fit (one lane carried onto the next) give another yaw a second on.
+        if moved > self.settings.bump_yaw_deg and short is not None:
+            agrees = (
+                self._bump_votes > 0
+                and abs(math.degrees(short.yaw_rad - self._bump_yaw_rad))
+                <= 0.5 * self.settings.bump_yaw_deg
+            )
+            self._bump_votes = self._bump_votes + 1 if agrees else 1
+            self._bump_yaw_rad = short.yaw_rad
+        else:
+            self._bump_votes = 0
         if self._bump_votes < 2 or short is None:
             return False
         self._bumped(stamp_s, f"its yaw moved {moved:.2f} deg in {self.settings.bump_window_s:g} s")
         # Learn again from the vehicles seen since the bump only.
         while self._boxes and self._boxes[0][0] < stamp_s - self.settings.bump_window_s:
             self._boxes.popleft()
-        self._lane = short
+        self._lane = replace(short, shift_std_m=self._lane.shift_std_m)  # the shift held
         self._update(stamp_s)
         return True
 

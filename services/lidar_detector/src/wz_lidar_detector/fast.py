@@ -59,7 +59,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from wz_lidar_detector.background import BackgroundModel, pack_keys, voxel_indices
-from wz_lidar_detector.boxfit import BoxFit, BoxFitSettings, fit_box
+from wz_lidar_detector.boxfit import BoxFit, BoxFitSettings, fit_box, hidden_near_end
 from wz_lidar_detector.detection import BoxDetection, DetectionResult, PointFrame
 from wz_shared.arrays import F64, I64, Bool
 
@@ -332,7 +332,7 @@ class FastPipeline:
         candidates = by_size[sizes[by_size] >= settings.min_cluster_points]
         clusters = [xyz[order[starts[label] : starts[label + 1]]] for label in candidates]
         grounds = self._ground_heights(clusters)
-        for cluster, ground in zip(clusters, grounds, strict=True):
+        for label, cluster, ground in zip(candidates.tolist(), clusters, grounds, strict=True):
             owner = self._owner(fitted, cluster[:, :2])
             if owner is not None:
                 owner.num_points += len(cluster)
@@ -351,6 +351,22 @@ class FastPipeline:
                 ground_z_m=ground,
                 settings=settings.box,
             )
+            # Completed from the end nearer the sensor: is that end a face, or where a nearer
+            # vehicle hides the rest (a truck behind a car in the near lane)?
+            if fit.completed_lw[0] and hidden_near_end(
+                cluster,
+                fit.heading_rad,
+                xyz[labels != label],
+                angle_tolerance_rad=math.radians(2.0 * settings.box.angular_resolution_deg),
+            ):
+                fit = fit_box(
+                    cluster,
+                    heading_prior_rad=settings.heading_prior_rad,
+                    heading_tolerance_rad=tolerance_rad,
+                    ground_z_m=ground,
+                    settings=settings.box,
+                    near_end_hidden=True,
+                )
             cut = floor is not None and _reaches_floor(cluster, floor)
             fitted.append(_Fitted(fit, len(cluster), cut))
         return [self._detection(box) for box in fitted]
