@@ -344,13 +344,20 @@ class FastPipeline:
                 continue
             if ground is not None and base - ground > settings.max_base_above_ground_m:
                 continue
-            fit = fit_box(
-                cluster,
-                heading_prior_rad=settings.heading_prior_rad,
-                heading_tolerance_rad=tolerance_rad,
-                ground_z_m=ground,
-                settings=settings.box,
-            )
+
+            def fitted_box(
+                near_end_hidden: bool, cluster: F64 = cluster, ground: float | None = ground
+            ) -> BoxFit:
+                return fit_box(
+                    cluster,
+                    heading_prior_rad=settings.heading_prior_rad,
+                    heading_tolerance_rad=tolerance_rad,
+                    ground_z_m=ground,
+                    settings=settings.box,
+                    near_end_hidden=near_end_hidden,
+                )
+
+            fit = fitted_box(near_end_hidden=False)
             # Completed from the end nearer the sensor: is that end a face, or where a nearer
             # vehicle hides the rest (a truck behind a car in the near lane)?
             if fit.completed_lw[0] and hidden_near_end(
@@ -359,14 +366,7 @@ class FastPipeline:
                 xyz[labels != label],
                 angle_tolerance_rad=math.radians(2.0 * settings.box.angular_resolution_deg),
             ):
-                fit = fit_box(
-                    cluster,
-                    heading_prior_rad=settings.heading_prior_rad,
-                    heading_tolerance_rad=tolerance_rad,
-                    ground_z_m=ground,
-                    settings=settings.box,
-                    near_end_hidden=True,
-                )
+                fit = fitted_box(near_end_hidden=True)
             cut = floor is not None and _reaches_floor(cluster, floor)
             fitted.append(_Fitted(fit, len(cluster), cut))
         return [self._detection(box) for box in fitted]
