@@ -290,6 +290,31 @@ def test_hard_braking_detected_on_a_noisy_profile(seed: int) -> None:
     assert BRAKE_END_S <= clear.stamp <= BRAKE_END_S + 2.0
 
 
+def _measured(track: Track, speed_std_mps: float) -> Track:
+    """``track`` with the tracker's velocity covariance of a speed known to ``speed_std``."""
+    covariance = np.zeros((4, 4))
+    covariance[:2, :2] = np.eye(2) * 0.1
+    covariance[2:, 2:] = np.eye(2) * speed_std_mps**2
+    return track.model_copy(update={"covariance": covariance.reshape(-1).tolist()})
+
+
+@pytest.mark.parametrize(("speed_std_mps", "alerts"), [(0.3, True), (2.0, False)])
+def test_hard_braking_needs_a_speed_measured_well_enough_to_tell_it(
+    speed_std_mps: float, alerts: bool
+) -> None:
+    """The same 5 m/s^2 in the speeds: a track whose speed is known to 0.3 m/s (seen by the
+    camera and radar) is braking; one known to 2 m/s (a far vehicle a few LiDAR beams see,
+    whose box jumps when the detector changes its mind about its length) swings by that much
+    on its own, and its 0.8 s slope (std 3.5 m/s^2) cannot tell 0.4 g from steady driving."""
+    engine = only(AlertType.HARD_BRAKING)
+    events = run(
+        engine,
+        stamps(4.0),
+        lambda t: [_measured(make_track(1, 600.0, braking_speed(t)), speed_std_mps)],
+    )
+    assert [e.phase for e in events] == (["start"] if alerts else [])
+
+
 def test_hard_braking_exact_rate_without_noise() -> None:
     engine = only(AlertType.HARD_BRAKING)
     events = run(engine, stamps(4.0), lambda t: [make_track(1, 600.0, braking_speed(t))])

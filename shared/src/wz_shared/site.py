@@ -331,6 +331,10 @@ class HardBrakingRule(EpisodeTiming):
     window_s: Annotated[float, Field(gt=0.0, le=5.0)] = 0.8
     #: Fewest speeds in the window for a slope (and they must span half the window).
     min_samples: Annotated[int, Field(ge=3, le=1000)] = 5
+    #: The threshold must stand this many of the slope's standard deviations (from the track's
+    #: speed variance) clear of zero, or the track's speed is too uncertain to alert on: 2,
+    #: a stop at the threshold told from steady driving at 95 %. 0: every slope as it comes.
+    certainty_sigmas: Annotated[float, Field(ge=0.0, le=5.0)] = 2.0
     #: 0.3 s: braking is brief; the window already smooths it.
     hold_s: Annotated[float, Field(ge=0.0, le=60.0)] = 0.3
     clear_s: Annotated[float, Field(ge=0.0, le=600.0)] = 1.0

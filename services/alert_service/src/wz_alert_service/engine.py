@@ -65,9 +65,12 @@ from wz_alert_service.rules import (
     queue,
     short_ttc,
     speed_trend_mps2,
+    speed_trend_std_mps2,
+    speed_variance,
     speeding,
 )
 from wz_alert_service.zone import ZoneGeometry
+from wz_shared.arrays import F64
 from wz_shared.messages import (
     Alert,
     AlertPhase,
@@ -109,11 +112,15 @@ class TrackContext:
         Speed slope over the hard-braking window [m/s^2].
     approach_trend_mps2 : float or None
         Speed slope over the aggressive-approach trend window [m/s^2].
+    braking_trend_std_mps2 : float or None
+        The braking slope's standard deviation from the tracks' own speed variances [m/s^2]
+        (:func:`~wz_alert_service.rules.speed_trend_std_mps2`); None: not known.
     """
 
     leader: Track | None
     braking_trend_mps2: float | None
     approach_trend_mps2: float | None
+    braking_trend_std_mps2: float | None = None
 
 
 TrackRule = Callable[[Track, TrackContext, ZoneGeometry, AlertRules, bool], Finding | None]
@@ -125,7 +132,12 @@ TRACK_RULES: Mapping[AlertType, TrackRule] = {
         t, c.approach_trend_mps2, z, r.aggressive_approach, active=a
     ),
     AlertType.HARD_BRAKING: lambda t, c, z, r, a: hard_braking(
-        t, c.braking_trend_mps2, z, r.hard_braking, active=a
+        t,
+        c.braking_trend_mps2,
+        z,
+        r.hard_braking,
+        active=a,
+        trend_std_mps2=c.braking_trend_std_mps2,
     ),
     AlertType.LATE_MERGE: lambda t, c, z, r, a: late_merge(t, z, r.late_merge, active=a),
     AlertType.SHORT_TTC: lambda t, c, z, r, a: short_ttc(t, c.leader, z, r.short_ttc, active=a),
@@ -309,7 +321,8 @@ class AlertEngine:
         ]
         self._episodes: dict[EpisodeKey, _Episode] = {}
         self._cooldown_until_s: dict[EpisodeKey, float] = {}
-        self._history: dict[int, deque[tuple[float, float]]] = {}
+        #: Per track: (stamp, speed, the speed's variance along the track) of the last seconds.
+        self._history: dict[int, deque[tuple[float, float, float]]] = {}
         #: Each track's newest measurement stamp seen, to tell an outage (see MEASUREMENT_GAP_S).
         self._measured_s: dict[int, float] = {}
         self._history_s = max(
@@ -410,16 +423,22 @@ class AlertEngine:
             if previous_s is not None and measured_s - previous_s > MEASUREMENT_GAP_S + TIME_EPS_S:
                 history.clear()  # back from an outage: the jump is the prediction's error
             self._measured_s[track.track_id] = measured_s
-        history.append((t, track.speed_mps))
+        history.append((t, track.speed_mps, speed_variance(track)))
         while history and history[0][0] < t - self._history_s - TIME_EPS_S:
             history.popleft()
 
+    def _window(self, track_id: int, t: float, window_s: float) -> F64:
+        """The track's (stamp, speed, variance) rows of the last ``window_s``, shape (n, 3)."""
+        rows = [s for s in self._history[track_id] if s[0] >= t - window_s - TIME_EPS_S]
+        return np.array(rows, dtype=np.float64).reshape(-1, 3)
+
     def _trend(self, track_id: int, t: float, window_s: float, min_samples: int) -> float | None:
-        samples = [(ts, v) for ts, v in self._history[track_id] if ts >= t - window_s - TIME_EPS_S]
-        if not samples:
+        rows = self._window(track_id, t, window_s)
+        if not len(rows):
             return None
-        times, speeds = np.array(samples, dtype=np.float64).T
-        return speed_trend_mps2(times, speeds, min_samples=min_samples, min_span_s=0.5 * window_s)
+        return speed_trend_mps2(
+            rows[:, 0], rows[:, 1], min_samples=min_samples, min_span_s=0.5 * window_s
+        )
 
     def _context(self, track: Track, leader: Track | None, t: float) -> TrackContext:
         braking = self.rules.hard_braking
@@ -428,6 +447,9 @@ class AlertEngine:
             leader=leader,
             braking_trend_mps2=self._trend(
                 track.track_id, t, braking.window_s, braking.min_samples
+            ),
+            braking_trend_std_mps2=speed_trend_std_mps2(
+                *self._window(track.track_id, t, braking.window_s)[:, [0, 2]].T
             ),
             approach_trend_mps2=self._trend(
                 track.track_id, t, approach.trend_window_s, TREND_MIN_SAMPLES

@@ -26,6 +26,7 @@ Rules
 
 from __future__ import annotations
 
+import math
 from collections import defaultdict
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -328,6 +329,37 @@ def speed_trend_mps2(
     return float(np.dot(dt, v - v.mean()) / np.dot(dt, dt))
 
 
+def speed_variance(track: Track) -> float:
+    """The variance of the track's speed [m^2/s^2]: its velocity covariance along its
+    direction of travel (half its trace when it stands, its direction unknown)."""
+    P = np.asarray(track.covariance, dtype=np.float64).reshape(4, 4)[2:, 2:]
+    speed = math.hypot(track.vx_mps, track.vy_mps)
+    if speed < 0.5:
+        return float(np.trace(P)) / 2.0
+    axis = np.array([track.vx_mps, track.vy_mps]) / speed
+    return float(axis @ P @ axis)
+
+
+def speed_trend_std_mps2(times_s: npt.ArrayLike, variances: npt.ArrayLike) -> float | None:
+    """The standard deviation of a speed's slope over a window [m/s^2], from the speed's own
+    variance at its ends: ``sqrt(var_first + var_last) / span``.
+
+    A filter's speeds from one update to the next are not independent, so the slope's error
+    is not the one of n independent samples (:func:`speed_trend_mps2`'s ``sigma sqrt(12/n) /
+    T``); the difference of the ends over the span bounds it. None with fewer than two
+    samples or no span.
+    """
+    t = np.asarray(times_s, dtype=np.float64)
+    var = np.asarray(variances, dtype=np.float64)
+    if t.size < 2:
+        return None
+    span_s = float(t.max() - t.min())
+    if span_s <= 0.0:
+        return None
+    first, last = int(np.argmin(t)), int(np.argmax(t))
+    return math.sqrt(max(float(var[first] + var[last]), 0.0)) / span_s
+
+
 def hard_braking(
     track: Track,
     speed_trend_mps2: float | None,
@@ -335,11 +367,18 @@ def hard_braking(
     rule: HardBrakingRule,
     *,
     active: bool = False,
+    trend_std_mps2: float | None = None,
 ) -> Finding | None:
-    """Deceleration beyond a fraction of g, within the approach.
+    """Deceleration beyond a fraction of g, within the approach, on a track whose speed is
+    measured well enough to tell it.
 
     Holds when ``-dv/dt >= k g`` with ``k = decel_g`` to open and ``k = decel_g -
-    hysteresis_g`` to stay open (g = 9.80665 m/s^2); critical from ``critical_decel_g``.
+    hysteresis_g`` to stay open (g = 9.80665 m/s^2), and the threshold stands ``z`` of the
+    slope's standard deviations clear of no braking at all: ``k g >= z sigma``, ``sigma`` from
+    the track's speed variances (``trend_std_mps2``, 0 when not given), ``z =
+    certainty_sigmas``. A speed the sensors hardly measure (a vehicle seen by a few beams far
+    down the road, a track just handed over) swings by more than braking would: its slope
+    cannot tell a stop from steady driving. Critical from ``critical_decel_g``.
 
     Parameters
     ----------
@@ -365,6 +404,8 @@ def hard_braking(
     threshold_mps2 = (rule.decel_g - (rule.hysteresis_g if active else 0.0)) * G_MPS2
     if decel_mps2 < threshold_mps2:
         return None
+    if rule.certainty_sigmas * (trend_std_mps2 or 0.0) > threshold_mps2:
+        return None  # the speed is too uncertain to tell braking from noise
     critical = decel_mps2 >= rule.critical_decel_g * G_MPS2
     return Finding(
         alert_type=AlertType.HARD_BRAKING,
@@ -376,7 +417,11 @@ def hard_braking(
         offset_m=track.offset_m,
         speed_mps=track.speed_mps,
         description=f"hard braking at {decel_mps2 / G_MPS2:.2f} g from {_mph(track.speed_mps):.0f} mph",
-        evidence={"decel_g": decel_mps2 / G_MPS2, "window_s": rule.window_s},
+        evidence={
+            "decel_g": decel_mps2 / G_MPS2,
+            "decel_std_g": (trend_std_mps2 or 0.0) / G_MPS2,
+            "window_s": rule.window_s,
+        },
         track=track,
     )
 

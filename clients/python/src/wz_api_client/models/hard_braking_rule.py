@@ -22,6 +22,7 @@ class HardBrakingRule:
     critical from ``critical_decel_g * g`` (g = 9.80665 m/s^2).
 
         Attributes:
+            certainty_sigmas (float | Unset):  Default: 1.645.
             clear_s (float | Unset):  Default: 1.0.
             cooldown_s (float | Unset):  Default: 5.0.
             critical_decel_g (float | Unset):  Default: 0.6.
@@ -33,6 +34,7 @@ class HardBrakingRule:
             window_s (float | Unset):  Default: 0.8.
     """
 
+    certainty_sigmas: float | Unset = 1.645
     clear_s: float | Unset = 1.0
     cooldown_s: float | Unset = 5.0
     critical_decel_g: float | Unset = 0.6
@@ -44,6 +46,8 @@ class HardBrakingRule:
     window_s: float | Unset = 0.8
 
     def to_dict(self) -> dict[str, Any]:
+        certainty_sigmas = self.certainty_sigmas
+
         clear_s = self.clear_s
 
         cooldown_s = self.cooldown_s
@@ -65,6 +69,8 @@ class HardBrakingRule:
         field_dict: dict[str, Any] = {}
 
         field_dict.update({})
+        if certainty_sigmas is not UNSET:
+            field_dict["certainty_sigmas"] = certainty_sigmas
         if clear_s is not UNSET:
             field_dict["clear_s"] = clear_s
         if cooldown_s is not UNSET:
@@ -89,6 +95,8 @@ class HardBrakingRule:
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
         d = dict(src_dict)
+        certainty_sigmas = d.pop("certainty_sigmas", UNSET)
+
         clear_s = d.pop("clear_s", UNSET)
 
         cooldown_s = d.pop("cooldown_s", UNSET)
@@ -108,6 +116,7 @@ class HardBrakingRule:
         window_s = d.pop("window_s", UNSET)
 
         hard_braking_rule = cls(
+            certainty_sigmas=certainty_sigmas,
             clear_s=clear_s,
             cooldown_s=cooldown_s,
             critical_decel_g=critical_decel_g,
