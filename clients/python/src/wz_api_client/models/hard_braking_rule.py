@@ -22,7 +22,7 @@ class HardBrakingRule:
     critical from ``critical_decel_g * g`` (g = 9.80665 m/s^2).
 
         Attributes:
-            certainty_sigmas (float | Unset):  Default: 1.645.
+            certainty_sigmas (float | Unset):  Default: 2.0.
             clear_s (float | Unset):  Default: 1.0.
             cooldown_s (float | Unset):  Default: 5.0.
             critical_decel_g (float | Unset):  Default: 0.6.
@@ -34,7 +34,7 @@ class HardBrakingRule:
             window_s (float | Unset):  Default: 0.8.
     """
 
-    certainty_sigmas: float | Unset = 1.645
+    certainty_sigmas: float | Unset = 2.0
     clear_s: float | Unset = 1.0
     cooldown_s: float | Unset = 5.0
     critical_decel_g: float | Unset = 0.6
