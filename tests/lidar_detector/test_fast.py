@@ -27,7 +27,10 @@ from wz_lidar_detector.background import (
 from wz_lidar_detector.boxfit import fit_box
 from wz_lidar_detector.detection import PointFrame
 from wz_lidar_detector.fast import FastPipeline, FastSettings, euclidean_clusters
+from wz_lidar_detector.node import fitted_to_mount
+from wz_lidar_detector.settings import LidarDetectorSettings
 from wz_shared.messages import VehicleClass
+from wz_shared.site_generator import generate_site
 
 ROWS, COLUMNS = 32, 480
 SENSOR_HEIGHT_M = 5.0
@@ -634,3 +637,38 @@ def test_a_truck_whose_near_end_a_nearer_truck_hides_is_not_completed_away_from_
     # (seen end-on, as a semitrailer: its length is hidden, not its near face).
     front = min(detections, key=lambda d: d.center_xyz_m[1])
     assert front.center_xyz_m[0] - front.size_lwh_m[0] / 2 == pytest.approx(20.5, abs=0.3)
+
+
+def test_the_beam_spacing_comes_from_the_site_s_lidar_and_says_a_far_car_may_be_a_truck() -> None:
+    """A 32-beam LiDAR over 40 deg has its beams 1.29 deg apart, not a 64-beam one's 0.65:
+    the front of a semitrailer 80 m off, 1.7 m of it under the highest return, may hide 1.8 m
+    more above it. Completed as a car, its box's covariance must reach to a heavy vehicle's
+    centre; with the 64-beam spacing it claimed a car to 0.3 m (generated site 9401: a truck's
+    box 6 m ahead of it, a second track on the approach)."""
+    site = generate_site(9401)
+    mount = next(m for m in site.sensors if m.intrinsics.kind == "lidar")
+    assert mount.intrinsics.beams == 32
+    settings = fitted_to_mount(LidarDetectorSettings(), site, mount)
+    box = settings.fast.box
+    assert box.beam_spacing_deg == pytest.approx(40.0 / 31.0)
+    assert box.angular_resolution_deg == pytest.approx(360.0 / mount.intrinsics.azimuth_steps)
+    assert settings.fast.heading_prior_rad is not None
+    # Set by hand, a value stays.
+    by_hand = LidarDetectorSettings.model_validate({"fast": {"box": {"beam_spacing_deg": 0.4}}})
+    assert fitted_to_mount(by_hand, site, mount).fast.box.beam_spacing_deg == 0.4
+
+    front = _visible_faces((80.0, 5.0), 0.0, 16.5, 2.5, "near_end")
+    front[:, 2] = np.linspace(-6.7, -5.2, len(front))  # 1.7 m seen above the road at -6.9 m
+    along_std = {
+        spacing: math.sqrt(
+            fit_box(
+                front,
+                heading_prior_rad=0.0,
+                ground_z_m=-6.9,
+                settings=box.model_copy(update={"beam_spacing_deg": spacing}),
+            ).covariance_xy_m2[0, 0]
+        )
+        for spacing in (0.65, 40.0 / 31.0)
+    }
+    assert along_std[0.65] < 0.5
+    assert along_std[40.0 / 31.0] >= (16.0 - 4.5) / 2
