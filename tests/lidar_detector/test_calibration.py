@@ -209,3 +209,13 @@ def test_disabled_or_without_a_site_the_pose_stays_the_site_files() -> None:
         _feed(calibration, truth, 0.0, 5.0, 7)
         assert calibration.pose == MOUNT.pose
         assert calibration.log.state == CalibrationState.PRIOR
+
+
+def test_a_height_off_past_the_bound_is_held_at_it_not_a_crash() -> None:
+    """A LiDAR 1.2 m lower than its site file says: the ground fit finds it, past the 1 m a
+    correction may take. The correction is held at the bound (a validation error stopped a
+    generated site's run at 1.0009 m)."""
+    calibration = LidarSelfCalibration(SITE.site_id, MOUNT, LidarCalibrationSettings(), SITE)
+    _feed(calibration, _true_pose(0.0, 0.0, 0.0, 0.0, 0.0, -1.2), 0.0, 20.0, 9)
+    assert calibration.correction.z_m == -1.0
+    assert calibration.pose.z_m == pytest.approx(MOUNT.pose.z_m - 1.0)

@@ -72,7 +72,12 @@ from wz_shared.messages import (
     PoseCorrection,
     SensorCalibration,
 )
-from wz_shared.self_calibration import CalibrationLog, bounded, corrected_pose, offset_pose
+from wz_shared.self_calibration import (
+    CalibrationLog,
+    bounded_correction,
+    corrected_pose,
+    offset_pose,
+)
 from wz_shared.site import SensorMount
 
 log = logging.getLogger("wz_camera_detector.calibration")
@@ -818,21 +823,19 @@ class CameraSelfCalibration:
     def _apply(self) -> None:
         assert self._applied is not None
         p, std = self._applied, self.std
-        self.correction = bounded(
-            PoseCorrection(
-                yaw_deg=p[0],
-                pitch_deg=p[1],
-                roll_deg=p[2],
-                x_m=p[3],
-                y_m=p[4],
-                z_m=p[5],
-                yaw_std_deg=float(std[0]),
-                pitch_std_deg=float(std[1]),
-                roll_std_deg=float(std[2]),
-                x_std_m=float(std[3]),
-                y_std_m=float(std[4]),
-                z_std_m=float(std[5]),
-            )
+        self.correction = bounded_correction(
+            yaw_deg=float(p[0]),
+            pitch_deg=float(p[1]),
+            roll_deg=float(p[2]),
+            x_m=float(p[3]),
+            y_m=float(p[4]),
+            z_m=float(p[5]),
+            yaw_std_deg=float(std[0]),
+            pitch_std_deg=float(std[1]),
+            roll_std_deg=float(std[2]),
+            x_std_m=float(std[3]),
+            y_std_m=float(std[4]),
+            z_std_m=float(std[5]),
         )
         self.clock_offset_s = float(np.clip(p[6], -0.5, 0.5))
         self.pose = corrected_pose(self.nominal, self.correction)

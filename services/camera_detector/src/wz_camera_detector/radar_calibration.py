@@ -27,7 +27,7 @@ import numpy as np
 from wz_camera_detector.calibration import ReferenceObjects, SensorCalibrationSettings
 from wz_shared.arrays import F64, Bool
 from wz_shared.messages import CalibrationState, PoseCorrection, RadarScan, SensorCalibration
-from wz_shared.self_calibration import CalibrationLog, bounded, corrected_pose
+from wz_shared.self_calibration import CalibrationLog, bounded_correction, corrected_pose
 from wz_shared.site import SensorMount
 
 log = logging.getLogger("wz_camera_detector.radar_calibration")
@@ -210,13 +210,11 @@ class RadarSelfCalibration:
         self.clock_offset_s = float(np.clip(self.clock_offset_s, -0.5, 0.5))
         if self.pairs >= self.settings.min_pairs:
             normal = self._boresight_normal()
-            self.correction = bounded(
-                PoseCorrection(
-                    yaw_deg=math.degrees(self.yaw_rad),
-                    yaw_std_deg=self.std[0],
-                    x_m=self.shift_m * float(normal[0]),
-                    y_m=self.shift_m * float(normal[1]),
-                )
+            self.correction = bounded_correction(
+                yaw_deg=math.degrees(self.yaw_rad),
+                yaw_std_deg=self.std[0],
+                x_m=self.shift_m * float(normal[0]),
+                y_m=self.shift_m * float(normal[1]),
             )
             self.pose = corrected_pose(self.nominal, self.correction)
         if self.log.state == CalibrationState.PRIOR:

@@ -50,7 +50,13 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from wz_shared.arrays import F64
 from wz_shared.messages import CalibrationState, PoseCorrection, SensorCalibration
-from wz_shared.self_calibration import CalibrationLog, bounded, corrected_pose, robust_std
+from wz_shared.self_calibration import (
+    CalibrationLog,
+    bounded,
+    bounded_correction,
+    corrected_pose,
+    robust_std,
+)
 from wz_shared.site import Pose, SensorMount, Site
 
 
@@ -519,7 +525,7 @@ class LidarSelfCalibration:
             rolls = np.array([g.roll_deg for g in self._ground])
             heights = np.array([g.height_m for g in self._ground])
             spread = math.sqrt(len(self._ground))
-            correction = PoseCorrection(
+            correction = bounded_correction(
                 pitch_deg=float(np.median(pitches)) - self.nominal.pitch_deg,
                 roll_deg=float(np.median(rolls)) - self.nominal.roll_deg,
                 z_m=float(np.median(heights)) - self.nominal.z_m,
