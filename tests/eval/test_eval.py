@@ -14,6 +14,8 @@ from wz_eval.fusion import Dropout, EvalOptions, pipeline_options
 from wz_eval.scores import SOURCES
 from wz_fusion_tracker.calibration import load_bias_map
 from wz_gateway.conflicts import SSAM_COLUMNS
+from wz_shared.capacity import closure_capacity_vph
+from wz_shared.site import DEFAULT_SITE_PATH, load_site
 
 ROOT = Path(__file__).resolve().parents[2]
 BIAS_MAP = ROOT / "deploy" / "sites" / "us75-lincoln.bias-map.json"
@@ -64,9 +66,15 @@ def test_wz_eval_writes_the_report_json_markdown_and_plots(tmp_path: Path) -> No
     for axis in ("rmse_longitudinal_m", "rmse_lateral_m", "rmse_speed_mps"):
         assert set(report[axis]) == set(SOURCES)
     assert report["vehicles"] >= 5
+    capacity_vph = closure_capacity_vph(load_site(DEFAULT_SITE_PATH), 0.15)
     assert report["conditions"] == {
         "weather": "day",
         "vehicles_per_hour": 1400.0,
+        "demand_ratio": None,
+        "share_of_capacity": round(1400.0 / capacity_vph, 3),
+        "capacity_vph": round(capacity_vph, 1),
+        "demand_profile": "steady",
+        "work_zone_headways": False,
         "truck_share": 0.15,
         "aggressive_share": 0.2,
     }

@@ -151,7 +151,7 @@ def _conditions(report: dict[str, Any]) -> str:
     if not c:
         return ""
     demand = f"{c['vehicles_per_hour']:.0f} vehicles/h"
-    if c.get("share_of_capacity") is not None:
+    if c.get("demand_ratio") is not None:  # asked as a share of capacity
         demand = (
             f"demand {c['share_of_capacity']:.2f} of the closure's capacity "
             f"({c['capacity_vph']:.0f} veh/h, so {demand}"
