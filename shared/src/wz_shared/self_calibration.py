@@ -61,21 +61,11 @@ def bounded(correction: PoseCorrection) -> PoseCorrection:
 
 def bounded_correction(**parts: float | None) -> PoseCorrection:
     """A correction from an estimator's raw values, each angle and shift clipped to its bound
-    before it is checked: a fit past a bound (a ground fit 1.0009 m off on a generated site)
-    is held at the bound rather than stopping the detector with a validation error."""
-    bounds = {
-        "yaw_deg": MAX_YAW_CORRECTION_DEG,
-        "pitch_deg": MAX_TILT_CORRECTION_DEG,
-        "roll_deg": MAX_TILT_CORRECTION_DEG,
-        "x_m": MAX_POSITION_CORRECTION_M,
-        "y_m": MAX_POSITION_CORRECTION_M,
-        "z_m": MAX_POSITION_CORRECTION_M,
-    }
-    clipped = {
-        name: (_clip(value, bounds[name]) if name in bounds and value is not None else value)
-        for name, value in parts.items()
-    }
-    return PoseCorrection.model_validate(clipped)
+    (:func:`bounded`) before it is checked: a fit past a bound (a ground fit 1.0009 m off on a
+    generated site) is held at the bound rather than stopping the detector with a validation
+    error."""
+    clipped = bounded(PoseCorrection.model_construct(None, **parts))  # type: ignore[arg-type]
+    return PoseCorrection.model_validate(clipped.model_dump())
 
 
 def offset_pose(
