@@ -68,7 +68,7 @@ def test_the_state_is_a_bus_message_that_compares_without_its_stamp() -> None:
         (AlertType.AGGRESSIVE_APPROACH, "SLOW DOWN"),
         (AlertType.SHORT_TTC, "SLOW DOWN"),
         (AlertType.LATE_MERGE, "MERGE RIGHT NOW"),
-        (AlertType.QUEUE, "QUEUE AHEAD 0.3 MI"),  # 1000 - 500 = 500 m = 0.31 mi
+        (AlertType.QUEUE, "SLOW TRAFFIC 0.3 MI"),  # 1000 - 500 = 500 m = 0.31 mi
         (AlertType.HARD_BRAKING, ""),
         (AlertType.INTRUSION, ""),
     ],
@@ -95,7 +95,7 @@ def test_sign_priority_queue_then_merge_then_slow_down() -> None:
     state = roadside_devices([*alerts, active(AlertType.QUEUE, 900.0)], ZONE, 0.0)
     # 900 - 500 = 400 m = 0.2485 mi -> 0.2
     assert (state.sign_text, state.cause, state.queue_tail_station_m) == (
-        "QUEUE AHEAD 0.2 MI",
+        "SLOW TRAFFIC 0.2 MI",
         AlertType.QUEUE,
         900.0,
     )
@@ -105,12 +105,12 @@ def test_sign_priority_queue_then_merge_then_slow_down() -> None:
 @pytest.mark.parametrize(
     ("tail_m", "text"),
     [
-        (500.0 + 0.0499 * METERS_PER_MILE, "QUEUE AHEAD"),  # 0.0499 mi rounds to 0.0
-        (500.0 + 0.0501 * METERS_PER_MILE, "QUEUE AHEAD 0.1 MI"),
-        (500.0 + 0.3449 * METERS_PER_MILE, "QUEUE AHEAD 0.3 MI"),
-        (500.0 + 0.3501 * METERS_PER_MILE, "QUEUE AHEAD 0.4 MI"),
-        (500.0 + 1.0 * METERS_PER_MILE, "QUEUE AHEAD 1.0 MI"),
-        (450.0, "QUEUE AHEAD"),  # behind the sign
+        (500.0 + 0.0499 * METERS_PER_MILE, "SLOW TRAFFIC AHEAD"),  # 0.0499 mi rounds to 0.0
+        (500.0 + 0.0501 * METERS_PER_MILE, "SLOW TRAFFIC 0.1 MI"),
+        (500.0 + 0.3449 * METERS_PER_MILE, "SLOW TRAFFIC 0.3 MI"),
+        (500.0 + 0.3501 * METERS_PER_MILE, "SLOW TRAFFIC 0.4 MI"),
+        (500.0 + 1.0 * METERS_PER_MILE, "SLOW TRAFFIC 1.0 MI"),
+        (450.0, "SLOW TRAFFIC AHEAD"),  # behind the sign
     ],
 )
 def test_queue_distance_in_tenths_of_a_mile(tail_m: float, text: str) -> None:
@@ -136,7 +136,7 @@ def test_engine_feeds_the_devices() -> None:
         source_id=DEFAULT_SOURCE_ID,
         stamp=4.0,
         beacon_on=True,
-        sign_text="QUEUE AHEAD 0.3 MI",
+        sign_text="SLOW TRAFFIC 0.3 MI",
         cause=AlertType.QUEUE,
         queue_tail_station_m=1040.0,
     )

@@ -31,7 +31,15 @@ from tests.alert_service.test_node_process import PERIOD_S, speeder_batches, wai
 from tests.cli.procs import start_router, stop_process
 from wz_gateway.wzdx import device_link_health
 from wz_shared.bus import Bus, Publisher, Subscription
-from wz_shared.messages import Alert, AlertType, ServiceState, ServiceStatus, TrackBatch
+from wz_shared.messages import (
+    Alert,
+    AlertType,
+    QueueState,
+    RoadsideDeviceState,
+    ServiceState,
+    ServiceStatus,
+    TrackBatch,
+)
 from wz_shared.settings import BusSettings
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -149,6 +157,10 @@ class Rig:
     alerts: Subscription[Alert]
     #: The device driver's newest status.
     driver_status: Subscription[ServiceStatus]
+    #: What the alert service wants the devices to show, each change.
+    devices: Subscription[RoadsideDeviceState]
+    #: Each lane's queue as the alert service publishes it.
+    queue: Subscription[QueueState]
 
     def send(self, batches: list[TrackBatch]) -> dict[float, float]:
         """Put ``batches`` at twice the tracker's pace; when each went (by stamp, Unix time)."""
@@ -225,6 +237,8 @@ def alert_service_and_driver(**settings: str) -> Iterator[Rig]:
                 bus.subscribe(
                     bus.keys.status("device-driver"), ServiceStatus, mode="ring", capacity=1
                 ),
+                bus.subscribe(bus.keys.devices_state, RoadsideDeviceState),
+                bus.subscribe(bus.keys.queue, QueueState),
             )
             try:
                 for module in SERVICES:

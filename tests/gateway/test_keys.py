@@ -105,7 +105,7 @@ def test_migration_6_marks_the_keys_older_dev_runs_made(tmp_path: Path) -> None:
             )
     engine.dispose()
     storage = Storage.open(f"sqlite:///{path}")
-    assert storage.current_schema_version() == SCHEMA_VERSION == 7
+    assert storage.current_schema_version() == SCHEMA_VERSION
     marked = {k.key_id: k.dev_mode for k in KeyStore(storage.engine).all(include_revoked=True)}
     assert marked == {"dev0": True, "api-in-dev": True, "api-later": False, "settings": False}
     assert KeyStore(storage.engine).revoke_dev_mode(400.0) == 1  # dev0 was revoked already

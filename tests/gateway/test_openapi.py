@@ -28,6 +28,7 @@ from tests.gateway.helpers import (
     sample_alert,
     service_status,
 )
+from tests.gateway.test_queue import state as queue_state
 from wz_gateway.app import create_app
 from wz_shared.messages import (
     AlertType,
@@ -55,6 +56,7 @@ def gateway_app(tmp_path_factory: pytest.TempPathFactory) -> Iterator[FastAPI]:
     messages += [
         devices_state(5.0, beacon_on=True, sign_text="SLOW DOWN", cause=AlertType.SPEEDING),
         service_status("alert-service", 5.0, {}),
+        queue_state(5.0, 900.0, stopped=True),
         SensorCalibration(
             site=SITE.site_id,
             source_id="camera-mast",
@@ -85,7 +87,7 @@ def test_every_operation_conforms_and_never_fails_on_the_server(
     operations = [
         op for op in (result.ok() for result in api.get_all_operations()) if op.path != "/v1/stream"
     ]
-    assert len(operations) == 16 + 7  # 7: /v1/webhooks
+    assert len(operations) == 18 + 7  # 7: /v1/webhooks
     checked = 0
     for operation in operations:
         has_input = any(True for _ in operation.iter_parameters()) or bool(

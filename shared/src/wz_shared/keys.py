@@ -11,6 +11,7 @@ docs/architecture.md, "Keys"::
     wz/<site>/tracks                  fused tracks           (FIFO)
     wz/<site>/alerts/<type>           alerts                 (FIFO, reliable)
     wz/<site>/devices/state           roadside beacon + sign (FIFO, reliable; on change)
+    wz/<site>/queue                   per-lane queue state (1 Hz and on a change)
     wz/<site>/status/<service>        liveliness token + periodic health
     wz/<site>/config/site             queryable: the site description
     wz/<site>/tracks/latest           queryable: the newest track batch
@@ -102,6 +103,11 @@ class Keys:
     @property
     def devices_state(self) -> str:
         return f"{self.prefix}/devices/state"
+
+    # the queue, per lane
+    @property
+    def queue(self) -> str:
+        return f"{self.prefix}/queue"
 
     # self-calibration of each sensor (its pose correction and clock offset)
     def calibration(self, sensor_id: str) -> str:

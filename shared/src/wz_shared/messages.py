@@ -470,6 +470,69 @@ class RoadsideDeviceState(Message):
         )
 
 
+class QueueCondition(StrEnum):
+    """A lane's traffic as the queue estimate sees it (thresholds: the site's ``alerts.queue``)."""
+
+    FREE = "free"
+    SLOW = "slow"
+    STOPPED = "stopped"
+
+
+class LaneQueue(BaseModel):
+    """One lane's queue now (:class:`QueueState`).
+
+    A lane is queued while ``min_vehicles`` of its slow vehicles stand within ``span_m`` of
+    station (the site's queue rule, per lane); stopped while their mean speed is below
+    ``stopped_speed_mps``. Stations are along the road [m]; the back is the queue's most
+    upstream queued vehicle, the head its most downstream one.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    lane_index: Annotated[int, Field(ge=0)]
+    condition: QueueCondition
+    #: The most upstream queued vehicle [m]; None while the lane is free.
+    back_station_m: FiniteFloat | None = None
+    #: The queue reaches the sensors' upstream reach in this lane: its back is at least that far
+    #: upstream (``back_station_m`` is where it leaves the sensors' sight), not measured.
+    back_beyond_reach: bool = False
+    head_station_m: FiniteFloat | None = None
+    #: ``head - back`` [m]; 0 while free.
+    length_m: NonNegFloat = 0.0
+    vehicle_count: Annotated[int, Field(ge=0)] = 0
+    #: Mean speed of the queued vehicles [m/s].
+    mean_speed_mps: NonNegFloat | None = None
+    #: The back's speed along the road over the last seconds [m/s]: negative while the queue
+    #: grows upstream (a shock wave's speed), positive while it dissolves; None until known.
+    back_speed_mps: FiniteFloat | None = None
+    #: How far upstream the site's sensors see a car in this lane [m]: a back here or beyond is
+    #: "beyond" (``back_beyond_reach``).
+    reach_station_m: FiniteFloat
+
+
+class QueueState(Message):
+    """Every lane's queue at one instant, from the alert service's tracks: on
+    ``wz/<site>/queue`` once a second of track stamps, and at once when a lane's condition
+    changes. ``stamp`` is the track batch's capture time."""
+
+    kind: Literal["queue_state"] = "queue_state"
+    lanes: list[LaneQueue]
+
+    @property
+    def condition(self) -> QueueCondition:
+        """The worst lane's condition (stopped over slow over free)."""
+        order = list(QueueCondition)
+        return max(
+            (lane.condition for lane in self.lanes), key=order.index, default=QueueCondition.FREE
+        )
+
+    @property
+    def back_station_m(self) -> float | None:
+        """The most upstream back of every queued lane [m]; None when every lane is free."""
+        backs = [lane.back_station_m for lane in self.lanes if lane.back_station_m is not None]
+        return min(backs) if backs else None
+
+
 class ActiveAlerts(Message):
     """The open alert episodes and the roadside devices now: the answer to a query on
     ``wz/<site>/alerts/active``, for a consumer that joins late.

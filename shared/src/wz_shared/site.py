@@ -418,6 +418,9 @@ class QueueRule(EpisodeTiming):
     #: Three slow vehicles within 100 m: more than one slow truck, fewer than a full jam.
     min_vehicles: Annotated[int, Field(ge=1, le=100)] = 3
     span_m: Annotated[float, Field(gt=0.0, le=2000.0)] = 100.0
+    #: A queued lane is stopped while its queued vehicles' mean speed is below this (HCM's
+    #: queued vehicle: under 5 mph); it is slow again above this plus ``speed_hysteresis_mps``.
+    stopped_speed_mps: Annotated[float, Field(ge=0.0, le=20.0)] = 2.2
     #: A tail this far upstream of the taper meets drivers still at approach speed.
     critical_backup_m: Annotated[float, Field(ge=0.0, le=10000.0)] = 300.0
     #: A queue is a state of traffic: 3 s filters a platoon braking briefly.
@@ -448,6 +451,10 @@ class DeviceRules(_Strict):
 
     #: Station of the dynamic message sign [m]; None: the advance-warning area's start.
     sign_station_m: Annotated[float, Field(ge=0.0)] | None = None
+    #: A new message for the same cause (the queue's distance, slow against stopped) replaces
+    #: the sign's only once it has held this long: a message that flickers is not read. A new
+    #: cause, a queue turning to stopped and a blank (the episode's own clear time) are at once.
+    message_hold_s: Annotated[float, Field(ge=0.0, le=120.0)] = 5.0
 
 
 class AlertRules(_Strict):

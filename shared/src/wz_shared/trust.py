@@ -114,7 +114,11 @@ ROLES: Mapping[str, Role] = {
         Role("lidar-detector", publishes=("detections/*", "calibration/*")),
         Role("camera-detector", publishes=("detections/*", "calibration/*")),
         Role(TRACKER, publishes=("tracks",), serves=("tracks/latest",)),
-        Role(ALERT_SERVICE, publishes=("alerts/*", "devices/state"), serves=("alerts/active",)),
+        Role(
+            ALERT_SERVICE,
+            publishes=("alerts/*", "devices/state", "queue"),
+            serves=("alerts/active",),
+        ),
         Role("gateway"),
         # drives the message sign and the beacon's relay from the devices' state; puts only its
         # status
@@ -324,7 +328,7 @@ def expected_source(key: str) -> str | None:
     """The ``source_id`` a message on the concrete ``key`` must carry, or None when any may.
 
     Raw data and detections carry their sensor's id, the key's last chunk; tracks the
-    tracker's name; alerts and the devices' state the alert service's; a status its service's.
+    tracker's name; alerts, the devices' state and the queue the alert service's; a status its service's.
     """
     parts = str(key).split("/")
     if len(parts) < 3 or parts[0] != ROOT:
@@ -334,7 +338,7 @@ def expected_source(key: str) -> str | None:
         return rest[-1]
     if rest == ["tracks"]:
         return TRACKER
-    if (rest[0] == "alerts" and len(rest) == 2) or rest == ["devices", "state"]:
+    if (rest[0] == "alerts" and len(rest) == 2) or rest in (["devices", "state"], ["queue"]):
         return ALERT_SERVICE
     return None
 

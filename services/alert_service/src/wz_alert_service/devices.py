@@ -8,10 +8,17 @@ message sign field device). Pure: no I/O, no clock.
   episode is open upstream of the end of the activity area (drivers still approaching the
   work space). Hard braking and intrusion do not light it: they are reported, but a beacon
   upstream tells approaching drivers nothing about them.
-- **Sign**: one message, by priority: a queue (``QUEUE AHEAD 0.3 MI``, the distance from the
-  sign to the queue's tail in tenths of a mile; ``QUEUE AHEAD`` when the tail is within
-  0.05 mi of the sign or behind it), then a late merge (``MERGE RIGHT NOW`` or ``LEFT``), then
-  speeding, aggressive approach or a short TTC (``SLOW DOWN``); blank otherwise.
+- **Sign**: one message, by priority: a queue, then a late merge (``MERGE RIGHT NOW`` or
+  ``LEFT``), then speeding, aggressive approach or a short TTC (``SLOW DOWN``); blank
+  otherwise. A queue reads ``STOPPED TRAFFIC AHEAD`` while a lane's queue is stopped
+  (:mod:`wz_alert_service.queues`), otherwise ``SLOW TRAFFIC 0.3 MI``: the distance from the
+  sign to the queue's back in tenths of a mile (``SLOW TRAFFIC AHEAD`` when the back is within
+  0.05 mi of the sign, behind it, or beyond the sensors' reach, where no distance is measured).
+
+:class:`SignHold` keeps the sign from flickering: a new message for the same cause (the
+queue's distance, slow against stopped) replaces the shown one only once it has held
+``message_hold_s``; a new cause, a queue turning to stopped, and a blank sign come at once
+(the episodes have their own hold and clear times).
 """
 
 from __future__ import annotations
@@ -21,7 +28,7 @@ from collections.abc import Iterable
 
 from wz_alert_service.engine import ActiveAlert
 from wz_alert_service.zone import ZoneGeometry
-from wz_shared.messages import AlertType, RoadsideDeviceState
+from wz_shared.messages import AlertType, QueueCondition, QueueState, RoadsideDeviceState
 
 METERS_PER_MILE = 1609.344
 #: ``source_id`` of the device states, unless the caller names another.
@@ -37,17 +44,30 @@ SIGN_PRIORITY: tuple[AlertType, ...] = (
 )
 
 
-def queue_sign_text(tail_station_m: float, sign_station_m: float) -> str:
-    """``QUEUE AHEAD x.x MI``: the distance from the sign to the queue's tail.
+STOPPED_TEXT = "STOPPED TRAFFIC AHEAD"
+
+
+def queue_sign_text(
+    tail_station_m: float | None,
+    sign_station_m: float,
+    *,
+    stopped: bool = False,
+) -> str:
+    """The queue's message: ``STOPPED TRAFFIC AHEAD``, or ``SLOW TRAFFIC x.x MI``.
 
     ``x.x = floor(10 (s_tail - s_sign) / 1609.344 + 0.5) / 10`` (tenths of a mile, halves
-    rounded up); ``QUEUE AHEAD`` alone when that rounds below 0.1 mi (the tail is within
-    0.05 mi of the sign, or behind it).
+    rounded up); ``SLOW TRAFFIC AHEAD`` when that rounds below 0.1 mi (the tail is within
+    0.05 mi of the sign, or behind it) or when the tail is not measured (None: beyond the
+    sensors' reach).
     """
+    if stopped:
+        return STOPPED_TEXT
+    if tail_station_m is None:
+        return "SLOW TRAFFIC AHEAD"
     tenths = math.floor(10.0 * (tail_station_m - sign_station_m) / METERS_PER_MILE + 0.5)
     if tenths < 1:
-        return "QUEUE AHEAD"
-    return f"QUEUE AHEAD {tenths / 10:.1f} MI"
+        return "SLOW TRAFFIC AHEAD"
+    return f"SLOW TRAFFIC {tenths / 10:.1f} MI"
 
 
 def roadside_devices(
@@ -56,6 +76,7 @@ def roadside_devices(
     stamp: float,
     *,
     source_id: str = DEFAULT_SOURCE_ID,
+    queue_state: QueueState | None = None,
 ) -> RoadsideDeviceState:
     """The beacon and the sign for the open episodes.
 
@@ -69,6 +90,10 @@ def roadside_devices(
         Capture time these states hold for [s].
     source_id : str
         Who decided them (the service's name).
+    queue_state : QueueState, optional
+        The lanes' queue now: a stopped lane makes a queue's message ``STOPPED TRAFFIC
+        AHEAD``; a back beyond the sensors' reach gives no distance. Without it, the queue
+        alert's tail and ``SLOW TRAFFIC``.
 
     Returns
     -------
@@ -88,12 +113,18 @@ def roadside_devices(
     cause = min((alert.alert_type for alert in upstream), key=SIGN_PRIORITY.index)
     if cause is AlertType.QUEUE:
         tail_m = min(a.finding.station_m for a in upstream if a.alert_type is AlertType.QUEUE)
+        stopped = False
+        measured: float | None = tail_m
+        if queue_state is not None:
+            stopped = queue_state.condition is QueueCondition.STOPPED
+            if any(lane.back_beyond_reach for lane in queue_state.lanes):
+                measured = None
         return RoadsideDeviceState(
             site=site,
             source_id=source_id,
             stamp=stamp,
             beacon_on=True,
-            sign_text=queue_sign_text(tail_m, zone.sign_station_m),
+            sign_text=queue_sign_text(measured, zone.sign_station_m, stopped=stopped),
             cause=cause,
             queue_tail_station_m=tail_m,
         )
@@ -101,3 +132,42 @@ def roadside_devices(
     return RoadsideDeviceState(
         site=site, source_id=source_id, stamp=stamp, beacon_on=True, sign_text=text, cause=cause
     )
+
+
+class SignHold:
+    """Holds the sign's message against flicker (see the module's notes).
+
+    Parameters
+    ----------
+    hold_s : float
+        How long a new message for the same cause must hold before it is shown [s]
+        (``alerts.devices.message_hold_s``).
+    """
+
+    def __init__(self, hold_s: float) -> None:
+        self.hold_s = hold_s
+        self.shown: RoadsideDeviceState | None = None
+        self._candidate: RoadsideDeviceState | None = None
+        self._candidate_since_s = 0.0
+
+    def _at_once(self, wanted: RoadsideDeviceState) -> bool:
+        shown = self.shown
+        return (
+            shown is None
+            or wanted.cause is None
+            or wanted.cause != shown.cause
+            or (wanted.sign_text == STOPPED_TEXT and shown.sign_text != STOPPED_TEXT)
+        )
+
+    def apply(self, wanted: RoadsideDeviceState) -> RoadsideDeviceState:
+        """What the devices show, given what the open episodes want at ``wanted.stamp``."""
+        if self._at_once(wanted) or wanted.sign_text == (self.shown and self.shown.sign_text):
+            self.shown, self._candidate = wanted, None
+            return wanted
+        assert self.shown is not None
+        if self._candidate is None or self._candidate.sign_text != wanted.sign_text:
+            self._candidate, self._candidate_since_s = wanted, wanted.stamp
+        if wanted.stamp - self._candidate_since_s >= self.hold_s:
+            self.shown, self._candidate = wanted, None
+            return wanted
+        return self.shown.model_copy(update={"stamp": wanted.stamp})

@@ -280,7 +280,8 @@ class _Episode:
         return bool(self.episode_id)
 
 
-def _confirmed(track: Track) -> bool:
+def confirmed(track: Track) -> bool:
+    """Whether the rules see a track: confirmed, and not tentative."""
     return track.confirmed and track.status is not TrackStatus.TENTATIVE
 
 
@@ -354,7 +355,7 @@ class AlertEngine:
             return []
         self._last_stamp_s = t
         self.counters.batches += 1
-        tracks = sorted((tr for tr in batch.tracks if _confirmed(tr)), key=lambda tr: tr.track_id)
+        tracks = sorted((tr for tr in batch.tracks if confirmed(tr)), key=lambda tr: tr.track_id)
         present = {tr.track_id for tr in tracks}
         events = self._forget_lost_tracks(present, t)
         self._cooldown_until_s = {k: u for k, u in self._cooldown_until_s.items() if u > t}

@@ -16,6 +16,9 @@ rules' thresholds are the ``alerts:`` section of the site file). It
 - publishes the flashing beacon's and the message sign's state
   (:class:`RoadsideDeviceState`) on ``wz/<site>/devices/state`` whenever what they show
   changes (and once, for the first batch, so a listener knows the starting state);
+- publishes each lane's queue (:class:`QueueState`, :mod:`wz_alert_service.queues`) on
+  ``wz/<site>/queue`` once a second of track stamps and at once when a lane's condition
+  changes; the sign's queue message reads it (stopped or slow, the back's distance);
 - answers queries on ``wz/<site>/alerts/active`` with :class:`ActiveAlerts`: per open
   episode its newest published event, and the devices' state, for a consumer that joins late.
 
@@ -35,8 +38,9 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-from wz_alert_service.devices import roadside_devices
-from wz_alert_service.engine import AlertEngine
+from wz_alert_service.devices import SignHold, roadside_devices
+from wz_alert_service.engine import AlertEngine, confirmed
+from wz_alert_service.queues import QueueEstimator
 from wz_alert_service.recovery import (
     EpisodeRecovery,
     clear_event,
@@ -45,7 +49,14 @@ from wz_alert_service.recovery import (
 )
 from wz_alert_service.settings import AlertServiceSettings
 from wz_shared.codec import encode_json
-from wz_shared.messages import ActiveAlerts, Alert, AlertType, RoadsideDeviceState, TrackBatch
+from wz_shared.messages import (
+    ActiveAlerts,
+    Alert,
+    AlertType,
+    QueueState,
+    RoadsideDeviceState,
+    TrackBatch,
+)
 from wz_shared.service import NodeApp, ServiceRuntime
 from wz_shared.shedding import StampGate
 from wz_shared.site import Site
@@ -68,11 +79,14 @@ class AlertOutputs:
         The engine's events as messages, in the engine's order.
     devices : RoadsideDeviceState or None
         The devices' new state, when what they show changed; None otherwise.
+    queue : QueueState or None
+        The lanes' queue, when due (once a second of stamps, or on a change); None otherwise.
     """
 
     accepted: bool
     alerts: list[Alert] = field(default_factory=list)
     devices: RoadsideDeviceState | None = None
+    queue: QueueState | None = None
 
 
 class AlertCore:
@@ -105,6 +119,10 @@ class AlertCore:
         self._id_prefix = id_prefix
         self.engine = AlertEngine(site, id_prefix=id_prefix)
         self.devices: RoadsideDeviceState | None = None
+        self.queues = QueueEstimator(self.engine.zone)
+        #: The lanes' newest queue state (published or not).
+        self.queue_state: QueueState | None = None
+        self._sign = SignHold(self.engine.rules.devices.message_hold_s)
         self._newest: dict[str, Alert] = {}  # episode id -> its newest start or update
         #: The episodes a previous process left open (:mod:`wz_alert_service.recovery`).
         self.recovery = EpisodeRecovery(site, recovered)
@@ -131,6 +149,7 @@ class AlertCore:
         count = self.engine.episode_count
         self.engine = AlertEngine(self.site, id_prefix=self._id_prefix)
         self.engine.episode_count = count
+        self.queues = QueueEstimator(self.engine.zone, self.queues.reach_m)
         self._newest.clear()
         self.runs += 1
         log.warning(
@@ -170,13 +189,27 @@ class AlertCore:
                 self._newest.pop(alert.episode_id, None)
             else:
                 self._newest[alert.episode_id] = alert
-        devices = roadside_devices(
-            self.engine.active(), self.engine.zone, batch.stamp, source_id=self.source_id
+        queue_state = self.queues.update(
+            [t for t in batch.tracks if confirmed(t)],
+            batch.stamp,
+            site=self.site.site_id,
+            source_id=self.source_id,
+        )
+        if queue_state is not None:
+            self.queue_state = queue_state
+        devices = self._sign.apply(
+            roadside_devices(
+                self.engine.active(),
+                self.engine.zone,
+                batch.stamp,
+                source_id=self.source_id,
+                queue_state=self.queue_state,
+            )
         )
         if devices.shows_same_as(self.devices):
-            return AlertOutputs(accepted=True, alerts=alerts)
+            return AlertOutputs(accepted=True, alerts=alerts, queue=queue_state)
         self.devices = devices
-        return AlertOutputs(accepted=True, alerts=alerts, devices=devices)
+        return AlertOutputs(accepted=True, alerts=alerts, devices=devices, queue=queue_state)
 
     def open_episodes(self) -> list[Alert]:
         """Each open episode's newest published event (what a restart recovers)."""
@@ -238,6 +271,7 @@ def run(
     }
     # The newest device state, for a gateway that starts (or reconnects) after it changed.
     devices_publisher = bus.publisher(bus.keys.devices_state, RoadsideDeviceState, history=1)
+    queue_publisher = bus.publisher(bus.keys.queue, QueueState, history=1)
     snapshot = [encode_json(core.active())]
     bus.serve(bus.keys.alerts_active, lambda: snapshot[-1])
     gate = StampGate(settings.min_batch_interval_s) if settings.shed_stale_batches else None
@@ -277,6 +311,8 @@ def run(
                 "on" if outputs.devices.beacon_on else "off",
                 outputs.devices.sign_text,
             )
+        if outputs.queue is not None:
+            queue_publisher.put(outputs.queue)
         snapshot[:] = [encode_json(core.active())]
         if core.runs != runs:  # a new run: its time starts again
             runs = core.runs

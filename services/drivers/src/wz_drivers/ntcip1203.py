@@ -190,7 +190,7 @@ SUPPORTED_TAGS = frozenset({"nl", "np", "jl", "jp", "pt"})
 
 
 def text_to_multi(text: str, chars_per_line: int, lines_per_page: int) -> str:
-    """Sign text (upper case words, ``QUEUE AHEAD 0.3 MI``) as MULTI for a character sign of
+    """Sign text (upper case words, ``SLOW TRAFFIC 0.3 MI``) as MULTI for a character sign of
     ``lines_per_page`` lines of ``chars_per_line``: words filled into lines, lines into pages
     (``[np]``), each line centred (``[jl3]``, the default on most signs, left implicit).
 

@@ -20,6 +20,7 @@ from wz_shared.messages import (
     AlertSeverity,
     CalibrationState,
     FiniteFloat,
+    QueueState,
     SensorCalibration,
     Track,
     TrackStatus,
@@ -149,6 +150,28 @@ class SiteCalibration(_Model):
 
     site: str
     sensors: list[SensorCalibrationStatus]
+
+
+class SiteQueue(_Model):
+    """A site's queue now: the newest per-lane state its alert service published (once a
+    second of track stamps), when it arrived, and whether that is longer ago than
+    ``stale_after_s`` (the alert service or the tracks stopped: the state may be old)."""
+
+    site: str
+    #: None: nothing received yet.
+    queue: QueueState | None
+    received_at: FiniteFloat | None
+    age_s: FiniteFloat | None
+    stale: bool
+
+
+class QueuePage(_Model):
+    """A page of stored queue states (newest first unless asked otherwise)."""
+
+    site: str
+    count: int
+    next_cursor: str | None
+    states: list[QueueState]
 
 
 class SiteSummary(_Model):

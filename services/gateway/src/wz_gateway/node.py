@@ -3,7 +3,8 @@
 Run it as ``python -m wz_gateway.node`` (settings ``WZ_GATEWAY_*``, bus ``WZ_BUS_*``). It
 
 - subscribes to ``wz/<site>/tracks`` (:class:`TrackBatch`), ``wz/<site>/alerts/*``
-  (:class:`Alert`), ``wz/<site>/devices/state`` (:class:`RoadsideDeviceState`) and
+  (:class:`Alert`), ``wz/<site>/devices/state`` (:class:`RoadsideDeviceState`),
+  ``wz/<site>/queue`` (:class:`QueueState`, each lane's queue once a second) and
   ``wz/<site>/status/*`` (:class:`ServiceStatus`, for the WZDx devices' status) and
   ``wz/<site>/calibration/*`` (:class:`SensorCalibration`, each sensor's self-calibration:
   its latest, each change of state, and the WZDx devices' status); a central
@@ -63,6 +64,7 @@ from wz_shared.keys import site_of_key
 from wz_shared.messages import (
     Alert,
     Message,
+    QueueState,
     RoadsideDeviceState,
     SensorCalibration,
     ServiceStatus,
@@ -262,6 +264,7 @@ class Writer:
             m.ingested.labels("track_batch").inc(result.track_batches)
             m.ingested.labels("alert").inc(result.alerts)
             m.ingested.labels("roadside_devices").inc(result.device_states)
+            m.ingested.labels("queue_states").inc(result.queue_states)
             m.ingested.labels("service_status").inc(result.statuses)
             m.ingested.labels("sensor_calibration").inc(result.calibrations)
             m.ingested_points.inc(result.points)
@@ -389,6 +392,7 @@ def run(
     writer.tracks = tracks
     bus.on(sites.key("alerts/*"), Alert, writer.offer, recover=True)
     bus.on(sites.key("devices/state"), RoadsideDeviceState, writer.offer, recover=True)
+    bus.on(sites.key("queue"), QueueState, writer.offer, recover=True)
     bus.on(sites.key("status/*"), ServiceStatus, writer.offer)
     # A calibration's source must be the sensor its key names (the bus checks it, as for
     # detections: wz_shared.trust.expected_source).

@@ -21,7 +21,7 @@ import logging
 import math
 import struct
 import time
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -62,6 +62,7 @@ from wz_gateway.tables import (
     calibration_changes,
     device_states,
     latest,
+    queue_states,
     schema_version,
     track_points,
     tracks,
@@ -73,7 +74,9 @@ from wz_shared.geometry import GeoFrame
 from wz_shared.messages import (
     Alert,
     CalibrationState,
+    LaneQueue,
     Message,
+    QueueState,
     RoadsideDeviceState,
     SensorCalibration,
     ServiceStatus,
@@ -173,6 +176,19 @@ class AlertQuery:
 
 
 @dataclass(frozen=True)
+class QueueQuery:
+    """Stored queue states of one site wanted; ``conditions`` empty: any worst condition."""
+
+    site: str
+    start_stamp: float | None = None
+    end_stamp: float | None = None
+    conditions: tuple[str, ...] = ()
+    newest_first: bool = True
+    limit: int = 100
+    cursor: str | None = None
+
+
+@dataclass(frozen=True)
 class Page:
     """Rows of one page and the cursor of the next (None on the last page)."""
 
@@ -218,6 +234,7 @@ class IngestResult:
     alerts: int = 0
     duplicate_alerts: int = 0
     device_states: int = 0
+    queue_states: int = 0
     statuses: int = 0
     #: Sensor calibrations stored, and those that changed a sensor's state.
     calibrations: int = 0
@@ -402,6 +419,7 @@ class Storage:
         A :class:`TrackBatch` adds one point per track and becomes the live view; an
         :class:`Alert` is added once (a repeated ``alert_id`` is counted, not written twice);
         a :class:`RoadsideDeviceState` is added to the history and becomes the devices' state;
+        a :class:`QueueState` is added to the queue's history and becomes the queue now;
         a :class:`ServiceStatus` becomes that service's latest status; a
         :class:`SensorCalibration` becomes that sensor's latest calibration, and is added to
         ``calibration_changes`` when its state differs from the one before (or was entered at
@@ -422,7 +440,12 @@ class Storage:
         for message in items:
             if not isinstance(
                 message,
-                TrackBatch | Alert | RoadsideDeviceState | ServiceStatus | SensorCalibration,
+                TrackBatch
+                | Alert
+                | RoadsideDeviceState
+                | QueueState
+                | ServiceStatus
+                | SensorCalibration,
             ):
                 raise TypeError(f"cannot store a {type(message).__name__}")
         result = IngestResult()
@@ -454,6 +477,20 @@ class Storage:
                     )
                     self._upsert_latest(connection, message.site, "devices", message, received_at)
                     result.device_states += 1
+                elif isinstance(message, QueueState):
+                    connection.execute(
+                        insert(queue_states).values(
+                            site=message.site,
+                            source_id=message.source_id,
+                            stamp=message.stamp,
+                            condition=message.condition.value,
+                            back_station_m=message.back_station_m,
+                            lanes=[lane.model_dump(mode="json") for lane in message.lanes],
+                            received_at=received_at,
+                        )
+                    )
+                    self._upsert_latest(connection, message.site, "queue", message, received_at)
+                    result.queue_states += 1
                 elif isinstance(message, ServiceStatus):
                     self._upsert_latest(
                         connection, message.site, f"status/{message.service}", message, received_at
@@ -647,6 +684,16 @@ class Storage:
             return stmt.order_by(table.c.stamp.desc(), table.c.id.desc()).limit(limit + 1)
         return stmt.order_by(table.c.stamp, table.c.id).limit(limit + 1)
 
+    def _page(self, stmt: Select[Any], limit: int, item: Callable[[Any], Any]) -> Page:
+        """Run a statement of :meth:`_page_order` (``limit + 1`` rows): the page's items and
+        the next page's cursor."""
+        with self.engine.connect() as connection:
+            rows = connection.execute(stmt).all()
+        more = len(rows) > limit
+        rows = rows[:limit]
+        next_cursor = encode_cursor(rows[-1].stamp, rows[-1].id) if more else None
+        return Page([item(row) for row in rows], next_cursor)
+
     def points(self, query: PointQuery) -> Page:
         """A page of track points (oldest first), items :class:`TrackPoint`."""
         c = track_points.c
@@ -682,13 +729,7 @@ class Storage:
             query.limit,
             newest_first=False,
         )
-        with self.engine.connect() as connection:
-            rows = connection.execute(stmt).all()
-        more = len(rows) > query.limit
-        rows = rows[: query.limit]
-        items = [_track_point(row) for row in rows]
-        next_cursor = encode_cursor(rows[-1].stamp, rows[-1].id) if more else None
-        return Page(items, next_cursor)
+        return self._page(stmt, query.limit, _track_point)
 
     def alerts(self, query: AlertQuery) -> Page:
         """A page of alert events, items :class:`Alert`."""
@@ -717,13 +758,26 @@ class Storage:
             query.limit,
             newest_first=query.newest_first,
         )
-        with self.engine.connect() as connection:
-            rows = connection.execute(stmt).all()
-        more = len(rows) > query.limit
-        rows = rows[: query.limit]
-        items = [_alert(row) for row in rows]
-        next_cursor = encode_cursor(rows[-1].stamp, rows[-1].id) if more else None
-        return Page(items, next_cursor)
+        return self._page(stmt, query.limit, _alert)
+
+    def queue_history(self, query: QueueQuery) -> Page:
+        """A page of stored queue states, items :class:`QueueState`."""
+        c = queue_states.c
+        conditions: list[ColumnElement[bool]] = [c.site == query.site]
+        if query.start_stamp is not None:
+            conditions.append(c.stamp >= query.start_stamp)
+        if query.end_stamp is not None:
+            conditions.append(c.stamp <= query.end_stamp)
+        if query.conditions:
+            conditions.append(c.condition.in_(query.conditions))
+        stmt = self._page_order(
+            select(queue_states).where(and_(*conditions)),
+            queue_states,
+            query.cursor,
+            query.limit,
+            newest_first=query.newest_first,
+        )
+        return self._page(stmt, query.limit, _queue_state)
 
     def traffic_points(
         self,
@@ -810,7 +864,15 @@ class Storage:
         """Rows in one of the gateway's tables (for tests and metrics)."""
         table = {
             t.name: t
-            for t in (track_points, alerts, device_states, calibration_changes, latest, api_keys)
+            for t in (
+                track_points,
+                alerts,
+                device_states,
+                queue_states,
+                calibration_changes,
+                latest,
+                api_keys,
+            )
         }[table_name]
         with self.engine.connect() as connection:
             return int(connection.scalar(select(func.count()).select_from(table)) or 0)
@@ -822,7 +884,8 @@ class Storage:
     ) -> dict[str, int]:
         """Delete what arrived longer ago than the retention; rows deleted per table.
 
-        Track points, device states and the sensors' changes of calibration state go after
+        Track points, device states, queue states and the sensors' changes of calibration
+        state go after
         ``retention_days``; alerts and webhook
         deliveries (and delivered, failed or expired outbox entries) after
         ``alert_retention_days``.
@@ -834,6 +897,7 @@ class Storage:
             for table, limit in (
                 (track_points, cutoff),
                 (device_states, cutoff),
+                (queue_states, cutoff),
                 (calibration_changes, cutoff),
                 (alerts, alert_cutoff),
             ):
@@ -916,6 +980,15 @@ def _track_point(row: Any) -> TrackPoint:
         length_m=row.length_m,
         width_m=row.width_m,
         smoothed=bool(row.smoothed),
+    )
+
+
+def _queue_state(row: Any) -> QueueState:
+    return QueueState(
+        site=row.site,
+        source_id=row.source_id,
+        stamp=row.stamp,
+        lanes=[LaneQueue.model_validate(lane) for lane in row.lanes],
     )
 
 

@@ -170,6 +170,25 @@ device_states = Table(
     Index("ix_device_states_received_at", "received_at"),
 )
 
+#: Each lane's queue, once a second and at each change of a lane's condition (migration 8):
+#: one row per :class:`~wz_shared.messages.QueueState`, its lanes as JSON (a list of
+#: :class:`~wz_shared.messages.LaneQueue`), with the worst lane's condition and the most
+#: upstream back as columns to filter on. The newest is also in ``latest`` (``queue``).
+queue_states = Table(
+    "queue_states",
+    metadata,
+    Column("id", RowId, primary_key=True, autoincrement=True),
+    Column("site", String(64), nullable=False),
+    Column("source_id", String(128), nullable=False),
+    Column("stamp", Double, nullable=False),
+    Column("condition", String(16), nullable=False),
+    Column("back_station_m", Double, nullable=True),
+    Column("lanes", JSON, nullable=False),
+    Column("received_at", Double, nullable=False),
+    Index("ix_queue_states_site_stamp", "site", "stamp"),
+    Index("ix_queue_states_received_at", "received_at"),
+)
+
 #: Each sensor's self-calibration state as it changed (migration 7): a row when a sensor's
 #: first :class:`~wz_shared.messages.SensorCalibration` arrives and each time its ``state``
 #: (or the stamp it was entered at) differs from the one before, so that a technician can see
@@ -502,6 +521,10 @@ def _v7_calibration_changes(connection: Connection) -> None:
     metadata.create_all(connection, tables=[calibration_changes])
 
 
+def _v8_queue_states(connection: Connection) -> None:
+    metadata.create_all(connection, tables=[queue_states])
+
+
 #: Every migration, in order; the last one's version is the schema this code reads and writes.
 MIGRATIONS: tuple[Migration, ...] = (
     Migration(1, "trajectories, alerts, device states, latest, API keys, webhooks", _v1_initial),
@@ -527,5 +550,6 @@ MIGRATIONS: tuple[Migration, ...] = (
         "the sensors' self-calibration: each change of state",
         _v7_calibration_changes,
     ),
+    Migration(8, "each lane's queue, once a second", _v8_queue_states),
 )
 SCHEMA_VERSION = MIGRATIONS[-1].version

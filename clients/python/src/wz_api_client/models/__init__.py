@@ -34,6 +34,9 @@ from .get_conflicts_v1_conflicts_get_format import GetConflictsV1ConflictsGetFor
 from .get_device_feed_v1_wzdx_device_feed_get_response_200 import (
     GetDeviceFeedV1WzdxDeviceFeedGetResponse200,
 )
+from .get_queue_history_v1_queue_history_get_order import (
+    GetQueueHistoryV1QueueHistoryGetOrder,
+)
 from .get_stream_v1_stream_get_event_type_0_item import (
     GetStreamV1StreamGetEventType0Item,
 )
@@ -48,6 +51,7 @@ from .hard_braking_rule import HardBrakingRule
 from .health import Health
 from .intrusion_rule import IntrusionRule
 from .lane import Lane
+from .lane_queue import LaneQueue
 from .late_merge_rule import LateMergeRule
 from .lidar_intrinsics import LidarIntrinsics
 from .live_track import LiveTrack
@@ -61,7 +65,10 @@ from .pose import Pose
 from .pose_correction import PoseCorrection
 from .problem import Problem
 from .problem_field import ProblemField
+from .queue_condition import QueueCondition
+from .queue_page import QueuePage
 from .queue_rule import QueueRule
+from .queue_state import QueueState
 from .radar_intrinsics import RadarIntrinsics
 from .readiness import Readiness
 from .readiness_checks import ReadinessChecks
@@ -75,6 +82,7 @@ from .sensor_mount import SensorMount
 from .short_ttc_rule import ShortTtcRule
 from .site import Site
 from .site_calibration import SiteCalibration
+from .site_queue import SiteQueue
 from .site_road_direction import SiteRoadDirection
 from .site_summary import SiteSummary
 from .speed_limit import SpeedLimit
@@ -123,6 +131,7 @@ __all__ = (
     "GetAlertsV1AlertsGetPhaseType0Item",
     "GetConflictsV1ConflictsGetFormat",
     "GetDeviceFeedV1WzdxDeviceFeedGetResponse200",
+    "GetQueueHistoryV1QueueHistoryGetOrder",
     "GetStreamV1StreamGetEventType0Item",
     "GetTrackV1TracksTrackIdGetFormat",
     "GetTrajectoriesV1TrajectoriesGetFormat",
@@ -131,6 +140,7 @@ __all__ = (
     "Health",
     "IntrusionRule",
     "Lane",
+    "LaneQueue",
     "LateMergeRule",
     "LidarIntrinsics",
     "LiveTrack",
@@ -144,7 +154,10 @@ __all__ = (
     "PoseCorrection",
     "Problem",
     "ProblemField",
+    "QueueCondition",
+    "QueuePage",
     "QueueRule",
+    "QueueState",
     "RadarIntrinsics",
     "Readiness",
     "ReadinessChecks",
@@ -158,6 +171,7 @@ __all__ = (
     "ShortTtcRule",
     "Site",
     "SiteCalibration",
+    "SiteQueue",
     "SiteRoadDirection",
     "SiteSummary",
     "SpeedingRule",

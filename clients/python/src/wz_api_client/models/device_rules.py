@@ -20,12 +20,16 @@ class DeviceRules:
     """Roadside devices driven by the alerts: a flashing beacon and a message sign.
 
     Attributes:
+        message_hold_s (float | Unset):  Default: 5.0.
         sign_station_m (float | None | Unset):
     """
 
+    message_hold_s: float | Unset = 5.0
     sign_station_m: float | None | Unset = UNSET
 
     def to_dict(self) -> dict[str, Any]:
+        message_hold_s = self.message_hold_s
+
         sign_station_m: float | None | Unset
         if isinstance(self.sign_station_m, Unset):
             sign_station_m = UNSET
@@ -35,6 +39,8 @@ class DeviceRules:
         field_dict: dict[str, Any] = {}
 
         field_dict.update({})
+        if message_hold_s is not UNSET:
+            field_dict["message_hold_s"] = message_hold_s
         if sign_station_m is not UNSET:
             field_dict["sign_station_m"] = sign_station_m
 
@@ -43,6 +49,7 @@ class DeviceRules:
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
         d = dict(src_dict)
+        message_hold_s = d.pop("message_hold_s", UNSET)
 
         def _parse_sign_station_m(data: object) -> float | None | Unset:
             if data is None:
@@ -54,6 +61,7 @@ class DeviceRules:
         sign_station_m = _parse_sign_station_m(d.pop("sign_station_m", UNSET))
 
         device_rules = cls(
+            message_hold_s=message_hold_s,
             sign_station_m=sign_station_m,
         )
 

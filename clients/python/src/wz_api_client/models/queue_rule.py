@@ -33,6 +33,7 @@ class QueueRule:
             slow_speed_mps (float | Unset):  Default: 8.9.
             span_m (float | Unset):  Default: 100.0.
             speed_hysteresis_mps (float | Unset):  Default: 2.0.
+            stopped_speed_mps (float | Unset):  Default: 2.2.
     """
 
     clear_s: float | Unset = 10.0
@@ -44,6 +45,7 @@ class QueueRule:
     slow_speed_mps: float | Unset = 8.9
     span_m: float | Unset = 100.0
     speed_hysteresis_mps: float | Unset = 2.0
+    stopped_speed_mps: float | Unset = 2.2
 
     def to_dict(self) -> dict[str, Any]:
         clear_s = self.clear_s
@@ -63,6 +65,8 @@ class QueueRule:
         span_m = self.span_m
 
         speed_hysteresis_mps = self.speed_hysteresis_mps
+
+        stopped_speed_mps = self.stopped_speed_mps
 
         field_dict: dict[str, Any] = {}
 
@@ -85,6 +89,8 @@ class QueueRule:
             field_dict["span_m"] = span_m
         if speed_hysteresis_mps is not UNSET:
             field_dict["speed_hysteresis_mps"] = speed_hysteresis_mps
+        if stopped_speed_mps is not UNSET:
+            field_dict["stopped_speed_mps"] = stopped_speed_mps
 
         return field_dict
 
@@ -109,6 +115,8 @@ class QueueRule:
 
         speed_hysteresis_mps = d.pop("speed_hysteresis_mps", UNSET)
 
+        stopped_speed_mps = d.pop("stopped_speed_mps", UNSET)
+
         queue_rule = cls(
             clear_s=clear_s,
             cooldown_s=cooldown_s,
@@ -119,6 +127,7 @@ class QueueRule:
             slow_speed_mps=slow_speed_mps,
             span_m=span_m,
             speed_hysteresis_mps=speed_hysteresis_mps,
+            stopped_speed_mps=stopped_speed_mps,
         )
 
         return queue_rule

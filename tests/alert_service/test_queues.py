@@ -1,0 +1,163 @@
+"""Each lane's queue as data (wz_alert_service.queues): back, head, length, speed, the back's
+growth, stopped against slow with hysteresis, the back beyond the sensors' reach, the 1 Hz
+cadence; and the sign's queue message held against flicker (devices.SignHold)."""
+
+from __future__ import annotations
+
+import pytest
+
+from tests.alert_service.helpers import CLOSED_LANE_D, SITE, make_track
+from tests.alert_service.test_devices import active
+from wz_alert_service.devices import STOPPED_TEXT, SignHold, roadside_devices
+from wz_alert_service.queues import QueueEstimator, upstream_reach_m
+from wz_alert_service.zone import ZoneGeometry
+from wz_shared.messages import AlertType, QueueCondition, RoadsideDeviceState
+
+ZONE = ZoneGeometry.from_site(SITE)  # approach [300, 1700) m, taper from 1000 m
+FAR_REACH = {0: 300.0, 1: 300.0}  # the sensors see the whole approach
+
+
+def queue_of(
+    count: int, back_m: float, speed_mps: float, *, spacing_m: float = 12.0, first_id: int = 1
+) -> list:
+    """``count`` vehicles of the open lane from ``back_m`` downstream, ``spacing_m`` apart."""
+    return [make_track(first_id + i, back_m + spacing_m * i, speed_mps) for i in range(count)]
+
+
+def test_a_lane_queue_has_its_back_head_length_count_and_mean_speed() -> None:
+    estimator = QueueEstimator(ZONE, FAR_REACH)
+    fast_car = make_track(99, 800.0, 25.0)  # upstream of the back, at speed: not queued
+    closed_car = make_track(98, 950.0, 20.0, offset_m=CLOSED_LANE_D)
+    lanes = estimator.estimate([*queue_of(5, 900.0, 4.0), fast_car, closed_car], 10.0)
+    by_lane = {lane.lane_index: lane for lane in lanes}
+    assert by_lane[1].condition is QueueCondition.FREE and by_lane[1].back_station_m is None
+    open_lane = by_lane[0]
+    assert open_lane.condition is QueueCondition.SLOW
+    assert (open_lane.back_station_m, open_lane.head_station_m) == (900.0, 948.0)
+    assert (open_lane.length_m, open_lane.vehicle_count) == (48.0, 5)
+    assert open_lane.mean_speed_mps == pytest.approx(4.0)
+    assert not open_lane.back_beyond_reach
+    assert open_lane.back_speed_mps is None  # one instant: no growth yet
+
+
+def test_two_slow_vehicles_are_no_queue_and_a_tentative_lane_is_free() -> None:
+    estimator = QueueEstimator(ZONE, FAR_REACH)
+    lanes = estimator.estimate(queue_of(2, 900.0, 1.0), 0.0)
+    assert all(lane.condition is QueueCondition.FREE for lane in lanes)
+
+
+def test_stopped_turns_slow_only_past_the_hysteresis() -> None:
+    rule = ZONE.rules.queue  # stopped below 2.2 m/s, slow again above 2.2 + 2.0
+    estimator = QueueEstimator(ZONE, FAR_REACH)
+
+    def condition(speed_mps: float, t: float) -> QueueCondition:
+        return estimator.estimate(queue_of(4, 900.0, speed_mps), t)[0].condition
+
+    assert condition(1.0, 0.0) is QueueCondition.STOPPED
+    assert condition(rule.stopped_speed_mps + 1.0, 0.1) is QueueCondition.STOPPED  # held
+    assert (
+        condition(rule.stopped_speed_mps + rule.speed_hysteresis_mps + 0.1, 0.2)
+        is QueueCondition.SLOW
+    )
+    assert condition(rule.stopped_speed_mps + 1.0, 0.3) is QueueCondition.SLOW  # not yet stopped
+    assert condition(rule.stopped_speed_mps - 0.1, 0.4) is QueueCondition.STOPPED
+
+
+def test_the_backs_speed_is_negative_while_the_queue_grows_upstream() -> None:
+    estimator = QueueEstimator(ZONE, FAR_REACH)
+    growth_mps = -4.0  # a shock wave at 4 m/s upstream
+    lane = None
+    for k in range(60):  # 6 s at 10 Hz
+        t = 0.1 * k
+        back_m = 950.0 + growth_mps * t
+        lane = estimator.estimate(queue_of(4, back_m, 1.0), t)[0]
+    assert lane is not None and lane.back_speed_mps == pytest.approx(growth_mps, abs=1e-6)
+    # the queue dissolves: the lane frees, its history is gone
+    assert estimator.estimate([], 6.0)[0].back_speed_mps is None
+
+
+def test_a_back_at_the_sensors_reach_is_beyond_it() -> None:
+    estimator = QueueEstimator(ZONE, {0: 880.0, 1: 880.0})
+    lane = estimator.estimate(queue_of(4, 890.0, 1.0), 0.0)[0]
+    assert lane.back_beyond_reach and lane.reach_station_m == 880.0
+    lane = estimator.estimate(queue_of(4, 920.0, 1.0), 0.1)[0]
+    assert not lane.back_beyond_reach
+
+
+def test_the_reach_follows_the_sensors_in_the_site_file() -> None:
+    reach = upstream_reach_m(ZONE)
+    # the default site's mast sees the approach some hundred metres upstream of the taper, and
+    # not the whole 700 m of approach before it
+    for lane in SITE.lanes:
+        assert ZONE.approach_start_m < reach[lane.index] < ZONE.taper_start_m
+    # without the mast's long-range sensors (the LiDAR alone), the reach is shorter
+    lidar_only = SITE.model_copy(update={"sensors": [m for m in SITE.sensors if m.kind == "lidar"]})
+    short = upstream_reach_m(ZoneGeometry.from_site(lidar_only))
+    for lane in SITE.lanes:
+        assert short[lane.index] > reach[lane.index]
+
+
+def test_published_once_a_second_and_at_once_on_a_change() -> None:
+    estimator = QueueEstimator(ZONE, FAR_REACH)
+    published = []
+    for k in range(40):  # 2 s at 20 Hz, a queue from 1.0 s
+        t = 0.05 * k
+        tracks = queue_of(4, 900.0, 1.0) if t >= 1.0 else []
+        state = estimator.update(tracks, t, site=SITE.site_id, source_id="alert-service")
+        if state is not None:
+            published.append((t, state.condition))
+    assert published == [(0.0, QueueCondition.FREE), (1.0, QueueCondition.STOPPED)]
+    state = estimator.update(
+        queue_of(4, 900.0, 1.0), 2.0, site=SITE.site_id, source_id="alert-service"
+    )
+    assert state is not None and state.back_station_m == 900.0
+
+
+def _device(stamp: float, text: str, cause: AlertType | None = AlertType.QUEUE):
+    return RoadsideDeviceState(
+        site=SITE.site_id,
+        source_id="alert-service",
+        stamp=stamp,
+        beacon_on=bool(text),
+        sign_text=text,
+        cause=cause if text else None,
+    )
+
+
+def test_the_sign_holds_a_new_queue_message_until_it_has_held() -> None:
+    hold = SignHold(5.0)
+    assert hold.apply(_device(0.0, "SLOW TRAFFIC 0.3 MI")).sign_text == "SLOW TRAFFIC 0.3 MI"
+    # the distance flickers to 0.2 and back: never shown
+    for t, text in [(1.0, "SLOW TRAFFIC 0.2 MI"), (2.0, "SLOW TRAFFIC 0.3 MI")]:
+        assert hold.apply(_device(t, text)).sign_text == "SLOW TRAFFIC 0.3 MI"
+    # 0.2 for good: shown once it has held 5 s
+    for t in (3.0, 5.0, 7.9):
+        assert hold.apply(_device(t, "SLOW TRAFFIC 0.2 MI")).sign_text == "SLOW TRAFFIC 0.3 MI"
+    assert hold.apply(_device(8.0, "SLOW TRAFFIC 0.2 MI")).sign_text == "SLOW TRAFFIC 0.2 MI"
+    # stopped traffic is at once; back to slow only after the hold
+    assert hold.apply(_device(8.1, STOPPED_TEXT)).sign_text == STOPPED_TEXT
+    assert hold.apply(_device(9.0, "SLOW TRAFFIC 0.2 MI")).sign_text == STOPPED_TEXT
+    # another cause, and a blank, are at once
+    assert hold.apply(_device(9.1, "MERGE RIGHT NOW", AlertType.LATE_MERGE)).sign_text == (
+        "MERGE RIGHT NOW"
+    )
+    assert hold.apply(_device(9.2, "")).sign_text == ""
+
+
+def test_the_sign_says_stopped_traffic_from_the_lanes_queue() -> None:
+    estimator = QueueEstimator(ZONE, FAR_REACH)
+    state = estimator.update(
+        queue_of(4, 900.0, 0.5), 0.0, site=SITE.site_id, source_id="alert-service"
+    )
+    devices = roadside_devices([active(AlertType.QUEUE, 900.0)], ZONE, 0.0, queue_state=state)
+    assert devices.sign_text == STOPPED_TEXT
+    slow = estimator.update(
+        queue_of(4, 900.0, 7.0, first_id=10), 1.0, site=SITE.site_id, source_id="x"
+    )
+    devices = roadside_devices([active(AlertType.QUEUE, 900.0)], ZONE, 1.0, queue_state=slow)
+    assert devices.sign_text == "SLOW TRAFFIC 0.2 MI"  # 400 m past the sign at 500 m
+    beyond = QueueEstimator(ZONE, {0: 890.0, 1: 890.0}).update(
+        queue_of(4, 900.0, 7.0), 0.0, site=SITE.site_id, source_id="x"
+    )
+    devices = roadside_devices([active(AlertType.QUEUE, 900.0)], ZONE, 0.0, queue_state=beyond)
+    assert devices.sign_text == "SLOW TRAFFIC AHEAD"  # no distance beyond the reach
