@@ -1,17 +1,26 @@
 """Each lane's queue as data (wz_alert_service.queues): back, head, length, speed, the back's
 growth, stopped against slow with hysteresis, the back beyond the sensors' reach, the 1 Hz
-cadence; and the sign's queue message held against flicker (devices.SignHold)."""
+cadence; the sign's queue message held against flicker (devices.SignHold); and the alert for
+approaching the back of the queue too fast (rules.queue_approach)."""
 
 from __future__ import annotations
 
 import pytest
 
-from tests.alert_service.helpers import CLOSED_LANE_D, SITE, make_track
+from tests.alert_service.helpers import CLOSED_LANE_D, SITE, batch, make_track, stamps
 from tests.alert_service.test_devices import active
 from wz_alert_service.devices import STOPPED_TEXT, SignHold, roadside_devices
+from wz_alert_service.engine import AlertEngine
 from wz_alert_service.queues import QueueEstimator, upstream_reach_m
+from wz_alert_service.rules import queue_approach
 from wz_alert_service.zone import ZoneGeometry
-from wz_shared.messages import AlertType, QueueCondition, RoadsideDeviceState
+from wz_shared.messages import (
+    AlertSeverity,
+    AlertType,
+    LaneQueue,
+    QueueCondition,
+    RoadsideDeviceState,
+)
 
 ZONE = ZoneGeometry.from_site(SITE)  # approach [300, 1700) m, taper from 1000 m
 FAR_REACH = {0: 300.0, 1: 300.0}  # the sensors see the whole approach
@@ -161,3 +170,83 @@ def test_the_sign_says_stopped_traffic_from_the_lanes_queue() -> None:
     )
     devices = roadside_devices([active(AlertType.QUEUE, 900.0)], ZONE, 0.0, queue_state=beyond)
     assert devices.sign_text == "SLOW TRAFFIC AHEAD"  # no distance beyond the reach
+
+
+# --- approaching the queue too fast ----------------------------------------------------------
+
+
+def stopped_lane(back_m: float = 900.0) -> LaneQueue:
+    return LaneQueue(
+        lane_index=0,
+        condition=QueueCondition.STOPPED,
+        back_station_m=back_m,
+        head_station_m=back_m + 36.0,
+        length_m=36.0,
+        vehicle_count=4,
+        mean_speed_mps=0.0,
+        reach_station_m=300.0,
+    )
+
+
+RULE = SITE.alerts.queue_approach  # 3.4 m/s^2, critical 4.9, stopping 7.5 m behind the back
+SLOW = SITE.alerts.queue.slow_speed_mps
+
+
+@pytest.mark.parametrize(
+    ("gap_m", "expected"),
+    [
+        # a = v^2 / (2 (gap - 7.5)) at 25 m/s
+        (100.0, None),  # 625 / 185 = 3.38
+        (90.0, AlertSeverity.WARNING),  # 625 / 165 = 3.79
+        (70.0, AlertSeverity.CRITICAL),  # 625 / 125 = 5.0
+        (5.0, AlertSeverity.CRITICAL),  # no room left
+    ],
+)
+def test_the_deceleration_needed_to_stop_behind_the_back(
+    gap_m: float, expected: AlertSeverity | None
+) -> None:
+    car = make_track(50, 900.0 - gap_m, 25.0)
+    finding = queue_approach(car, stopped_lane(), ZONE, RULE, slow_speed_mps=SLOW)
+    if expected is None:
+        assert finding is None
+        return
+    assert finding is not None and finding.severity is expected
+    room_m = gap_m - RULE.stop_spacing_m
+    if room_m > 0:
+        assert finding.measured_value == pytest.approx(25.0**2 / (2.0 * room_m))
+    assert finding.evidence["time_to_back_s"] == pytest.approx(max(0.0, room_m) / 25.0)
+    assert finding.evidence["queue_back_station_m"] == 900.0
+
+
+def test_queue_approach_hysteresis_and_what_is_not_approaching() -> None:
+    near_threshold = make_track(50, 900.0 - 100.0, 25.0)  # 3.38 m/s^2: under 3.4, over 3.0
+    assert queue_approach(near_threshold, stopped_lane(), ZONE, RULE, slow_speed_mps=SLOW) is None
+    assert (
+        queue_approach(near_threshold, stopped_lane(), ZONE, RULE, slow_speed_mps=SLOW, active=True)
+        is not None
+    )
+    crawling = make_track(51, 880.0, SLOW - 0.1)  # part of the queue's traffic
+    past = make_track(52, 910.0, 25.0)  # downstream of the back
+    for track in (crawling, past):
+        assert queue_approach(track, stopped_lane(), ZONE, RULE, slow_speed_mps=SLOW) is None
+    free = LaneQueue(lane_index=0, condition=QueueCondition.FREE, reach_station_m=300.0)
+    car = make_track(53, 850.0, 25.0)
+    assert queue_approach(car, free, ZONE, RULE, slow_speed_mps=SLOW) is None
+    assert queue_approach(car, None, ZONE, RULE, slow_speed_mps=SLOW) is None
+
+
+def test_the_engine_alerts_a_car_closing_on_a_stopped_queue() -> None:
+    engine = AlertEngine(SITE, reach_m=FAR_REACH)
+    stopped = queue_of(4, 900.0, 0.0)
+    starts = []
+    for k, t in enumerate(stamps(3.0)):
+        car = make_track(60, 760.0 + 25.0 * t, 25.0)  # 140 m behind the back at t = 0
+        events = engine.update(batch(t, [*stopped, car], k))
+        starts += [
+            e for e in events if e.phase == "start" and e.alert_type is AlertType.QUEUE_APPROACH
+        ]
+    assert len(starts) == 1 and starts[0].track_id == 60
+    # a = 625 / (2 D) >= 3.4 from D <= 91.9 m, i.e. the car within 99.4 m of the back, at
+    # t >= 1.62 s; started after the 0.5 s hold
+    assert starts[0].stamp == pytest.approx(1.62 + RULE.hold_s, abs=0.06)
+    assert starts[0].finding.evidence["time_to_back_s"] > 2.0

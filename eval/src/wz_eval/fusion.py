@@ -97,6 +97,7 @@ from wz_eval.fusion_report import ALERT_TRUTH_RANGE_M, must_show, table_summary
 from wz_eval.lane_counts import lane_volume_report
 from wz_eval.metrics import TruthIndex, in_range, match
 from wz_eval.pipeline import PipelineOptions, PipelineRecord, demand_conditions, run_pipeline
+from wz_eval.queue_report import queue_report
 from wz_eval.scores import SOURCE_GATE_M, SOURCES, Scores
 from wz_fusion_tracker.calibration import BiasMap, LateralBiasCorrector, fit_bias_map
 from wz_fusion_tracker.node import (
@@ -508,6 +509,12 @@ def evaluate(
         "conflicts": conflict_report(alert_batches, alert_truth, plots_dir),
         "fused_by_station": by_station.report(),
         "mast_stretch": by_station.mast_stretch(),
+        # each lane's queue against the same estimate on every simulated vehicle's truth
+        "queue": (
+            queue_report(site, alert_batches, record.truth, *_scored_interval(record))
+            if record.truth
+            else None
+        ),
         "lane_volumes": (
             lane_volume_report(site, alert_batches, record.truth, *_scored_interval(record))
             if record.truth

@@ -407,6 +407,7 @@ def markdown(report: dict[str, Any]) -> str:
             f"{stretch['ratio']:.2f} times the approach's {stretch['approach_rmse_speed_mps']:.2f}"
             f" m/s further upstream.",
         ]
+    lines += _queue_lines(report.get("queue"))
     lines += [
         "",
         "Alerts (the alert service on the fused tracks against the same rules on the "
@@ -430,6 +431,41 @@ def markdown(report: dict[str, Any]) -> str:
     for plot in report.get("plots", []):
         lines.append(f"![{plot}]({plot})")
     return "\n".join(lines) + "\n"
+
+
+def _cell(value: float | None) -> str:
+    return "-" if value is None else f"{value:.2f}"
+
+
+def _queue_lines(queue: dict[str, Any] | None) -> list[str]:
+    """Each lane's queue against the truth (:mod:`wz_eval.queue_report`)."""
+    cell = _cell
+    if not queue or (not queue["true_episodes"] and not queue["false_episodes"]):
+        return []
+    d = queue["definition"]
+    lines = [
+        "",
+        f"Queues (a lane queued while {d['min_vehicles']} of its vehicles under "
+        f"{d['slow_speed_mps']:g} m/s stand within {d['span_m']:g} m; stopped under "
+        f"{d['stopped_speed_mps']:g} m/s; the same estimate on every vehicle's truth, "
+        f"compared each {d['step_s']:g} s):",
+        "",
+        "| lane | reach [m] | queued s true / est. | back error median / p90 [m] | beyond reach s "
+        "(flagged) | episodes found | onset delay median / max [s] | dissolution delay "
+        "median [s] | false episodes |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for lane, row in queue["lanes"].items():
+        back, onset = row["back_error_m"], row["onset_delay_s"]
+        lines.append(
+            f"| {lane} | {row['reach_station_m']:g} | {row['true_queued_s']} / "
+            f"{row['estimated_queued_s']} | {cell(back['median'])} / {cell(back['p90'])} | "
+            f"{row['beyond_reach_s']} ({row['beyond_reach_flagged_s']}) | "
+            f"{row['detected_episodes']} of {row['true_episodes']} | {cell(onset['median'])} / "
+            f"{cell(onset['max'])} | {cell(row['dissolution_delay_s']['median'])} | "
+            f"{row['false_episodes']} |"
+        )
+    return lines
 
 
 def _lane_volume_lines(lane_volumes: dict[str, Any] | None) -> list[str]:

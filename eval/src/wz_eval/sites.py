@@ -83,6 +83,16 @@ def _false_hard_braking(report: dict[str, Any]) -> float | None:
     return float(row["false_positives"]) * FIVE_MINUTES_S / float(report["duration_s"])
 
 
+def _queue(key: str, figure: str) -> Callable[[dict[str, Any]], float | None]:
+    """A figure of the queue's scoring (:mod:`wz_eval.queue_report`); None without a queue."""
+
+    def value(report: dict[str, Any]) -> float | None:
+        number = ((report.get("queue") or {}).get(key) or {}).get(figure)
+        return None if number is None else float(number)
+
+    return value
+
+
 def _fused(key: str) -> Callable[[dict[str, Any]], float | None]:
     def value(report: dict[str, Any]) -> float | None:
         number = report["sources"]["fused"].get(key)
@@ -111,6 +121,10 @@ SITE_TARGETS: tuple[Target, ...] = (
         1.5,
         True,
     ),
+    Target("queue back error median [m]", _queue("back_error_m", "median"), 15.0, True),
+    Target("queue onset delay median [s]", _queue("onset_delay_s", "median"), 10.0, True),
+    Target("queue-approach precision", _alert("queue_approach", "precision"), 0.9, False),
+    Target("queue-approach recall", _alert("queue_approach", "recall"), 0.9, False),
 )
 
 #: The demand sets of ``--traffic``: demand over capacity drawn in this range, and its profile.

@@ -399,6 +399,8 @@ class AlertType(StrEnum):
     SHORT_TTC = "short_ttc"
     INTRUSION = "intrusion"
     QUEUE = "queue"
+    #: Approaching the back of a lane's queue too fast to stop behind it comfortably.
+    QUEUE_APPROACH = "queue_approach"
 
 
 class AlertSeverity(StrEnum):

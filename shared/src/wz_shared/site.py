@@ -430,6 +430,39 @@ class QueueRule(EpisodeTiming):
     cooldown_s: Annotated[float, Field(ge=0.0, le=3600.0)] = 30.0
 
 
+class QueueApproachRule(EpisodeTiming):
+    """Approaching the back of the lane's queue too fast: the deceleration needed to stop
+    behind it.
+
+    For a track upstream of its lane's queue (:mod:`wz_alert_service.queues`) and not slow
+    itself, with the queue's back ``s_b``, the track at ``s`` and speed ``v``, the queue's mean
+    speed ``u``: the room to stop ``D = s_b - s - stop_spacing_m`` and the deceleration needed
+    to come down to ``u`` within it, ``a = (v^2 - u^2) / (2 D)``. Starts at ``a >=
+    comfortable_decel_mps2`` (or ``D <= 0`` while still closing), stays open down to
+    ``comfortable_decel_mps2 - hysteresis_mps2``; critical from ``critical_decel_mps2``. The
+    lead time is ``D / (v - u)``: how long until the track reaches the back at its speed.
+    """
+
+    #: AASHTO's (Green Book) comfortable deceleration, 11.2 ft/s^2, as for the taper.
+    comfortable_decel_mps2: Annotated[float, Field(gt=0.0, le=15.0)] = 3.4
+    #: Half a g: harder than most drivers ever brake on purpose.
+    critical_decel_mps2: Annotated[float, Field(gt=0.0, le=15.0)] = 4.9
+    hysteresis_mps2: Annotated[float, Field(ge=0.0, le=5.0)] = 0.4
+    #: Centre to centre of two stopped cars: a car's length and the 2-3 m drivers leave.
+    stop_spacing_m: Annotated[float, Field(ge=0.0, le=50.0)] = 7.5
+    hold_s: Annotated[float, Field(ge=0.0, le=60.0)] = 0.5
+    clear_s: Annotated[float, Field(ge=0.0, le=600.0)] = 1.0
+
+    @model_validator(mode="after")
+    def _bands(self) -> QueueApproachRule:
+        if self.critical_decel_mps2 < self.comfortable_decel_mps2:
+            raise ValueError(
+                f"queue_approach: critical_decel_mps2 {self.critical_decel_mps2} must be "
+                f"at least comfortable_decel_mps2 {self.comfortable_decel_mps2}"
+            )
+        return self
+
+
 class IntrusionRule(EpisodeTiming):
     """A vehicle in the closed lane inside the buffer or activity area.
 
@@ -461,7 +494,7 @@ class AlertRules(_Strict):
     """Thresholds of the alert service, with units; every rule works in the road frame.
 
     The approach is the station window ``[activity end - approach_length_m, activity end)``:
-    speeding, aggressive approach, hard braking, late merge, short TTC and queue look only
+    speeding, aggressive approach, hard braking, late merge, short TTC, queue and queue approach look only
     there. Each rule has its own :class:`EpisodeTiming` (hold, clear, cool-down).
     """
 
@@ -474,6 +507,7 @@ class AlertRules(_Strict):
     short_ttc: ShortTtcRule = Field(default_factory=ShortTtcRule)
     queue: QueueRule = Field(default_factory=QueueRule)
     intrusion: IntrusionRule = Field(default_factory=IntrusionRule)
+    queue_approach: QueueApproachRule = Field(default_factory=QueueApproachRule)
     devices: DeviceRules = Field(default_factory=DeviceRules)
 
 

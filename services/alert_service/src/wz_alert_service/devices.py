@@ -4,13 +4,14 @@
 station show; the gateway puts it in its WZDx device feed (a flashing beacon and a dynamic
 message sign field device). Pure: no I/O, no clock.
 
-- **Beacon**: flashes while any speeding, aggressive-approach, late-merge, short-TTC or queue
-  episode is open upstream of the end of the activity area (drivers still approaching the
+- **Beacon**: flashes while any speeding, aggressive-approach, late-merge, short-TTC, queue or
+  queue-approach episode is open upstream of the end of the activity area (drivers still approaching the
   work space). Hard braking and intrusion do not light it: they are reported, but a beacon
   upstream tells approaching drivers nothing about them.
 - **Sign**: one message, by priority: a queue, then a late merge (``MERGE RIGHT NOW`` or
   ``LEFT``), then speeding, aggressive approach or a short TTC (``SLOW DOWN``); blank
-  otherwise. A queue reads ``STOPPED TRAFFIC AHEAD`` while a lane's queue is stopped
+  otherwise (a driver approaching the queue too fast before the queue's own episode has
+  opened: ``SLOW DOWN``). A queue reads ``STOPPED TRAFFIC AHEAD`` while a lane's queue is stopped
   (:mod:`wz_alert_service.queues`), otherwise ``SLOW TRAFFIC 0.3 MI``: the distance from the
   sign to the queue's back in tenths of a mile (``SLOW TRAFFIC AHEAD`` when the back is within
   0.05 mi of the sign, behind it, or beyond the sensors' reach, where no distance is measured).
@@ -37,6 +38,7 @@ DEFAULT_SOURCE_ID = "alert-service"
 #: Alert types that light the beacon, in the sign's priority order.
 SIGN_PRIORITY: tuple[AlertType, ...] = (
     AlertType.QUEUE,
+    AlertType.QUEUE_APPROACH,
     AlertType.LATE_MERGE,
     AlertType.SPEEDING,
     AlertType.AGGRESSIVE_APPROACH,

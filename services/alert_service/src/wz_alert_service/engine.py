@@ -54,6 +54,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from wz_alert_service.queues import QueueEstimator
 from wz_alert_service.rules import (
     SEVERITY_RANK,
     Finding,
@@ -63,6 +64,7 @@ from wz_alert_service.rules import (
     late_merge,
     leaders,
     queue,
+    queue_approach,
     short_ttc,
     speed_trend_mps2,
     speed_trend_std_mps2,
@@ -76,6 +78,7 @@ from wz_shared.messages import (
     AlertPhase,
     AlertSeverity,
     AlertType,
+    LaneQueue,
     Track,
     TrackBatch,
     TrackStatus,
@@ -115,12 +118,15 @@ class TrackContext:
     braking_trend_std_mps2 : float or None
         The braking slope's standard deviation from the tracks' own speed variances [m/s^2]
         (:func:`~wz_alert_service.rules.speed_trend_std_mps2`); None: not known.
+    lane_queue : LaneQueue or None
+        The track's lane's queue in this batch (:mod:`wz_alert_service.queues`).
     """
 
     leader: Track | None
     braking_trend_mps2: float | None
     approach_trend_mps2: float | None
     braking_trend_std_mps2: float | None = None
+    lane_queue: LaneQueue | None = None
 
 
 TrackRule = Callable[[Track, TrackContext, ZoneGeometry, AlertRules, bool], Finding | None]
@@ -142,6 +148,9 @@ TRACK_RULES: Mapping[AlertType, TrackRule] = {
     AlertType.LATE_MERGE: lambda t, c, z, r, a: late_merge(t, z, r.late_merge, active=a),
     AlertType.SHORT_TTC: lambda t, c, z, r, a: short_ttc(t, c.leader, z, r.short_ttc, active=a),
     AlertType.INTRUSION: lambda t, c, z, r, a: intrusion(t, z, r.intrusion, active=a),
+    AlertType.QUEUE_APPROACH: lambda t, c, z, r, a: queue_approach(
+        t, c.lane_queue, z, r.queue_approach, slow_speed_mps=r.queue.slow_speed_mps, active=a
+    ),
 }
 
 
@@ -297,6 +306,9 @@ class AlertEngine:
     id_prefix : str
         Put before every episode id (e.g. the service's start time), so ids stay unique across
         restarts; letters, digits and ``_ . : -``.
+    reach_m : dict of int to float, optional
+        Each lane's upstream reach for the queue estimate (default: from the site's sensors,
+        :func:`~wz_alert_service.queues.upstream_reach_m`).
 
     Notes
     -----
@@ -305,7 +317,14 @@ class AlertEngine:
     ``counters.batches_out_of_order`` and ignored (episodes move forward in time only).
     """
 
-    def __init__(self, site: Site, rules: AlertRules | None = None, *, id_prefix: str = "") -> None:
+    def __init__(
+        self,
+        site: Site,
+        rules: AlertRules | None = None,
+        *,
+        id_prefix: str = "",
+        reach_m: dict[int, float] | None = None,
+    ) -> None:
         if id_prefix and not _PREFIX.match(id_prefix):
             raise ValueError(
                 f"id_prefix {id_prefix!r}: use letters, digits and '_', '.', ':', '-' "
@@ -330,6 +349,8 @@ class AlertEngine:
             self.rules.hard_braking.window_s, self.rules.aggressive_approach.trend_window_s
         )
         self._last_stamp_s: float | None = None
+        #: Each lane's queue, estimated from every batch's tracks before the rules run.
+        self.queues = QueueEstimator(self.zone, reach_m)
         #: Episodes opened so far: the number in each episode id (a successor engine of a new
         #: run carries it on, so ids never repeat in one process).
         self.episode_count = 0
@@ -362,6 +383,7 @@ class AlertEngine:
         for track in tracks:
             self._remember_speed(track, t)
         track_leaders = leaders(tracks)
+        self.queues.estimate(tracks, t)
         for track in tracks:
             context = self._context(track, track_leaders.get(track.track_id), t)
             measured = track.status is not TrackStatus.COASTING
@@ -455,6 +477,7 @@ class AlertEngine:
             approach_trend_mps2=self._trend(
                 track.track_id, t, approach.trend_window_s, TREND_MIN_SAMPLES
             ),
+            lane_queue=self.queues.lane(self.queues.lane_of(track)),
         )
 
     # --- the episode state machine --------------------------------------------------------

@@ -39,8 +39,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from wz_alert_service.devices import SignHold, roadside_devices
-from wz_alert_service.engine import AlertEngine, confirmed
-from wz_alert_service.queues import QueueEstimator
+from wz_alert_service.engine import AlertEngine
 from wz_alert_service.recovery import (
     EpisodeRecovery,
     clear_event,
@@ -119,7 +118,6 @@ class AlertCore:
         self._id_prefix = id_prefix
         self.engine = AlertEngine(site, id_prefix=id_prefix)
         self.devices: RoadsideDeviceState | None = None
-        self.queues = QueueEstimator(self.engine.zone)
         #: The lanes' newest queue state (published or not).
         self.queue_state: QueueState | None = None
         self._sign = SignHold(self.engine.rules.devices.message_hold_s)
@@ -147,9 +145,10 @@ class AlertCore:
         """Start the engine again for the new run; its episode numbers go on (ids stay unique).
         The old run's open episodes were cleared first (:meth:`_end_open_episodes`)."""
         count = self.engine.episode_count
-        self.engine = AlertEngine(self.site, id_prefix=self._id_prefix)
+        self.engine = AlertEngine(
+            self.site, id_prefix=self._id_prefix, reach_m=self.engine.queues.reach_m
+        )
         self.engine.episode_count = count
-        self.queues = QueueEstimator(self.engine.zone, self.queues.reach_m)
         self._newest.clear()
         self.runs += 1
         log.warning(
@@ -189,11 +188,8 @@ class AlertCore:
                 self._newest.pop(alert.episode_id, None)
             else:
                 self._newest[alert.episode_id] = alert
-        queue_state = self.queues.update(
-            [t for t in batch.tracks if confirmed(t)],
-            batch.stamp,
-            site=self.site.site_id,
-            source_id=self.source_id,
+        queue_state = self.engine.queues.due(
+            batch.stamp, site=self.site.site_id, source_id=self.source_id
         )
         if queue_state is not None:
             self.queue_state = queue_state

@@ -114,19 +114,43 @@ class QueueEstimator:
         self._lanes = sorted(lane.index for lane in zone.site.lanes)
         self._memory = {index: _LaneMemory() for index in self._lanes}
         self._published_s: float | None = None
+        self._changed = False
+        #: Every lane's queue as of the last :meth:`estimate`.
+        self.lanes: list[LaneQueue] = [
+            LaneQueue(
+                lane_index=i,
+                condition=QueueCondition.FREE,
+                reach_station_m=self.reach_m.get(i, zone.approach_end_m),
+            )
+            for i in self._lanes
+        ]
 
-    def _lane_of(self, track: Track) -> int:
+    def lane(self, index: int) -> LaneQueue | None:
+        """Lane ``index``'s queue as of the last :meth:`estimate` (None: no such lane)."""
+        for lane in self.lanes:
+            if lane.lane_index == index:
+                return lane
+        return None
+
+    def lane_of(self, track: Track) -> int:
+        """The track's lane: the tracker's, or the lane at its offset."""
         if track.lane_index >= 0:
             return track.lane_index
         return int(self.zone.site.lane_index_at(track.offset_m))
 
     def estimate(self, tracks: Iterable[Track], stamp: float) -> list[LaneQueue]:
         """Every lane's queue at ``stamp`` from the batch's confirmed tracks (updates the
-        lanes' memory: conditions and the back's recent stations)."""
+        lanes' memory: conditions and the back's recent stations; kept in :attr:`lanes`)."""
+        before = [self._memory[i].condition for i in self._lanes]
+        self.lanes = self._estimate(tracks, stamp)
+        self._changed |= before != [lane.condition for lane in self.lanes]
+        return self.lanes
+
+    def _estimate(self, tracks: Iterable[Track], stamp: float) -> list[LaneQueue]:
         rule = self.rule
         by_lane: dict[int, list[Track]] = {index: [] for index in self._lanes}
         for track in tracks:
-            lane = self._lane_of(track)
+            lane = self.lane_of(track)
             if lane in by_lane and self.zone.in_approach(track.station_m):
                 by_lane[lane].append(track)
         out: list[LaneQueue] = []
@@ -177,21 +201,23 @@ class QueueEstimator:
             )
         return out
 
-    def update(
-        self, tracks: Iterable[Track], stamp: float, *, site: str, source_id: str
-    ) -> QueueState | None:
-        """The lanes' queue for one batch, or None when it is not due: it is due for the first
-        batch, once :data:`PUBLISH_INTERVAL_S` of stamps have passed since the last one, and
-        whenever a lane's condition changed."""
-        before = [self._memory[i].condition for i in self._lanes]
-        lanes = self.estimate(tracks, stamp)
-        changed = before != [lane.condition for lane in lanes]
+    def due(self, stamp: float, *, site: str, source_id: str) -> QueueState | None:
+        """The lanes' queue of the last :meth:`estimate` as a message, or None when it is not
+        due: it is due for the first batch, once :data:`PUBLISH_INTERVAL_S` of stamps have
+        passed since the last one, and whenever a lane's condition changed since."""
         if (
-            not changed
+            not self._changed
             and self._published_s is not None
             and stamp - self._published_s < PUBLISH_INTERVAL_S
             and stamp >= self._published_s
         ):
             return None
-        self._published_s = stamp
-        return QueueState(site=site, source_id=source_id, stamp=stamp, lanes=lanes)
+        self._published_s, self._changed = stamp, False
+        return QueueState(site=site, source_id=source_id, stamp=stamp, lanes=self.lanes)
+
+    def update(
+        self, tracks: Iterable[Track], stamp: float, *, site: str, source_id: str
+    ) -> QueueState | None:
+        """:meth:`estimate`, then :meth:`due`."""
+        self.estimate(tracks, stamp)
+        return self.due(stamp, site=site, source_id=source_id)

@@ -22,6 +22,7 @@ Rules
 - :func:`short_ttc`: ``TTC = gap / (v_f - v_l)`` to the nearest vehicle ahead in the lane.
 - :func:`queue`: several slow vehicles within a station span; reported at the queue's tail.
 - :func:`intrusion`: in the closed lane inside the buffer or the activity area.
+- :func:`queue_approach`: the deceleration needed to stop behind the back of the lane's queue.
 """
 
 from __future__ import annotations
@@ -35,13 +36,14 @@ import numpy as np
 import numpy.typing as npt
 
 from wz_alert_service.zone import ZoneGeometry
-from wz_shared.messages import AlertSeverity, AlertType, Track
+from wz_shared.messages import AlertSeverity, AlertType, LaneQueue, Track
 from wz_shared.site import (
     MPH_TO_MPS,
     AggressiveApproachRule,
     HardBrakingRule,
     IntrusionRule,
     LateMergeRule,
+    QueueApproachRule,
     QueueRule,
     ShortTtcRule,
     SpeedingRule,
@@ -49,6 +51,8 @@ from wz_shared.site import (
 
 #: Standard gravity [m/s^2].
 G_MPS2 = 9.80665
+#: The deceleration reported for no room left to stop (about 10 g: beyond any brakes).
+NO_ROOM_DECEL_MPS2 = 100.0
 
 SEVERITY_RANK: Mapping[AlertSeverity, int] = {
     AlertSeverity.INFO: 0,
@@ -718,6 +722,93 @@ def queue(
             "slow_speed_mps": slow_mps,
         },
         track=None,
+    )
+
+
+# --- approaching the queue too fast ---------------------------------------------------------
+
+
+def queue_approach(
+    track: Track,
+    lane_queue: LaneQueue | None,
+    zone: ZoneGeometry,
+    rule: QueueApproachRule,
+    *,
+    slow_speed_mps: float,
+    active: bool = False,
+) -> Finding | None:
+    """Closing on the back of the lane's queue faster than a comfortable stop allows.
+
+    With the queue's back ``s_b`` and mean speed ``u``, the track at ``s < s_b`` with speed
+    ``v > u``: ``D = s_b - s - stop_spacing_m`` and ``a = (v^2 - u^2) / (2 D)`` (``a`` taken as
+    infinite for ``D <= 0``: no room left). Holds at ``a >= comfortable_decel_mps2`` (while
+    open: ``comfortable_decel_mps2 - hysteresis_mps2``); critical from
+    ``critical_decel_mps2``. A track slow itself (below ``slow_speed_mps``, the queue's own
+    threshold) is part of the traffic the queue is made of, not approaching it.
+
+    Parameters
+    ----------
+    track : Track
+        ``station_m``, ``speed_mps``.
+    lane_queue : LaneQueue or None
+        The track's lane's queue now (None, or a free lane: nothing to approach).
+    zone : ZoneGeometry
+        The approach.
+    rule : QueueApproachRule
+        Thresholds.
+    slow_speed_mps : float
+        The queue rule's slow speed [m/s].
+    active : bool
+        Whether an episode is open (exit threshold).
+
+    Returns
+    -------
+    Finding or None
+        ``measured_value`` ``a`` [m/s^2] (capped at 100 for no room), ``threshold_value`` the
+        threshold; evidence: the back, the room, the queue's speed and the lead time
+        ``time_to_back_s = D / (v - u)``.
+    """
+    if lane_queue is None or lane_queue.back_station_m is None:
+        return None
+    if not zone.in_approach(track.station_m) or track.speed_mps < slow_speed_mps:
+        return None
+    back_m = lane_queue.back_station_m
+    queue_mps = lane_queue.mean_speed_mps or 0.0
+    closing_mps = track.speed_mps - queue_mps
+    if track.station_m >= back_m or closing_mps <= 0.0:
+        return None
+    room_m = back_m - track.station_m - rule.stop_spacing_m
+    needed = (
+        NO_ROOM_DECEL_MPS2
+        if room_m <= 0.0
+        else min(NO_ROOM_DECEL_MPS2, required_deceleration_mps2(track.speed_mps, queue_mps, room_m))
+    )
+    threshold = rule.comfortable_decel_mps2 - (rule.hysteresis_mps2 if active else 0.0)
+    if needed < threshold:
+        return None
+    critical = needed >= rule.critical_decel_mps2
+    lead_s = max(0.0, room_m) / closing_mps
+    return Finding(
+        alert_type=AlertType.QUEUE_APPROACH,
+        severity=AlertSeverity.CRITICAL if critical else AlertSeverity.WARNING,
+        measured_value=needed,
+        threshold_value=threshold,
+        value_unit="m/s^2",
+        station_m=track.station_m,
+        offset_m=track.offset_m,
+        speed_mps=track.speed_mps,
+        description=(
+            f"approaching the queue too fast: {_mph(track.speed_mps):.0f} mph, "
+            f"{max(0.0, room_m):.0f} m to stop behind the back of lane {lane_queue.lane_index}'s "
+            f"queue ({needed:.1f} m/s^2 needed, {lead_s:.1f} s)"
+        ),
+        evidence={
+            "queue_back_station_m": back_m,
+            "room_m": room_m,
+            "queue_speed_mps": queue_mps,
+            "time_to_back_s": lead_s,
+        },
+        track=track,
     )
 
 

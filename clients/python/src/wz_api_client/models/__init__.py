@@ -65,6 +65,7 @@ from .pose import Pose
 from .pose_correction import PoseCorrection
 from .problem import Problem
 from .problem_field import ProblemField
+from .queue_approach_rule import QueueApproachRule
 from .queue_condition import QueueCondition
 from .queue_page import QueuePage
 from .queue_rule import QueueRule
@@ -154,6 +155,7 @@ __all__ = (
     "PoseCorrection",
     "Problem",
     "ProblemField",
+    "QueueApproachRule",
     "QueueCondition",
     "QueuePage",
     "QueueRule",

@@ -17,6 +17,7 @@ if TYPE_CHECKING:
     from ..models.hard_braking_rule import HardBrakingRule
     from ..models.intrusion_rule import IntrusionRule
     from ..models.late_merge_rule import LateMergeRule
+    from ..models.queue_approach_rule import QueueApproachRule
     from ..models.queue_rule import QueueRule
     from ..models.short_ttc_rule import ShortTtcRule
     from ..models.speeding_rule import SpeedingRule
@@ -30,7 +31,7 @@ class AlertRules:
     """Thresholds of the alert service, with units; every rule works in the road frame.
 
     The approach is the station window ``[activity end - approach_length_m, activity end)``:
-    speeding, aggressive approach, hard braking, late merge, short TTC and queue look only
+    speeding, aggressive approach, hard braking, late merge, short TTC, queue and queue approach look only
     there. Each rule has its own :class:`EpisodeTiming` (hold, clear, cool-down).
 
         Attributes:
@@ -69,6 +70,17 @@ class AlertRules:
                 while a queue is open). One site-level episode, reported at the queue's tail (its most
                 upstream slow vehicle); critical when the tail is ``critical_backup_m`` or more upstream of
                 the taper start.
+            queue_approach (QueueApproachRule | Unset): Approaching the back of the lane's queue too fast: the deceleration
+                needed to stop
+                behind it.
+
+                For a track upstream of its lane's queue (:mod:`wz_alert_service.queues`) and not slow
+                itself, with the queue's back ``s_b``, the track at ``s`` and speed ``v``, the queue's mean
+                speed ``u``: the room to stop ``D = s_b - s - stop_spacing_m`` and the deceleration needed
+                to come down to ``u`` within it, ``a = (v^2 - u^2) / (2 D)``. Starts at ``a >=
+                comfortable_decel_mps2`` (or ``D <= 0`` while still closing), stays open down to
+                ``comfortable_decel_mps2 - hysteresis_mps2``; critical from ``critical_decel_mps2``. The
+                lead time is ``D / (v - u)``: how long until the track reaches the back at its speed.
             short_ttc (ShortTtcRule | Unset): Time to collision with the nearest vehicle ahead in the same lane.
 
                 ``TTC = gap / (v_follower - v_leader)``, ``gap = s_leader - s_follower - (L_f + L_l) / 2``.
@@ -89,6 +101,7 @@ class AlertRules:
     intrusion: IntrusionRule | Unset = UNSET
     late_merge: LateMergeRule | Unset = UNSET
     queue: QueueRule | Unset = UNSET
+    queue_approach: QueueApproachRule | Unset = UNSET
     short_ttc: ShortTtcRule | Unset = UNSET
     speeding: SpeedingRule | Unset = UNSET
 
@@ -98,6 +111,7 @@ class AlertRules:
         from ..models.hard_braking_rule import HardBrakingRule  # noqa: PLC0415
         from ..models.intrusion_rule import IntrusionRule  # noqa: PLC0415
         from ..models.late_merge_rule import LateMergeRule  # noqa: PLC0415
+        from ..models.queue_approach_rule import QueueApproachRule  # noqa: PLC0415
         from ..models.queue_rule import QueueRule  # noqa: PLC0415
         from ..models.short_ttc_rule import ShortTtcRule  # noqa: PLC0415
         from ..models.speeding_rule import SpeedingRule  # noqa: PLC0415
@@ -128,6 +142,10 @@ class AlertRules:
         if not isinstance(self.queue, Unset):
             queue = self.queue.to_dict()
 
+        queue_approach: dict[str, Any] | Unset = UNSET
+        if not isinstance(self.queue_approach, Unset):
+            queue_approach = self.queue_approach.to_dict()
+
         short_ttc: dict[str, Any] | Unset = UNSET
         if not isinstance(self.short_ttc, Unset):
             short_ttc = self.short_ttc.to_dict()
@@ -153,6 +171,8 @@ class AlertRules:
             field_dict["late_merge"] = late_merge
         if queue is not UNSET:
             field_dict["queue"] = queue
+        if queue_approach is not UNSET:
+            field_dict["queue_approach"] = queue_approach
         if short_ttc is not UNSET:
             field_dict["short_ttc"] = short_ttc
         if speeding is not UNSET:
@@ -167,6 +187,7 @@ class AlertRules:
         from ..models.hard_braking_rule import HardBrakingRule  # noqa: PLC0415
         from ..models.intrusion_rule import IntrusionRule  # noqa: PLC0415
         from ..models.late_merge_rule import LateMergeRule  # noqa: PLC0415
+        from ..models.queue_approach_rule import QueueApproachRule  # noqa: PLC0415
         from ..models.queue_rule import QueueRule  # noqa: PLC0415
         from ..models.short_ttc_rule import ShortTtcRule  # noqa: PLC0415
         from ..models.speeding_rule import SpeedingRule  # noqa: PLC0415
@@ -216,6 +237,13 @@ class AlertRules:
         else:
             queue = QueueRule.from_dict(_queue)
 
+        _queue_approach = d.pop("queue_approach", UNSET)
+        queue_approach: QueueApproachRule | Unset
+        if isinstance(_queue_approach, Unset):
+            queue_approach = UNSET
+        else:
+            queue_approach = QueueApproachRule.from_dict(_queue_approach)
+
         _short_ttc = d.pop("short_ttc", UNSET)
         short_ttc: ShortTtcRule | Unset
         if isinstance(_short_ttc, Unset):
@@ -238,6 +266,7 @@ class AlertRules:
             intrusion=intrusion,
             late_merge=late_merge,
             queue=queue,
+            queue_approach=queue_approach,
             short_ttc=short_ttc,
             speeding=speeding,
         )

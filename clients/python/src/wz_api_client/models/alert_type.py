@@ -7,6 +7,7 @@ class AlertType(StrEnum):
     INTRUSION = "intrusion"
     LATE_MERGE = "late_merge"
     QUEUE = "queue"
+    QUEUE_APPROACH = "queue_approach"
     SHORT_TTC = "short_ttc"
     SPEEDING = "speeding"
 

@@ -42,7 +42,7 @@ class Site:
         alerts (AlertRules | Unset): Thresholds of the alert service, with units; every rule works in the road frame.
 
             The approach is the station window ``[activity end - approach_length_m, activity end)``:
-            speeding, aggressive approach, hard braking, late merge, short TTC and queue look only
+            speeding, aggressive approach, hard braking, late merge, short TTC, queue and queue approach look only
             there. Each rule has its own :class:`EpisodeTiming` (hold, clear, cool-down).
         road_direction (SiteRoadDirection | Unset):  Default: SiteRoadDirection.UNKNOWN.
         road_names (list[str] | Unset):

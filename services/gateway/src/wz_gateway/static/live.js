@@ -37,6 +37,7 @@
   };
   const ALERT_NAMES = {
     speeding: "Speeding", aggressive_approach: "Aggressive approach",
+    queue_approach: "Approaching the queue too fast",
     hard_braking: "Hard braking", late_merge: "Late merge",
     short_ttc: "Short time to collision", intrusion: "Work-area intrusion", queue: "Queue",
   };
