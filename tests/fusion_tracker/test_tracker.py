@@ -1179,3 +1179,38 @@ def test_huber_update_limits_an_outlier_and_leaves_ordinary_measurements_alone()
     plain, robust = last_y(0.75, 0.0), last_y(0.75, 2.5)
     assert 0.0 < robust < 0.9 * plain  # 0.145 against 0.180 m
     assert last_y(0.1, 2.5) == pytest.approx(last_y(0.1, 0.0), abs=1e-12)
+
+
+def test_a_vehicle_in_a_stretch_no_sensor_sees_is_coasted_across_and_published() -> None:
+    """A car at 25 m/s crosses a 60 m stretch no sensor sees (the blind cone past a mast:
+    x in [100, 160) m, 2.4 s, past ``max_coast_s``). With the stretch known
+    (``in_sensor_gap``) its track coasts across, published as coasting all the while, and
+    takes the car up again on the far side: one id, never unpublished. Without it the track is
+    deleted in the gap (lost, unpublished), and a car that is simply gone from seen road is
+    deleted after ``max_coast_s`` either way."""
+    cov = np.eye(2) * 1e-4
+
+    def in_gap(x_m: float, y_m: float) -> bool:
+        return 100.0 <= x_m < 160.0
+
+    def run(hook: Callable[[float, float], bool] | None, vanish: bool = False) -> list[set[int]]:
+        tracker = MultiTargetTracker(
+            TrackerSettings(reorder_window_s=0.0), heading_at=lambda x, y: 0.0, in_sensor_gap=hook
+        )
+        published = []
+        for k in range(int(9.0 / 0.05)):
+            t = 0.05 * k
+            x = 25.0 * t
+            seen = not (100.0 <= x < 160.0) and not (vanish and x >= 60.0)
+            tracker.add(LIDAR, t, [Measurement(x_m=x, y_m=0.0, covariance_m2=cov)] if seen else [])
+            published.append({s.track_id for s in tracker.tracks() if s.status != "tentative"})
+        return published
+
+    with_gap = run(in_gap)
+    assert set().union(*with_gap) == {1}
+    assert all(ids == {1} for ids in with_gap[10:])  # confirmed at 0.5 s, never unpublished
+    without = run(None)
+    assert set() in without  # deleted in the gap, unpublished while lost
+    vanished = run(in_gap, vanish=True)  # gone at 60 m, on seen road: deleted after 1.5 s
+    gone_at = next(k for k, ids in enumerate(vanished) if k > 10 and not ids)
+    assert 0.05 * gone_at == pytest.approx(2.4 + SETTINGS.max_coast_s, abs=0.1)

@@ -10,7 +10,9 @@ import pytest
 from wz_shared.coverage import (
     CAR_HEIGHT_M,
     CAR_REFLECTIVITY,
+    SensorGaps,
     SiteCoverage,
+    _bounded_runs,
     camera_covers,
     camera_fog_range_m,
     lidar_beam_rows,
@@ -25,6 +27,7 @@ from wz_shared.site import (
     Pose,
     RadarIntrinsics,
     SensorMount,
+    Site,
     load_site,
 )
 
@@ -134,3 +137,41 @@ def test_on_the_default_site_the_approach_is_covered_and_the_far_downstream_is_n
     fog = SiteCoverage(site, lidar_extinction_per_m=3.912 / 150.0, visibility_m=150.0)
     assert fog(np.full(3, lane_x), down).tolist() == [False, False, False]
     assert fog(np.full(3, lane_x), up).all()
+
+
+SITE = load_site(DEFAULT_SITE_PATH)
+
+
+def _with_lidar_height(site: Site, z_m: float) -> Site:
+    """The site with its LiDAR (and nothing else) raised to ``z_m``."""
+    sensors = [
+        m.model_copy(update={"pose": m.pose.model_copy(update={"z_m": z_m})})
+        if m.kind == "lidar"
+        else m
+        for m in site.sensors
+    ]
+    return site.model_copy(update={"sensors": sensors})
+
+
+def test_sensor_gaps_are_the_unseen_stretches_between_seen_road() -> None:
+    unseen = np.array([1, 1, 0, 0, 1, 1, 1, 0, 1, 1, 1, 1, 1, 0, 1], dtype=bool)
+    # the leading and trailing runs are not bounded; the 5-long run is longer than 4
+    assert _bounded_runs(unseen, 4).tolist() == [
+        False, False, False, False, True, True, True, False,
+        False, False, False, False, False, False, False,
+    ]  # fmt: skip
+    # a mast high above the road: its LiDAR's blind cone is a gap; a low one leaves none
+    high = _with_lidar_height(SITE, 12.0)
+    gaps = SensorGaps(high)
+    spans = gaps.spans_m(0)
+    assert spans, "a 12 m mast leaves an unseen stretch under it"
+    (lidar,) = [m for m in high.sensors if m.kind == "lidar"]
+    mast_station = float(high.road_frame.to_road(lidar.pose.x_m, lidar.pose.y_m)[0])
+    assert any(a - 5.0 <= mast_station <= b + 40.0 for a, b in spans)
+    a, b = spans[0]
+    x, y = high.road_frame.to_site(0.5 * (a + b), high.lanes[0].center_offset_m)
+    assert gaps(float(x), float(y))
+    x, y = high.road_frame.to_site(a - 50.0, high.lanes[0].center_offset_m)
+    assert not gaps(float(x), float(y))
+    x, y = high.road_frame.to_site(0.5 * (a + b), 30.0)  # off the road
+    assert not gaps(float(x), float(y))

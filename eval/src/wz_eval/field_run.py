@@ -55,6 +55,7 @@ from wz_fusion_tracker.settings import TrackerSettings
 from wz_fusion_tracker.tracker import MultiTargetTracker
 from wz_lidar_detector.node import LidarDetector
 from wz_lidar_detector.settings import LidarDetectorSettings
+from wz_shared.coverage import SensorGaps
 from wz_shared.logs import configure_logging
 from wz_shared.messages import DetectionBatch
 
@@ -165,6 +166,7 @@ def fuse(
         heading_at=road_heading_hook(site),
         sensor_positions=sensor_positions(site),
         headings_at=road_headings_hook(site),
+        in_sensor_gap=SensorGaps(site),
     )
     fused: list[Observation] = []
     position = 0

@@ -210,3 +210,72 @@ class SiteCoverage:
         for mount in self.site.sensors:
             out |= self.sensor(mount, x, y)
         return out
+
+
+#: The longest stretch no sensor sees that a tracker bridges by coasting [m]: the blind cone
+#: under a mast (a 64-beam LiDAR 8 m up sees the road from about 20 m out) with the stretch
+#: where the cameras and radars facing upstream have already lost a vehicle.
+MAX_SENSOR_GAP_M = 80.0
+
+
+class SensorGaps:
+    """The stretches of each lane that no sensor sees but that seen road bounds on both sides:
+    where a vehicle is only out of sight for a moment, and a tracker coasts its track across
+    instead of ending it (a vehicle passing under the mast, from the upstream-facing camera and
+    radar to the LiDAR beyond its blind cone).
+
+    Built once from the site file (:class:`SiteCoverage`, clear weather unless ``coverage``
+    says otherwise): along each lane's centre line every ``step_m``, the uncovered runs of at
+    most ``max_gap_m`` with covered road before and after. A point belongs to the lane whose
+    centre is nearest its offset (within half a lane width and a metre).
+    """
+
+    def __init__(
+        self,
+        site: Site,
+        *,
+        max_gap_m: float = MAX_SENSOR_GAP_M,
+        step_m: float = 1.0,
+        coverage: SiteCoverage | None = None,
+    ) -> None:
+        coverage = SiteCoverage(site) if coverage is None else coverage
+        self.site = site
+        self.step_m = step_m
+        frame = site.road_frame
+        self._stations = np.arange(0.0, frame.length_m, step_m)
+        self._offsets = np.array([lane.center_offset_m for lane in site.lanes])
+        self._half_widths = np.array([0.5 * lane.width_m + 1.0 for lane in site.lanes])
+        self.gaps = np.zeros((len(site.lanes), self._stations.size), dtype=bool)
+        for row, offset in enumerate(self._offsets):
+            x, y = frame.to_site(self._stations, np.full(self._stations.shape, offset))
+            seen = coverage(x, y)
+            self.gaps[row] = _bounded_runs(~seen, int(max_gap_m / step_m))
+
+    def spans_m(self, lane_row: int) -> list[tuple[float, float]]:
+        """The gaps of the ``lane_row``-th lane of the site file, as station spans [m]."""
+        mask = self.gaps[lane_row]
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(np.int8), [0]])))
+        return [
+            (float(self._stations[a]), float(self._stations[b - 1]))
+            for a, b in zip(edges[::2], edges[1::2], strict=True)
+        ]
+
+    def __call__(self, x_m: float, y_m: float) -> bool:
+        """Whether a site point lies in a lane's gap."""
+        station, offset = self.site.road_frame.to_road(x_m, y_m)
+        d = np.abs(self._offsets - float(offset))
+        row = int(np.argmin(d))
+        if d[row] > self._half_widths[row]:
+            return False
+        k = round(float(station) / self.step_m)
+        return 0 <= k < self._stations.size and bool(self.gaps[row, k])
+
+
+def _bounded_runs(unseen: Bool, max_len: int) -> Bool:
+    """The runs of True in ``unseen`` of at most ``max_len`` with False on both sides."""
+    out = np.zeros_like(unseen)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], unseen.astype(np.int8), [0]])))
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        if a > 0 and b < unseen.size and b - a <= max_len:
+            out[a:b] = True
+    return out

@@ -6,7 +6,7 @@ for a while for the hand-over, then ended. Functions on the :class:`TrackStore`,
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 
 import numpy as np
 
@@ -106,12 +106,18 @@ def check_confirmation(
         store.counters.tracks_confirmed += 1
 
 
+#: Whether a site point ``(x_m, y_m)`` lies in a stretch no sensor sees between seen ones
+#: (:class:`wz_shared.coverage.SensorGaps`).
+InSensorGap = Callable[[float, float], bool]
+
+
 def expired(
     store: TrackStore,
     settings: TrackerSettings,
     slots: IntP,
     stamp_s: float,
     last_batch_s: Mapping[str, float],
+    in_sensor_gap: InSensorGap | None = None,
 ) -> Bool:
     """Which tracks of ``slots`` are to be deleted at ``stamp_s``, shape (K,).
 
@@ -121,6 +127,11 @@ def expired(
     ``max_outage_coast_s``, so it keeps its id when the sensor comes back. Any, not all:
     a vehicle passing under the mast during a LiDAR outage also leaves the camera's view,
     and the camera still sending frames does not mean it could see the vehicle.
+    A confirmed track whose predicted position lies in a stretch no sensor sees, or did
+    ``max_coast_s`` ago (``in_sensor_gap``: the blind cone under a mast, between the cameras
+    facing upstream and the LiDAR's first beams on the road), coasts up to
+    ``max_gap_coast_s``: the vehicle is out of sight, not gone, and comes back on the far
+    side, where a new track would take a new id.
     ``last_batch_s``: the newest batch stamp processed per sensor."""
     table = store.table
     updated_s = table.updated_s[slots]
@@ -137,11 +148,29 @@ def expired(
         newest_s = np.array([last_batch_s.get(sensor, -math.inf) for sensor in table.sensor_ids])
         silent = newest_s < stamp_s - settings.sensor_silent_after_s
         deleted[outage] = ~(recent & silent[None, :]).any(axis=1)
+    if in_sensor_gap is not None:
+        hidden = np.flatnonzero(deleted & confirmed & (age_s <= settings.max_gap_coast_s))
+        if len(hidden):
+            bank = store.bank
+            x = bank.states(slots[hidden])
+            dt = stamp_s - bank.stamps_s(slots[hidden])
+            # in the gap now, or a coast ago: out of it, it is given the usual coast to be
+            # taken up again on the far side
+            for k, row in enumerate(hidden.tolist()):
+                for t in (dt[k], max(0.0, dt[k] - settings.max_coast_s)):
+                    px, py = x[k, :2] + x[k, 2:] * t
+                    if in_sensor_gap(float(px), float(py)):
+                        deleted[row] = False
+                        break
     return deleted
 
 
 def prune(
-    store: TrackStore, settings: TrackerSettings, stamp_s: float, last_batch_s: Mapping[str, float]
+    store: TrackStore,
+    settings: TrackerSettings,
+    stamp_s: float,
+    last_batch_s: Mapping[str, float],
+    in_sensor_gap: InSensorGap | None = None,
 ) -> None:
     """Delete the tracks expired at ``stamp_s`` (:func:`expired`): a confirmed one is kept as
     lost for ``lost_memory_s`` (its slot too, for the hand-over), then ends and its history is
@@ -151,7 +180,7 @@ def prune(
         gone_tracks: list[Track] = []
     else:
         expired_rows = np.flatnonzero(
-            expired(store, settings, slots, stamp_s, last_batch_s)
+            expired(store, settings, slots, stamp_s, last_batch_s, in_sensor_gap)
         ).tolist()
         gone_tracks = [live[i] for i in expired_rows]
     memory_s = settings.lost_memory_s

@@ -47,6 +47,7 @@ from wz_fusion_tracker.tracker import MultiTargetTracker
 from wz_fusion_tracker.types import Measurement, TrackState
 from wz_shared.arrays import F64
 from wz_shared.codec import encode_json
+from wz_shared.coverage import SensorGaps
 from wz_shared.messages import (
     DetectionBatch,
     Track,
@@ -183,6 +184,8 @@ class FusionCore:
         #: Removes each sensor's calibrated lateral bias: ``bias`` when given (the node's,
         #: read at start), else read from ``settings.bias_map``; None: none removed.
         self.bias = bias if bias is not None else bias_corrector(site, settings)
+        #: The stretches no sensor sees between seen road, where tracks coast across.
+        self.sensor_gaps = SensorGaps(site)
         self.tracker = self._new_tracker(first_track_id=1)
         self._process_noise = process_noise(settings.tracker)
         self._next_output_s: float | None = None
@@ -199,6 +202,7 @@ class FusionCore:
             sensor_positions=sensor_positions(site),
             headings_at=road_headings_hook(site),
             first_track_id=first_track_id,
+            in_sensor_gap=self.sensor_gaps,
         )
 
     def _start_new_run(self, batch: DetectionBatch) -> None:

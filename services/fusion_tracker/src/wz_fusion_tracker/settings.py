@@ -78,6 +78,9 @@ class TrackerSettings(BaseModel):
     #: ... unless a sensor that saw it has gone silent (an outage, not a vehicle gone): then
     #: it coasts up to this [s].
     max_outage_coast_s: float = Field(default=5.0, gt=0.0)
+    #: A confirmed track predicted in a stretch no sensor sees (the mast's blind cone; the
+    #: tracker's ``in_sensor_gap``) coasts up to this [s]: an 80 m gap at 20 m/s.
+    max_gap_coast_s: float = Field(default=4.0, gt=0.0)
     #: A sensor with no batch for this long is silent [s].
     sensor_silent_after_s: float = Field(default=0.5, gt=0.0)
     #: A deleted confirmed track stays *lost* this long [s], so a vehicle hidden behind a truck

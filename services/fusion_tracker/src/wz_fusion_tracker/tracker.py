@@ -94,7 +94,13 @@ from wz_fusion_tracker.identity import (
 )
 from wz_fusion_tracker.imm import IMMStateBank
 from wz_fusion_tracker.kalman import TrackStateBank
-from wz_fusion_tracker.life_cycle import check_confirmation, expired, prune, start_track
+from wz_fusion_tracker.life_cycle import (
+    InSensorGap,
+    check_confirmation,
+    expired,
+    prune,
+    start_track,
+)
 from wz_fusion_tracker.settings import TrackerSettings
 from wz_fusion_tracker.track_table import Track, TrackStore, UpdateRecord
 from wz_fusion_tracker.types import (
@@ -198,6 +204,10 @@ class MultiTargetTracker:
     sensor_positions
         Site position of each sensor ``(x_m, y_m)``; with it, a box completed from the face a
         sensor sees is re-centred with the track's own length (:meth:`_reference_point`).
+    in_sensor_gap
+        Whether a site point ``(x_m, y_m)`` lies in a stretch no sensor sees between seen
+        road (:class:`wz_shared.coverage.SensorGaps`); a confirmed track predicted there
+        coasts up to ``max_gap_coast_s`` instead of ``max_coast_s``. None: no such stretch.
     first_track_id
         The first track's id (a tracker that takes over from another in the same process, for
         a new run, goes on from :attr:`next_track_id` of the old one: ids are never reused).
@@ -210,8 +220,10 @@ class MultiTargetTracker:
         sensor_positions: Mapping[str, tuple[float, float]] | None = None,
         headings_at: HeadingsAt | None = None,
         first_track_id: int = 1,
+        in_sensor_gap: InSensorGap | None = None,
     ) -> None:
         self.settings = settings
+        self._in_sensor_gap = in_sensor_gap
         self._heading_at = heading_at
         self._headings_at = headings_at if heading_at is not None else None
         self._sensor_positions = dict(sensor_positions or {})
@@ -306,7 +318,7 @@ class MultiTargetTracker:
         processed = self._release(horizon_s)
         if self._last_processed_s is None or horizon_s > self._last_processed_s:
             self._last_processed_s = horizon_s
-            prune(self._store, self.settings, horizon_s, self._last_batch_s)
+            prune(self._store, self.settings, horizon_s, self._last_batch_s, self._in_sensor_gap)
         return processed
 
     def _release(self, horizon_s: float) -> int:
@@ -371,7 +383,14 @@ class MultiTargetTracker:
         reference_s = stamp_s if stamp_s is not None else self._last_processed_s
         live, slots = self._store.live()
         if reference_s is not None and live:
-            kept = ~expired(self._store, self.settings, slots, reference_s, self._last_batch_s)
+            kept = ~expired(
+                self._store,
+                self.settings,
+                slots,
+                reference_s,
+                self._last_batch_s,
+                self._in_sensor_gap,
+            )
             if not kept.all():
                 live = [t for t, k in zip(live, kept.tolist(), strict=True) if k]
                 slots = slots[kept]
@@ -459,7 +478,7 @@ class MultiTargetTracker:
         tracks that missed updates with measurements left near them; spawn tentative tracks
         from the measurements still left; then hand-over and duplicate merging.
         """
-        prune(self._store, self.settings, stamp_s, self._last_batch_s)
+        prune(self._store, self.settings, stamp_s, self._last_batch_s, self._in_sensor_gap)
         self._last_processed_s = stamp_s
         self._store.counters.batches_processed += 1
         self._last_batch_s[sensor_id] = stamp_s
