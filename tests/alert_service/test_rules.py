@@ -453,6 +453,34 @@ def test_short_ttc_hysteresis_and_closing_speed() -> None:
     assert short_ttc(follower, None, ZONE, rule) is None
 
 
+def _with_stds(track: Track, position_std_m: float, speed_std_mps: float) -> Track:
+    """The track with an isotropic position and velocity covariance of these stds."""
+    diagonal = [position_std_m**2] * 2 + [speed_std_mps**2] * 2
+    return track.model_copy(update={"covariance": np.diag(diagonal).reshape(-1).tolist()})
+
+
+def test_short_ttc_decides_on_the_ttc_the_covariances_make_sure() -> None:
+    """In a queue: a follower at 4 m/s 2 m behind a leader at 2.5 m/s. Measured, TTC 1.33 s;
+    with speeds known to 0.5 m/s and positions to 0.3 m, 2 sigma leave a closing speed of
+    0.09 m/s: nothing sure, no alert. Known to 0.1 m/s and 0.05 m, the TTC is sure to be
+    (2 + 2 sqrt(2) 0.05) / (1.5 - 2 sqrt(2) 0.1) = 1.73 s: above 1.5 s, no alert either; a
+    faster follower (6 m/s) alerts at that certainty, with the measured TTC in the evidence."""
+    rule = RULES.short_ttc
+    leader, follower = make_track(2, 906.5, 2.5), make_track(1, 900.0, 4.0)
+    assert short_ttc(follower, leader, ZONE, rule) is not None  # as measured, no covariance
+    noisy = (_with_stds(follower, 0.3, 0.5), _with_stds(leader, 0.3, 0.5))
+    assert short_ttc(*noisy, ZONE, rule) is None
+    good = (_with_stds(follower, 0.05, 0.1), _with_stds(leader, 0.05, 0.1))
+    assert short_ttc(*good, ZONE, rule) is None
+    fast = _with_stds(make_track(1, 900.0, 6.0), 0.05, 0.1)
+    finding = short_ttc(fast, good[1], ZONE, rule)
+    sure_s = (2.0 + 2.0 * math.sqrt(2.0) * 0.05) / (3.5 - 2.0 * math.sqrt(2.0) * 0.1)
+    assert finding is not None and finding.measured_value == pytest.approx(sure_s)
+    assert finding.evidence["measured_ttc_s"] == pytest.approx(2.0 / 3.5)
+    as_measured = short_ttc(fast, good[1], ZONE, rule.model_copy(update={"certainty_sigmas": 0}))
+    assert as_measured is not None and as_measured.measured_value == pytest.approx(2.0 / 3.5)
+
+
 def test_leaders_are_the_nearest_ahead_in_the_same_lane() -> None:
     tracks = [
         make_track(1, 900.0, 30.0),

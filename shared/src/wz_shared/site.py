@@ -378,7 +378,9 @@ class ShortTtcRule(EpisodeTiming):
     ``TTC = gap / (v_follower - v_leader)``, ``gap = s_leader - s_follower - (L_f + L_l) / 2``.
     Bins after SSAM (whose default conflict threshold is 1.5 s): info at ``TTC <= max_ttc_s``,
     warning at ``<= warning_ttc_s``, critical at ``<= critical_ttc_s``. Stays open while
-    ``TTC <= max_ttc_s + hysteresis_s``.
+    ``TTC <= max_ttc_s + hysteresis_s``. The TTC decided on is the longest the two tracks'
+    covariances still allow at ``certainty_sigmas``: the gap widened and the closing speed
+    lowered by that many of their standard deviations.
     """
 
     max_ttc_s: Annotated[float, Field(gt=0.0, le=10.0)] = 1.5
@@ -389,6 +391,9 @@ class ShortTtcRule(EpisodeTiming):
     min_closing_speed_mps: Annotated[float, Field(ge=0.0, le=10.0)] = 0.5
     #: Length used when the tracker has no estimate: a passenger car.
     default_vehicle_length_m: Annotated[float, Field(gt=0.0, le=30.0)] = 4.5
+    #: In a queue the gaps are a few metres and the speeds close: a closing speed within the
+    #: tracks' own speed noise is no conflict. 2: 95 % sure, as for hard braking; 0: as measured.
+    certainty_sigmas: Annotated[float, Field(ge=0.0, le=5.0)] = 2.0
     hold_s: Annotated[float, Field(ge=0.0, le=60.0)] = 0.2
     clear_s: Annotated[float, Field(ge=0.0, le=600.0)] = 1.0
     cooldown_s: Annotated[float, Field(ge=0.0, le=3600.0)] = 5.0

@@ -333,15 +333,26 @@ def speed_trend_mps2(
     return float(np.dot(dt, v - v.mean()) / np.dot(dt, dt))
 
 
-def speed_variance(track: Track) -> float:
-    """The variance of the track's speed [m^2/s^2]: its velocity covariance along its
-    direction of travel (half its trace when it stands, its direction unknown)."""
-    P = np.asarray(track.covariance, dtype=np.float64).reshape(4, 4)[2:, 2:]
+def _variance_along(track: Track, block: slice) -> float:
+    """One 2x2 block of the track's covariance (position ``0:2``, velocity ``2:4``) along its
+    direction of travel; half its trace when it stands, its direction unknown."""
+    P = np.asarray(track.covariance, dtype=np.float64).reshape(4, 4)[block, block]
     speed = math.hypot(track.vx_mps, track.vy_mps)
     if speed < 0.5:
         return float(np.trace(P)) / 2.0
     axis = np.array([track.vx_mps, track.vy_mps]) / speed
     return float(axis @ P @ axis)
+
+
+def speed_variance(track: Track) -> float:
+    """The variance of the track's speed [m^2/s^2]: its velocity covariance along its
+    direction of travel."""
+    return _variance_along(track, slice(2, 4))
+
+
+def position_variance_along(track: Track) -> float:
+    """The variance of the track's position along its direction of travel [m^2]."""
+    return _variance_along(track, slice(0, 2))
 
 
 def speed_trend_std_mps2(times_s: npt.ArrayLike, variances: npt.ArrayLike) -> float | None:
@@ -546,11 +557,16 @@ def short_ttc(
 ) -> Finding | None:
     """Time to collision with the vehicle ahead below SSAM-style bins, within the approach.
 
-    ``TTC = gap / (v_f - v_l)`` with ``gap = s_l - s_f - (L_f + L_l) / 2`` [m]; holds for
-    ``v_f - v_l >= min_closing_speed_mps``, ``gap > 0`` and ``TTC <= max_ttc_s`` (while open
-    ``max_ttc_s + hysteresis_s``). Severity: critical ``<= critical_ttc_s``, warning
-    ``<= warning_ttc_s``, info otherwise. Overlapping boxes (``gap <= 0``) are one vehicle
-    tracked twice or a crash; a TTC describes neither, so they do not hold.
+    ``TTC = gap / (v_f - v_l)`` with ``gap = s_l - s_f - (L_f + L_l) / 2`` [m]. What is
+    decided on is the longest TTC the tracks' covariances allow at ``z = certainty_sigmas``:
+    ``TTC_z = (gap + z sigma_gap) / (v_f - v_l - z sigma_closing)``, ``sigma_gap^2`` the sum
+    of the two positions' variances along the road, ``sigma_closing^2`` of their speeds'
+    (:func:`speed_variance`); a speed noise of 0.5 m/s each is a closing speed of 1.4 m/s at
+    2 sigma. Holds for ``v_f - v_l - z sigma_closing >= min_closing_speed_mps``, ``gap > 0``
+    and ``TTC_z <= max_ttc_s`` (while open ``max_ttc_s + hysteresis_s``). Severity by
+    ``TTC_z``: critical ``<= critical_ttc_s``, warning ``<= warning_ttc_s``, info otherwise.
+    Overlapping boxes (``gap <= 0``) are one vehicle tracked twice or a crash; a TTC
+    describes neither, so they do not hold.
 
     Parameters
     ----------
@@ -566,15 +582,23 @@ def short_ttc(
     Returns
     -------
     Finding or None
-        ``measured_value`` the TTC [s], ``threshold_value`` the bound that decided [s].
+        ``measured_value`` ``TTC_z`` [s], ``threshold_value`` the bound that decided [s];
+        the evidence has the TTC as measured.
     """
     if leader is None or not zone.in_approach(follower.station_m):
         return None
+    z = rule.certainty_sigmas
     closing_mps = follower.speed_mps - leader.speed_mps
+    closing_sure_mps = closing_mps - z * math.sqrt(
+        speed_variance(follower) + speed_variance(leader)
+    )
     gap_m = bumper_gap_m(follower, leader, rule.default_vehicle_length_m)
-    if closing_mps < rule.min_closing_speed_mps or gap_m <= 0.0:
+    if closing_sure_mps < rule.min_closing_speed_mps or gap_m <= 0.0:
         return None
-    ttc_s = time_to_collision_s(gap_m, closing_mps)
+    gap_sure_m = gap_m + z * math.sqrt(
+        position_variance_along(follower) + position_variance_along(leader)
+    )
+    ttc_s = time_to_collision_s(gap_sure_m, closing_sure_mps)
     threshold_s = rule.max_ttc_s + (rule.hysteresis_s if active else 0.0)
     if ttc_s > threshold_s:
         return None
@@ -600,6 +624,7 @@ def short_ttc(
         evidence={
             "gap_m": gap_m,
             "closing_speed_mps": closing_mps,
+            "measured_ttc_s": time_to_collision_s(gap_m, closing_mps),
             "leader_track_id": float(leader.track_id),
             "leader_station_m": leader.station_m,
             "leader_speed_mps": leader.speed_mps,

@@ -86,7 +86,9 @@ class AlertRules:
                 ``TTC = gap / (v_follower - v_leader)``, ``gap = s_leader - s_follower - (L_f + L_l) / 2``.
                 Bins after SSAM (whose default conflict threshold is 1.5 s): info at ``TTC <= max_ttc_s``,
                 warning at ``<= warning_ttc_s``, critical at ``<= critical_ttc_s``. Stays open while
-                ``TTC <= max_ttc_s + hysteresis_s``.
+                ``TTC <= max_ttc_s + hysteresis_s``. The TTC decided on is the longest the two tracks'
+                covariances still allow at ``certainty_sigmas``: the gap widened and the closing speed
+                lowered by that many of their standard deviations.
             speeding (SpeedingRule | Unset): Speed over the posted limit at the vehicle's station, within the approach.
 
                 Starts at ``excess >= margin_mph``, stays open while ``excess >= margin_mph -

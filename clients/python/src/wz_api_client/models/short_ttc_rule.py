@@ -21,9 +21,12 @@ class ShortTtcRule:
     ``TTC = gap / (v_follower - v_leader)``, ``gap = s_leader - s_follower - (L_f + L_l) / 2``.
     Bins after SSAM (whose default conflict threshold is 1.5 s): info at ``TTC <= max_ttc_s``,
     warning at ``<= warning_ttc_s``, critical at ``<= critical_ttc_s``. Stays open while
-    ``TTC <= max_ttc_s + hysteresis_s``.
+    ``TTC <= max_ttc_s + hysteresis_s``. The TTC decided on is the longest the two tracks'
+    covariances still allow at ``certainty_sigmas``: the gap widened and the closing speed
+    lowered by that many of their standard deviations.
 
         Attributes:
+            certainty_sigmas (float | Unset):  Default: 2.0.
             clear_s (float | Unset):  Default: 1.0.
             cooldown_s (float | Unset):  Default: 5.0.
             critical_ttc_s (float | Unset):  Default: 0.5.
@@ -36,6 +39,7 @@ class ShortTtcRule:
             warning_ttc_s (float | Unset):  Default: 1.0.
     """
 
+    certainty_sigmas: float | Unset = 2.0
     clear_s: float | Unset = 1.0
     cooldown_s: float | Unset = 5.0
     critical_ttc_s: float | Unset = 0.5
@@ -48,6 +52,8 @@ class ShortTtcRule:
     warning_ttc_s: float | Unset = 1.0
 
     def to_dict(self) -> dict[str, Any]:
+        certainty_sigmas = self.certainty_sigmas
+
         clear_s = self.clear_s
 
         cooldown_s = self.cooldown_s
@@ -71,6 +77,8 @@ class ShortTtcRule:
         field_dict: dict[str, Any] = {}
 
         field_dict.update({})
+        if certainty_sigmas is not UNSET:
+            field_dict["certainty_sigmas"] = certainty_sigmas
         if clear_s is not UNSET:
             field_dict["clear_s"] = clear_s
         if cooldown_s is not UNSET:
@@ -97,6 +105,8 @@ class ShortTtcRule:
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
         d = dict(src_dict)
+        certainty_sigmas = d.pop("certainty_sigmas", UNSET)
+
         clear_s = d.pop("clear_s", UNSET)
 
         cooldown_s = d.pop("cooldown_s", UNSET)
@@ -118,6 +128,7 @@ class ShortTtcRule:
         warning_ttc_s = d.pop("warning_ttc_s", UNSET)
 
         short_ttc_rule = cls(
+            certainty_sigmas=certainty_sigmas,
             clear_s=clear_s,
             cooldown_s=cooldown_s,
             critical_ttc_s=critical_ttc_s,
