@@ -18,6 +18,7 @@ from wz_camera_detector.calibration import (
     CameraSelfCalibration,
     ReferenceObjects,
     SensorCalibrationSettings,
+    _occluded,
 )
 from wz_camera_detector.node import CLASS_SHAPES
 from wz_camera_detector.radar_calibration import RadarSelfCalibration
@@ -330,3 +331,22 @@ def test_once_calibrated_the_applied_pose_follows_the_fits_smoothly() -> None:
     calibration.log.enter(CalibrationState.BUMPED, 20.0, "test")
     calibration.take(first + 2.0 * np.array([1, 0, 0, 0, 0, 0, 0]))
     assert calibration.correction.yaw_deg == pytest.approx(3.0)  # knocked: taken at once
+
+
+def test_a_vehicle_partly_behind_a_nearer_one_is_no_calibration_target() -> None:
+    """In a queue seen from the mast, the car behind another shows its roof above the nearer
+    car's: its box's bottom is hidden and would read as a pitch. Of three predicted boxes, the
+    far one overlapped by the near one is occluded; the near one, and a car beside them whose
+    box touches neither, are not; a box covered by a nearer one by less than 2 % counts as
+    whole."""
+    boxes = np.array(
+        [
+            [100.0, 300.0, 200.0, 380.0],  # near car, 20 m
+            [120.0, 280.0, 190.0, 340.0],  # far car behind it, 40 m: bottom hidden
+            [400.0, 280.0, 470.0, 340.0],  # a car beside, 40 m
+            [198.0, 250.0, 260.0, 302.0],  # farther, its corner under the near car's: 0.2 %
+        ]
+    )
+    xy = np.array([[20.0, 0.0], [40.0, 0.0], [40.0, 3.6], [60.0, 1.0]])
+    hidden = _occluded(boxes, xy, np.zeros(2), np.arange(4))
+    assert hidden.tolist() == [False, True, False, False]

@@ -60,11 +60,12 @@ from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field
 from scipy.optimize import linear_sum_assignment
 
 from wz_camera_detector.world import PIXEL_EDGE_INSET_PX, VehicleShape
-from wz_shared.arrays import F64
+from wz_shared.arrays import F64, Bool
 from wz_shared.camera_geometry import PinholeCamera, camera_at_size
 from wz_shared.messages import (
     CalibrationState,
@@ -290,6 +291,31 @@ class ReferenceObjects:
 # --- the camera -----------------------------------------------------------------------------
 
 
+#: A target box this much covered by a nearer vehicle's box (a share of its area) is occluded.
+OCCLUDED_SHARE = 0.02
+
+
+def _occluded(boxes: F64, xy_m: F64, camera_xy: F64, rows: npt.NDArray[np.int64]) -> Bool:
+    """Which of the vehicles ``rows`` (of the predicted image boxes ``boxes`` (N, 4), at site
+    positions ``xy_m`` (N, 2)) a vehicle nearer the camera covers by more than
+    :data:`OCCLUDED_SHARE` of its box, shape (len(rows),)."""
+    out = np.zeros(len(rows), dtype=bool)
+    finite = np.isfinite(boxes).all(axis=1)
+    distance = np.hypot(*(xy_m - camera_xy).T)
+    for k, i in enumerate(rows.tolist()):
+        box = boxes[i]
+        area = (box[2] - box[0]) * (box[3] - box[1])
+        nearer = finite & (distance < distance[i])
+        if area <= 0.0 or not nearer.any():
+            continue
+        other = boxes[nearer]
+        width = np.minimum(other[:, 2], box[2]) - np.maximum(other[:, 0], box[0])
+        height = np.minimum(other[:, 3], box[3]) - np.maximum(other[:, 1], box[1])
+        covered = np.clip(width, 0.0, None) * np.clip(height, 0.0, None)
+        out[k] = bool((covered > OCCLUDED_SHARE * area).any())
+    return out
+
+
 def _track_ids(snapshot: Snapshot, count: int) -> F64:
     """The snapshot's vehicle numbers (one per object; -1 each when not given)."""
     if len(snapshot.track_id) == count:
@@ -496,6 +522,7 @@ class CameraSelfCalibration:
         offset, the detected box with its shape, and the reference vehicle's number, as
         arrays."""
         predicted = self._predict(params, frames)
+        camera_xy = np.array([self.nominal.x_m + params[3], self.nominal.y_m + params[4]])
         rows: list[F64] = []
         for frame, boxes in zip(frames, predicted, strict=True):
             ok = np.isfinite(boxes).all(axis=1)
@@ -530,6 +557,10 @@ class CameraSelfCalibration:
                 box_shapes, self._target_shapes
             )
             r, c = r[known], c[known]
+            # Whole in the camera's view: a vehicle partly behind a nearer one (a queue seen
+            # from the mast) has its bottom or a side edge hidden, which reads as a pitch.
+            visible = ~_occluded(boxes, frame.reference.xy_m, camera_xy, r)
+            r, c = r[visible], c[visible]
             if not len(r):
                 continue
             ref = frame.reference
