@@ -74,8 +74,10 @@ def test_back_error_onset_dissolution_and_false_queues() -> None:
 
 
 def test_a_back_beyond_the_reach_is_not_scored_as_an_error() -> None:
-    # the default site's sensors reach to about 782 m upstream: a queue from 700 m is beyond
-    truth, batches = story(700.0)
+    # The default site's sensors see a car to about 782 m upstream. The truth is what they can
+    # see (a queue from 770 m: its cars from 788 m), its back at the reach; the tracks' back
+    # is there too: not scored as an error, flagged beyond the reach.
+    truth, batches = story(770.0)
     lane0 = queue_report(SITE, batches, truth, 0.0, 59.9)["lanes"]["0"]
     assert lane0["back_error_m"]["count"] == 0
     assert lane0["beyond_reach_s"] == 28 and lane0["beyond_reach_flagged_s"] == 28

@@ -512,7 +512,7 @@ def evaluate(
         "mast_stretch": by_station.mast_stretch(),
         # each lane's queue against the same estimate on every simulated vehicle's truth
         "queue": (
-            queue_report(site, alert_batches, record.truth, *_scored_interval(record))
+            queue_report(site, alert_batches, record.truth, *_scored_interval(record), in_weather)
             if record.truth
             else None
         ),

@@ -2,8 +2,11 @@
 delays, false queues.
 
 Truth is the same estimate (:class:`wz_alert_service.queues.QueueEstimator`, the site's queue
-thresholds) run on the true kinematics of every simulated vehicle in the approach, as
-:func:`wz_eval.alerts.truth_batches` gives them: a lane is queued while 3 of its vehicles
+thresholds) run on the true kinematics of every simulated vehicle in the approach that stands
+where a sensor of the site can see a car (``coverage``, the weather's; as the tracks are scored:
+a queue that forms past the sensors' sight at the taper is found when its back comes into
+it, and no software on the mast can do better), as :func:`wz_eval.alerts.truth_batches`
+gives them: a lane is queued while 3 of its vehicles
 under 8.9 m/s (20 mph) stand within 100 m, stopped while their mean speed is under 2.2 m/s
 (HCM's queued vehicle: under 5 mph); the back is the most upstream queued vehicle. The
 thresholds are the site file's (``alerts.queue``) and the report states them.
@@ -39,6 +42,7 @@ from wz_alert_service.engine import confirmed
 from wz_alert_service.queues import QueueEstimator, upstream_reach_m
 from wz_alert_service.zone import ZoneGeometry
 from wz_eval.alerts import TruthFrames, truth_batches
+from wz_shared.coverage import SiteCoverage
 from wz_shared.messages import LaneQueue, QueueCondition, TrackBatch
 from wz_shared.site import Site
 
@@ -71,6 +75,19 @@ def lane_series(
         lanes = {lane.lane_index: lane for lane in estimator.lanes} if k else free
         for index in out:
             out[index].append(lanes[index])
+    return out
+
+
+def _seen(truth_frames: TruthFrames, coverage: SiteCoverage) -> TruthFrames:
+    """Each frame's vehicles where a sensor of the site can see a car."""
+    out = []
+    for stamp, vehicles in truth_frames:
+        if not vehicles:
+            out.append((stamp, vehicles))
+            continue
+        xy = np.array([(v.x_m, v.y_m) for v in vehicles])
+        seen = coverage(xy[:, 0], xy[:, 1])
+        out.append((stamp, [v for v, s in zip(vehicles, seen, strict=True) if s]))
     return out
 
 
@@ -109,13 +126,16 @@ def queue_report(
     truth_frames: TruthFrames,
     start_s: float,
     end_s: float,
+    coverage: SiteCoverage | None = None,
 ) -> dict[str, Any]:
     """The lanes' queue estimated from ``track_batches`` against the truth, over
-    ``[start_s, end_s]`` (see the module's notes)."""
+    ``[start_s, end_s]`` (see the module's notes); ``coverage``: where the sensors see a car
+    (default: the site's in clear weather)."""
     zone = ZoneGeometry.from_site(site)
-    reach = upstream_reach_m(zone)
+    coverage = SiteCoverage(site) if coverage is None else coverage
+    reach = upstream_reach_m(zone, coverage)
     times = np.arange(start_s, end_s + 1e-9, STEP_S)
-    truth, _ = truth_batches(site, truth_frames)
+    truth, _ = truth_batches(site, _seen(truth_frames, coverage))
     true_lanes = lane_series(zone, truth, reach, times)
     est_lanes = lane_series(zone, track_batches, reach, times)
     hours = max(end_s - start_s, 1e-9) / 3600.0
