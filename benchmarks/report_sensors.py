@@ -512,6 +512,15 @@ def tracker_cycle(result: dict[str, Any]) -> list[str]:
             ("snapshot, IMM option", "snapshot"),
         ):
             rows.append(row(label, imm[key]))
+    queue = result.get("queue_300")
+    if queue:  # issue 40: a three-lane queue
+        label = (
+            f"all batches, a {queue['lanes']}-lane queue of {queue['vehicles']} "
+            f"({queue['confirmed_tracks_median']:.0f} confirmed tracks, "
+            f"{queue['spacing_m']:g} m apart, creeping at 2 m/s)"
+        )
+        rows.append(row(label, queue["cycle"]))
+        rows.append(row("snapshot, the queue", queue["snapshot"]))
     correction = result.get("bias_map_correction")
     if correction:  # in the node, before the tracker, with a lateral bias map
         for size in (10, 200):

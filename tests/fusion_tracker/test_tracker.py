@@ -1186,16 +1186,21 @@ def test_a_vehicle_in_a_stretch_no_sensor_sees_is_coasted_across_and_published()
     x in [100, 160) m, 2.4 s, past ``max_coast_s``). With the stretch known
     (``in_sensor_gap``) its track coasts across, published as coasting all the while, and
     takes the car up again on the far side: one id, never unpublished. Without it the track is
-    deleted in the gap (lost, unpublished), and a car that is simply gone from seen road is
-    deleted after ``max_coast_s`` either way."""
+    deleted in the gap (lost, unpublished), as with ``coast_sensor_gaps`` off (the default),
+    and a car that is simply gone from seen road is deleted after ``max_coast_s`` either
+    way."""
     cov = np.eye(2) * 1e-4
 
     def in_gap(x_m: float, y_m: float) -> bool:
         return 100.0 <= x_m < 160.0
 
-    def run(hook: Callable[[float, float], bool] | None, vanish: bool = False) -> list[set[int]]:
+    def run(
+        hook: Callable[[float, float], bool] | None, vanish: bool = False, on: bool = True
+    ) -> list[set[int]]:
         tracker = MultiTargetTracker(
-            TrackerSettings(reorder_window_s=0.0), heading_at=lambda x, y: 0.0, in_sensor_gap=hook
+            TrackerSettings(reorder_window_s=0.0, coast_sensor_gaps=on),
+            heading_at=lambda x, y: 0.0,
+            in_sensor_gap=hook,
         )
         published = []
         for k in range(int(9.0 / 0.05)):
@@ -1211,6 +1216,7 @@ def test_a_vehicle_in_a_stretch_no_sensor_sees_is_coasted_across_and_published()
     assert all(ids == {1} for ids in with_gap[10:])  # confirmed at 0.5 s, never unpublished
     without = run(None)
     assert set() in without  # deleted in the gap, unpublished while lost
+    assert set() in run(in_gap, on=False)  # known, but coasting across is off (the default)
     vanished = run(in_gap, vanish=True)  # gone at 60 m, on seen road: deleted after 1.5 s
     gone_at = next(k for k, ids in enumerate(vanished) if k > 10 and not ids)
     assert 0.05 * gone_at == pytest.approx(2.4 + SETTINGS.max_coast_s, abs=0.1)

@@ -78,8 +78,13 @@ class TrackerSettings(BaseModel):
     #: ... unless a sensor that saw it has gone silent (an outage, not a vehicle gone): then
     #: it coasts up to this [s].
     max_outage_coast_s: float = Field(default=5.0, gt=0.0)
-    #: A confirmed track predicted in a stretch no sensor sees (the mast's blind cone; the
-    #: tracker's ``in_sensor_gap``) coasts up to this [s]: an 80 m gap at 20 m/s.
+    #: Coast confirmed tracks across stretches no sensor sees (the mast's blind cone; the
+    #: tracker's ``in_sensor_gap``) instead of ending them. Off: on generated site 9600 it
+    #: made things worse (MOTA 0.862 -> 0.815): a track coasting at a speed 1.5 m/s low and
+    #: with the lateral velocity of the taper's merge drifts a lane over in 1.5 s, and its
+    #: widened gate then takes another vehicle (docs/fusion-tracker.md).
+    coast_sensor_gaps: bool = False
+    #: ... and then up to this [s]: an 80 m gap at 20 m/s.
     max_gap_coast_s: float = Field(default=4.0, gt=0.0)
     #: A sensor with no batch for this long is silent [s].
     sensor_silent_after_s: float = Field(default=0.5, gt=0.0)

@@ -206,8 +206,9 @@ class MultiTargetTracker:
         sensor sees is re-centred with the track's own length (:meth:`_reference_point`).
     in_sensor_gap
         Whether a site point ``(x_m, y_m)`` lies in a stretch no sensor sees between seen
-        road (:class:`wz_shared.coverage.SensorGaps`); a confirmed track predicted there
-        coasts up to ``max_gap_coast_s`` instead of ``max_coast_s``. None: no such stretch.
+        road (:class:`wz_shared.coverage.SensorGaps`); with ``coast_sensor_gaps``, a confirmed
+        track predicted there coasts up to ``max_gap_coast_s`` instead of ``max_coast_s``.
+        None: no such stretch.
     first_track_id
         The first track's id (a tracker that takes over from another in the same process, for
         a new run, goes on from :attr:`next_track_id` of the old one: ids are never reused).
@@ -223,7 +224,7 @@ class MultiTargetTracker:
         in_sensor_gap: InSensorGap | None = None,
     ) -> None:
         self.settings = settings
-        self._in_sensor_gap = in_sensor_gap
+        self._in_sensor_gap = in_sensor_gap if settings.coast_sensor_gaps else None
         self._heading_at = heading_at
         self._headings_at = headings_at if heading_at is not None else None
         self._sensor_positions = dict(sensor_positions or {})
