@@ -36,7 +36,8 @@ from wz_gateway import auth, webhooks
 from wz_gateway.delivery import WebhookDeliverer
 from wz_gateway.key_store import KeyStore
 from wz_gateway.metrics import GatewayMetrics
-from wz_gateway.storage import AlertQuery, PointQuery, Storage
+from wz_gateway.storage import Storage
+from wz_gateway.store_types import AlertQuery, PointQuery
 from wz_gateway.tables import SCHEMA_VERSION
 from wz_gateway.track_ends import TrackFinisher
 from wz_gateway.track_lives import TrackLifeStore

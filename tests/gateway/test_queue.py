@@ -16,7 +16,8 @@ from sqlalchemy import inspect
 from tests.gateway.helpers import READ_KEY, SITE, gateway_settings, live_server, open_storage
 from tests.gateway.test_wzdx import T0_UNIX
 from wz_gateway.settings import GatewaySettings
-from wz_gateway.storage import QueueQuery, Storage
+from wz_gateway.storage import Storage
+from wz_gateway.store_types import QueueQuery
 from wz_gateway.tables import SCHEMA_VERSION
 from wz_shared.messages import LaneQueue, QueueCondition, QueueState
 

@@ -28,7 +28,8 @@ from wz_gateway import wzdx
 from wz_gateway.metrics import GatewayMetrics
 from wz_gateway.node import Writer
 from wz_gateway.sites import Sites, load_sites
-from wz_gateway.storage import AlertQuery, PointQuery, Storage
+from wz_gateway.storage import Storage
+from wz_gateway.store_types import AlertQuery, PointQuery
 from wz_gateway.tables import MIGRATIONS, SCHEMA_VERSION, alerts, schema_version
 from wz_gateway.track_ends import SiteFinishers
 from wz_gateway.track_lives import TrackLifeStore

@@ -23,15 +23,8 @@ from tests.gateway.helpers import (
 )
 from wz_gateway import auth
 from wz_gateway.key_store import KeyStore
-from wz_gateway.storage import (
-    AlertQuery,
-    CursorError,
-    PointQuery,
-    Storage,
-    StorageError,
-    decode_cursor,
-    encode_cursor,
-)
+from wz_gateway.storage import Storage, StorageError
+from wz_gateway.store_types import AlertQuery, CursorError, PointQuery, decode_cursor, encode_cursor
 from wz_gateway.tables import MIGRATIONS, SCHEMA_VERSION, metadata
 from wz_shared.messages import AlertSeverity, AlertType, DetectionBatch, RoadsideDeviceState
 

@@ -27,7 +27,8 @@ from tests.gateway.tracking import car_tracks, filtered_car, merged_batches
 from wz_gateway.metrics import GatewayMetrics
 from wz_gateway.node import Writer
 from wz_gateway.settings import GatewaySettings
-from wz_gateway.storage import PointQuery, Storage
+from wz_gateway.storage import Storage
+from wz_gateway.store_types import PointQuery
 from wz_gateway.tables import MIGRATIONS, schema_version, track_points
 from wz_gateway.track_ends import TrackEnds, TrackFinisher
 from wz_shared.messages import Message, TrackBatch

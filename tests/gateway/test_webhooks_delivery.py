@@ -25,7 +25,8 @@ from wz_gateway import webhooks
 from wz_gateway.delivery import Resolve, WebhookDeliverer, resolve_host
 from wz_gateway.metrics import GatewayMetrics
 from wz_gateway.settings import GatewaySettings
-from wz_gateway.storage import IngestResult, Storage
+from wz_gateway.storage import Storage
+from wz_gateway.store_types import IngestResult
 from wz_gateway.webhook_store import WebhookStore
 from wz_shared.messages import Alert, AlertSeverity, AlertType
 

@@ -22,7 +22,8 @@ from wz_gateway.models import (
     SensorCalibrationStatus,
     SiteCalibration,
 )
-from wz_gateway.storage import LatestRow, Storage
+from wz_gateway.storage import Storage
+from wz_gateway.store_types import LatestRow
 from wz_gateway.traffic import TrafficSummary, find_crossings, summarize
 from wz_gateway.wzdx import (
     CalibrationRules,

@@ -20,7 +20,7 @@ from sqlalchemy.exc import OperationalError
 from starlette.exceptions import HTTPException
 
 from wz_gateway.models import Problem, ProblemField
-from wz_gateway.storage import CursorError
+from wz_gateway.store_types import CursorError
 
 log = logging.getLogger(__name__)
 

@@ -13,7 +13,7 @@ from wz_gateway.api.deps import SITE_RESPONSES, Ctx, Reader, site_of
 from wz_gateway.api.errors import V1_RESPONSES
 from wz_gateway.api.params import MAX_ID, Cursor, Limit, Stamp, check_order, next_link, page_limit
 from wz_gateway.models import AlertPage
-from wz_gateway.storage import AlertQuery
+from wz_gateway.store_types import AlertQuery
 from wz_shared.messages import AlertSeverity, AlertType
 
 router = APIRouter(prefix="/v1", responses=V1_RESPONSES)

@@ -14,7 +14,7 @@ from wz_gateway.api.errors import V1_RESPONSES, InputError
 from wz_gateway.api.params import Cursor, Limit, check_order, next_link, page_limit
 from wz_gateway.conflicts import ConflictSettings, find_conflicts, ssam_csv
 from wz_gateway.models import ConflictPage
-from wz_gateway.storage import CursorError, decode_cursor, encode_cursor
+from wz_gateway.store_types import CursorError, decode_cursor, encode_cursor
 
 #: The longest window one request may analyse [s]: an hour of a busy site is ~10^6 points.
 MAX_WINDOW_S = 3600.0

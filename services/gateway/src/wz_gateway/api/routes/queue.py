@@ -14,7 +14,7 @@ from wz_gateway.api.deps import SITE_RESPONSES, Ctx, Reader, SiteParam
 from wz_gateway.api.errors import V1_RESPONSES
 from wz_gateway.api.params import Cursor, Limit, Stamp, check_order, next_link, page_limit
 from wz_gateway.models import QueuePage, SiteQueue
-from wz_gateway.storage import QueueQuery
+from wz_gateway.store_types import QueueQuery
 from wz_shared.messages import QueueCondition, QueueState
 
 router = APIRouter(prefix="/v1", responses=V1_RESPONSES)

@@ -29,7 +29,7 @@ from wz_gateway.api.params import (
     page_limit,
 )
 from wz_gateway.models import LiveTracks, PointPage, TrackPoint, Trajectory
-from wz_gateway.storage import Page, PointQuery
+from wz_gateway.store_types import Page, PointQuery
 from wz_shared.site import AreaKind
 
 GEOJSON = "application/geo+json"
