@@ -48,6 +48,7 @@ from wz_fusion_tracker.calibration import (
 from wz_fusion_tracker.node import (
     road_heading_hook,
     road_headings_hook,
+    sensor_gaps_hook,
     sensor_positions,
     to_measurements,
 )
@@ -55,7 +56,6 @@ from wz_fusion_tracker.settings import TrackerSettings
 from wz_fusion_tracker.tracker import MultiTargetTracker
 from wz_lidar_detector.node import LidarDetector
 from wz_lidar_detector.settings import LidarDetectorSettings
-from wz_shared.coverage import SensorGaps
 from wz_shared.logs import configure_logging
 from wz_shared.messages import DetectionBatch
 
@@ -161,12 +161,13 @@ def fuse(
     )
     if not batches:
         return []
+    settings = tracker_settings or TrackerSettings()
     tracker = MultiTargetTracker(
-        tracker_settings or TrackerSettings(),
+        settings,
         heading_at=road_heading_hook(site),
         sensor_positions=sensor_positions(site),
         headings_at=road_headings_hook(site),
-        in_sensor_gap=SensorGaps(site),
+        in_sensor_gap=sensor_gaps_hook(site, settings),
     )
     fused: list[Observation] = []
     position = 0

@@ -104,6 +104,7 @@ from wz_fusion_tracker.node import (
     process_noise,
     road_heading_hook,
     road_headings_hook,
+    sensor_gaps_hook,
     sensor_positions,
     to_measurements,
     to_track,
@@ -120,7 +121,7 @@ from wz_fusion_tracker.tracker import MultiTargetTracker
 from wz_fusion_tracker.types import TrackHistory, TrackState
 from wz_lidar_detector.settings import lidar_mount
 from wz_shared.arrays import F64
-from wz_shared.coverage import SensorGaps, SiteCoverage
+from wz_shared.coverage import SiteCoverage
 from wz_shared.messages import DetectionBatch, TrackBatch, VehicleTruth
 from wz_shared.motion import rts_smooth
 from wz_shared.site import Site
@@ -315,7 +316,7 @@ def evaluate(
         heading_at=road_heading_hook(site),
         sensor_positions=sensor_positions(site),
         headings_at=road_headings_hook(site),
-        in_sensor_gap=SensorGaps(site),
+        in_sensor_gap=sensor_gaps_hook(site, options.tracker),
     )
     bias = None if options.bias_map is None else LateralBiasCorrector(site, options.bias_map)
     mot = _MotAccumulator()

@@ -285,8 +285,7 @@ def bump_lines(report: dict[str, Any]) -> list[str]:
 
 
 def markdown(report: dict[str, Any]) -> str:
-    def cell(value: float | None) -> str:
-        return "-" if value is None else f"{value:.2f}"
+    cell = _cell
 
     def ratio(value: float | None) -> str:  # three places: 0.946 must not read as 0.95
         return "-" if value is None else f"{value:.3f}"

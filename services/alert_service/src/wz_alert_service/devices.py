@@ -152,21 +152,21 @@ class SignHold:
         self._candidate: RoadsideDeviceState | None = None
         self._candidate_since_s = 0.0
 
-    def _at_once(self, wanted: RoadsideDeviceState) -> bool:
-        shown = self.shown
+    @staticmethod
+    def _at_once(wanted: RoadsideDeviceState, shown: RoadsideDeviceState) -> bool:
+        """A new cause, a blank, a queue turning to stopped, or the same text: no waiting."""
         return (
-            shown is None
-            or wanted.cause is None
+            wanted.cause is None
             or wanted.cause != shown.cause
+            or wanted.sign_text == shown.sign_text
             or (wanted.sign_text == STOPPED_TEXT and shown.sign_text != STOPPED_TEXT)
         )
 
     def apply(self, wanted: RoadsideDeviceState) -> RoadsideDeviceState:
         """What the devices show, given what the open episodes want at ``wanted.stamp``."""
-        if self._at_once(wanted) or wanted.sign_text == (self.shown and self.shown.sign_text):
+        if self.shown is None or self._at_once(wanted, self.shown):
             self.shown, self._candidate = wanted, None
             return wanted
-        assert self.shown is not None
         if self._candidate is None or self._candidate.sign_text != wanted.sign_text:
             self._candidate, self._candidate_since_s = wanted, wanted.stamp
         if wanted.stamp - self._candidate_since_s >= self.hold_s:

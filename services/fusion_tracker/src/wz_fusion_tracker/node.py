@@ -81,6 +81,12 @@ def road_headings_hook(site: Site) -> Callable[[F64, F64], F64]:
     return headings_at
 
 
+def sensor_gaps_hook(site: Site, settings: TrackerSettings) -> SensorGaps | None:
+    """The tracker's ``in_sensor_gap``: the site's :class:`SensorGaps` when
+    ``coast_sensor_gaps`` is on; None otherwise (nothing to build)."""
+    return SensorGaps(site) if settings.coast_sensor_gaps else None
+
+
 def sensor_positions(site: Site) -> dict[str, tuple[float, float]]:
     """Each sensor's site position ``(x_m, y_m)``, for the tracker's reference points."""
     return {mount.sensor_id: (mount.pose.x_m, mount.pose.y_m) for mount in site.sensors}
@@ -185,7 +191,7 @@ class FusionCore:
         #: read at start), else read from ``settings.bias_map``; None: none removed.
         self.bias = bias if bias is not None else bias_corrector(site, settings)
         #: The stretches no sensor sees between seen road, where tracks coast across.
-        self.sensor_gaps = SensorGaps(site)
+        self.sensor_gaps = sensor_gaps_hook(site, settings.tracker)
         self.tracker = self._new_tracker(first_track_id=1)
         self._process_noise = process_noise(settings.tracker)
         self._next_output_s: float | None = None
