@@ -2,11 +2,12 @@
 
 Usage::
 
-    python -m tests.cli.bus_tools publish ENDPOINT MIX N   # MIX: "mix" or "tap"
+    python -m tests.cli.bus_tools publish ENDPOINT MIX N   # MIX: "mix" or "tap"; until SIGTERM
     python -m tests.cli.bus_tools stream ENDPOINT HZ        # until SIGTERM
     python -m tests.cli.bus_tools count ENDPOINT TOTAL TIMEOUT_S
 
-``publish`` waits until every one of its publishers matches a subscriber, publishes, exits 0.
+``publish`` waits until every one of its publishers matches a subscriber, publishes, prints
+``published``, and keeps its session open until SIGTERM (then exits 0).
 ``count`` subscribes (FIFO) to ``wz/**``, prints ``ready``, then counts samples per key until
 TOTAL arrived or TIMEOUT_S passed of silence, and prints one JSON line:
 ``{key: [count, sha256 of the payloads in arrival order]}``.
@@ -108,6 +109,7 @@ def _settings(endpoint: str) -> BusSettings:
 
 
 def publish(endpoint: str, samples: list[Sample]) -> None:
+    stop = stop_on_signals()
     with Bus.open(_settings(endpoint), site=SITE, service="publisher") as bus:
         publishers = {}
         for key, cls, _payload in samples:
@@ -118,6 +120,11 @@ def publish(endpoint: str, samples: list[Sample]) -> None:
                 raise SystemExit(f"no subscriber for {publisher.key} within 20 s")
         for key, _cls, payload in samples:
             publishers[key].put_bytes(payload)
+        # Closing a session right after its last put may drop what is still queued for the
+        # router: the session stays open until the test has seen everything arrive.
+        sys.stdout.write("published\n")
+        sys.stdout.flush()
+        stop.wait()
 
 
 def stream(endpoint: str, rate_hz: float) -> None:

@@ -130,6 +130,12 @@ def start_wz_up(
     )
 
 
+def published(publisher: subprocess.Popen[str]) -> None:
+    """Wait for a ``bus_tools publish`` helper's ``published`` line."""
+    assert publisher.stdout is not None
+    assert publisher.stdout.readline() == "published\n", publisher.poll()
+
+
 @contextlib.contextmanager
 def running(process: P) -> Iterator[P]:
     """Make sure ``process`` is gone when the block ends, whatever happened in it."""

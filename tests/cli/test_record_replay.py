@@ -13,7 +13,15 @@ from pathlib import Path
 from mcap.reader import make_reader
 
 from tests.cli.bus_tools import Sample, expected_counts, mix
-from tests.cli.procs import run_wz, running, start_helper, start_wz, wait_for
+from tests.cli.procs import (
+    published,
+    run_wz,
+    running,
+    start_helper,
+    start_wz,
+    stop_process,
+    wait_for,
+)
 from wz_cli.recording import RecordingWriter
 
 COUNT = 20  # of every message type and frame kind
@@ -42,13 +50,15 @@ def _replayed(stdout: str) -> int:
 
 def _record_mix(router: str, out: Path) -> list[Sample]:
     samples = mix(COUNT)
-    with running(
-        start_wz("record", str(out), "--max-messages", str(len(samples)), "--connect", router)
-    ) as recorder:
-        # The publisher starts once its publishers match the recorder's subscription.
-        with running(start_helper(router, "publish", "mix", str(COUNT))) as publisher:
-            assert publisher.wait(60) == 0
+    recording = ("record", str(out), "--max-messages", str(len(samples)), "--connect", router)
+    # The publisher starts once its publishers match the recorder's subscription.
+    with (
+        running(start_wz(*recording)) as recorder,
+        running(start_helper(router, "publish", "mix", str(COUNT))) as publisher,
+    ):
+        published(publisher)
         stdout, stderr = recorder.communicate(timeout=60)
+        assert stop_process(publisher) == 0
     assert recorder.returncode == 0, stderr
     keys = len({key for key, _cls, _payload in samples})
     assert f"recorded {len(samples)} message(s) on {keys} key(s)" in stdout

@@ -3,27 +3,28 @@
 from __future__ import annotations
 
 from tests.cli.bus_tools import JUNK_KEY, tap_mix
-from tests.cli.procs import free_port, run_wz, running, start_helper, start_wz
+from tests.cli.procs import (
+    free_port,
+    published,
+    run_wz,
+    running,
+    start_helper,
+    start_wz,
+    stop_process,
+)
 
 
 def test_tap_shows_messages_frames_and_invalid_payloads(router: str) -> None:
     expected = len(tap_mix())
-    with running(
-        start_wz(
-            "tap",
-            "wz/test-site/**",
-            "--count",
-            str(expected),
-            "--timeout",
-            "60",
-            "--connect",
-            router,
-        )
-    ) as tap:
-        # The publisher waits until its publishers match the tap's subscription.
-        with running(start_helper(router, "publish", "tap")) as publisher:
-            assert publisher.wait(60) == 0
+    tapping = ("tap", "wz/test-site/**", "--count", str(expected), "--timeout", "60")
+    # The publisher waits until its publishers match the tap's subscription.
+    with (
+        running(start_wz(*tapping, "--connect", router)) as tap,
+        running(start_helper(router, "publish", "tap")) as publisher,
+    ):
+        published(publisher)
         out, err = tap.communicate(timeout=60)
+        assert stop_process(publisher) == 0
     assert tap.returncode == 0, err
     lines = out.splitlines()
     assert len(lines) == expected, out
