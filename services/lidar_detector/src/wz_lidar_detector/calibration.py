@@ -13,8 +13,10 @@ with ``R = Rz(yaw) Ry(-pitch) Rx(roll)`` (:meth:`wz_shared.site.Pose.rotation`):
 
 so ``pitch = asin(n_x)``, ``roll = atan2(n_y, n_z)``, and the sensor's height is its distance
 to the plane (yaw does not change ``n``). :func:`fit_ground` fits the plane to the returns
-within a band of the road's height under the current pose (least squares, trimmed twice), once
-a second; the estimate is the median of the last fits.
+within a band of the road's height under the current pose (least squares, narrowed to a
+15 cm band and refitted until the returns in it settle), once a second, over the ranges where
+the sensor's beams meet the road (:func:`ground_range`); the estimate is the median of the
+last fits.
 
 **The vehicles on their lanes** give yaw and the position across the road. Vehicles drive on
 their lanes' centres, on average: a detected centre's offset from the nearest lane centre is,
@@ -57,7 +59,7 @@ from wz_shared.self_calibration import (
     corrected_pose,
     robust_std,
 )
-from wz_shared.site import Pose, SensorMount, Site
+from wz_shared.site import LidarIntrinsics, Pose, SensorMount, Site
 
 
 class LidarCalibrationSettings(BaseModel):
@@ -72,7 +74,8 @@ class LidarCalibrationSettings(BaseModel):
     #: Ground fits the pitch, roll and height are the median of.
     ground_fits: int = Field(default=15, ge=1, le=600)
     #: Returns within this horizontal range are the ground fit's [m]: near enough for the beams
-    #: to be dense, far from the mast's own trailer.
+    #: to be dense, far from the mast's own trailer. A LiDAR whose lowest beam meets the road
+    #: farther out gets the range its beams see (:func:`ground_range`).
     ground_range_m: tuple[float, float] = (4.0, 40.0)
     #: A fit's band around the ground under the current pose [m], the first and the last.
     ground_band_m: tuple[float, float] = (1.5, 0.15)
@@ -128,6 +131,29 @@ def tilt_from_normal(normal: F64) -> tuple[float, float]:
     return pitch, roll
 
 
+def ground_range(mount: SensorMount, range_m: tuple[float, float]) -> tuple[float, float]:
+    """The horizontal range [m] whose ground the LiDAR on ``mount`` sees, from ``range_m`` on.
+
+    A sensor ``h`` above the road whose lowest beam points ``d`` below the horizon first
+    meets the road at ``h / tan d``; nearer, its returns are the mast's trailer and nothing of
+    the road. A narrow-field LiDAR high on a mast (a 64-beam unit of +-11 deg at 7.6 m meets
+    the road at 38 m) would leave ``range_m``'s 40 m a sliver of its lowest ring, where a
+    plane is barely conditioned: the range becomes from 0.9 of that distance to twice it (the
+    lower half of its beams' depression). The sensor's own tilt can lower or raise the beam
+    by up to ``hypot(pitch, roll)``; the near edge takes the steepest.
+    """
+    intrinsics = mount.intrinsics
+    if not isinstance(intrinsics, LidarIntrinsics) or mount.pose.z_m <= 0.0:
+        return range_m
+    tilt = math.hypot(mount.pose.pitch_deg, mount.pose.roll_deg)
+    steepest = -intrinsics.vertical_min_deg + tilt
+    if steepest <= 1.0 or steepest >= 89.0:
+        return range_m
+    first = mount.pose.z_m / math.tan(math.radians(steepest))
+    low, high = range_m
+    return max(low, 0.9 * first), max(high, 2.0 * first)
+
+
 def fit_ground(
     xyz_sensor: npt.NDArray[np.floating],
     pose: Pose,
@@ -140,8 +166,9 @@ def fit_ground(
 
     Returns within ``range_m`` (horizontal) whose height under ``pose`` is within the first of
     ``band_m`` of ``ground_z_m`` are fitted by least squares; the fit is repeated with the
-    returns within a narrower band of the plane found (a vehicle's roof or a drum leaves it);
-    None when fewer than 200 returns remain.
+    returns within narrower bands of the plane found, down to the last of ``band_m``, until
+    they stop changing (a vehicle's roof or a drum leaves it); None when fewer than 200
+    returns remain.
     """
     xyz = np.asarray(xyz_sensor).reshape(-1, 3)
     if len(xyz) > 4 * max_points:  # a sweep's 100 000+ returns: every k-th is plenty
@@ -156,21 +183,27 @@ def fit_ground(
     chosen = xyz[np.abs(site_z - ground_z_m) <= band_m[0]]
     if len(chosen) < 200:
         return None
-    bands = np.geomspace(band_m[0], band_m[1], 3)[1:]
-    normal = np.zeros(3)
-    offset = 0.0
-    for band in (*bands, band_m[1]):
-        centroid = chosen.mean(axis=0)
-        _, _, vt = np.linalg.svd(chosen - centroid, full_matrices=False)
-        normal = vt[2]
-        if normal[2] < 0:
-            normal = -normal
-        offset = -float(normal @ centroid)
-        distance = np.abs(xyz @ normal + offset)
-        keep = xyz[distance <= band]
-        if len(keep) < 200:
+
+    def plane(points: F64) -> tuple[F64, float]:
+        centroid = points.mean(axis=0)
+        _, _, vt = np.linalg.svd(points - centroid, full_matrices=False)
+        normal = vt[2] if vt[2][2] >= 0 else -vt[2]
+        return normal, -float(normal @ centroid)
+
+    normal, offset = plane(chosen)
+    # Narrowed to the last band, then refitted until the returns within it stop changing: the
+    # first fits lean towards what stands on the road (drums, barriers, a trailer), and a
+    # tilted sensor's road leaves the band at the range's far end until the plane has turned.
+    inside = np.zeros(len(xyz), dtype=bool)
+    for band in (*np.geomspace(band_m[0], band_m[1], 3)[1:], *[band_m[1]] * 8):
+        keep = np.abs(xyz @ normal + offset) <= band
+        if keep.sum() < 200:
             break
-        chosen = keep
+        if band == band_m[1] and np.array_equal(keep, inside):
+            break
+        inside = keep
+        chosen = xyz[keep]
+        normal, offset = plane(chosen)
     residual = chosen @ normal + offset
     pitch, roll = tilt_from_normal(normal)
     return GroundFit(
@@ -338,6 +371,7 @@ class LidarSelfCalibration:
             settings if site is not None else settings.model_copy(update={"enabled": False})
         )
         self.log = CalibrationLog(site_id, mount.sensor_id, "lidar")
+        self.ground_range_m = ground_range(mount, settings.ground_range_m)
         self._ground: deque[GroundFit] = deque(maxlen=settings.ground_fits)
         self._next_ground_s = -math.inf
         self._next_lane_s = -math.inf
@@ -366,7 +400,7 @@ class LidarSelfCalibration:
         fit = fit_ground(
             xyz_sensor[np.isfinite(xyz_sensor).all(axis=1)],
             self.pose,
-            range_m=self.settings.ground_range_m,
+            range_m=self.ground_range_m,
             band_m=self.settings.ground_band_m,
         )
         if fit is None:
