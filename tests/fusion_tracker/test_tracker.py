@@ -1220,3 +1220,43 @@ def test_a_vehicle_in_a_stretch_no_sensor_sees_is_coasted_across_and_published()
     vanished = run(in_gap, vanish=True)  # gone at 60 m, on seen road: deleted after 1.5 s
     gone_at = next(k for k, ids in enumerate(vanished) if k > 10 and not ids)
     assert 0.05 * gone_at == pytest.approx(2.4 + SETTINGS.max_coast_s, abs=0.1)
+
+
+def test_a_vehicle_unseen_across_a_blind_stretch_gets_its_id_back() -> None:
+    """A car at 11 m/s crosses a 52 m stretch no sensor sees (x in [100, 152) m): 4.7 s
+    unseen, past ``max_coast_s`` and ``lost_memory_s`` together. On the far side the LiDAR
+    first sees its front, then more of it as it comes into view: the box centre starts half a
+    car length ahead and takes 0.5 s to come back, so the young track starts slow (as on
+    generated site 9600, 5 m/s for 12). With the stretch known (``in_sensor_gap``), the lost
+    track is remembered while it is predicted in it and the young one hands the car back:
+    one id, unpublished while unseen. Unknown, or with either part off, the car comes back
+    under a second id."""
+    cov = np.eye(2) * 0.01
+    speed, half_length = 11.0, 2.25
+
+    def in_gap(x_m: float, y_m: float) -> bool:
+        return 100.0 <= x_m < 152.0
+
+    def run(hook: Callable[[float, float], bool] | None, **settings: float) -> set[int]:
+        tracker = MultiTargetTracker(
+            TrackerSettings(reorder_window_s=0.0, **settings),  # type: ignore[arg-type]
+            heading_at=lambda x, y: 0.0,
+            in_sensor_gap=hook,
+        )
+        ids: set[int] = set()
+        for k in range(int(20.0 / 0.05)):
+            t = 0.05 * k
+            x = speed * t
+            measured = []
+            if not 100.0 <= x < 152.0:
+                coming_into_view = max(0.0, 1.0 - (x - 152.0) / (0.5 * speed))
+                ahead = half_length * coming_into_view if x >= 152.0 else 0.0
+                measured = [Measurement(x_m=x + ahead, y_m=0.0, covariance_m2=cov)]
+            tracker.add(LIDAR, t, measured)
+            ids |= {s.track_id for s in tracker.tracks() if s.status != "tentative"}
+        return ids
+
+    assert run(in_gap) == {1}
+    assert len(run(None)) == 2
+    assert len(run(in_gap, max_gap_memory_s=0.0)) == 2
+    assert len(run(in_gap, hand_over_velocity_sigmas=0.0)) == 2

@@ -22,6 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from wz_fusion_tracker.association import gnn_assign
+from wz_fusion_tracker.life_cycle import InSensorGap
 from wz_fusion_tracker.settings import TrackerSettings
 from wz_fusion_tracker.track_table import Track, TrackStore
 from wz_shared.arrays import F64, IntP
@@ -114,14 +115,20 @@ def reacquisitions(
     return new_pairs, P_wide
 
 
-def hand_over(store: TrackStore, settings: TrackerSettings, stamp_s: float) -> None:
+def hand_over(
+    store: TrackStore,
+    settings: TrackerSettings,
+    stamp_s: float,
+    in_sensor_gap: InSensorGap | None = None,
+) -> None:
     """Hand-over: a young track that took up a coasting track's vehicle hands its state to it.
 
     When a vehicle comes back too far from its coasting track's prediction even for
     :func:`reacquisitions` (a long gap, a bent velocity), a new track starts on it. While the
     new track is young (``hand_over_age_s``) and the old one coasts just behind or ahead of
     it (``hand_over_along_m``, ``hand_over_across_m``: the same lane or the next), moving alike
-    (or at a speed and place that braking or speeding up while unseen explains:
+    (within the young track's own velocity uncertainty: :func:`_velocity_within_std`; or at a
+    speed and place that braking or speeding up while unseen explains:
     :func:`_speed_change_explains`), and the new one was updated after the old one last
     was, they are one vehicle: the old track takes the new one's state and the new one
     goes, so the vehicle keeps its identity.
@@ -161,7 +168,8 @@ def hand_over(store: TrackStore, settings: TrackerSettings, stamp_s: float) -> N
     # the road. A vehicle that changed lanes while hidden (a late merge behind a truck)
     # comes back one lane over from where it was last seen, not from that drift.
     along_speed = np.einsum("ok,ok->o", x_old[:, 2:], u)
-    x_old[:, :2] += u * (along_speed * (stamp_s - store.bank.stamps_s(old_slots)))[:, None]
+    last_s = store.bank.stamps_s(old_slots)
+    x_old[:, :2] += u * (along_speed * (stamp_s - last_s))[:, None]
     x_new = store.bank.states(new_slots)
     x_new[:, :2] += x_new[:, 2:] * (stamp_s - store.bank.stamps_s(new_slots))[:, None]
     d = x_new[None, :, :2] - x_old[:, None, :2]  # (old, new, 2)
@@ -173,6 +181,26 @@ def hand_over(store: TrackStore, settings: TrackerSettings, stamp_s: float) -> N
     # update is older than the coasting track's is not its vehicle come back.
     took_up = table.updated_s[new_slots][None, :] > table.updated_s[old_slots][:, None]
     alike = dv < settings.merge_velocity_difference_mps
+    near = (
+        (np.abs(along) <= settings.hand_over_along_m)
+        & (np.abs(across) <= settings.hand_over_across_m)
+        & took_up
+    )
+    if settings.hand_over_velocity_sigmas > 0.0 and in_sensor_gap is not None:
+        # Across a stretch no sensor sees, the vehicle comes back where a sensor first sees
+        # it, and its young track's speed is what the first boxes of a vehicle coming into
+        # view say: the tolerance grows with that track's own velocity std. Not elsewhere:
+        # in a queue, a young track of unknown speed beside a truck is any of its neighbours.
+        loose = near & ~alike
+        loose &= _velocity_within_std(
+            settings, u, x_old[:, 2:], x_new[:, 2:], store.bank.covariances(new_slots)
+        )
+        rows = np.flatnonzero(loose.any(axis=1))
+        if len(rows):
+            crossed = _crossed_gap(
+                x_old[rows], u[rows], along_speed[rows], stamp_s - last_s[rows], in_sensor_gap
+            )
+            alike[rows] |= loose[rows] & crossed[:, None]
     if settings.hand_over_max_accel_mps2 > 0.0:
         alike |= _speed_change_explains(
             settings,
@@ -184,12 +212,7 @@ def hand_over(store: TrackStore, settings: TrackerSettings, stamp_s: float) -> N
     sliding = np.abs(x_old[:, 3] * u[:, 0] - x_old[:, 2] * u[:, 1]) > (
         settings.hand_over_max_lateral_speed_mps
     )
-    allowed = (
-        (np.abs(along) <= settings.hand_over_along_m)
-        & (np.abs(across) <= settings.hand_over_across_m)
-        & alike
-        & took_up
-    )
+    allowed = near & alike
     if not allowed.any():
         return
     resumed = False
@@ -250,6 +273,43 @@ def retire(store: TrackStore, track: Track, successor_id: int) -> bool:
         k: (successor_id if v == track.track_id else v) for k, v in store.local_ids.items()
     }
     return True
+
+
+def _crossed_gap(
+    x_now: F64, u: F64, along_speed: F64, unseen_s: F64, in_sensor_gap: InSensorGap
+) -> npt.NDArray[np.bool_]:
+    """Which old tracks, predicted along the road to ``x_now`` (O, 4) over ``unseen_s`` (O,),
+    passed through a sensor gap while unseen (checked at five points of the way)."""
+    crossed = np.zeros(len(x_now), dtype=bool)
+    for k in range(len(x_now)):
+        for share in (0.0, 0.25, 0.5, 0.75, 1.0):
+            back = (1.0 - share) * along_speed[k] * unseen_s[k]
+            px, py = x_now[k, :2] - u[k] * back
+            if in_sensor_gap(float(px), float(py)):
+                crossed[k] = True
+                break
+    return crossed
+
+
+def _velocity_within_std(
+    settings: TrackerSettings, u: F64, v_old: F64, v_new: F64, P_new: F64
+) -> npt.NDArray[np.bool_]:
+    """Which (old, new) pairs' velocities agree, shape (O, N): along and across the old
+    track's heading ``u`` (O, 2), within ``merge_velocity_difference_mps`` plus
+    ``hand_over_velocity_sigmas`` of the young track's own velocity std (``P_new`` (N, 4, 4)).
+    A young track's velocity is what its first few boxes say, and its covariance says how
+    little that is."""
+    w = np.stack([-u[:, 1], u[:, 0]], axis=1)  # across, to the left
+    dv = v_new[None, :, :] - v_old[:, None, :]  # (O, N, 2)
+    velocity_cov = P_new[:, 2:, 2:]
+    tolerance = settings.merge_velocity_difference_mps
+    k = settings.hand_over_velocity_sigmas
+    within = np.ones(dv.shape[:2], dtype=bool)
+    for axis in (u, w):
+        difference = np.einsum("onk,ok->on", dv, axis)
+        variance = np.einsum("ok,nkl,ol->on", axis, velocity_cov, axis)
+        within &= np.abs(difference) <= tolerance + k * np.sqrt(np.maximum(variance, 0.0))
+    return within
 
 
 def _speed_change_explains(

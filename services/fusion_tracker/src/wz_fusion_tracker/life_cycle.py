@@ -148,7 +148,7 @@ def expired(
         newest_s = np.array([last_batch_s.get(sensor, -math.inf) for sensor in table.sensor_ids])
         silent = newest_s < stamp_s - settings.sensor_silent_after_s
         deleted[outage] = ~(recent & silent[None, :]).any(axis=1)
-    if in_sensor_gap is not None:
+    if in_sensor_gap is not None and settings.coast_sensor_gaps:
         hidden = np.flatnonzero(deleted & confirmed & (age_s <= settings.max_gap_coast_s))
         if len(hidden):
             bank = store.bank
@@ -163,6 +163,39 @@ def expired(
                         deleted[row] = False
                         break
     return deleted
+
+
+def _out_of_gaps(
+    store: TrackStore,
+    settings: TrackerSettings,
+    tracks: list[Track],
+    stamp_s: float,
+    in_sensor_gap: InSensorGap,
+) -> list[Track]:
+    """Of lost ``tracks`` past ``lost_memory_s``, those to forget at ``stamp_s``: all but the
+    ones predicted in a sensor gap now or ``lost_memory_s`` ago (and lost for less than
+    ``max_gap_memory_s``). Predicted as the hand-over does: along the track's heading at its
+    speed along it, its offset across held."""
+    table = store.table
+    slots = np.array([t.slot for t in tracks], dtype=np.intp)
+    x = store.bank.states(slots)
+    heading = table.heading_rad[slots]
+    heading = np.where(np.isfinite(heading), heading, np.arctan2(x[:, 3], x[:, 2]))
+    u = np.stack([np.cos(heading), np.sin(heading)], axis=1)
+    along_speed = np.einsum("tk,tk->t", x[:, 2:], u)
+    dt = stamp_s - store.bank.stamps_s(slots)
+    forget = []
+    for k, track in enumerate(tracks):
+        if stamp_s - track.lost_s > settings.max_gap_memory_s:
+            forget.append(track)
+            continue
+        for t in (dt[k], max(0.0, dt[k] - settings.lost_memory_s)):
+            px, py = x[k, :2] + u[k] * along_speed[k] * t
+            if in_sensor_gap(float(px), float(py)):
+                break
+        else:
+            forget.append(track)
+    return forget
 
 
 def prune(
@@ -197,7 +230,10 @@ def prune(
         if confirmed[track.slot]:
             store.finished.append(track.to_history())
     if store.lost:
-        for track in [t for t in store.lost.values() if stamp_s - t.lost_s > memory_s]:
+        forgotten = [t for t in store.lost.values() if stamp_s - t.lost_s > memory_s]
+        if forgotten and in_sensor_gap is not None and settings.max_gap_memory_s > 0.0:
+            forgotten = _out_of_gaps(store, settings, forgotten, stamp_s, in_sensor_gap)
+        for track in forgotten:
             del store.lost[track.track_id]
             store.bank.remove(track.slot)
             store.finished.append(track.to_history())

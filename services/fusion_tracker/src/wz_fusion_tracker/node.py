@@ -83,8 +83,10 @@ def road_headings_hook(site: Site) -> Callable[[F64, F64], F64]:
 
 def sensor_gaps_hook(site: Site, settings: TrackerSettings) -> SensorGaps | None:
     """The tracker's ``in_sensor_gap``: the site's :class:`SensorGaps` when
-    ``coast_sensor_gaps`` is on; None otherwise (nothing to build)."""
-    return SensorGaps(site) if settings.coast_sensor_gaps else None
+    ``coast_sensor_gaps`` or ``max_gap_memory_s`` uses it; None otherwise (nothing to
+    build)."""
+    wanted = settings.coast_sensor_gaps or settings.max_gap_memory_s > 0.0
+    return SensorGaps(site) if wanted else None
 
 
 def sensor_positions(site: Site) -> dict[str, tuple[float, float]]:

@@ -91,6 +91,13 @@ class TrackerSettings(BaseModel):
     #: A deleted confirmed track stays *lost* this long [s], so a vehicle hidden behind a truck
     #: gets its old id back (see ``hand_over_*``); 0 turns it off.
     lost_memory_s: float = Field(default=3.0, ge=0.0)
+    #: A lost track predicted (along the road, at its speed) in a stretch no sensor sees is
+    #: remembered until ``lost_memory_s`` after it has left it, up to this long in all [s]
+    #: (the tracker's ``in_sensor_gap``): a vehicle crossing a mast's blind cone, 50 m at
+    #: 11 m/s, is out of sight 4.5 s and comes back as a young track the hand-over gives its
+    #: old id. 0 turns it off. Not published and taking no measurement, unlike
+    #: ``coast_sensor_gaps``.
+    max_gap_memory_s: float = Field(default=12.0, ge=0.0)
 
     # --- timing ---
     #: Batches are held this long behind the newest stamp seen, then processed in order [s].
@@ -118,6 +125,11 @@ class TrackerSettings(BaseModel):
     hand_over_max_accel_mps2: float = Field(default=4.0, ge=0.0)
     #: Slack on that kinematic test's displacement [m].
     hand_over_kinematic_slack_m: float = Field(default=2.0, ge=0.0)
+    #: A young track's velocity is alike within ``merge_velocity_difference_mps`` plus this
+    #: many of its own standard deviations: a LiDAR that first sees a vehicle coming out of
+    #: its blind cone places the part it sees, growing, and the young track starts at half
+    #: the speed, with a std of 5-6 m/s that says so. 0: the tolerance alone.
+    hand_over_velocity_sigmas: float = Field(default=2.0, ge=0.0)
     #: An old track sliding across the road faster than this follows no vehicle and is not
     #: handed one [m/s]: a lane change peaks at 1-1.5 m/s.
     hand_over_max_lateral_speed_mps: float = Field(default=2.5, gt=0.0)

@@ -207,7 +207,8 @@ class MultiTargetTracker:
     in_sensor_gap
         Whether a site point ``(x_m, y_m)`` lies in a stretch no sensor sees between seen
         road (:class:`wz_shared.coverage.SensorGaps`); with ``coast_sensor_gaps``, a confirmed
-        track predicted there coasts up to ``max_gap_coast_s`` instead of ``max_coast_s``.
+        track predicted there coasts up to ``max_gap_coast_s`` instead of ``max_coast_s``;
+        a lost one predicted there is remembered up to ``max_gap_memory_s``.
         None: no such stretch.
     first_track_id
         The first track's id (a tracker that takes over from another in the same process, for
@@ -224,7 +225,7 @@ class MultiTargetTracker:
         in_sensor_gap: InSensorGap | None = None,
     ) -> None:
         self.settings = settings
-        self._in_sensor_gap = in_sensor_gap if settings.coast_sensor_gaps else None
+        self._in_sensor_gap = in_sensor_gap
         self._heading_at = heading_at
         self._headings_at = headings_at if heading_at is not None else None
         self._sensor_positions = dict(sensor_positions or {})
@@ -663,7 +664,7 @@ class MultiTargetTracker:
         if len(store.tracks) + len(store.lost) < 2 or stamp_s < self._next_identity_s:
             return
         self._next_identity_s = stamp_s + IDENTITY_PERIOD_S
-        hand_over(store, self.settings, stamp_s)
+        hand_over(store, self.settings, stamp_s, self._in_sensor_gap)
         merge_duplicates(store, self.settings, stamp_s)
 
     def _reference_point(
