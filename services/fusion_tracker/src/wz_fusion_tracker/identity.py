@@ -22,7 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from wz_fusion_tracker.association import gnn_assign
-from wz_fusion_tracker.life_cycle import InSensorGap
+from wz_fusion_tracker.life_cycle import InSensorGap, along_road
 from wz_fusion_tracker.settings import TrackerSettings
 from wz_fusion_tracker.track_table import Track, TrackStore
 from wz_shared.arrays import F64, IntP
@@ -159,15 +159,7 @@ def hand_over(
         return
     old_slots = np.array([t.slot for t in coasting], dtype=np.intp)
     new_slots = np.array([t.slot for t in young], dtype=np.intp)
-    x_old = store.bank.states(old_slots)
-    heading = table.heading_rad[old_slots]
-    heading = np.where(np.isfinite(heading), heading, np.arctan2(x_old[:, 3], x_old[:, 2]))
-    u = np.stack([np.cos(heading), np.sin(heading)], axis=1)
-    # The old track is predicted along the road (its speed along the road's heading, its
-    # offset across held): seconds of a lateral velocity carried forward would put it off
-    # the road. A vehicle that changed lanes while hidden (a late merge behind a truck)
-    # comes back one lane over from where it was last seen, not from that drift.
-    along_speed = np.einsum("ok,ok->o", x_old[:, 2:], u)
+    x_old, u, along_speed = along_road(store, old_slots)  # predicted along the road
     last_s = store.bank.stamps_s(old_slots)
     x_old[:, :2] += u * (along_speed * (stamp_s - last_s))[:, None]
     x_new = store.bank.states(new_slots)

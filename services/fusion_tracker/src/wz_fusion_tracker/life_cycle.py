@@ -165,6 +165,20 @@ def expired(
     return deleted
 
 
+def along_road(store: TrackStore, slots: IntP) -> tuple[F64, F64, F64]:
+    """What an unseen track is predicted with: its state (K, 4), its heading's unit vector
+    (K, 2) (the road's where known, else its velocity's) and its speed along it (K,).
+    Predicted along the road (that speed along that heading, the offset across held):
+    seconds of a lateral velocity carried forward would put it off the road, and a vehicle
+    that changed lanes while hidden (a late merge behind a truck) comes back one lane over
+    from where it was last seen, not from that drift."""
+    x = store.bank.states(slots)
+    heading = store.table.heading_rad[slots]
+    heading = np.where(np.isfinite(heading), heading, np.arctan2(x[:, 3], x[:, 2]))
+    u = np.stack([np.cos(heading), np.sin(heading)], axis=1)
+    return x, u, np.einsum("tk,tk->t", x[:, 2:], u)
+
+
 def _out_of_gaps(
     store: TrackStore,
     settings: TrackerSettings,
@@ -176,13 +190,8 @@ def _out_of_gaps(
     ones predicted in a sensor gap now or ``lost_memory_s`` ago (and lost for less than
     ``max_gap_memory_s``). Predicted as the hand-over does: along the track's heading at its
     speed along it, its offset across held."""
-    table = store.table
     slots = np.array([t.slot for t in tracks], dtype=np.intp)
-    x = store.bank.states(slots)
-    heading = table.heading_rad[slots]
-    heading = np.where(np.isfinite(heading), heading, np.arctan2(x[:, 3], x[:, 2]))
-    u = np.stack([np.cos(heading), np.sin(heading)], axis=1)
-    along_speed = np.einsum("tk,tk->t", x[:, 2:], u)
+    x, u, along_speed = along_road(store, slots)
     dt = stamp_s - store.bank.stamps_s(slots)
     forget = []
     for k, track in enumerate(tracks):
