@@ -113,6 +113,10 @@ class TrackerSettings(BaseModel):
     reacquire_along_m: float = Field(default=4.0, ge=0.0)
     #: Re-acquisition reach across the track [m]: the next lane is 3.6 m over.
     reacquire_across_m: float = Field(default=1.2, ge=0.0)
+    #: A re-acquired track's velocity may change by what this acceleration over its gap
+    #: explains, not more [m/s^2] (a car's hardest braking on a dry road); 0: by the whole
+    #: innovation over the gap.
+    reacquire_max_accel_mps2: float = Field(default=8.0, ge=0.0)
     #: A track younger than this may hand its vehicle back to a coasting or lost one [s];
     #: 0 turns it off.
     hand_over_age_s: float = Field(default=1.0, ge=0.0)
