@@ -190,20 +190,33 @@ def fit_ground(
         normal = vt[2] if vt[2][2] >= 0 else -vt[2]
         return normal, -float(normal @ centroid)
 
-    normal, offset = plane(chosen)
-    # Narrowed to the last band, then refitted until the returns within it stop changing: the
-    # first fits lean towards what stands on the road (drums, barriers, a trailer), and a
-    # tilted sensor's road leaves the band at the range's far end until the plane has turned.
-    inside = np.zeros(len(xyz), dtype=bool)
-    for band in (*np.geomspace(band_m[0], band_m[1], 3)[1:], *[band_m[1]] * 8):
-        keep = np.abs(xyz @ normal + offset) <= band
-        if keep.sum() < 200:
-            break
-        if band == band_m[1] and np.array_equal(keep, inside):
-            break
-        inside = keep
-        chosen = xyz[keep]
-        normal, offset = plane(chosen)
+    def settle(normal: F64, offset: float, bands: list[float]) -> tuple[F64, float, F64]:
+        """Narrowed to the last band, then refitted until the returns within it stop
+        changing: (normal, offset, the returns fitted)."""
+        chosen = np.zeros((0, 3))
+        inside = np.zeros(len(xyz), dtype=bool)
+        for band in (*bands, *[band_m[1]] * 8):
+            keep = np.abs(xyz @ normal + offset) <= band
+            if keep.sum() < 200:
+                break
+            if band == band_m[1] and np.array_equal(keep, inside):
+                break
+            inside = keep
+            chosen = xyz[keep]
+            normal, offset = plane(chosen)
+        return normal, offset, chosen
+
+    # Two starts, and the plane more returns lie on wins (the road is the largest surface):
+    # the fit to the wide band's returns leans towards what stands on the road (drums,
+    # barriers, a trailer, a truck's roof in traffic) and a tilted sensor's road leaves the
+    # band at the range's far end until the plane has turned; the plane the pose gives
+    # starts on the road, if the pose is near.
+    wide = settle(*plane(chosen), list(np.geomspace(band_m[0], band_m[1], 3)[1:]))
+    up = pose.rotation()[2]  # the site's up in the sensor frame
+    posed = settle(up, pose.z_m - ground_z_m, [float(np.sqrt(band_m[0] * band_m[1]))])
+    normal, offset, chosen = max((wide, posed), key=lambda fit: len(fit[2]))
+    if len(chosen) < 200:
+        return None
     residual = chosen @ normal + offset
     pitch, roll = tilt_from_normal(normal)
     return GroundFit(
