@@ -131,6 +131,12 @@ def test_calibrations_over_the_bus_to_http_the_feed_the_stream_and_the_page(
                 "document.body && document.body.dataset.calibrationBumped === '1'",
                 "the knocked camera on the page",
             )
+            # The silent radar's row comes with the site's sensor list, a fetch of its own
+            # that may land after the stream's first events.
+            page.wait_for(
+                "document.querySelectorAll('#calibration-rows tr').length === 3",
+                "a row for each of the site's sensors",
+            )
             shown = page.evaluate("window.wzLive.calibration")
             assert shown[CAMERA] == {
                 "kind": "camera",
