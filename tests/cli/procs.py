@@ -130,10 +130,18 @@ def start_wz_up(
     )
 
 
-def published(publisher: subprocess.Popen[str]) -> None:
-    """Wait for a ``bus_tools publish`` helper's ``published`` line."""
-    assert publisher.stdout is not None
-    assert publisher.stdout.readline() == "published\n", publisher.poll()
+def communicate_while_publishing(
+    process: subprocess.Popen[str], endpoint: str, *mix: str
+) -> tuple[str, str]:
+    """``process``'s (stdout, stderr) once it has ended, a ``bus_tools publish`` helper
+    publishing ``mix`` meanwhile; the helper's session stays open until ``process`` has
+    ended (it has seen everything arrive), then the helper is stopped and must exit 0."""
+    with running(start_helper(endpoint, "publish", *mix)) as publisher:
+        assert publisher.stdout is not None
+        assert publisher.stdout.readline() == "published\n", publisher.poll()
+        out, err = process.communicate(timeout=60)
+        assert stop_process(publisher) == 0
+    return out, err
 
 
 @contextlib.contextmanager

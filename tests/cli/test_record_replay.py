@@ -14,12 +14,11 @@ from mcap.reader import make_reader
 
 from tests.cli.bus_tools import Sample, expected_counts, mix
 from tests.cli.procs import (
-    published,
+    communicate_while_publishing,
     run_wz,
     running,
     start_helper,
     start_wz,
-    stop_process,
     wait_for,
 )
 from wz_cli.recording import RecordingWriter
@@ -52,13 +51,8 @@ def _record_mix(router: str, out: Path) -> list[Sample]:
     samples = mix(COUNT)
     recording = ("record", str(out), "--max-messages", str(len(samples)), "--connect", router)
     # The publisher starts once its publishers match the recorder's subscription.
-    with (
-        running(start_wz(*recording)) as recorder,
-        running(start_helper(router, "publish", "mix", str(COUNT))) as publisher,
-    ):
-        published(publisher)
-        stdout, stderr = recorder.communicate(timeout=60)
-        assert stop_process(publisher) == 0
+    with running(start_wz(*recording)) as recorder:
+        stdout, stderr = communicate_while_publishing(recorder, router, "mix", str(COUNT))
     assert recorder.returncode == 0, stderr
     keys = len({key for key, _cls, _payload in samples})
     assert f"recorded {len(samples)} message(s) on {keys} key(s)" in stdout

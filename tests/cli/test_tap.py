@@ -4,13 +4,11 @@ from __future__ import annotations
 
 from tests.cli.bus_tools import JUNK_KEY, tap_mix
 from tests.cli.procs import (
+    communicate_while_publishing,
     free_port,
-    published,
     run_wz,
     running,
-    start_helper,
     start_wz,
-    stop_process,
 )
 
 
@@ -18,13 +16,8 @@ def test_tap_shows_messages_frames_and_invalid_payloads(router: str) -> None:
     expected = len(tap_mix())
     tapping = ("tap", "wz/test-site/**", "--count", str(expected), "--timeout", "60")
     # The publisher waits until its publishers match the tap's subscription.
-    with (
-        running(start_wz(*tapping, "--connect", router)) as tap,
-        running(start_helper(router, "publish", "tap")) as publisher,
-    ):
-        published(publisher)
-        out, err = tap.communicate(timeout=60)
-        assert stop_process(publisher) == 0
+    with running(start_wz(*tapping, "--connect", router)) as tap:
+        out, err = communicate_while_publishing(tap, router, "tap")
     assert tap.returncode == 0, err
     lines = out.splitlines()
     assert len(lines) == expected, out

@@ -22,7 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from wz_fusion_tracker.association import gnn_assign
-from wz_fusion_tracker.life_cycle import InSensorGap, along_road
+from wz_fusion_tracker.life_cycle import InSensorGap, along_road, in_gap_at
 from wz_fusion_tracker.settings import TrackerSettings
 from wz_fusion_tracker.track_table import Track, TrackStore
 from wz_shared.arrays import F64, IntP
@@ -193,15 +193,18 @@ def hand_over(
         # view say: the tolerance grows with that track's own velocity std. Not elsewhere:
         # in a queue, a young track of unknown speed beside a truck is any of its neighbours.
         loose = near & ~alike
-        loose &= _velocity_within_std(
-            settings, u, x_old[:, 2:], x_new[:, 2:], store.bank.covariances(new_slots)
-        )
-        rows = np.flatnonzero(loose.any(axis=1))
-        if len(rows):
-            crossed = _crossed_gap(
-                x_old[rows], u[rows], along_speed[rows], stamp_s - last_s[rows], in_sensor_gap
+        if loose.any():
+            loose &= _velocity_within_std(
+                settings, u, x_old[:, 2:], x_new[:, 2:], store.bank.covariances(new_slots)
             )
-            alike[rows] |= loose[rows] & crossed[:, None]
+        for row in np.flatnonzero(loose.any(axis=1)).tolist():
+            # its predicted way, from its last update to now, checked at five points
+            unseen_s = stamp_s - float(last_s[row])
+            velocity = u[row] * along_speed[row]
+            start = x_old[row, :2] - velocity * unseen_s
+            shares = (0.0, 0.25, 0.5, 0.75, 1.0)
+            if in_gap_at(start, velocity, [unseen_s * f for f in shares], in_sensor_gap):
+                alike[row] |= loose[row]
     if settings.hand_over_max_accel_mps2 > 0.0:
         alike |= _speed_change_explains(
             settings,
@@ -274,22 +277,6 @@ def retire(store: TrackStore, track: Track, successor_id: int) -> bool:
         k: (successor_id if v == track.track_id else v) for k, v in store.local_ids.items()
     }
     return True
-
-
-def _crossed_gap(
-    x_now: F64, u: F64, along_speed: F64, unseen_s: F64, in_sensor_gap: InSensorGap
-) -> npt.NDArray[np.bool_]:
-    """Which old tracks, predicted along the road to ``x_now`` (O, 4) over ``unseen_s`` (O,),
-    passed through a sensor gap while unseen (checked at five points of the way)."""
-    crossed = np.zeros(len(x_now), dtype=bool)
-    for k in range(len(x_now)):
-        for share in (0.0, 0.25, 0.5, 0.75, 1.0):
-            back = (1.0 - share) * along_speed[k] * unseen_s[k]
-            px, py = x_now[k, :2] - u[k] * back
-            if in_sensor_gap(float(px), float(py)):
-                crossed[k] = True
-                break
-    return crossed
 
 
 def _velocity_within_std(

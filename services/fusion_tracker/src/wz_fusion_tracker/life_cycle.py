@@ -6,7 +6,7 @@ for a while for the hand-over, then ended. Functions on the :class:`TrackStore`,
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 
 import numpy as np
 
@@ -157,12 +157,22 @@ def expired(
             # in the gap now, or a coast ago: out of it, it is given the usual coast to be
             # taken up again on the far side
             for k, row in enumerate(hidden.tolist()):
-                for t in (dt[k], max(0.0, dt[k] - settings.max_coast_s)):
-                    px, py = x[k, :2] + x[k, 2:] * t
-                    if in_sensor_gap(float(px), float(py)):
-                        deleted[row] = False
-                        break
+                times = (dt[k], max(0.0, dt[k] - settings.max_coast_s))
+                if in_gap_at(x[k, :2], x[k, 2:], times, in_sensor_gap):
+                    deleted[row] = False
     return deleted
+
+
+def in_gap_at(
+    start_xy: F64, velocity_xy: F64, times_s: Iterable[float], in_sensor_gap: InSensorGap
+) -> bool:
+    """Whether a track at ``start_xy`` moving at ``velocity_xy`` lies in a sensor gap at any
+    of ``times_s`` after (a road-frame lookup each: a few points, not a sweep)."""
+    for t in times_s:
+        px, py = start_xy + velocity_xy * t
+        if in_sensor_gap(float(px), float(py)):
+            return True
+    return False
 
 
 def along_road(store: TrackStore, slots: IntP) -> tuple[F64, F64, F64]:
@@ -193,18 +203,17 @@ def _out_of_gaps(
     slots = np.array([t.slot for t in tracks], dtype=np.intp)
     x, u, along_speed = along_road(store, slots)
     dt = stamp_s - store.bank.stamps_s(slots)
-    forget = []
-    for k, track in enumerate(tracks):
-        if stamp_s - track.lost_s > settings.max_gap_memory_s:
-            forget.append(track)
-            continue
-        for t in (dt[k], max(0.0, dt[k] - settings.lost_memory_s)):
-            px, py = x[k, :2] + u[k] * along_speed[k] * t
-            if in_sensor_gap(float(px), float(py)):
-                break
-        else:
-            forget.append(track)
-    return forget
+    return [
+        track
+        for k, track in enumerate(tracks)
+        if stamp_s - track.lost_s > settings.max_gap_memory_s
+        or not in_gap_at(
+            x[k, :2],
+            u[k] * along_speed[k],
+            (dt[k], max(0.0, dt[k] - settings.lost_memory_s)),
+            in_sensor_gap,
+        )
+    ]
 
 
 def prune(
