@@ -87,6 +87,29 @@ def test_a_missed_vehicle_and_a_lane_error_show_per_lane() -> None:
     assert left["volume_error"] == 0.0 and left["holds"]
     assert report["station"]["volume_error"] == pytest.approx(-0.1)
     assert not report["holds"] and VOLUME_TOLERANCE == 0.05
+    # Nothing hid the right lane: its error is the tracker's, not the sight's.
+    assert right["reliable"] and not report["off_lanes_marked"]
+
+
+def test_a_lane_a_standing_truck_hides_is_marked_unreliable_and_left_out_of_the_target() -> None:
+    """A semitrailer stands in the right lane 12 m past the loop, between it and the mast: the
+    left lane's loop spot is hidden, two of its five vehicles are never tracked."""
+    lanes = {k: RIGHT if k % 2 else LEFT for k in range(10)}
+    truth, batches = scene(lanes)
+    truck = make_track(99, STATION + 12.0, 0.0, length_m=16.0).model_copy(
+        update={"object_class": VehicleClass.TRUCK, "width_m": 2.5}
+    )
+    kept = [
+        b.model_copy(update={"tracks": [t for t in b.tracks if t.track_id not in (1, 5)] + [truck]})
+        for b in batches
+    ]
+    report = lane_volume_report(SITE, kept, truth, 0.0, 19.9)
+    by_lane = rows(report)
+    right, left = by_lane[lane_order(SITE, RIGHT)], by_lane[lane_order(SITE, LEFT)]
+    assert (left["truth_vehicles"], left["track_vehicles"]) == (5, 3)
+    assert left["hidden_share"] == pytest.approx(1.0) and left["reliable"] is False
+    assert right["hidden_share"] == 0.0 and right["reliable"] and right["holds"]
+    assert report["holds"] and report["off_lanes_marked"]
 
 
 def test_vehicles_outside_the_interval_are_not_counted() -> None:

@@ -35,6 +35,7 @@ from wz_shared.messages import (
     DeviceLink,
     Message,
     ServiceState,
+    TrackBatch,
 )
 
 KEYS = Keys(SITE.site_id)
@@ -73,17 +74,23 @@ def store(storage: Storage, messages: list[Message], received_at: float) -> None
     storage.ingest(messages, geo=SITE.geo_frame, received_at=received_at)
 
 
-def traffic_day(storage: Storage) -> None:
-    """300 s of traffic: 10 cars at 25 m/s in lane 0 (the right lane), 5 at 20 m/s in lane 1,
-    each crossing the detector (950 m, 30 m before the mast) once, then an empty road at
-    300 s. Each batch arrives when it was captured (T0_UNIX + stamp)."""
-    messages: list[Message] = []
+def traffic_batches() -> list[TrackBatch]:
+    """10 cars at 25 m/s in lane 0 (the right lane) and 5 at 20 m/s in lane 1 over 300 s, each
+    crossing the detector (967 m, 13 m before the mast) once."""
+    batches: list[TrackBatch] = []
     for k in range(10):
-        messages += car_batches(100 + k, 900.0, 25.0, 30.0 * k, 40, first_cycle=1000 * k)
+        batches += car_batches(100 + k, 900.0, 25.0, 30.0 * k, 40, first_cycle=1000 * k)
     for k in range(5):
-        messages += car_batches(
+        batches += car_batches(
             200 + k, 910.0, 20.0, 30.0 * k + 10.0, 40, offset_m=1.83, first_cycle=1000 * k + 500
         )
+    return batches
+
+
+def traffic_day(storage: Storage) -> None:
+    """300 s of traffic (:func:`traffic_batches`), then an empty road at 300 s. Each batch
+    arrives when it was captured (T0_UNIX + stamp)."""
+    messages: list[Message] = list(traffic_batches())
     messages.sort(key=lambda m: m.stamp)
     for message in messages:
         store(storage, [message], T0_UNIX + message.stamp)

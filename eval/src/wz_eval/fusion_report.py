@@ -114,16 +114,24 @@ def must_show(report: dict[str, Any]) -> list[dict[str, Any]]:
             (
                 abs(row["volume_error"])
                 for row in lane_volumes["lanes"]
-                if row["volume_error"] is not None
+                if row["volume_error"] is not None and row.get("reliable") is not False
             ),
             default=None,
         )
         add(
-            "lane volume at the WZDx traffic detector, worst lane's error vs truth (issue 27)",
+            "lane volume at the WZDx traffic detector, worst seen lane's error vs truth",
             worst,
             f"<= {lane_volumes['tolerance']:g}",
             lane_volumes["holds"],
         )
+        if "off_lanes_marked" in lane_volumes:
+            off = sum(1 for row in lane_volumes["lanes"] if not row["holds"])
+            add(
+                "lanes off by more marked unreliable (hidden by vehicles)",
+                off,
+                "all",
+                lane_volumes["off_lanes_marked"],
+            )
     for dropout in report["dropouts"]:
         name = f"{dropout['sensor_id']} silent {dropout['duration_s']:g} s"
         lon, lat = dropout["fused_rmse_longitudinal_m"], dropout["fused_rmse_lateral_m"]
@@ -479,16 +487,20 @@ def _lane_volume_lines(lane_volumes: dict[str, Any] | None) -> list[str]:
         f"{100 * lane_volumes['tolerance']:g} % of the truth):",
         "",
         "| lane | truth vehicles | track vehicles | error | truth / track veh/h | "
-        "speed difference [m/s] |",
-        "|---|---|---|---|---|---|",
+        "speed difference [m/s] | hidden | volume |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for row in [*lane_volumes["lanes"], lane_volumes["station"]]:
         error = row["volume_error"]
         speed = row["speed_difference_mps"]
+        share = row.get("hidden_share")
+        reliable = row.get("reliable")
         lines.append(
             f"| {row['lane_order'] or 'all'} | {row['truth_vehicles']} | "
             f"{row['track_vehicles']} | {'-' if error is None else f'{100 * error:+.1f} %'} | "
             f"{row['truth_volume_vph']:g} / {row['track_volume_vph']:g} | "
-            f"{'-' if speed is None else f'{speed:+.2f}'} |"
+            f"{'-' if speed is None else f'{speed:+.2f}'} | "
+            f"{'-' if share is None else f'{100 * share:.0f} %'} | "
+            f"{'-' if reliable is None else ('reliable' if reliable else 'unreliable')} |"
         )
     return lines

@@ -661,6 +661,11 @@ class Storage:
                 c.vx_mps,
                 c.vy_mps,
                 c.length_m,
+                c.x_m,
+                c.y_m,
+                c.heading_rad,
+                c.width_m,
+                c.object_class,
             )
             .where(*conditions)
             .order_by(c.track_id, c.stamp)
@@ -679,6 +684,13 @@ class Storage:
             length_m=np.array(
                 [math.nan if r.length_m is None else r.length_m for r in rows], dtype=np.float64
             ),
+            x_m=np.array([r.x_m for r in rows], dtype=np.float64),
+            y_m=np.array([r.y_m for r in rows], dtype=np.float64),
+            heading_rad=np.array([r.heading_rad for r in rows], dtype=np.float64),
+            width_m=np.array(
+                [math.nan if r.width_m is None else r.width_m for r in rows], dtype=np.float64
+            ),
+            object_class=[r.object_class for r in rows],
         )
 
     def trajectories(

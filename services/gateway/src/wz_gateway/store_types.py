@@ -172,3 +172,9 @@ class TrafficPoints:
     vx_mps: npt.NDArray[np.float64]
     vy_mps: npt.NDArray[np.float64]
     length_m: npt.NDArray[np.float64]  # NaN where the tracker gave no length
+    # Where the vehicle stands and what it is, for the sight of the lanes (lane_sight).
+    x_m: npt.NDArray[np.float64]
+    y_m: npt.NDArray[np.float64]
+    heading_rad: npt.NDArray[np.float64]
+    width_m: npt.NDArray[np.float64]  # NaN where the tracker gave no width
+    object_class: list[str]

@@ -28,10 +28,15 @@ of length ``L_i``:
 (a vehicle covers the zone for the time it takes to travel its own length plus the zone's; the
 sum is over the presences' union, clipped to the interval), at most 100 %. Station-wide: the volumes add up, the speed is the mean over every crossing
 and the occupancy is the mean of the lanes'.
+
+A lane's count is only as good as the sensors' view of it: where other vehicles hid its loop
+spot for more than :data:`HIDDEN_SHARE_LIMIT` of the interval (measured by
+:mod:`wz_gateway.lane_sight`), its volume is marked unreliable.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,6 +49,10 @@ DEFAULT_VEHICLE_LENGTH_M = 4.5
 #: Speeds below this count as this for occupancy [m/s]: a stopped vehicle on the loop holds
 #: it for the rest of the interval, not forever.
 MIN_OCCUPANCY_SPEED_MPS = 0.5
+#: A lane's volume is unreliable when its loop spot was hidden from the sensors for more than
+#: this share of the interval: about that share of its vehicles passed unseen, and the lane
+#: volume's target is 5 % (:mod:`wz_gateway.lane_sight`).
+HIDDEN_SHARE_LIMIT = 0.05
 
 
 @dataclass(frozen=True)
@@ -66,6 +75,15 @@ class LaneTraffic:
     volume_vph: float
     average_speed_mps: float | None  # None when no vehicle crossed
     occupancy_percent: float
+    #: Share of the interval the lane's loop spot was hidden from every sensor (None: not
+    #: measured).
+    hidden_share: float | None = None
+
+    @property
+    def reliable(self) -> bool:
+        """Whether the lane's volume can be trusted: hidden no longer than
+        :data:`HIDDEN_SHARE_LIMIT` of the interval (or not measured)."""
+        return self.hidden_share is None or self.hidden_share <= HIDDEN_SHARE_LIMIT
 
 
 @dataclass(frozen=True)
@@ -140,11 +158,14 @@ def summarize(
     lane_indices: list[int],
     detector_station_m: float,
     zone_length_m: float = DEFAULT_ZONE_LENGTH_M,
+    hidden_shares: Mapping[int, float] | None = None,
 ) -> TrafficSummary:
     """Volumes, speeds and occupancies per lane over ``[start_stamp, end_stamp]``.
 
     Crossings outside the interval or in a lane not in ``lane_indices`` (off the road, -1)
     are left out of the lanes; the station-wide figures are over the lanes' crossings.
+    ``hidden_shares``: each lane's hidden share of the interval, by lane index
+    (:func:`wz_gateway.lane_sight.lane_hidden_shares`), which marks its volume's reliability.
 
     Raises
     ------
@@ -178,6 +199,7 @@ def summarize(
                 volume_vph=3600.0 * v.size / duration_s,
                 average_speed_mps=float(v.mean()) if v.size else None,
                 occupancy_percent=min(100.0, 100.0 * occupied_s / duration_s),
+                hidden_share=None if hidden_shares is None else hidden_shares.get(lane_index),
             )
         )
         speeds.append(v)

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 from pydantic import ValidationError
 
+from wz_gateway.lane_sight import lane_hidden_shares, sight_station_range
 from wz_gateway.models import (
     CalibrationStateChange,
     LiveTrack,
@@ -172,12 +173,13 @@ def traffic_summary(
     if end - start < 1.0:
         return None
     station = detector_station_m(site, detector_override_m)
+    sight_from, sight_to = sight_station_range(site, station)
     points = storage.traffic_points(
         site.site_id,
         start - 5.0,
         end,
-        station - _CROSSING_REACH_M,
-        station + _CROSSING_REACH_M,
+        min(station - _CROSSING_REACH_M, sight_from),
+        max(station + _CROSSING_REACH_M, sight_to),
         received_since=None if run_start is None else run_start.received_at,
     )
     crossings = find_crossings(
@@ -190,7 +192,21 @@ def traffic_summary(
         station,
     )
     lanes = sorted(lane.index for lane in site.lanes)
-    return summarize(crossings, start, end, lanes, station)
+    in_sight = (points.station_m >= sight_from) & (points.station_m <= sight_to)
+    hidden_shares = lane_hidden_shares(
+        site,
+        station,
+        points.stamp[in_sight],
+        points.x_m[in_sight],
+        points.y_m[in_sight],
+        points.heading_rad[in_sight],
+        points.length_m[in_sight],
+        points.width_m[in_sight],
+        [kind for kind, keep in zip(points.object_class, in_sight, strict=True) if keep],
+        start,
+        end,
+    )
+    return summarize(crossings, start, end, lanes, station, hidden_shares=hidden_shares)
 
 
 def device_feed_of(

@@ -31,7 +31,7 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
-from wz_gateway.traffic import TrafficSummary
+from wz_gateway.traffic import LaneTraffic, TrafficSummary
 from wz_shared.coverage import lidar_beam_rows
 from wz_shared.messages import (
     BEACON_DEVICE,
@@ -451,6 +451,9 @@ def traffic_sensor_feature(inputs: FeedInputs) -> dict[str, Any] | None:
         and (health := inputs.calibration_health(sensor.sensor_id)) is not None
     ]
     health = combine(inputs.traffic_health, *calibration)
+    hidden = [] if summary is None else [lane for lane in summary.lanes if not lane.reliable]
+    if hidden:
+        health = combine(health, _hidden_lanes_health(site, hidden, inputs.now))
     properties: dict[str, Any] = {
         "core_details": _core(
             site,
@@ -467,15 +470,15 @@ def traffic_sensor_feature(inputs: FeedInputs) -> dict[str, Any] | None:
     if summary is not None:
         if summary.average_speed_mps is not None:
             properties["average_speed_kph"] = _round(summary.average_speed_mps * MPS_TO_KPH)
-        properties["volume_vph"] = _round(summary.volume_vph)
-        properties["occupancy_percent"] = _round(summary.occupancy_percent)
+        if not hidden:  # the station's figures add up every lane's
+            properties["volume_vph"] = _round(summary.volume_vph)
+            properties["occupancy_percent"] = _round(summary.occupancy_percent)
         lane_data = []
         for lane in sorted(summary.lanes, key=lambda lane: lane_order(site, lane.lane_index)):
-            entry: dict[str, Any] = {
-                "lane_order": lane_order(site, lane.lane_index),
-                "volume_vph": _round(lane.volume_vph),
-                "occupancy_percent": _round(lane.occupancy_percent),
-            }
+            entry: dict[str, Any] = {"lane_order": lane_order(site, lane.lane_index)}
+            if lane.reliable:  # a hidden lane's count and occupancy fall short: withheld
+                entry["volume_vph"] = _round(lane.volume_vph)
+                entry["occupancy_percent"] = _round(lane.occupancy_percent)
             if lane.average_speed_mps is not None:
                 entry["average_speed_kph"] = _round(lane.average_speed_mps * MPS_TO_KPH)
             lane_data.append(entry)
@@ -486,6 +489,19 @@ def traffic_sensor_feature(inputs: FeedInputs) -> dict[str, Any] | None:
         "properties": properties,
         "geometry": _point(site, mast.pose.x_m, mast.pose.y_m),
     }
+
+
+def _hidden_lanes_health(site: Site, lanes: list[LaneTraffic], now: float) -> DeviceHealth:
+    """A warning for lanes whose loop spot other vehicles hid longer than
+    :data:`~wz_gateway.traffic.HIDDEN_SHARE_LIMIT` of the interval: their volume and
+    occupancy are withheld, and the station's with them (:mod:`wz_gateway.lane_sight`)."""
+    messages = tuple(
+        f"lane {lane_order(site, lane.lane_index)} volume withheld: hidden from the sensors "
+        f"{100.0 * (lane.hidden_share or 0.0):.0f} % of the interval (by other vehicles, or out "
+        "of view)"
+        for lane in sorted(lanes, key=lambda lane: lane_order(site, lane.lane_index))
+    )
+    return DeviceHealth("warning", messages, now)
 
 
 def camera_features(inputs: FeedInputs) -> list[dict[str, Any]]:
