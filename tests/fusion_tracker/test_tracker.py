@@ -133,11 +133,11 @@ def ids_by_vehicle(
     ids=lambda m: m.__name__,
 )
 def test_core_imports_no_io_library(module: ModuleType) -> None:
-    """No I/O library, and of the shared library only its pure array types and motion model
-    (never the bus, the service runtime or the codecs)."""
+    """No I/O library, and of the shared library only its pure array types, motion model and
+    sight-line geometry (never the bus, the service runtime or the codecs)."""
     assert top_level_imports(module).isdisjoint({"zenoh", "fastapi", "uvicorn", "requests", "io"})
     shared = {name for name in imported_modules(module) if name.split(".")[0] == "wz_shared"}
-    assert shared <= {"wz_shared.arrays", "wz_shared.motion"}
+    assert shared <= {"wz_shared.arrays", "wz_shared.motion", "wz_shared.occlusion"}
 
 
 def test_settings_refuse_coasting_after_deletion() -> None:

@@ -50,6 +50,7 @@ from wz_fusion_tracker.node import (
     road_headings_hook,
     sensor_gaps_hook,
     sensor_positions,
+    sight_hook,
     to_measurements,
 )
 from wz_fusion_tracker.settings import TrackerSettings
@@ -168,6 +169,7 @@ def fuse(
         sensor_positions=sensor_positions(site),
         headings_at=road_headings_hook(site),
         in_sensor_gap=sensor_gaps_hook(site, settings),
+        hidden_from_sensors=sight_hook(site, settings),
     )
     fused: list[Observation] = []
     position = 0

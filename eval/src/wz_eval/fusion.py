@@ -106,6 +106,7 @@ from wz_fusion_tracker.node import (
     road_headings_hook,
     sensor_gaps_hook,
     sensor_positions,
+    sight_hook,
     to_measurements,
     to_track,
 )
@@ -317,6 +318,7 @@ def evaluate(
         sensor_positions=sensor_positions(site),
         headings_at=road_headings_hook(site),
         in_sensor_gap=sensor_gaps_hook(site, options.tracker),
+        hidden_from_sensors=sight_hook(site, options.tracker),
     )
     bias = None if options.bias_map is None else LateralBiasCorrector(site, options.bias_map)
     mot = _MotAccumulator()

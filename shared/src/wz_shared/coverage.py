@@ -37,6 +37,7 @@ import numpy as np
 import numpy.typing as npt
 
 from wz_shared.camera_geometry import PinholeCamera
+from wz_shared.occlusion import Boxes, hidden
 from wz_shared.site import CameraIntrinsics, LidarIntrinsics, RadarIntrinsics, SensorMount, Site
 
 F64 = npt.NDArray[np.float64]
@@ -210,6 +211,30 @@ class SiteCoverage:
         for mount in self.site.sensors:
             out |= self.sensor(mount, x, y)
         return out
+
+
+class SiteSight:
+    """Whether other vehicles hide points from every one of a site's sensors that covers them
+    (:class:`SiteCoverage`: range, field of view, beams; clear weather
+    unless ``coverage`` says otherwise)."""
+
+    def __init__(self, site: Site, coverage: SiteCoverage | None = None) -> None:
+        self._coverage = SiteCoverage(site) if coverage is None else coverage
+        self._mounts = list(site.sensors)
+
+    def covered_and_hidden(self, targets_m: npt.ArrayLike, boxes: Boxes) -> tuple[Bool, Bool]:
+        """For each target (M, 3) [m]: whether a sensor covers it, and whether every sensor
+        that covers it has a box in its sight line (False where none covers it)."""
+        targets = np.asarray(targets_m, dtype=np.float64).reshape(-1, 3)
+        covered = np.zeros(targets.shape[0], dtype=bool)
+        seen = np.zeros(targets.shape[0], dtype=bool)
+        for mount in self._mounts:
+            covers = self._coverage.sensor(mount, targets[:, 0], targets[:, 1])
+            if not covers.any():
+                continue
+            covered |= covers
+            seen |= covers & ~hidden(mount.pose.position_m, targets, boxes)
+        return covered, covered & ~seen
 
 
 #: The longest stretch no sensor sees that a tracker bridges by coasting [m]: the blind cone

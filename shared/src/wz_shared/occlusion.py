@@ -14,9 +14,10 @@ heights there (it is straight):
 
 A box whose footprint holds the target itself is the vehicle seen there, not one in the way,
 and never hides it. Vehicle heights by class are those of the AASHTO design vehicles
-(:data:`CLASS_HEIGHT_M`); a tracker reports footprints, not heights.
+(:data:`CLASS_HEIGHT_M`); a tracker reports footprints, not heights. Pure numpy: the
+tracker's core uses it.
 
-:class:`SiteSight` asks it of a site's sensors together: a point is hidden when every sensor
+:class:`wz_shared.coverage.SiteSight` asks it of a site's sensors together: a point is hidden when every sensor
 that covers it has a vehicle in its sight line. The gateway uses it for the lanes at its
 traffic detector (:mod:`wz_gateway.lane_sight`); the tracker, for a track that stopped being
 updated behind a truck (it keeps coasting: ``max_occlusion_coast_s``).
@@ -31,8 +32,6 @@ import numpy as np
 import numpy.typing as npt
 
 from wz_shared.arrays import F64, Bool
-from wz_shared.coverage import SiteCoverage
-from wz_shared.site import Site
 
 #: Heights by vehicle class [m]: AASHTO's design vehicles (Green Book, Table 2-1a): a passenger
 #: car 1.3 m, taken at 1.5 m for today's share of SUVs and pickups; single-unit and
@@ -142,27 +141,3 @@ def hidden(sensor_m: npt.ArrayLike, targets_m: npt.ArrayLike, boxes: Boxes) -> B
     blocked = crosses & (lowest < boxes.height_m) & ~holds_target
     result: Bool = blocked.any(axis=-1)
     return result
-
-
-class SiteSight:
-    """Whether other vehicles hide points from every one of a site's sensors that covers them
-    (:class:`~wz_shared.coverage.SiteCoverage`: range, field of view, beams; clear weather
-    unless ``coverage`` says otherwise)."""
-
-    def __init__(self, site: Site, coverage: SiteCoverage | None = None) -> None:
-        self._coverage = SiteCoverage(site) if coverage is None else coverage
-        self._mounts = list(site.sensors)
-
-    def covered_and_hidden(self, targets_m: npt.ArrayLike, boxes: Boxes) -> tuple[Bool, Bool]:
-        """For each target (M, 3) [m]: whether a sensor covers it, and whether every sensor
-        that covers it has a box in its sight line (False where none covers it)."""
-        targets = np.asarray(targets_m, dtype=np.float64).reshape(-1, 3)
-        covered = np.zeros(targets.shape[0], dtype=bool)
-        seen = np.zeros(targets.shape[0], dtype=bool)
-        for mount in self._mounts:
-            covers = self._coverage.sensor(mount, targets[:, 0], targets[:, 1])
-            if not covers.any():
-                continue
-            covered |= covers
-            seen |= covers & ~hidden(mount.pose.position_m, targets, boxes)
-        return covered, covered & ~seen

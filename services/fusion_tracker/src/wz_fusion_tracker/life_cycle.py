@@ -1,12 +1,14 @@
 """A track's life cycle: started from a measurement no track took, confirmed after enough hits,
-deleted when it stops being updated (or kept coasting through a sensor's outage), kept as lost
-for a while for the hand-over, then ended. Functions on the :class:`TrackStore`, called by
-:class:`~wz_fusion_tracker.tracker.MultiTargetTracker`'s cycle (spawn and prune steps)."""
+deleted when it stops being updated (or kept coasting through a sensor's outage, or while
+another vehicle hides it), kept as lost for a while for the hand-over, then ended. Functions on
+the :class:`TrackStore`, called by :class:`~wz_fusion_tracker.tracker.MultiTargetTracker`'s
+cycle (spawn and prune steps)."""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -15,6 +17,7 @@ from wz_fusion_tracker.track_table import Track, TrackStore
 from wz_fusion_tracker.types import Measurement
 from wz_shared.arrays import F64, Bool, IntP
 from wz_shared.motion import STATE_DIM
+from wz_shared.occlusion import CLASS_HEIGHT_M, Boxes
 
 
 def start_track(
@@ -109,6 +112,19 @@ def check_confirmation(
 #: Whether a site point ``(x_m, y_m)`` lies in a stretch no sensor sees between seen ones
 #: (:class:`wz_shared.coverage.SensorGaps`).
 InSensorGap = Callable[[float, float], bool]
+#: Whether other vehicles (``Boxes``) hide each point (K, 3) [m] from every sensor that covers
+#: it (:meth:`wz_shared.occlusion.SiteSight.covered_and_hidden`'s second answer).
+HiddenFromSensors = Callable[[F64, Boxes], Bool]
+
+
+@dataclass(frozen=True)
+class Sight:
+    """Where the site's sensors cannot see a vehicle, as the life cycle asks it: stretches no
+    sensor covers (``in_sensor_gap``) and spots other vehicles hide (``hidden_from_sensors``);
+    None: not known."""
+
+    in_sensor_gap: InSensorGap | None = None
+    hidden_from_sensors: HiddenFromSensors | None = None
 
 
 def expired(
@@ -117,7 +133,7 @@ def expired(
     slots: IntP,
     stamp_s: float,
     last_batch_s: Mapping[str, float],
-    in_sensor_gap: InSensorGap | None = None,
+    sight: Sight = Sight(),
 ) -> Bool:
     """Which tracks of ``slots`` are to be deleted at ``stamp_s``, shape (K,).
 
@@ -132,6 +148,9 @@ def expired(
     facing upstream and the LiDAR's first beams on the road), coasts up to
     ``max_gap_coast_s``: the vehicle is out of sight, not gone, and comes back on the far
     side, where a new track would take a new id.
+    A confirmed track whose predicted position other tracked vehicles hide from every sensor
+    that covers it (``hidden_from_sensors``: a car beside or behind a truck) coasts up to
+    ``max_occlusion_coast_s``: the sensors cannot see it, so missing it says nothing.
     ``last_batch_s``: the newest batch stamp processed per sensor."""
     table = store.table
     updated_s = table.updated_s[slots]
@@ -148,6 +167,7 @@ def expired(
         newest_s = np.array([last_batch_s.get(sensor, -math.inf) for sensor in table.sensor_ids])
         silent = newest_s < stamp_s - settings.sensor_silent_after_s
         deleted[outage] = ~(recent & silent[None, :]).any(axis=1)
+    in_sensor_gap = sight.in_sensor_gap
     if in_sensor_gap is not None and settings.coast_sensor_gaps:
         hidden = np.flatnonzero(deleted & confirmed & (age_s <= settings.max_gap_coast_s))
         if len(hidden):
@@ -160,7 +180,41 @@ def expired(
                 times = (dt[k], max(0.0, dt[k] - settings.max_coast_s))
                 if in_gap_at(x[k, :2], x[k, 2:], times, in_sensor_gap):
                     deleted[row] = False
+    if sight.hidden_from_sensors is not None and settings.max_occlusion_coast_s > 0.0:
+        rows = np.flatnonzero(deleted & confirmed & (age_s <= settings.max_occlusion_coast_s))
+        if len(rows):
+            deleted[rows] = ~hidden_now(store, slots[rows], stamp_s, sight.hidden_from_sensors)
     return deleted
+
+
+def hidden_now(
+    store: TrackStore, slots: IntP, stamp_s: float, hidden_from_sensors: HiddenFromSensors
+) -> Bool:
+    """Whether the other tracks hide each of ``slots`` (K,) from every sensor covering it at
+    ``stamp_s``: each predicted along the road (:func:`along_road`) to its roof (its class's
+    height), the live tracks in the way predicted at their velocities, as boxes of their
+    measured footprints and their classes' heights (:class:`~wz_shared.occlusion.Boxes`)."""
+    x, u, along_speed = along_road(store, slots)
+    dt = stamp_s - store.bank.stamps_s(slots)
+    table = store.table
+    targets = np.column_stack(
+        [
+            x[:, :2] + (u * (along_speed * dt)[:, None]),
+            [CLASS_HEIGHT_M.get(c, CLASS_HEIGHT_M["unknown"]) for c in table.object_classes(slots)],
+        ]
+    )
+    _, others = store.live()
+    if not len(others):
+        return np.zeros(len(slots), dtype=bool)
+    y = store.bank.states(others)
+    ahead = y[:, :2] + y[:, 2:] * (stamp_s - store.bank.stamps_s(others))[:, None]
+    sizes = table.sizes(others)
+    heading = table.heading_rad[others]
+    heading = np.where(np.isfinite(heading), heading, np.arctan2(y[:, 3], y[:, 2]))
+    boxes = Boxes.of(
+        ahead[:, 0], ahead[:, 1], heading, sizes[:, 0], sizes[:, 1], table.object_classes(others)
+    )
+    return hidden_from_sensors(targets, boxes)
 
 
 def in_gap_at(
@@ -216,22 +270,48 @@ def _out_of_gaps(
     ]
 
 
+def _unhidden(
+    store: TrackStore,
+    settings: TrackerSettings,
+    tracks: list[Track],
+    stamp_s: float,
+    hidden_from_sensors: HiddenFromSensors,
+) -> list[Track]:
+    """Of lost ``tracks`` past ``lost_memory_s``, those to forget at ``stamp_s``: all but the
+    ones other vehicles still hide (:func:`hidden_now`) that were lost for less than
+    ``max_occlusion_memory_s``: a car that stays beside a truck in a queue comes back when the
+    truck pulls away, and the hand-over gives it its old id."""
+    young = [t for t in tracks if stamp_s - t.lost_s <= settings.max_occlusion_memory_s]
+    if not young:
+        return tracks
+    slots = np.array([t.slot for t in young], dtype=np.intp)
+    keep = {
+        t.track_id
+        for t, hid in zip(
+            young, hidden_now(store, slots, stamp_s, hidden_from_sensors), strict=True
+        )
+        if hid
+    }
+    return [t for t in tracks if t.track_id not in keep]
+
+
 def prune(
     store: TrackStore,
     settings: TrackerSettings,
     stamp_s: float,
     last_batch_s: Mapping[str, float],
-    in_sensor_gap: InSensorGap | None = None,
+    sight: Sight = Sight(),
 ) -> None:
     """Delete the tracks expired at ``stamp_s`` (:func:`expired`): a confirmed one is kept as
-    lost for ``lost_memory_s`` (its slot too, for the hand-over), then ends and its history is
-    handed out; the sensors' local ids that pointed at a deleted track are forgotten."""
+    lost for ``lost_memory_s`` (its slot too, for the hand-over; longer in a sensor gap or
+    hidden by other vehicles, ``sight``), then ends and its history is handed out; the
+    sensors' local ids that pointed at a deleted track are forgotten."""
     live, slots = store.live()
     if not live:
         gone_tracks: list[Track] = []
     else:
         expired_rows = np.flatnonzero(
-            expired(store, settings, slots, stamp_s, last_batch_s, in_sensor_gap)
+            expired(store, settings, slots, stamp_s, last_batch_s, sight)
         ).tolist()
         gone_tracks = [live[i] for i in expired_rows]
     memory_s = settings.lost_memory_s
@@ -249,8 +329,12 @@ def prune(
             store.finished.append(track.to_history())
     if store.lost:
         forgotten = [t for t in store.lost.values() if stamp_s - t.lost_s > memory_s]
+        in_sensor_gap = sight.in_sensor_gap
         if forgotten and in_sensor_gap is not None and settings.max_gap_memory_s > 0.0:
             forgotten = _out_of_gaps(store, settings, forgotten, stamp_s, in_sensor_gap)
+        hide = sight.hidden_from_sensors
+        if forgotten and hide is not None and settings.max_occlusion_memory_s > 0.0:
+            forgotten = _unhidden(store, settings, forgotten, stamp_s, hide)
         for track in forgotten:
             del store.lost[track.track_id]
             store.bank.remove(track.slot)

@@ -42,12 +42,13 @@ from collections.abc import Callable
 import numpy as np
 
 from wz_fusion_tracker.calibration import BiasMapError, LateralBiasCorrector, load_bias_map
+from wz_fusion_tracker.life_cycle import HiddenFromSensors
 from wz_fusion_tracker.settings import FusionTrackerSettings, TrackerSettings
 from wz_fusion_tracker.tracker import MultiTargetTracker
 from wz_fusion_tracker.types import Measurement, TrackState
-from wz_shared.arrays import F64
+from wz_shared.arrays import F64, Bool
 from wz_shared.codec import encode_json
-from wz_shared.coverage import SensorGaps
+from wz_shared.coverage import SensorGaps, SiteSight
 from wz_shared.messages import (
     DetectionBatch,
     Track,
@@ -56,6 +57,7 @@ from wz_shared.messages import (
     VehicleClass,
 )
 from wz_shared.motion import ProcessNoise
+from wz_shared.occlusion import Boxes
 from wz_shared.service import NodeApp, ServiceRuntime
 from wz_shared.site import Site
 from wz_shared.timebase import RunWatch, SimClock
@@ -87,6 +89,20 @@ def sensor_gaps_hook(site: Site, settings: TrackerSettings) -> SensorGaps | None
     build)."""
     wanted = settings.coast_sensor_gaps or settings.max_gap_memory_s > 0.0
     return SensorGaps(site) if wanted else None
+
+
+def sight_hook(site: Site, settings: TrackerSettings) -> HiddenFromSensors | None:
+    """The tracker's ``hidden_from_sensors``: the site's sensors' sight lines through other
+    vehicles (:class:`SiteSight`) when ``max_occlusion_coast_s`` or ``max_occlusion_memory_s``
+    uses it; None otherwise."""
+    if settings.max_occlusion_coast_s <= 0.0 and settings.max_occlusion_memory_s <= 0.0:
+        return None
+    sight = SiteSight(site)
+
+    def hidden_from_sensors(targets_m: F64, boxes: Boxes) -> Bool:
+        return sight.covered_and_hidden(targets_m, boxes)[1]
+
+    return hidden_from_sensors
 
 
 def sensor_positions(site: Site) -> dict[str, tuple[float, float]]:
@@ -194,6 +210,7 @@ class FusionCore:
         self.bias = bias if bias is not None else bias_corrector(site, settings)
         #: The stretches no sensor sees between seen road, where tracks coast across.
         self.sensor_gaps = sensor_gaps_hook(site, settings.tracker)
+        self.hidden_from_sensors = sight_hook(site, settings.tracker)
         self.tracker = self._new_tracker(first_track_id=1)
         self._process_noise = process_noise(settings.tracker)
         self._next_output_s: float | None = None
@@ -211,6 +228,7 @@ class FusionCore:
             headings_at=road_headings_hook(site),
             first_track_id=first_track_id,
             in_sensor_gap=self.sensor_gaps,
+            hidden_from_sensors=self.hidden_from_sensors,
         )
 
     def _start_new_run(self, batch: DetectionBatch) -> None:

@@ -98,6 +98,14 @@ class TrackerSettings(BaseModel):
     #: old id. 0 turns it off. Not published and taking no measurement, unlike
     #: ``coast_sensor_gaps``.
     max_gap_memory_s: float = Field(default=12.0, ge=0.0)
+    #: A confirmed track not updated for ``max_coast_s`` whose predicted position other
+    #: tracked vehicles hide from every sensor that covers it (a car beside or behind a truck:
+    #: sight lines through their boxes, the tracker's ``hidden_from_sensors``) coasts up to
+    #: this [s]; 0 turns it off.
+    max_occlusion_coast_s: float = Field(default=0.0, ge=0.0)
+    #: A lost track still hidden so is remembered up to this long [s], for the hand-over when
+    #: the vehicle shows again; 0 turns it off.
+    max_occlusion_memory_s: float = Field(default=0.0, ge=0.0)
 
     # --- timing ---
     #: Batches are held this long behind the newest stamp seen, then processed in order [s].

@@ -95,7 +95,9 @@ from wz_fusion_tracker.identity import (
 from wz_fusion_tracker.imm import IMMStateBank
 from wz_fusion_tracker.kalman import TrackStateBank
 from wz_fusion_tracker.life_cycle import (
+    HiddenFromSensors,
     InSensorGap,
+    Sight,
     check_confirmation,
     expired,
     prune,
@@ -210,6 +212,11 @@ class MultiTargetTracker:
         track predicted there coasts up to ``max_gap_coast_s`` instead of ``max_coast_s``;
         a lost one predicted there is remembered up to ``max_gap_memory_s``.
         None: no such stretch.
+    hidden_from_sensors
+        Whether other vehicles (boxes) hide each of some site points from every sensor that
+        covers it (:meth:`wz_shared.occlusion.SiteSight.covered_and_hidden`); with it, a
+        confirmed track hidden so coasts up to ``max_occlusion_coast_s`` and a lost one is
+        remembered up to ``max_occlusion_memory_s``. None: not known.
     first_track_id
         The first track's id (a tracker that takes over from another in the same process, for
         a new run, goes on from :attr:`next_track_id` of the old one: ids are never reused).
@@ -223,9 +230,10 @@ class MultiTargetTracker:
         headings_at: HeadingsAt | None = None,
         first_track_id: int = 1,
         in_sensor_gap: InSensorGap | None = None,
+        hidden_from_sensors: HiddenFromSensors | None = None,
     ) -> None:
         self.settings = settings
-        self._in_sensor_gap = in_sensor_gap
+        self._sight = Sight(in_sensor_gap, hidden_from_sensors)
         self._heading_at = heading_at
         self._headings_at = headings_at if heading_at is not None else None
         self._sensor_positions = dict(sensor_positions or {})
@@ -320,7 +328,7 @@ class MultiTargetTracker:
         processed = self._release(horizon_s)
         if self._last_processed_s is None or horizon_s > self._last_processed_s:
             self._last_processed_s = horizon_s
-            prune(self._store, self.settings, horizon_s, self._last_batch_s, self._in_sensor_gap)
+            prune(self._store, self.settings, horizon_s, self._last_batch_s, self._sight)
         return processed
 
     def _release(self, horizon_s: float) -> int:
@@ -391,7 +399,7 @@ class MultiTargetTracker:
                 slots,
                 reference_s,
                 self._last_batch_s,
-                self._in_sensor_gap,
+                self._sight,
             )
             if not kept.all():
                 live = [t for t, k in zip(live, kept.tolist(), strict=True) if k]
@@ -480,7 +488,7 @@ class MultiTargetTracker:
         tracks that missed updates with measurements left near them; spawn tentative tracks
         from the measurements still left; then hand-over and duplicate merging.
         """
-        prune(self._store, self.settings, stamp_s, self._last_batch_s, self._in_sensor_gap)
+        prune(self._store, self.settings, stamp_s, self._last_batch_s, self._sight)
         self._last_processed_s = stamp_s
         self._store.counters.batches_processed += 1
         self._last_batch_s[sensor_id] = stamp_s
@@ -664,7 +672,7 @@ class MultiTargetTracker:
         if len(store.tracks) + len(store.lost) < 2 or stamp_s < self._next_identity_s:
             return
         self._next_identity_s = stamp_s + IDENTITY_PERIOD_S
-        hand_over(store, self.settings, stamp_s, self._in_sensor_gap)
+        hand_over(store, self.settings, stamp_s, self._sight.in_sensor_gap)
         merge_duplicates(store, self.settings, stamp_s)
 
     def _reference_point(

@@ -25,8 +25,8 @@ import numpy as np
 import numpy.typing as npt
 
 from wz_shared.arrays import F64
-from wz_shared.coverage import CAR_HEIGHT_M, SiteCoverage
-from wz_shared.occlusion import Boxes, SiteSight
+from wz_shared.coverage import CAR_HEIGHT_M, SiteCoverage, SiteSight
+from wz_shared.occlusion import Boxes
 from wz_shared.site import Site
 
 #: How often the lanes' sight is sampled [s].
