@@ -8,6 +8,8 @@ the tracker's cycle calls them in this order:
 - :func:`hand_over` (every :data:`IDENTITY_PERIOD_S`): a young track that took up a coasting
   or lost track's vehicle hands its state to the old track, so the vehicle keeps its old id;
 - :func:`merge_duplicates` (right after): of two tracks that are one vehicle, the younger goes;
+- :func:`merge_into_trucks` (then): a young track inside a tracked truck's footprint, moving
+  with it, is part of that truck (its trailer seen apart from its cab) and goes;
 - :func:`retire`: how the hand-over and the merging end a track in favour of another.
 
 A confirmed track past its coast is deleted by the tracker's prune but kept *lost* for
@@ -376,4 +378,53 @@ def merge_duplicates(store: TrackStore, settings: TrackerSettings, stamp_s: floa
                 removed[other.track_id] = live[i].track_id
     for track_id, survivor in removed.items():
         retire(store, store.tracks[track_id], successor_id=survivor)
+        store.counters.tracks_merged += 1
+
+
+#: Classes whose long footprint a young track may lie in as part of the vehicle
+#: (:func:`merge_into_trucks`).
+_LONG_CLASSES = frozenset({"truck", "bus"})
+
+
+def merge_into_trucks(store: TrackStore, settings: TrackerSettings, stamp_s: float) -> None:
+    """A young track (younger than ``hand_over_age_s``) whose position lies inside a tracked
+    truck's or bus's footprint (its measured median length and width, heading along the road,
+    plus ``truck_merge_margin_m`` all round) and whose velocity is within
+    ``merge_velocity_difference_mps`` of the truck's is the truck's own trailer or body seen
+    apart from its cab (a LiDAR that splits a semitrailer at its coupling, a camera box of the
+    trailer alone): it is retired in favour of the truck. A car is never inside a truck's
+    footprint; one following 2 m behind a 16 m semitrailer has its centre 4 m beyond the
+    rear. Off with ``truck_merge_margin_m`` < 0."""
+    if settings.truck_merge_margin_m < 0.0 or len(store.tracks) < 2:
+        return
+    live, slots = store.live()
+    table = store.table
+    classes = table.object_classes(slots)
+    long_rows = [i for i, c in enumerate(classes) if c in _LONG_CLASSES]
+    if not long_rows:
+        return
+    age_s = stamp_s - table.born_s[slots]
+    young_rows = np.flatnonzero(age_s < settings.hand_over_age_s)
+    if not len(young_rows):
+        return
+    x = store.bank.states(slots)
+    x[:, :2] += x[:, 2:] * (stamp_s - store.bank.stamps_s(slots))[:, None]
+    sizes = table.sizes(slots)
+    _, u, _ = along_road(store, slots)
+    margin = settings.truck_merge_margin_m
+    removed: dict[int, int] = {}
+    for i in long_rows:
+        length, width = sizes[i, 0], sizes[i, 1]
+        if not (np.isfinite(length) and np.isfinite(width)) or age_s[i] < settings.hand_over_age_s:
+            continue  # a young truck's footprint is not known yet
+        d = x[young_rows, :2] - x[i, :2]
+        along = d @ u[i]
+        across = d @ np.array([-u[i, 1], u[i, 0]])
+        alike = np.hypot(*(x[young_rows, 2:] - x[i, 2:]).T) < settings.merge_velocity_difference_mps
+        inside = (np.abs(along) <= length / 2.0 + margin) & (np.abs(across) <= width / 2.0 + margin)
+        for j in young_rows[inside & alike].tolist():
+            if j != i and live[j].track_id not in removed:
+                removed[live[j].track_id] = live[i].track_id
+    for track_id, truck_id in removed.items():
+        retire(store, store.tracks[track_id], successor_id=truck_id)
         store.counters.tracks_merged += 1

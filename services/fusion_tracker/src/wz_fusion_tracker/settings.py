@@ -159,6 +159,9 @@ class TrackerSettings(BaseModel):
     merge_distance_m: float = Field(default=2.5, ge=0.0)
     #: ... and their velocities differ by less than this [m/s].
     merge_velocity_difference_mps: float = Field(default=4.0, gt=0.0)
+    #: A young track inside a tracked truck's or bus's footprint grown by this all round,
+    #: moving alike, is part of it and is deleted [m]; negative turns it off.
+    truck_merge_margin_m: float = -1.0
 
     # --- initialisation ---
     #: Std of a new track's unknown velocity (along the road, with a road prior) [m/s].

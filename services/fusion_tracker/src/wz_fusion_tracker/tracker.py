@@ -90,6 +90,7 @@ from wz_fusion_tracker.identity import (
     IDENTITY_PERIOD_S,
     hand_over,
     merge_duplicates,
+    merge_into_trucks,
     reacquisitions,
 )
 from wz_fusion_tracker.imm import IMMStateBank
@@ -674,6 +675,7 @@ class MultiTargetTracker:
         self._next_identity_s = stamp_s + IDENTITY_PERIOD_S
         hand_over(store, self.settings, stamp_s, self._sight.in_sensor_gap)
         merge_duplicates(store, self.settings, stamp_s)
+        merge_into_trucks(store, self.settings, stamp_s)
 
     def _reference_point(
         self,
