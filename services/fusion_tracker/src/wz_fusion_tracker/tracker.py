@@ -9,6 +9,8 @@ multi_object_tracker), each in its own module:
 - :mod:`~wz_fusion_tracker.types`: what goes in and out (:class:`Measurement`,
   :class:`TrackState`, :class:`TrackHistory`, :class:`TrackerCounters`);
 - :mod:`~wz_fusion_tracker.association`: gating, costs, assignment, Huber's inflation;
+- :mod:`~wz_fusion_tracker.updater`: the measurement models (position, radar speed along the
+  road), the speed gate and the batched update, returning what it did;
 - :mod:`~wz_fusion_tracker.track_table`: every track's bookkeeping as arrays over the state
   bank's slots;
 - :mod:`~wz_fusion_tracker.identity`: re-acquisition, hand-over, duplicate merging, retirement;
@@ -107,7 +109,6 @@ from wz_fusion_tracker.life_cycle import (
 from wz_fusion_tracker.settings import TrackerSettings
 from wz_fusion_tracker.track_table import Track, TrackStore, UpdateRecord
 from wz_fusion_tracker.types import (
-    NO_INDEX,
     HeadingAt,
     HeadingsAt,
     Measurement,
@@ -116,8 +117,8 @@ from wz_fusion_tracker.types import (
     TrackState,
     TrackStatus,
 )
+from wz_fusion_tracker.updater import UpdateOutcome, reference_points, update_matched
 from wz_shared.arrays import F64, IntP
-from wz_shared.motion import STATE_DIM
 
 __all__ = [
     "Measurement",
@@ -574,8 +575,15 @@ class MultiTargetTracker:
         """Update the associated tracks: outliers' covariances widened (Huber), boxes seen from
         one end re-centred with the track's length (:meth:`_reference_point`)."""
         R_used = huber_inflated(batch.R, columns, d2, self.settings.huber_k)
-        z_used = self._reference_point(
-            slots, rows, columns, batch.z, batch.sensor_id, batch.measurements
+        z_used = reference_points(
+            self._store.table,
+            self.settings.reference_point_min_m,
+            self._sensor_positions.get(batch.sensor_id),
+            slots,
+            rows,
+            columns,
+            batch.z,
+            batch.measurements,
         )
         self._update_matched(
             [live[row] for row in rows.tolist()],
@@ -677,50 +685,6 @@ class MultiTargetTracker:
         merge_duplicates(store, self.settings, stamp_s)
         merge_into_trucks(store, self.settings, stamp_s)
 
-    def _reference_point(
-        self,
-        slots: IntP,
-        rows: IntP,
-        columns: IntP,
-        z: F64,
-        sensor_id: str,
-        measurements: Sequence[Measurement],
-    ) -> F64:
-        """Matched positions re-centred with the track's length where a sensor saw one end.
-
-        A LiDAR sees the face of a vehicle turned to it and completes the box away from the
-        sensor with the length of the class it can tell (a semitrailer seen end-on at 130 m
-        shows a car's height: completed as a 4.5 m car, its centre 6 m short). The track knows
-        better: its length ``L_t`` (the upper quartile of the measured lengths, since a partial
-        view only shortens) against the box's ``L_d`` moves the centre by ``(L_t - L_d) / 2``
-        along the track's direction, away from the sensor. Differences below
-        ``reference_point_min_m`` are left alone (a car's own spread).
-        """
-        threshold = self.settings.reference_point_min_m
-        sensor = self._sensor_positions.get(sensor_id)
-        if sensor is None or threshold <= 0.0:
-            return z
-        measured = np.fromiter(
-            [
-                math.nan if (length := measurements[c].length_m) is None else length
-                for c in columns.tolist()
-            ],
-            np.float64,
-            len(columns),
-        )
-        matched_slots = slots[rows]
-        difference = self._store.table.sizes(matched_slots)[:, 2] - measured  # NaN: either unknown
-        heading = self._store.table.heading_rad[matched_slots]
-        moved = (np.abs(difference) >= threshold) & np.isfinite(heading)  # False for NaN
-        if not moved.any():
-            return z
-        axis = np.stack([np.cos(heading[moved]), np.sin(heading[moved])], axis=1)
-        at = columns[moved]
-        away = np.where(np.einsum("ki,ki->k", z[at] - np.asarray(sensor), axis) >= 0.0, 1.0, -1.0)
-        z_used = z.copy()
-        z_used[at] = z[at] + (0.5 * difference[moved] * away)[:, None] * axis
-        return z_used
-
     def _predicted(self, slots: IntP, stamp_s: float) -> tuple[F64, F64]:
         """The states of ``slots`` predicted to ``stamp_s`` with each track's process noise.
 
@@ -761,12 +725,13 @@ class MultiTargetTracker:
         z: F64,
         R: F64,
         batch: _Batch,
-    ) -> None:
+    ) -> UpdateOutcome:
         """Update the tracks ``tracks`` (rows ``rows`` of ``slots``) with the measurements
         ``columns`` of the batch, positions ``z`` (M, 2) and covariances ``R`` (M, 2, 2), from
         the priors ``x_pred`` (T, 4), ``P_pred`` (T, 4, 4): one batched Kalman update of the
-        positions, then of the radar speeds along the road; then the hits, class votes, sizes,
-        history and confirmation."""
+        positions, then of the radar speeds along the road
+        (:func:`~wz_fusion_tracker.updater.update_matched`); then the hits, class votes,
+        sizes, history and confirmation. What the update did, also added to the counters."""
         settings = self.settings
         sensor_id, stamp_s, measurements = batch.sensor_id, batch.stamp_s, batch.measurements
         speeds, time_offset_s = batch.speeds, batch.time_offset_s
@@ -775,50 +740,20 @@ class MultiTargetTracker:
         # the prior: each matched track predicted to the batch's stamp
         x_prior, P_prior = x_pred[rows], P_pred[rows]
         self._store.bank.commit_prior(matched_slots, x_prior, P_prior, stamp_s)
-        # position update, all matched tracks at once; a measurement captured delta after
-        # the stamp sees p + delta v: H = [I delta I] (see innovation_statistics)
-        if time_offset_s is None:
-            self._store.bank.update(matched_slots, z[columns], R[columns])
-        else:
-            H = np.zeros((len(columns), 2, STATE_DIM))
-            H[:, 0, 0] = H[:, 1, 1] = 1.0
-            H[:, 0, 2] = H[:, 1, 3] = time_offset_s[columns]
-            self._store.bank.update(matched_slots, z[columns], R[columns], H)
-
-        if self._heading_at is not None:
-            x_post = self._store.bank.states(matched_slots)
-            if self._headings_at is not None:
-                road = np.asarray(self._headings_at(x_post[:, 0], x_post[:, 1]), dtype=np.float64)
-            else:
-                road = np.array(
-                    [self._heading_at(x_m, y_m) for x_m, y_m in x_post[:, :2].tolist()],
-                    dtype=np.float64,
-                )
-            road = np.where(np.isfinite(road), road, math.nan)  # no road: NaN
-            table.heading_rad[matched_slots] = road
-            # radar speed along the road: z = s, H = [0, 0, cos h, sin h], R = sigma_s^2
-            speed_rows = (
-                np.flatnonzero(np.isfinite(speeds[columns]) & np.isfinite(road))
-                if (settings.use_speed_measurements)
-                else NO_INDEX
-            )
-            if len(speed_rows):
-                h = road[speed_rows]
-                H = np.zeros((len(speed_rows), 1, STATE_DIM))
-                H[:, 0, 2], H[:, 0, 3] = np.cos(h), np.sin(h)
-                measured = speeds[columns[speed_rows]][:, None]
-                R_speed = np.full((len(speed_rows), 1, 1), settings.speed_std_mps**2)
-                # Gate: a radar speed paired with the wrong echo (the car in the next lane)
-                # would drag the velocity by metres per second in one update.
-                # y = s - H x,  S = H P H^T + R,  kept when y^2 / S <= speed_gate_chi2.
-                speed_slots = matched_slots[speed_rows]
-                x_now, P_now = bank.states(speed_slots), bank.covariances(speed_slots)
-                y = measured[:, 0] - np.einsum("mj,mj->m", H[:, 0, :], x_now)
-                S = np.einsum("mi,mij,mj->m", H[:, 0, :], P_now, H[:, 0, :]) + R_speed[:, 0, 0]
-                keep = y * y <= settings.speed_gate_chi2 * S
-                self._store.counters.speeds_rejected += int(np.count_nonzero(~keep))
-                if keep.any():
-                    bank.update(speed_slots[keep], measured[keep], R_speed[keep], H[keep])
+        # positions, then the radar speeds along the road's heading at the updated tracks
+        outcome = update_matched(
+            bank,
+            settings,
+            matched_slots,
+            z[columns],
+            R[columns],
+            None if time_offset_s is None else time_offset_s[columns],
+            None if self._heading_at is None else self._road_headings,
+            speeds[columns],
+        )
+        if outcome.road_heading_rad is not None:
+            table.heading_rad[matched_slots] = outcome.road_heading_rad
+        self._store.counters.speeds_rejected += outcome.speeds_rejected
 
         # the hits: class vote, sizes, per-sensor stamps, all matched tracks at once
         columns_list = columns.tolist()  # Python ints index the measurements faster
@@ -855,6 +790,17 @@ class MultiTargetTracker:
             # a confirmed track has no hits left to count
             tracks[i].hit_stamps_s.append(stamp_s)
             check_confirmation(self._store, self.settings, tracks[i], stamp_s)
+        return outcome
+
+    def _road_headings(self, xy: F64) -> F64:
+        """The road's heading at each site position (K, 2) [rad]; NaN where there is none
+        (only with ``heading_at``)."""
+        assert self._heading_at is not None
+        if self._headings_at is not None:
+            road = np.asarray(self._headings_at(xy[:, 0], xy[:, 1]), dtype=np.float64)
+        else:
+            road = np.array([self._heading_at(x, y) for x, y in xy.tolist()], dtype=np.float64)
+        return np.where(np.isfinite(road), road, math.nan)
 
     def _road_heading(self, x_m: float, y_m: float) -> float | None:
         if self._heading_at is None:
