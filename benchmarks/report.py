@@ -39,6 +39,7 @@ from benchmarks.report_sensors import (
     sensors,
     sumo_step,
     tracker_cycle,
+    traffic_sites,
 )
 
 # --- machine and summary ----------------------------------------------------------------------
@@ -343,6 +344,11 @@ SECTIONS: dict[str, tuple[str, Callable[[dict[str, Any]], list[str]]]] = {
     "generated_sites": (
         "the whole pipeline on 12 generated sites it was never tuned on (issue 25)",
         generated_sites,
+    ),
+    "traffic_sites": (
+        "the whole pipeline on 24 generated sites it was never tuned on, 12 in free flow and "
+        "12 congested (issue 40)",
+        traffic_sites,
     ),
     "self_calibration": (
         "the sensors' self-calibration: CPU at full rates, time to learn against traffic",

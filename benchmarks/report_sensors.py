@@ -539,12 +539,14 @@ def generated_sites(result: dict[str, Any]) -> list[str]:
         return "-" if value is None else f"{value:.3g}"
 
     taken = result.get("taken_from")
+    traffic = result.get("traffic")
     lines = [
         f"`wz eval --sites {result['count']} --seed {result['seed']} --duration-s "
-        f"{result['duration_s']:g} --warmup-s {result['warmup_s']:g}`: "
+        f"{result['duration_s']:g} --warmup-s {result['warmup_s']:g}"
+        f"{'' if traffic is None else ' --traffic ' + traffic}`: "
         f"**{result['sites_meeting_every_target']} of {result['count']} sites meet every target** "
-        "(issue 25; the live fused track within 150 m of the mast where a sensor can see a car; "
-        "alerts against the same rules on the truth)."
+        f"({'issue 25' if traffic is None else 'issue 40'}; the live fused track within 150 m of "
+        "the mast where a sensor can see a car; alerts against the same rules on the truth)."
         + (
             f" Figures taken from the run written at {taken['written_at']} "
             f"(`{taken['path']}`), the same command, not re-run."
@@ -669,4 +671,22 @@ def self_calibration(result: dict[str, Any]) -> list[str]:
             f"| {row['vehicles_per_hour']:g} | {cell(row['lidar_s'], '.1f')} | "
             f"{cell(row['camera_s'], '.1f')} | {cell(row['radar_s'], '.1f')} |"
         )
+    return lines
+
+
+def traffic_sites(result: dict[str, Any]) -> list[str]:
+    """Issue 40's 24 sites: each traffic set as :func:`generated_sites` shows it."""
+    wall = result.get("wall_s") or {}
+    lines = [
+        "Wall time on this machine: "
+        + (
+            ", ".join(f"{name} {seconds / 60.0:.0f} min" for name, seconds in wall.items())
+            if wall
+            else "not recorded"
+        )
+        + " (bound: both sets within 2 hours).",
+        "",
+    ]
+    for traffic, entry in result["sets"].items():
+        lines += [f"**{traffic}**", "", *generated_sites(entry)]
     return lines

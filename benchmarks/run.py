@@ -45,6 +45,7 @@ from benchmarks import (
     speeding_flood,
     sumo_step,
     tracker_cycle,
+    traffic_sites,
     webhook_latency,
 )
 from benchmarks.common import ROOT
@@ -68,6 +69,7 @@ BENCHMARKS: dict[str, Callable[[bool], dict[str, Any]]] = {
     "webhook_latency": webhook_latency.run,
     "recovery": recovery.run,
     "generated_sites": generated_sites.run,
+    "traffic_sites": traffic_sites.run,
     "self_calibration": self_calibration.run,
 }
 RESULTS_PATH = ROOT / "benchmarks" / "results.json"
