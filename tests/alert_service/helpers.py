@@ -41,7 +41,7 @@ def make_track(
         speed_mps=speed_mps,
         heading_rad=1.5707963267948966,
         lane_index=lane,
-        age_s=1.0,
+        age_s=10.0,  # followed a while (the short-TTC rule wants 2 s)
         hits=10,
         confirmed=status is not TrackStatus.TENTATIVE,
         sources=["lidar-mast"],

@@ -481,6 +481,22 @@ def test_short_ttc_decides_on_the_ttc_the_covariances_make_sure() -> None:
     assert as_measured is not None and as_measured.measured_value == pytest.approx(2.0 / 3.5)
 
 
+def test_short_ttc_wants_both_tracks_followed_a_while() -> None:
+    """A follower at 26 m/s 20 m behind a "leader" at 3 m/s born 0.6 s ago (on site 9700 a
+    camera ghost: no vehicle there): TTC 0.87 s as measured; with ``min_track_age_s`` 2 (the
+    default) no alert until both tracks are 2 s old, then one; with 0, at once."""
+    rule = RULES.short_ttc
+    assert rule.min_track_age_s == 2.0
+    follower = make_track(1, 900.0, 26.0).model_copy(update={"age_s": 5.0})
+    ghost = make_track(2, 924.5, 3.0).model_copy(update={"age_s": 0.6})
+    any_age = rule.model_copy(update={"min_track_age_s": 0.0})
+    assert short_ttc(follower, ghost, ZONE, any_age) is not None
+    assert short_ttc(follower, ghost, ZONE, rule) is None
+    older = ghost.model_copy(update={"age_s": 2.0})
+    assert short_ttc(follower, older, ZONE, rule) is not None
+    assert short_ttc(follower.model_copy(update={"age_s": 1.9}), older, ZONE, rule) is None
+
+
 def test_leaders_are_the_nearest_ahead_in_the_same_lane() -> None:
     tracks = [
         make_track(1, 900.0, 30.0),

@@ -247,9 +247,15 @@ def _episodes(events: Iterable[_Event], vehicle_of_start: dict[str, str | None])
 
 
 def truth_episodes(site: Site, truth_frames: TruthFrames) -> list[Episode]:
-    """The episodes the engine finds on the true kinematics, each with its vehicle."""
+    """The episodes the engine finds on the true kinematics, each with its vehicle. What the
+    rules ask of a track's evidence (the short-TTC rule's ``min_track_age_s``: a vehicle
+    followed long enough for its speed to be known) does not apply to the truth, whose every
+    vehicle is known from its first frame."""
     batches, vehicle_of = truth_batches(site, truth_frames)
-    events = run_alert_engine(site, batches)
+    rules = site.alerts.model_copy(
+        update={"short_ttc": site.alerts.short_ttc.model_copy(update={"min_track_age_s": 0.0})}
+    )
+    events = run_alert_engine(site.model_copy(update={"alerts": rules}), batches)
     vehicles = {
         e.episode_id: None if e.track_id is None else vehicle_of[e.track_id]
         for e in events

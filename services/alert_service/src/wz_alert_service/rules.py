@@ -563,7 +563,8 @@ def short_ttc(
     of the two positions' variances along the road, ``sigma_closing^2`` of their speeds'
     (:func:`speed_variance`); a speed noise of 0.5 m/s each is a closing speed of 1.4 m/s at
     2 sigma. Holds for ``v_f - v_l - z sigma_closing >= min_closing_speed_mps``, ``gap > 0``
-    and ``TTC_z <= max_ttc_s`` (while open ``max_ttc_s + hysteresis_s``). Severity by
+    and ``TTC_z <= max_ttc_s`` (while open ``max_ttc_s + hysteresis_s``), both tracks at
+    least ``min_track_age_s`` old. Severity by
     ``TTC_z``: critical ``<= critical_ttc_s``, warning ``<= warning_ttc_s``, info otherwise.
     Overlapping boxes (``gap <= 0``) are one vehicle tracked twice or a crash; a TTC
     describes neither, so they do not hold.
@@ -586,6 +587,8 @@ def short_ttc(
         the evidence has the TTC as measured.
     """
     if leader is None or not zone.in_approach(follower.station_m):
+        return None
+    if min(follower.age_s, leader.age_s) < rule.min_track_age_s:
         return None
     z = rule.certainty_sigmas
     closing_mps = follower.speed_mps - leader.speed_mps

@@ -36,6 +36,7 @@ class ShortTtcRule:
             hysteresis_s (float | Unset):  Default: 0.3.
             max_ttc_s (float | Unset):  Default: 1.5.
             min_closing_speed_mps (float | Unset):  Default: 0.5.
+            min_track_age_s (float | Unset):  Default: 2.0.
             warning_ttc_s (float | Unset):  Default: 1.0.
     """
 
@@ -49,6 +50,7 @@ class ShortTtcRule:
     hysteresis_s: float | Unset = 0.3
     max_ttc_s: float | Unset = 1.5
     min_closing_speed_mps: float | Unset = 0.5
+    min_track_age_s: float | Unset = 2.0
     warning_ttc_s: float | Unset = 1.0
 
     def to_dict(self) -> dict[str, Any]:
@@ -71,6 +73,8 @@ class ShortTtcRule:
         max_ttc_s = self.max_ttc_s
 
         min_closing_speed_mps = self.min_closing_speed_mps
+
+        min_track_age_s = self.min_track_age_s
 
         warning_ttc_s = self.warning_ttc_s
 
@@ -97,6 +101,8 @@ class ShortTtcRule:
             field_dict["max_ttc_s"] = max_ttc_s
         if min_closing_speed_mps is not UNSET:
             field_dict["min_closing_speed_mps"] = min_closing_speed_mps
+        if min_track_age_s is not UNSET:
+            field_dict["min_track_age_s"] = min_track_age_s
         if warning_ttc_s is not UNSET:
             field_dict["warning_ttc_s"] = warning_ttc_s
 
@@ -125,6 +131,8 @@ class ShortTtcRule:
 
         min_closing_speed_mps = d.pop("min_closing_speed_mps", UNSET)
 
+        min_track_age_s = d.pop("min_track_age_s", UNSET)
+
         warning_ttc_s = d.pop("warning_ttc_s", UNSET)
 
         short_ttc_rule = cls(
@@ -138,6 +146,7 @@ class ShortTtcRule:
             hysteresis_s=hysteresis_s,
             max_ttc_s=max_ttc_s,
             min_closing_speed_mps=min_closing_speed_mps,
+            min_track_age_s=min_track_age_s,
             warning_ttc_s=warning_ttc_s,
         )
 
