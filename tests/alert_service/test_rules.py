@@ -117,6 +117,18 @@ def test_speeding_only_within_the_approach(station_m: float, fires: bool) -> Non
     assert (finding is not None) is fires
 
 
+def test_speeding_can_decide_on_the_speed_the_covariance_makes_sure() -> None:
+    """1 m/s over the entry threshold with a speed std of 0.6 m/s: as measured (the default)
+    it alerts; at 2 sigma (1.2 m/s) it does not; with a std of 0.4 m/s it does again."""
+    rule = RULES.speeding.model_copy(update={"certainty_sigmas": 2.0})
+    assert RULES.speeding.certainty_sigmas == 0.0
+    track = make_track(1, 800.0, SPEEDING_ENTER_MPS + 1.0)
+    loose, tight = _with_stds(track, 0.3, 0.6), _with_stds(track, 0.3, 0.4)
+    assert speeding(loose, ZONE, RULES.speeding) is not None
+    assert speeding(loose, ZONE, rule) is None
+    assert speeding(tight, ZONE, rule) is not None
+
+
 def test_speeding_uses_the_limit_at_the_station() -> None:
     # At 1500 m the limit is 55 mph; a site with a 70 mph stretch there raises the threshold.
     site = SITE.model_copy(

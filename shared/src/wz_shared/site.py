@@ -268,6 +268,9 @@ class SpeedingRule(EpisodeTiming):
     critical_excess_mph: Annotated[float, Field(gt=0.0, le=60.0)] = 15.0
     #: 1 s: 20 tracker cycles, so one noisy cycle or a new track's speed settling cannot alert.
     hold_s: Annotated[float, Field(ge=0.0, le=60.0)] = 1.0
+    #: Decide on the lowest speed the track's covariance allows at this many standard
+    #: deviations (as the hard-braking and short-TTC rules do); 0: on the speed as measured.
+    certainty_sigmas: Annotated[float, Field(ge=0.0, le=5.0)] = 0.0
 
     @model_validator(mode="after")
     def _bands(self) -> SpeedingRule:

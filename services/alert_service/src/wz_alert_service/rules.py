@@ -122,9 +122,10 @@ def speeding(
 ) -> Finding | None:
     """Speed over the posted limit at the track's station, within the approach.
 
-    Holds when ``v - v_limit(s) >= m`` with ``m = margin_mph`` to open and ``m = margin_mph -
+    Holds when ``v_z - v_limit(s) >= m`` with ``m = margin_mph`` to open and ``m = margin_mph -
     hysteresis_mph`` to stay open (converted to m/s); critical when the excess reaches
-    ``critical_excess_mph``.
+    ``critical_excess_mph``. ``v_z = v - z sigma_v`` is the lowest speed the track's
+    covariance allows at ``z = certainty_sigmas`` (:func:`speed_variance`; 0: as measured).
 
     Parameters
     ----------
@@ -147,7 +148,10 @@ def speeding(
     limit_mps = zone.speed_limit_mps_at(track.station_m)
     margin_mph = rule.margin_mph - (rule.hysteresis_mph if active else 0.0)
     threshold_mps = limit_mps + margin_mph * MPH_TO_MPS
-    if track.speed_mps < threshold_mps:
+    sure_mps = track.speed_mps
+    if rule.certainty_sigmas > 0.0:
+        sure_mps -= rule.certainty_sigmas * math.sqrt(speed_variance(track))
+    if sure_mps < threshold_mps:
         return None
     excess_mps = track.speed_mps - limit_mps
     critical = excess_mps >= rule.critical_excess_mph * MPH_TO_MPS

@@ -23,6 +23,7 @@ class SpeedingRule:
     limits they are added to.
 
         Attributes:
+            certainty_sigmas (float | Unset):  Default: 0.0.
             clear_s (float | Unset):  Default: 2.0.
             cooldown_s (float | Unset):  Default: 10.0.
             critical_excess_mph (float | Unset):  Default: 15.0.
@@ -32,6 +33,7 @@ class SpeedingRule:
             margin_mph (float | Unset):  Default: 5.0.
     """
 
+    certainty_sigmas: float | Unset = 0.0
     clear_s: float | Unset = 2.0
     cooldown_s: float | Unset = 10.0
     critical_excess_mph: float | Unset = 15.0
@@ -41,6 +43,8 @@ class SpeedingRule:
     margin_mph: float | Unset = 5.0
 
     def to_dict(self) -> dict[str, Any]:
+        certainty_sigmas = self.certainty_sigmas
+
         clear_s = self.clear_s
 
         cooldown_s = self.cooldown_s
@@ -58,6 +62,8 @@ class SpeedingRule:
         field_dict: dict[str, Any] = {}
 
         field_dict.update({})
+        if certainty_sigmas is not UNSET:
+            field_dict["certainty_sigmas"] = certainty_sigmas
         if clear_s is not UNSET:
             field_dict["clear_s"] = clear_s
         if cooldown_s is not UNSET:
@@ -78,6 +84,8 @@ class SpeedingRule:
     @classmethod
     def from_dict(cls: type[T], src_dict: Mapping[str, Any]) -> T:
         d = dict(src_dict)
+        certainty_sigmas = d.pop("certainty_sigmas", UNSET)
+
         clear_s = d.pop("clear_s", UNSET)
 
         cooldown_s = d.pop("cooldown_s", UNSET)
@@ -93,6 +101,7 @@ class SpeedingRule:
         margin_mph = d.pop("margin_mph", UNSET)
 
         speeding_rule = cls(
+            certainty_sigmas=certainty_sigmas,
             clear_s=clear_s,
             cooldown_s=cooldown_s,
             critical_excess_mph=critical_excess_mph,
