@@ -233,6 +233,12 @@ def test_queue_approach_hysteresis_and_what_is_not_approaching() -> None:
     car = make_track(53, 850.0, 25.0)
     assert queue_approach(car, free, ZONE, RULE, slow_speed_mps=SLOW) is None
     assert queue_approach(car, None, ZONE, RULE, slow_speed_mps=SLOW) is None
+    # A back beyond the sensors' reach stands upstream of every track they see: a fast track
+    # 90 m downstream of where the queue leaves their sight is not closing on it.
+    beyond = stopped_lane().model_copy(update={"back_beyond_reach": True})
+    seen = make_track(54, 900.0 - 90.0, 25.0)
+    assert queue_approach(seen, stopped_lane(), ZONE, RULE, slow_speed_mps=SLOW) is not None
+    assert queue_approach(seen, beyond, ZONE, RULE, slow_speed_mps=SLOW) is None
 
 
 def test_the_engine_alerts_a_car_closing_on_a_stopped_queue() -> None:

@@ -776,7 +776,11 @@ def queue_approach(
     infinite for ``D <= 0``: no room left). Holds at ``a >= comfortable_decel_mps2`` (while
     open: ``comfortable_decel_mps2 - hysteresis_mps2``); critical from
     ``critical_decel_mps2``. A track slow itself (below ``slow_speed_mps``, the queue's own
-    threshold) is part of the traffic the queue is made of, not approaching it.
+    threshold) is part of the traffic the queue is made of, not approaching it. Nor is any
+    track while the lane's back stands beyond the sensors' reach (``back_beyond_reach``): the
+    back is then somewhere upstream of all the sensors see, so every seen track is in the
+    queue or past its back, and a fast one there is a track new at the edge of sight whose
+    speed is not yet known; the sign warns of the queue (docs/alerts.md).
 
     Parameters
     ----------
@@ -800,7 +804,7 @@ def queue_approach(
         threshold; evidence: the back, the room, the queue's speed and the lead time
         ``time_to_back_s = D / (v - u)``.
     """
-    if lane_queue is None or lane_queue.back_station_m is None:
+    if lane_queue is None or lane_queue.back_station_m is None or lane_queue.back_beyond_reach:
         return None
     if not zone.in_approach(track.station_m) or track.speed_mps < slow_speed_mps:
         return None
