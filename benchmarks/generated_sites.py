@@ -30,7 +30,7 @@ COUNT, SEED, DURATION_S, WARMUP_S = 12, 9100, 300.0, 60.0
 QUICK = (2, 9100, 60.0, 30.0)
 
 
-def _summary(report: dict[str, Any]) -> dict[str, Any]:
+def summary(report: dict[str, Any]) -> dict[str, Any]:
     """What BENCHMARKS.md shows: the distribution and each site's row (no pictures)."""
     keep = (
         "site_id",
@@ -70,9 +70,9 @@ def run(quick: bool) -> dict[str, Any]:
         if found != asked:
             raise ValueError(f"{path}: a run of {found}, not of {asked} (count, seed, s, warm-up)")
         written = datetime.datetime.fromtimestamp(path.stat().st_mtime, datetime.UTC)
-        result = _summary(report)
+        result = summary(report)
         result["taken_from"] = {"path": str(path), "written_at": written.isoformat("T", "seconds")}
         return result
     with tempfile.TemporaryDirectory(prefix="wz-bench-sites-") as tmp:
         report = run_sites(count, seed, duration_s, warmup_s, Path(tmp))
-    return _summary(report)
+    return summary(report)

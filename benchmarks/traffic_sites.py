@@ -29,7 +29,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from benchmarks.generated_sites import _summary
+from benchmarks.generated_sites import summary
 from wz_eval.sites import run_sites
 
 #: (traffic set, first seed): 12 sites each, 300 s after 60 s of warm-up.
@@ -45,7 +45,7 @@ def _taken(directory: Path, traffic: str, asked: tuple[int, int, float, float]) 
     if found != asked or report.get("traffic") != traffic:
         raise ValueError(f"{path}: a {report.get('traffic')} run of {found}, not of {asked}")
     written = datetime.datetime.fromtimestamp(path.stat().st_mtime, datetime.UTC)
-    result = _summary(report)
+    result = summary(report)
     result["traffic"] = traffic
     result["taken_from"] = {"path": str(path), "written_at": written.isoformat("T", "seconds")}
     return result
@@ -69,5 +69,5 @@ def run(quick: bool) -> dict[str, Any]:
                 count, seed, duration_s, warmup_s, Path(tmp) / traffic, traffic=traffic
             )
             wall_s[traffic] = round(time.perf_counter() - started, 1)
-            sets[traffic] = {**_summary(report), "traffic": traffic}
+            sets[traffic] = {**summary(report), "traffic": traffic}
     return {"sets": sets, "wall_s": wall_s}

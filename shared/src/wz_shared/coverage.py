@@ -222,19 +222,24 @@ class SiteSight:
         self._coverage = SiteCoverage(site) if coverage is None else coverage
         self._mounts = list(site.sensors)
 
-    def covered_and_hidden(self, targets_m: npt.ArrayLike, boxes: Boxes) -> tuple[Bool, Bool]:
-        """For each target (M, 3) [m]: whether a sensor covers it, and whether every sensor
-        that covers it has a box in its sight line (False where none covers it)."""
+    def covers(self, targets_m: npt.ArrayLike) -> Bool:
+        """Which sensor covers which target (M, 3) [m]: shape (S, M), the site's sensors in
+        order. Fixed points (a lane's loop spot) take it once for every :meth:`hidden`."""
         targets = np.asarray(targets_m, dtype=np.float64).reshape(-1, 3)
-        covered = np.zeros(targets.shape[0], dtype=bool)
+        rows = [self._coverage.sensor(m, targets[:, 0], targets[:, 1]) for m in self._mounts]
+        return np.array(rows, dtype=bool).reshape(len(self._mounts), targets.shape[0])
+
+    def hidden(self, targets_m: npt.ArrayLike, boxes: Boxes, covers: Bool | None = None) -> Bool:
+        """Whether every sensor that covers each target (M, 3) [m] has a box in its sight line;
+        False where none covers it. ``covers``: :meth:`covers` of these targets, if known."""
+        targets = np.asarray(targets_m, dtype=np.float64).reshape(-1, 3)
+        covers = self.covers(targets) if covers is None else covers
         seen = np.zeros(targets.shape[0], dtype=bool)
-        for mount in self._mounts:
-            covers = self._coverage.sensor(mount, targets[:, 0], targets[:, 1])
-            if not covers.any():
-                continue
-            covered |= covers
-            seen |= covers & ~hidden(mount.pose.position_m, targets, boxes)
-        return covered, covered & ~seen
+        for mount, row in zip(self._mounts, covers, strict=True):
+            if row.any():
+                seen |= row & ~hidden(mount.pose.position_m, targets, boxes)
+        result: Bool = covers.any(axis=0) & ~seen
+        return result
 
 
 #: The longest stretch no sensor sees that a tracker bridges by coasting [m]: the blind cone

@@ -113,7 +113,7 @@ def check_confirmation(
 #: (:class:`wz_shared.coverage.SensorGaps`).
 InSensorGap = Callable[[float, float], bool]
 #: Whether other vehicles (``Boxes``) hide each point (K, 3) [m] from every sensor that covers
-#: it (:meth:`wz_shared.occlusion.SiteSight.covered_and_hidden`'s second answer).
+#: it (:meth:`wz_shared.coverage.SiteSight.hidden`).
 HiddenFromSensors = Callable[[F64, Boxes], Bool]
 
 
@@ -206,11 +206,10 @@ def hidden_now(
     _, others = store.live()
     if not len(others):
         return np.zeros(len(slots), dtype=bool)
-    y = store.bank.states(others)
+    y, axis, _ = along_road(store, others)
     ahead = y[:, :2] + y[:, 2:] * (stamp_s - store.bank.stamps_s(others))[:, None]
     sizes = table.sizes(others)
-    heading = table.heading_rad[others]
-    heading = np.where(np.isfinite(heading), heading, np.arctan2(y[:, 3], y[:, 2]))
+    heading = np.arctan2(axis[:, 1], axis[:, 0])
     boxes = Boxes.of(
         ahead[:, 0], ahead[:, 1], heading, sizes[:, 0], sizes[:, 1], table.object_classes(others)
     )

@@ -46,7 +46,7 @@ from wz_fusion_tracker.life_cycle import HiddenFromSensors
 from wz_fusion_tracker.settings import FusionTrackerSettings, TrackerSettings
 from wz_fusion_tracker.tracker import MultiTargetTracker
 from wz_fusion_tracker.types import Measurement, TrackState
-from wz_shared.arrays import F64, Bool
+from wz_shared.arrays import F64
 from wz_shared.codec import encode_json
 from wz_shared.coverage import SensorGaps, SiteSight
 from wz_shared.messages import (
@@ -57,7 +57,6 @@ from wz_shared.messages import (
     VehicleClass,
 )
 from wz_shared.motion import ProcessNoise
-from wz_shared.occlusion import Boxes
 from wz_shared.service import NodeApp, ServiceRuntime
 from wz_shared.site import Site
 from wz_shared.timebase import RunWatch, SimClock
@@ -97,12 +96,7 @@ def sight_hook(site: Site, settings: TrackerSettings) -> HiddenFromSensors | Non
     uses it; None otherwise."""
     if settings.max_occlusion_coast_s <= 0.0 and settings.max_occlusion_memory_s <= 0.0:
         return None
-    sight = SiteSight(site)
-
-    def hidden_from_sensors(targets_m: F64, boxes: Boxes) -> Bool:
-        return sight.covered_and_hidden(targets_m, boxes)[1]
-
-    return hidden_from_sensors
+    return SiteSight(site).hidden
 
 
 def sensor_positions(site: Site) -> dict[str, tuple[float, float]]:

@@ -216,7 +216,7 @@ class MultiTargetTracker:
         None: no such stretch.
     hidden_from_sensors
         Whether other vehicles (boxes) hide each of some site points from every sensor that
-        covers it (:meth:`wz_shared.occlusion.SiteSight.covered_and_hidden`); with it, a
+        covers it (:meth:`wz_shared.coverage.SiteSight.hidden`); with it, a
         confirmed track hidden so coasts up to ``max_occlusion_coast_s`` and a lost one is
         remembered up to ``max_occlusion_memory_s``. None: not known.
     first_track_id

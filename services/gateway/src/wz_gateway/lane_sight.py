@@ -77,7 +77,7 @@ def lane_hidden_shares(
     order = np.argsort(t, kind="stable")
     t = t[order]
     samples = _sample_stamps(t, start_stamp, end_stamp)
-    covered, _ = sight.covered_and_hidden(spots, Boxes.of([], [], [], [], [], []))
+    covers = sight.covers(spots)  # the spots stand still: once for every sample
     hidden_count = np.zeros(len(lanes))
     if samples.size:
         x, y = np.asarray(x_m, np.float64)[order], np.asarray(y_m, np.float64)[order]
@@ -89,11 +89,11 @@ def lane_hidden_shares(
         ends = np.searchsorted(t, samples, side="right")
         for a, b in zip(firsts, ends, strict=True):
             boxes = Boxes.of(x[a:b], y[a:b], heading[a:b], length[a:b], width[a:b], kinds[a:b])
-            hidden_count += sight.covered_and_hidden(spots, boxes)[1]
+            hidden_count += sight.hidden(spots, boxes, covers)
         shares = hidden_count / samples.size
     else:
         shares = np.zeros(len(lanes))
-    shares[~covered] = 1.0
+    shares[~covers.any(axis=0)] = 1.0
     return {lane.index: float(share) for lane, share in zip(lanes, shares, strict=True)}
 
 
