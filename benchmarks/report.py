@@ -35,6 +35,7 @@ from benchmarks.report_sensors import (
     camera_models,
     generated_sites,
     lidar_detection,
+    queue_beyond_reach,
     self_calibration,
     sensors,
     sumo_step,
@@ -349,6 +350,11 @@ SECTIONS: dict[str, tuple[str, Callable[[dict[str, Any]], list[str]]]] = {
         "the whole pipeline on 24 generated sites it was never tuned on, 12 in free flow and "
         "12 congested (issue 40)",
         traffic_sites,
+    ),
+    "queue_beyond_reach": (
+        "a queue's back beyond the mast's reach bounded by upstream point speed sensors, on "
+        "the 12 congested sites (issue 40)",
+        queue_beyond_reach,
     ),
     "self_calibration": (
         "the sensors' self-calibration: CPU at full rates, time to learn against traffic",

@@ -38,6 +38,7 @@ from benchmarks import (
     gateway_live,
     generated_sites,
     lidar_detection,
+    queue_beyond_reach,
     recovery,
     report,
     self_calibration,
@@ -70,6 +71,7 @@ BENCHMARKS: dict[str, Callable[[bool], dict[str, Any]]] = {
     "recovery": recovery.run,
     "generated_sites": generated_sites.run,
     "traffic_sites": traffic_sites.run,
+    "queue_beyond_reach": queue_beyond_reach.run,
     "self_calibration": self_calibration.run,
 }
 RESULTS_PATH = ROOT / "benchmarks" / "results.json"

@@ -16,11 +16,14 @@ from typing import TypeVar
 import pytest
 
 from tests.alert_service.helpers import SITE, batch, make_track
+from tests.alert_service.test_queues import reading
 from wz_shared.bus import Bus, Subscription
 from wz_shared.messages import (
     ActiveAlerts,
     Alert,
     AlertType,
+    PointSensorReading,
+    QueueState,
     RoadsideDeviceState,
     ServiceStatus,
     TrackBatch,
@@ -54,6 +57,19 @@ def wait_for(
     pytest.fail(f"timed out after {timeout_s:.0f} s waiting for {what}")
 
 
+def node_env(port: int, **extra: str) -> dict[str, str]:
+    """The node's environment: this one's without any ``WZ_`` setting, connected to the test's
+    bus on ``port``, its status every 0.2 s, and ``extra``."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("WZ_")}
+    env.update(
+        WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{port}",
+        WZ_BUS_LISTEN_ENDPOINTS="",
+        WZ_STATUS_PERIOD_S="0.2",
+        **extra,
+    )
+    return env
+
+
 def speeder_batches(
     track_id: int, start_s: float, duration_s: float, first_cycle: int
 ) -> list[TrackBatch]:
@@ -71,14 +87,7 @@ def speeder_batches(
 
 def test_node_process_alerts_once_drives_the_beacon_and_survives_bad_input(port: int) -> None:
     settings = BusSettings(listen_endpoints=[f"tcp/127.0.0.1:{port}"], connect_endpoints=[])
-    env = {k: v for k, v in os.environ.items() if not k.startswith("WZ_")}
-    env.update(
-        WZ_BUS_CONNECT_ENDPOINTS=f"tcp/127.0.0.1:{port}",
-        WZ_BUS_LISTEN_ENDPOINTS="",
-        WZ_STATUS_PERIOD_S="0.2",
-        WZ_LOG_FORMAT="json",
-        WZ_ALERT_EPISODE_ID_PREFIX="proc",
-    )
+    env = node_env(port, WZ_LOG_FORMAT="json", WZ_ALERT_EPISODE_ID_PREFIX="proc")
     with Bus.open(settings, site=SITE.site_id, service="node-test") as bus:
         tracks = bus.publisher(bus.keys.tracks, TrackBatch)
         alerts = bus.subscribe(bus.keys.alerts_all, Alert)
@@ -168,6 +177,52 @@ def test_node_process_alerts_once_drives_the_beacon_and_survives_bad_input(port:
             ]
             assert speeding_events == [("start", 1), ("clear", 1), ("start", 2)]
             assert len({a.alert_id for a in received}) == len(received)
+        finally:
+            node.send_signal(signal.SIGTERM)
+            assert node.wait(15.0) == 0
+
+
+def test_node_process_bounds_a_back_beyond_the_reach_with_the_point_sensors(port: int) -> None:
+    """The default site's point sensors over the bus: speed-1 (600 m) reads the open lane
+    crawling, speed-2 (350 m) free; a queue the tracks see to the reach (782 m) then has its
+    back between them on ``wz/<site>/queue``. A reading from a sensor the site file does not
+    list is counted and dropped."""
+    settings = BusSettings(listen_endpoints=[f"tcp/127.0.0.1:{port}"], connect_endpoints=[])
+    env = node_env(port)
+    with Bus.open(settings, site=SITE.site_id, service="node-test") as bus:
+        tracks = bus.publisher(bus.keys.tracks, TrackBatch)
+        points = {
+            name: bus.publisher(bus.keys.point_sensor(name), PointSensorReading)
+            for name in ("speed-1", "speed-2", "speed-9")
+        }
+        queue = bus.subscribe(bus.keys.queue, QueueState)
+        status = bus.subscribe(
+            bus.keys.status("alert-service"), ServiceStatus, mode="ring", capacity=1
+        )
+        node = subprocess.Popen([sys.executable, "-m", "wz_alert_service.node"], cwd=ROOT, env=env)
+        try:
+            assert tracks.wait_for_subscribers(30.0), "the node never subscribed to the tracks"
+            assert points["speed-1"].wait_for_subscribers(10.0), "no subscriber to the points"
+            points["speed-1"].put(reading("speed-1", 30.0, 3.0))
+            points["speed-2"].put(reading("speed-2", 30.0, 24.0))
+            forged = reading("speed-2", 30.0, 24.0).model_copy(update={"source_id": "speed-9"})
+            points["speed-9"].put(forged)
+            time.sleep(0.5)  # the readings are taken before the next batch
+            queued = [make_track(1 + i, 786.0 + 9.0 * i, 1.0) for i in range(5)]
+            for k in range(5):
+                tracks.put(batch(31.0 + k * PERIOD_S, queued, k))
+            state = wait_for(
+                queue,
+                lambda s: s.lanes[0].back_beyond_reach,
+                "the open lane's back beyond the reach",
+            )
+            lane = state.lanes[0]
+            # 5 m/s for the 30 s interval and the 1 s since: 155 m either way
+            assert lane.back_downstream_bound_m == pytest.approx(755.0, abs=1.0)
+            assert lane.back_upstream_bound_m == pytest.approx(195.0, abs=1.0)
+            name = f"{bus.keys.point_sensors_all}|unknown_sensor"
+            wait_for(status, lambda s: s.invalid_counts.get(name, 0) == 1, "speed-9 refused")
+            assert node.poll() is None
         finally:
             node.send_signal(signal.SIGTERM)
             assert node.wait(15.0) == 0

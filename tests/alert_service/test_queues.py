@@ -11,16 +11,26 @@ from tests.alert_service.helpers import CLOSED_LANE_D, SITE, batch, make_track, 
 from tests.alert_service.test_devices import active
 from wz_alert_service.devices import STOPPED_TEXT, SignHold, roadside_devices
 from wz_alert_service.engine import AlertEngine
-from wz_alert_service.queues import QueueEstimator, upstream_reach_m
+from wz_alert_service.node import AlertCore
+from wz_alert_service.queues import (
+    BACK_SPEED_MAX_MPS,
+    POINT_STALE_INTERVALS,
+    QueueEstimator,
+    point_lane_queued,
+    upstream_reach_m,
+)
 from wz_alert_service.rules import queue_approach
 from wz_alert_service.zone import ZoneGeometry
 from wz_shared.messages import (
     AlertSeverity,
     AlertType,
     LaneQueue,
+    PointLaneReading,
+    PointSensorReading,
     QueueCondition,
     RoadsideDeviceState,
 )
+from wz_shared.site import PointSensor, Site
 
 ZONE = ZoneGeometry.from_site(SITE)  # approach [300, 1700) m, taper from 1000 m
 FAR_REACH = {0: 300.0, 1: 300.0}  # the sensors see the whole approach
@@ -170,6 +180,118 @@ def test_the_sign_says_stopped_traffic_from_the_lanes_queue() -> None:
     )
     devices = roadside_devices([active(AlertType.QUEUE, 900.0)], ZONE, 0.0, queue_state=beyond)
     assert devices.sign_text == "SLOW TRAFFIC AHEAD"  # no distance beyond the reach
+
+
+# --- the upstream point sensors: a back beyond the reach bounded --------------------------
+
+
+def reading(
+    sensor_id: str,
+    stamp: float,
+    speed_mps: float | None,
+    *,
+    occupancy: float = 20.0,
+    interval_s: float = 30.0,
+    site: Site = SITE,
+) -> PointSensorReading:
+    """The open lane's reading of one of the site's point sensors (the closed lane empty)."""
+    station = next(p.station_m for p in site.point_sensors if p.sensor_id == sensor_id)
+    open_lane = PointLaneReading(
+        lane_index=0,
+        vehicle_count=0 if speed_mps is None else 8,
+        mean_speed_mps=speed_mps,
+        occupancy_percent=occupancy,
+    )
+    closed = PointLaneReading(lane_index=1, vehicle_count=0, occupancy_percent=0.0)
+    return PointSensorReading(
+        site=site.site_id,
+        source_id=sensor_id,
+        stamp=stamp,
+        station_m=station,
+        interval_s=interval_s,
+        lanes=[open_lane, closed],
+    )
+
+
+def test_point_sensors_bound_a_back_beyond_the_reach() -> None:
+    """The default site's speed-1 (600 m) reads the open lane crawling, speed-2 (350 m) free:
+    the back is between them, each bound widened by the farthest the back can have moved
+    since the reading's interval began (5 m/s for 30 + 10 s: 200 m)."""
+    estimator = QueueEstimator(ZONE, {0: 890.0, 1: 890.0})
+    assert estimator.observe(reading("speed-1", 30.0, 3.0))
+    assert estimator.observe(reading("speed-2", 30.0, 24.0))
+    lane = estimator.estimate(queue_of(4, 895.0, 2.0), 40.0)[0]
+    moved_m = BACK_SPEED_MAX_MPS * (40.0 - 30.0 + 30.0)
+    assert lane.back_beyond_reach
+    assert lane.back_downstream_bound_m == pytest.approx(600.0 + moved_m)
+    assert lane.back_upstream_bound_m == pytest.approx(350.0 - moved_m)
+    # a back the tracks measure inside the reach has no bounds
+    inside = estimator.estimate(queue_of(4, 950.0, 2.0, first_id=20), 41.0)[0]
+    assert not inside.back_beyond_reach
+    assert inside.back_upstream_bound_m is inside.back_downstream_bound_m is None
+
+
+def test_a_stale_or_silent_sensor_ends_the_walk() -> None:
+    estimator = QueueEstimator(ZONE, {0: 890.0, 1: 890.0})
+    estimator.observe(reading("speed-1", 30.0, 24.0))  # free at 600 m
+    stale_s = 30.0 + POINT_STALE_INTERVALS * 30.0 + 1.0
+    lane = estimator.estimate(queue_of(4, 895.0, 2.0), stale_s)[0]
+    assert (lane.back_upstream_bound_m, lane.back_downstream_bound_m) == (None, 890.0)
+    # no reading yet of speed-1: nothing bounds the back, though speed-2 reads free
+    fresh = QueueEstimator(ZONE, {0: 890.0, 1: 890.0})
+    fresh.observe(reading("speed-2", 30.0, 24.0))
+    lane = fresh.estimate(queue_of(4, 895.0, 2.0), 40.0)[0]
+    assert lane.back_upstream_bound_m is None
+
+
+def test_a_queue_standing_on_a_sensor_reads_queued_and_an_empty_lane_free() -> None:
+    rule = ZONE.rules.queue
+    stopped = PointLaneReading(lane_index=0, vehicle_count=0, occupancy_percent=80.0)
+    empty = PointLaneReading(lane_index=0, vehicle_count=0, occupancy_percent=0.0)
+    assert point_lane_queued(stopped, rule, queued_before=False)
+    assert not point_lane_queued(empty, rule, queued_before=False)
+    between = PointLaneReading(
+        lane_index=0,
+        vehicle_count=5,
+        mean_speed_mps=rule.slow_speed_mps + 1.0,
+        occupancy_percent=30.0,
+    )
+    assert not point_lane_queued(between, rule, queued_before=False)
+    assert point_lane_queued(between, rule, queued_before=True)  # the queue rule's hysteresis
+
+
+def test_only_the_site_files_point_sensors_are_taken() -> None:
+    core = AlertCore(SITE, lambda reason, detail: None)
+    forged = reading("speed-1", 30.0, 3.0).model_copy(update={"source_id": "speed-9"})
+    assert core.add_point(forged) == "unknown_sensor"
+    other = reading("speed-1", 30.0, 3.0).model_copy(update={"site": "elsewhere"})
+    assert core.add_point(other) == "wrong_site"
+    assert core.add_point(reading("speed-1", 30.0, 3.0)) is None
+    # the station is the site file's, whatever the message says
+    moved = reading("speed-2", 30.0, 24.0).model_copy(update={"station_m": 880.0})
+    assert core.add_point(moved) is None
+    estimator = core.engine.queues
+    assert estimator.point_bounds(0, 890.0, 40.0)[0] == pytest.approx(350.0 - 200.0)
+
+
+def test_the_sign_gives_the_distance_to_the_nearest_the_back_may_stand() -> None:
+    """A sensor 850 m reading free 10 s ago over 10 s: the back is downstream of 850 - 100 m,
+    400 m past the sign at 500 m (0.2 mi); without the reading, no distance."""
+    site = SITE.model_copy(
+        update={"point_sensors": [PointSensor(sensor_id="near", station_m=850.0, interval_s=10.0)]}
+    )
+    zone = ZoneGeometry.from_site(site)
+    estimator = QueueEstimator(zone, {0: 890.0, 1: 890.0})
+    estimator.observe(reading("near", 10.0, 25.0, interval_s=10.0, site=site))
+    state = estimator.update(queue_of(4, 895.0, 7.0), 20.0, site=site.site_id, source_id="x")
+    assert state is not None and state.lanes[0].back_upstream_bound_m == pytest.approx(750.0)
+    devices = roadside_devices([active(AlertType.QUEUE, 895.0)], zone, 20.0, queue_state=state)
+    assert devices.sign_text == "SLOW TRAFFIC 0.2 MI"
+    unbounded = QueueEstimator(zone, {0: 890.0, 1: 890.0}).update(
+        queue_of(4, 895.0, 7.0), 20.0, site=site.site_id, source_id="x"
+    )
+    devices = roadside_devices([active(AlertType.QUEUE, 895.0)], zone, 20.0, queue_state=unbounded)
+    assert devices.sign_text == "SLOW TRAFFIC AHEAD"
 
 
 # --- approaching the queue too fast ----------------------------------------------------------

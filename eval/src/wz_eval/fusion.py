@@ -515,7 +515,14 @@ def evaluate(
         "mast_stretch": by_station.mast_stretch(),
         # each lane's queue against the same estimate on every simulated vehicle's truth
         "queue": (
-            queue_report(site, alert_batches, record.truth, *_scored_interval(record), in_weather)
+            queue_report(
+                site,
+                alert_batches,
+                record.truth,
+                *_scored_interval(record),
+                in_weather,
+                getattr(record, "point_readings", []),  # recordings from before them lack it
+            )
             if record.truth
             else None
         ),

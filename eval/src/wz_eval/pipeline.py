@@ -46,7 +46,13 @@ from wz_lidar_detector.calibration import LidarSelfCalibration
 from wz_lidar_detector.node import LidarDetector
 from wz_lidar_detector.settings import LidarDetectorSettings, lidar_mount
 from wz_shared.capacity import closure_capacity_vph
-from wz_shared.messages import Detection, DetectionBatch, SensorCalibration, VehicleTruth
+from wz_shared.messages import (
+    Detection,
+    DetectionBatch,
+    PointSensorReading,
+    SensorCalibration,
+    VehicleTruth,
+)
 from wz_shared.site import Site
 from wz_simulator.sensors.mast import Bump, MastModel
 from wz_simulator.sensors.rig import CameraOutput, LidarOutput, RadarOutput, SensorRig
@@ -138,6 +144,8 @@ class PipelineRecord:
     batches: list[DetectionBatch] = field(default_factory=list)
     camera_only: list[tuple[float, list[SourcePoint]]] = field(default_factory=list)
     radar_only: list[tuple[float, list[SourcePoint]]] = field(default_factory=list)
+    #: The site's upstream point sensors' readings (warm-up included), in time order.
+    point_readings: list[PointSensorReading] = field(default_factory=list)
     problems: dict[str, int] = field(default_factory=dict)
     wall_s: float = 0.0
     #: The mast model the sensors were rendered with (None: the nominal poses).
@@ -229,6 +237,7 @@ def run_pipeline(
             now_s = world.sim_time_s
             if now_s >= options.warmup_s:
                 record.truth.append((now_s, vehicles))
+            record.point_readings += world.point_readings()
             if progress is not None and now_s >= next_progress_s:
                 progress(now_s, total_s)
                 next_progress_s += 1.0

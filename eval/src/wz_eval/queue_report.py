@@ -23,6 +23,13 @@ before the second:
   estimated one overlaps it; ``onset_delay_s`` is the estimate's start minus the truth's (a
   median over the detected episodes, and the worst), ``dissolution_delay_s`` the same for
   their ends (episodes still open at the end are left out of it).
+- ``beyond_reach`` (a site with upstream point sensors): at the seconds the estimate had a
+  lane's back beyond the reach, the truth's back on the whole approach (every vehicle, seen
+  or not: :func:`beyond_reach_report`) against the point sensors' bounds: seconds, seconds
+  bounded (a sensor read the lane free upstream), seconds the true back stood within the
+  bounds (:data:`BOUND_TOLERANCE_M` either side), the bounds' width, how far outside the
+  true back stood, and how far the true back stood from the reach (what "beyond the reach"
+  alone leaves unknown).
 - ``false_queue``: estimated episodes that overlap no true one, their count per hour of
   scored time and their seconds; ``missed``: true episodes no estimate overlaps.
 
@@ -43,11 +50,15 @@ from wz_alert_service.queues import QueueEstimator, upstream_reach_m
 from wz_alert_service.zone import ZoneGeometry
 from wz_eval.alerts import TruthFrames, truth_batches
 from wz_shared.coverage import SiteCoverage
-from wz_shared.messages import LaneQueue, QueueCondition, TrackBatch
+from wz_shared.messages import LaneQueue, PointSensorReading, QueueCondition, TrackBatch
 from wz_shared.site import Site
 
 #: The sampling step of the comparison [s].
 STEP_S = 1.0
+#: A true back this close outside the point sensors' bounds [m] still counts as within: one
+#: queued car and its gap at jam density, as the reach's margin
+#: (:data:`wz_alert_service.queues.REACH_MARGIN_M`).
+BOUND_TOLERANCE_M = 15.0
 
 
 @dataclass(frozen=True)
@@ -60,16 +71,24 @@ class _Episode:
 
 
 def lane_series(
-    zone: ZoneGeometry, batches: Sequence[TrackBatch], reach_m: dict[int, float], times: np.ndarray
+    zone: ZoneGeometry,
+    batches: Sequence[TrackBatch],
+    reach_m: dict[int, float],
+    times: np.ndarray,
+    point_readings: Sequence[PointSensorReading] = (),
 ) -> dict[int, list[LaneQueue]]:
     """Each lane's queue at each of ``times``: the estimate of the newest batch at or before
-    it (free before the first batch)."""
+    it (free before the first batch), the point sensors' readings taken as their stamps come."""
     estimator = QueueEstimator(zone, reach_m)
     free = {lane.lane_index: lane for lane in estimator.lanes}
     out: dict[int, list[LaneQueue]] = {index: [] for index in free}
-    k = 0
+    readings = sorted(point_readings, key=lambda r: r.stamp)
+    k = j = 0
     for t in times:
         while k < len(batches) and batches[k].stamp <= t + 1e-9:
+            while j < len(readings) and readings[j].stamp <= batches[k].stamp + 1e-9:
+                estimator.observe(readings[j])
+                j += 1
             estimator.estimate([tr for tr in batches[k].tracks if confirmed(tr)], batches[k].stamp)
             k += 1
         lanes = {lane.lane_index: lane for lane in estimator.lanes} if k else free
@@ -78,7 +97,7 @@ def lane_series(
     return out
 
 
-def _seen(truth_frames: TruthFrames, coverage: SiteCoverage) -> TruthFrames:
+def seen_frames(truth_frames: TruthFrames, coverage: SiteCoverage) -> TruthFrames:
     """Each frame's vehicles where a sensor of the site can see a car."""
     out = []
     for stamp, vehicles in truth_frames:
@@ -120,6 +139,48 @@ def _stats(values: Sequence[float]) -> dict[str, float | int | None]:
     }
 
 
+def beyond_reach_report(
+    zone: ZoneGeometry,
+    truth_frames: TruthFrames,
+    est_lanes: dict[int, list[LaneQueue]],
+    times: np.ndarray,
+) -> dict[str, Any]:
+    """A back beyond the sensors' reach against the truth's back on the whole approach (every
+    vehicle, seen or not), at the seconds the estimate had the lane's back beyond the reach
+    (see the module's notes)."""
+    whole_reach = {lane.index: zone.approach_start_m for lane in zone.site.lanes}
+    truth, _ = truth_batches(zone.site, truth_frames)
+    whole = lane_series(zone, truth, whole_reach, times)
+    seconds = bounded = within = 0
+    widths: list[float] = []
+    errors: list[float] = []
+    past_reach: list[float] = []
+    for index, est_lane in est_lanes.items():
+        for tl, el in zip(whole[index], est_lane, strict=True):
+            if not el.back_beyond_reach or tl.back_station_m is None:
+                continue
+            seconds += 1
+            past_reach.append(abs(el.reach_station_m - tl.back_station_m))
+            down = el.back_downstream_bound_m
+            up = el.back_upstream_bound_m
+            if up is None or down is None:
+                continue
+            bounded += 1
+            widths.append(down - up)
+            back = tl.back_station_m
+            within += up - BOUND_TOLERANCE_M <= back <= down + BOUND_TOLERANCE_M
+            errors.append(max(0.0, up - back, back - down))
+    return {
+        "seconds": seconds,
+        "bounded_s": bounded,
+        "truth_within_bounds_s": within,
+        "bound_width_m": _stats(widths),
+        "outside_by_m": _stats(errors),
+        "reach_to_back_m": _stats(past_reach),
+        "tolerance_m": BOUND_TOLERANCE_M,
+    }
+
+
 def queue_report(
     site: Site,
     track_batches: Sequence[TrackBatch],
@@ -127,17 +188,19 @@ def queue_report(
     start_s: float,
     end_s: float,
     coverage: SiteCoverage | None = None,
+    point_readings: Sequence[PointSensorReading] = (),
 ) -> dict[str, Any]:
-    """The lanes' queue estimated from ``track_batches`` against the truth, over
-    ``[start_s, end_s]`` (see the module's notes); ``coverage``: where the sensors see a car
-    (default: the site's in clear weather)."""
+    """The lanes' queue estimated from ``track_batches`` (and the site's upstream point
+    sensors' ``point_readings``) against the truth, over ``[start_s, end_s]`` (see the module's
+    notes); ``coverage``: where the sensors see a car (default: the site's in clear
+    weather)."""
     zone = ZoneGeometry.from_site(site)
     coverage = SiteCoverage(site) if coverage is None else coverage
     reach = upstream_reach_m(zone, coverage)
     times = np.arange(start_s, end_s + 1e-9, STEP_S)
-    truth, _ = truth_batches(site, _seen(truth_frames, coverage))
+    truth, _ = truth_batches(site, seen_frames(truth_frames, coverage))
     true_lanes = lane_series(zone, truth, reach, times)
-    est_lanes = lane_series(zone, track_batches, reach, times)
+    est_lanes = lane_series(zone, track_batches, reach, times, point_readings)
     hours = max(end_s - start_s, 1e-9) / 3600.0
     rule = site.alerts.queue
     lanes_report: dict[str, Any] = {}
@@ -209,6 +272,9 @@ def queue_report(
         "false_episodes_per_hour": round(totals["false_episodes"] / hours, 2),
         "false_queued_s": totals["false_s"],
         "lanes": lanes_report,
+        "beyond_reach": beyond_reach_report(zone, truth_frames, est_lanes, times)
+        if site.point_sensors
+        else None,
     }
 
 

@@ -12,6 +12,7 @@ docs/architecture.md, "Keys"::
     wz/<site>/alerts/<type>           alerts                 (FIFO, reliable)
     wz/<site>/devices/state           roadside beacon + sign (FIFO, reliable; on change)
     wz/<site>/queue                   per-lane queue state (1 Hz and on a change)
+    wz/<site>/points/<sensor>         upstream point speed sensors (each interval)
     wz/<site>/status/<service>        liveliness token + periodic health
     wz/<site>/config/site             queryable: the site description
     wz/<site>/tracks/latest           queryable: the newest track batch
@@ -108,6 +109,14 @@ class Keys:
     @property
     def queue(self) -> str:
         return f"{self.prefix}/queue"
+
+    # upstream point speed sensors (site file's point_sensors)
+    def point_sensor(self, sensor_id: str) -> str:
+        return f"{self.prefix}/points/{_check_chunk(sensor_id, 'sensor id')}"
+
+    @property
+    def point_sensors_all(self) -> str:
+        return f"{self.prefix}/points/*"
 
     # self-calibration of each sensor (its pose correction and clock offset)
     def calibration(self, sensor_id: str) -> str:

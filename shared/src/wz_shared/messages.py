@@ -510,6 +510,15 @@ class LaneQueue(BaseModel):
     #: How far upstream the site's sensors see a car in this lane [m]: a back here or beyond is
     #: "beyond" (``back_beyond_reach``).
     reach_station_m: FiniteFloat
+    #: Where the back is beyond the reach and the site has point sensors upstream
+    #: (:class:`PointSensorReading`): the back stands downstream of this station, where the
+    #: nearest point sensor upstream of the queue reads the lane free [m]; None: no sensor
+    #: bounds it (none upstream, or every one reads the lane queued).
+    back_upstream_bound_m: FiniteFloat | None = None
+    #: ... and upstream of this one [m]: the farthest upstream point sensor that reads the lane
+    #: queued in an unbroken run from the reach, or the reach itself. None while the back is
+    #: measured by the tracks (``back_beyond_reach`` false).
+    back_downstream_bound_m: FiniteFloat | None = None
 
 
 class QueueState(Message):
@@ -533,6 +542,30 @@ class QueueState(Message):
         """The most upstream back of every queued lane [m]; None when every lane is free."""
         backs = [lane.back_station_m for lane in self.lanes if lane.back_station_m is not None]
         return min(backs) if backs else None
+
+
+class PointLaneReading(BaseModel):
+    """One lane of a :class:`PointSensorReading`: over the interval, the vehicles that passed
+    the sensor's station, their mean speed and the occupancy."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    lane_index: Annotated[int, Field(ge=0)]
+    vehicle_count: Annotated[int, Field(ge=0)]
+    #: Mean speed of the vehicles that passed [m/s]; None when none passed.
+    mean_speed_mps: NonNegFloat | None = None
+    #: Share of the interval a vehicle stood over the station [%].
+    occupancy_percent: Annotated[float, Field(ge=0.0, le=100.0, allow_inf_nan=False)]
+
+
+class PointSensorReading(Message):
+    """One interval of an upstream point speed sensor (:class:`wz_shared.site.PointSensor`) on
+    ``wz/<site>/points/<sensor>``: ``stamp`` is the interval's end, ``source_id`` the sensor."""
+
+    kind: Literal["point_sensor_reading"] = "point_sensor_reading"
+    station_m: NonNegFloat
+    interval_s: Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
+    lanes: list[PointLaneReading]
 
 
 class ActiveAlerts(Message):

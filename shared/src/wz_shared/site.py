@@ -234,6 +234,21 @@ class SensorMount(_Strict):
         return self.intrinsics.kind
 
 
+class PointSensor(_Strict):
+    """A point speed sensor upstream of the mast: what smart-work-zone deployments place every
+    quarter to half mile ahead of a lane closure (a side-fire radar or a loop station on its
+    own trailer). Each interval it gives, per lane, the vehicles that passed its station, their
+    mean speed and the share of the time a vehicle stood over it (occupancy). The alert service
+    bounds a queue's back with them where the back is beyond the mast's sensors' reach
+    (:mod:`wz_alert_service.queues`); in simulation SUMO's induction loops stand in for them.
+    """
+
+    sensor_id: Annotated[str, Field(pattern=r"^[a-z0-9][a-z0-9_-]{0,62}$")]
+    station_m: Annotated[float, Field(ge=0.0)]
+    #: Aggregation interval [s] (20-60 s in deployed systems).
+    interval_s: Annotated[float, Field(ge=5.0, le=900.0)] = 30.0
+
+
 # --- alert thresholds -----------------------------------------------------------------------
 
 
@@ -596,6 +611,8 @@ class Site(_Strict):
     work_zone: Annotated[list[WorkZoneArea], Field(min_length=1)]
     speed_limits: Annotated[list[SpeedLimit], Field(min_length=1)]
     sensors: list[SensorMount] = Field(default_factory=list)
+    #: Point speed sensors upstream (:class:`PointSensor`); none: the mast's sensors alone.
+    point_sensors: list[PointSensor] = Field(default_factory=list)
     #: Alert thresholds; a site file without an ``alerts:`` section gets the defaults.
     alerts: AlertRules = Field(default_factory=AlertRules)
 
@@ -627,6 +644,15 @@ class Site(_Strict):
         if len(ids) != len(set(ids)):
             raise ValueError(f"sensor ids must be unique, got {ids}")
         length = self.road_length_m
+        points = [point.sensor_id for point in self.point_sensors]
+        if len(set(points)) != len(points) or set(points) & set(ids):
+            raise ValueError(f"point sensor ids must be unique among all sensors, got {points}")
+        for point in self.point_sensors:
+            if point.station_m > length:
+                raise ValueError(
+                    f"point sensor {point.sensor_id} stands at {point.station_m} m, beyond the "
+                    f"centerline's length {length:.1f} m"
+                )
         for area in self.work_zone:
             if area.end_station_m > length + 1e-6:
                 raise ValueError(

@@ -17,6 +17,9 @@ MUTCD (Part 6) and a field technician would:
   of view; a camera of a common format (1280x720, 1920x1080, 1280x960, 2048x1536) and 50-100
   degrees, aimed down the approach with the horizon 22-40 % from the top of the frame; a radar
   aimed down the approach;
+- upstream point speed sensors every 200-400 m from the mast to the road's start, each
+  reporting every 20, 30 or 60 s (drawn after everything else: a seed's other draws are as
+  before they came);
 - the alert thresholds from the site's limits and layout (:func:`alert_rules_for`).
 
 Everything is a function of the seed (``numpy.random.default_rng``): the same seed gives the
@@ -41,6 +44,7 @@ from wz_shared.site import (
     Lane,
     LateMergeRule,
     LidarIntrinsics,
+    PointSensor,
     Pose,
     RadarIntrinsics,
     RoadDirection,
@@ -366,6 +370,23 @@ def generate_site(seed: int) -> Site:
             for i, sensor in enumerate(sensors)
         ]
 
+    road_names = [f"SR-{int(rng.integers(1, 999))}"]
+    origin = GeoOrigin(
+        latitude_deg=round(float(rng.uniform(30.0, 47.0)), 5),
+        longitude_deg=round(float(rng.uniform(-120.0, -75.0)), 5),
+        altitude_m=round(float(rng.uniform(0.0, 1500.0)), 1),
+    )
+    # Upstream point speed sensors (drawn last: the draws above stay as they were): one every
+    # 200-400 m upstream of the mast to the road's first 50 m, each reporting every 20-60 s.
+    # Deployments space them a quarter to half a mile; the simulated approach is shorter.
+    spacing_m = float(rng.choice([200.0, 300.0, 400.0]))
+    interval_s = float(rng.choice([20.0, 30.0, 60.0]))
+    point_stations = np.arange(mast_station_m - spacing_m, 50.0, -spacing_m)
+    point_sensors = [
+        PointSensor(sensor_id=f"speed-{i + 1}", station_m=round(float(s), 1), interval_s=interval_s)
+        for i, s in enumerate(point_stations)
+    ]
+
     return Site(
         site_id=f"gen-{seed}",
         name=(
@@ -373,13 +394,9 @@ def generate_site(seed: int) -> Site:
             f"closed, {shape}, {upstream_mph:.0f}/{zone_mph:.0f} mph, mast on the {mast_side} "
             f"{height_m:.1f} m high {taper_start_m - mast_station_m:.0f} m before the taper"
         ),
-        road_names=[f"SR-{int(rng.integers(1, 999))}"],
+        road_names=road_names,
         road_direction=_direction(bearing_deg),
-        origin=GeoOrigin(
-            latitude_deg=round(float(rng.uniform(30.0, 47.0)), 5),
-            longitude_deg=round(float(rng.uniform(-120.0, -75.0)), 5),
-            altitude_m=round(float(rng.uniform(0.0, 1500.0)), 1),
-        ),
+        origin=origin,
         centerline_xy_m=centerline,
         lanes=lanes,
         closed_lane_index=closed_lane,
@@ -403,6 +420,7 @@ def generate_site(seed: int) -> Site:
             ),
         ],
         sensors=sensors,
+        point_sensors=point_sensors,
         alerts=alert_rules_for(
             zone_limit_mph=zone_mph,
             advance_warning_start_m=advance_start_m,

@@ -14,7 +14,9 @@ message sign field device). Pure: no I/O, no clock.
   opened: ``SLOW DOWN``). A queue reads ``STOPPED TRAFFIC AHEAD`` while a lane's queue is stopped
   (:mod:`wz_alert_service.queues`), otherwise ``SLOW TRAFFIC 0.3 MI``: the distance from the
   sign to the queue's back in tenths of a mile (``SLOW TRAFFIC AHEAD`` when the back is within
-  0.05 mi of the sign, behind it, or beyond the sensors' reach, where no distance is measured).
+  0.05 mi of the sign, behind it, or beyond the sensors' reach, where no distance is measured,
+  unless the site's upstream point sensors bound it: then the distance is to their upstream
+  bound, the nearest the back may stand, :mod:`wz_alert_service.queues`).
 
 :class:`SignHold` keeps the sign from flickering: a new message for the same cause (the
 queue's distance, slow against stopped) replaces the shown one only once it has held
@@ -94,7 +96,8 @@ def roadside_devices(
         Who decided them (the service's name).
     queue_state : QueueState, optional
         The lanes' queue now: a stopped lane makes a queue's message ``STOPPED TRAFFIC
-        AHEAD``; a back beyond the sensors' reach gives no distance. Without it, the queue
+        AHEAD``; a back beyond the sensors' reach gives no distance (but to the point
+        sensors' upstream bound, where they bound it). Without it, the queue
         alert's tail and ``SLOW TRAFFIC``.
 
     Returns
@@ -119,8 +122,12 @@ def roadside_devices(
         measured: float | None = tail_m
         if queue_state is not None:
             stopped = queue_state.condition is QueueCondition.STOPPED
-            if any(lane.back_beyond_reach for lane in queue_state.lanes):
-                measured = None
+            beyond = [lane for lane in queue_state.lanes if lane.back_beyond_reach]
+            if beyond:
+                # The point sensors' upstream bound: the nearest the back may stand to the
+                # sign (None: no sensor bounds it).
+                bounds = [lane.back_upstream_bound_m for lane in beyond]
+                measured = None if None in bounds else min(b for b in bounds if b is not None)
         return RoadsideDeviceState(
             site=site,
             source_id=source_id,

@@ -19,6 +19,9 @@ rules' thresholds are the ``alerts:`` section of the site file). It
 - publishes each lane's queue (:class:`QueueState`, :mod:`wz_alert_service.queues`) on
   ``wz/<site>/queue`` once a second of track stamps and at once when a lane's condition
   changes; the sign's queue message reads it (stopped or slow, the back's distance);
+- takes the upstream point sensors' readings from ``wz/<site>/points/*`` where the site file
+  lists point sensors: they bound a queue's back beyond the sensors' reach (one of a sensor
+  the site file does not list is counted, ``unknown_sensor``, and dropped);
 - answers queries on ``wz/<site>/alerts/active`` with :class:`ActiveAlerts`: per open
   episode its newest published event, and the devices' state, for a consumer that joins late.
 
@@ -52,6 +55,7 @@ from wz_shared.messages import (
     ActiveAlerts,
     Alert,
     AlertType,
+    PointSensorReading,
     QueueState,
     RoadsideDeviceState,
     TrackBatch,
@@ -207,6 +211,16 @@ class AlertCore:
         self.devices = devices
         return AlertOutputs(accepted=True, alerts=alerts, devices=devices, queue=queue_state)
 
+    def add_point(self, reading: PointSensorReading) -> str | None:
+        """Take an upstream point sensor's reading (it bounds a queue's back beyond the
+        sensors' reach); the reason it is refused (``wrong_site``, ``unknown_sensor``: one the
+        site file does not list), None when taken."""
+        if reading.site != self.site.site_id:
+            return "wrong_site"
+        if not self.engine.queues.observe(reading):
+            return "unknown_sensor"
+        return None
+
     def open_episodes(self) -> list[Alert]:
         """Each open episode's newest published event (what a restart recovers)."""
         return list(self._newest.values())
@@ -277,10 +291,21 @@ def run(
         capacity=settings.queue_capacity,
         gate=gate,
     )
+    points = (
+        bus.subscribe(bus.keys.point_sensors_all, PointSensorReading, capacity=64)
+        if site.point_sensors
+        else None
+    )
     log.info("alerting on %s -> %s", tracks_key, bus.keys.alerts_all)
     published = 0
     runs = core.runs
     while not runtime.stop.is_set():
+        for reading in points.drain() if points is not None else ():
+            refused = core.add_point(reading)
+            if refused is not None:
+                bus.stats.count_invalid(
+                    bus.keys.point_sensors_all, refused, f"point reading of {reading.source_id}"
+                )
         batch = batches.recv(0.1)
         runtime.beat(processed=batch is not None)
         if batch is None:

@@ -18,11 +18,29 @@ site's sensors see a car (:func:`upstream_reach_m`, from the site file's sensor 
 :data:`REACH_MARGIN_M` of that reach, the lane's back is reported as ``back_beyond_reach``
 (at least that far), never as a measured station.
 
+**Upstream point sensors.** Where the site file lists point speed sensors upstream of the reach
+(:class:`wz_shared.site.PointSensor`: the side-fire radars or loop stations smart-work-zone
+deployments place every quarter to half mile), their readings (:meth:`QueueEstimator.observe`)
+bound a back beyond the reach. A sensor reads a lane *queued* when the vehicles that passed it
+in its last interval averaged under the queue rule's slow speed (with its hysteresis once
+queued), or, none having passed, a vehicle stood over it at least
+:data:`JAM_OCCUPANCY_PERCENT` of the interval (a stopped queue over the station); *free*
+otherwise, an empty lane included. Walking upstream from the reach, every sensor that reads the
+lane queued moves the back's downstream bound (``back_downstream_bound_m``) to its station;
+the first that reads it free is the upstream bound (``back_upstream_bound_m``): the back stands
+between them. A reading is an interval's summary, and the back moves on after it: each bound
+is widened by the farthest the back can have moved since the reading's interval began
+(:data:`BACK_SPEED_MAX_MPS` times that time; a downstream bound no farther than the reach).
+A reading older than :data:`POINT_STALE_INTERVALS` intervals says nothing and ends the walk.
+So the bounds are as good as the sensors' spacing plus a few hundred metres for every minute
+of interval: a site's sensors should report every 20-30 s.
+
 Pure apart from the per-lane history that :class:`QueueEstimator` keeps; no clock, no I/O.
 """
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -32,7 +50,15 @@ import numpy as np
 from wz_alert_service.rules import queue_extent
 from wz_alert_service.zone import ZoneGeometry
 from wz_shared.coverage import SiteCoverage
-from wz_shared.messages import LaneQueue, QueueCondition, QueueState, Track
+from wz_shared.messages import (
+    LaneQueue,
+    PointLaneReading,
+    PointSensorReading,
+    QueueCondition,
+    QueueState,
+    Track,
+)
+from wz_shared.site import QueueRule
 
 #: Seconds of back-of-queue stations the back's speed is fitted over.
 BACK_SPEED_WINDOW_S = 10.0
@@ -46,6 +72,17 @@ REACH_MARGIN_M = 15.0
 REACH_GAP_M = 60.0
 #: Station step of the reach's search [m].
 REACH_STEP_M = 2.0
+#: The fastest a queue's back moves along the road [m/s], growing or dissolving: the congested
+#: branch's wave speed of a triangular fundamental diagram (Newell), ``w = q_c / (k_j - k_c)``,
+#: with a lane's capacity ``q_c`` = 2000 veh/h, jam spacing 7.5 m and capacity at 25 m/s: about
+#: 5 m/s (18 km/h, the speed of the stop-and-go waves measured on freeways).
+BACK_SPEED_MAX_MPS = 5.0
+#: A point sensor's reading is used until this many of its intervals after the interval's end.
+POINT_STALE_INTERVALS = 2.5
+#: None having passed in the interval, a point sensor reads its lane queued when a vehicle stood
+#: over its station at least this share of the interval [%]: half the interval stopped is a
+#: queue standing on the sensor (free flow at capacity occupies a detector 10-15 %).
+JAM_OCCUPANCY_PERCENT = 50.0
 #: The state is published once this many seconds of track stamps have passed, and at once when
 #: a lane's condition changes.
 PUBLISH_INTERVAL_S = 1.0
@@ -96,6 +133,39 @@ def _back_speed_mps(backs: Sequence[tuple[float, float]]) -> float | None:
     return float(np.dot(t, s - s.mean()) / np.dot(t, t))
 
 
+def point_lane_queued(lane: PointLaneReading, rule: QueueRule, *, queued_before: bool) -> bool:
+    """Whether a point sensor's reading shows the lane queued (see the module's notes)."""
+    if lane.mean_speed_mps is None:
+        return lane.occupancy_percent >= JAM_OCCUPANCY_PERCENT
+    slow_mps = rule.slow_speed_mps + (rule.speed_hysteresis_mps if queued_before else 0.0)
+    return lane.mean_speed_mps < slow_mps
+
+
+class _PointMemory:
+    """One point sensor's newest reading and each lane's queued state from it."""
+
+    def __init__(self, station_m: float) -> None:
+        self.station_m = station_m
+        self.stamp_s = -math.inf
+        self.interval_s = 0.0
+        self.queued: dict[int, bool] = {}
+
+    def observe(self, reading: PointSensorReading, rule: QueueRule) -> None:
+        self.stamp_s, self.interval_s = reading.stamp, reading.interval_s
+        self.queued = {
+            lane.lane_index: point_lane_queued(
+                lane, rule, queued_before=self.queued.get(lane.lane_index, False)
+            )
+            for lane in reading.lanes
+        }
+
+    def lane_queued(self, lane_index: int, stamp: float) -> bool | None:
+        """The lane's state at ``stamp``; None: no reading of it, or too old."""
+        if stamp - self.stamp_s > POINT_STALE_INTERVALS * self.interval_s:
+            return None
+        return self.queued.get(lane_index)
+
+
 class QueueEstimator:
     """Per-lane queue state from confirmed tracks, batch after batch.
 
@@ -115,6 +185,10 @@ class QueueEstimator:
         self._memory = {index: _LaneMemory() for index in self._lanes}
         self._published_s: float | None = None
         self._changed = False
+        #: The site's point sensors upstream of every lane's reach, by id.
+        self._points = {
+            point.sensor_id: _PointMemory(point.station_m) for point in zone.site.point_sensors
+        }
         #: Every lane's queue as of the last :meth:`estimate`.
         self.lanes: list[LaneQueue] = [
             LaneQueue(
@@ -131,6 +205,37 @@ class QueueEstimator:
             if lane.lane_index == index:
                 return lane
         return None
+
+    def observe(self, reading: PointSensorReading) -> bool:
+        """Take a point sensor's reading; False (and nothing kept) when the site file lists no
+        point sensor of that id. Its station is the site file's, not the message's."""
+        memory = self._points.get(reading.source_id)
+        if memory is None:
+            return False
+        memory.observe(reading, self.rule)
+        return True
+
+    def point_bounds(
+        self, lane_index: int, reach_m: float, stamp: float
+    ) -> tuple[float | None, float]:
+        """The (upstream, downstream) bounds of a back beyond ``reach_m`` in the lane from the
+        point sensors upstream of it at ``stamp`` (see the module's notes); the upstream bound
+        None when no sensor reads the lane free before the walk ends."""
+        downstream = reach_m
+        upstream: float | None = None
+        for memory in sorted(self._points.values(), key=lambda m: -m.station_m):
+            if memory.station_m >= reach_m:
+                continue
+            queued = memory.lane_queued(lane_index, stamp)
+            if queued is None:
+                break
+            # The back may have moved this far since the reading's interval began.
+            moved_m = BACK_SPEED_MAX_MPS * (stamp - memory.stamp_s + memory.interval_s)
+            if not queued:
+                upstream = memory.station_m - moved_m
+                break
+            downstream = min(reach_m, memory.station_m + moved_m)
+        return upstream, downstream
 
     def lane_of(self, track: Track) -> int:
         """The track's lane: the tracker's, or the lane at its offset."""
@@ -185,18 +290,24 @@ class QueueEstimator:
                 QueueCondition.STOPPED if mean_speed < stopped_mps else QueueCondition.SLOW
             )
             memory.backs.append((stamp, extent.tail_station_m))
+            beyond = extent.tail_station_m <= reach + REACH_MARGIN_M
+            upstream_bound, downstream_bound = (
+                self.point_bounds(index, reach, stamp) if beyond else (None, None)
+            )
             out.append(
                 LaneQueue(
                     lane_index=index,
                     condition=memory.condition,
                     back_station_m=extent.tail_station_m,
-                    back_beyond_reach=extent.tail_station_m <= reach + REACH_MARGIN_M,
+                    back_beyond_reach=beyond,
                     head_station_m=extent.head_station_m,
                     length_m=extent.head_station_m - extent.tail_station_m,
                     vehicle_count=len(members),
                     mean_speed_mps=mean_speed,
                     back_speed_mps=_back_speed_mps(memory.backs),
                     reach_station_m=reach,
+                    back_upstream_bound_m=upstream_bound,
+                    back_downstream_bound_m=downstream_bound,
                 )
             )
         return out

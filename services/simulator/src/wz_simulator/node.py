@@ -8,6 +8,8 @@ Run it as ``python -m wz_simulator.node`` (``wz up`` does). Settings come from t
 - ``wz/<site>/raw/lidar/<id>``, ``raw/camera/<id>``, ``raw/radar/<id>``: each sensor of the site
   at its own rate (frames as binary envelopes, radar scans as JSON), stamped with the firing
   time (see :mod:`wz_simulator.sensors.rig`);
+- ``wz/<site>/points/<id>``: each upstream point speed sensor of the site (its SUMO induction
+  loops, :mod:`wz_simulator.traffic.loops`) at the end of each of its intervals;
 - ``wz/<site>/status/simulator``: liveliness and health (see :mod:`wz_shared.service`);
   ``starting`` until it publishes (SUMO, the sensor models, and the warm-up: ``warmup_s`` of
   traffic simulated as fast as possible, nothing published, so that the stream starts on a
@@ -35,6 +37,7 @@ from wz_shared.messages import (
     CameraFrameMeta,
     GroundTruth,
     LidarFrameMeta,
+    PointSensorReading,
     RadarScan,
     ServiceState,
 )
@@ -98,9 +101,10 @@ def run_loop(
     rig: SensorRig | None = None,
     publish_sensor: Callable[[SensorOutput], None] | None = None,
     beat: Callable[[], None] = lambda: None,
+    publish_point: Callable[[PointSensorReading], None] | None = None,
 ) -> int:
-    """Step the world until ``stop`` or its duration; publish truth and due sensor frames;
-    ``beat()`` after each step (the node's liveness).
+    """Step the world until ``stop`` or its duration; publish truth, due sensor frames and
+    the point sensors' readings; ``beat()`` after each step (the node's liveness).
 
     Returns the number of steps taken.
     """
@@ -122,6 +126,9 @@ def run_loop(
         if rig is not None and publish_sensor is not None:
             for output in rig.fire(vehicles, now_s):
                 publish_sensor(output)
+        if publish_point is not None:
+            for reading in world.point_readings():
+                publish_point(reading)
         steps += 1
         beat()
         pacer.wait_until(now_s, stop)
@@ -201,6 +208,19 @@ def simulate(
             steps,
             world.counters.departed - world.counters.arrived,
         )
+    publish_point = None
+    if site.point_sensors:
+        points = {
+            point.sensor_id: bus.publisher(
+                bus.keys.point_sensor(point.sensor_id), PointSensorReading
+            )
+            for point in site.point_sensors
+        }
+
+        def publish_point(reading: PointSensorReading) -> None:
+            points[reading.source_id].put(reading)
+
+        log.info("point sensors: %s", sorted(points))
     # The scene, the models and their caches live for the whole run: move them out of the
     # collector's generations so full collections stay short (they paused single camera
     # frames for 70-85 ms; BENCHMARKS.md, sensors).
@@ -216,6 +236,7 @@ def simulate(
         rig,
         publish_sensor,
         beat=lambda: runtime.beat(processed=True),
+        publish_point=publish_point,
     )
     log.info(
         "simulation ended after %d steps (%.1f s simulated): %s",

@@ -61,6 +61,7 @@ from .new_api_key_scope import NewApiKeyScope
 from .new_webhook import NewWebhook
 from .new_webhook_phases_type_0_item import NewWebhookPhasesType0Item
 from .point_page import PointPage
+from .point_sensor import PointSensor
 from .pose import Pose
 from .pose_correction import PoseCorrection
 from .problem import Problem
@@ -151,6 +152,7 @@ __all__ = (
     "NewWebhook",
     "NewWebhookPhasesType0Item",
     "PointPage",
+    "PointSensor",
     "Pose",
     "PoseCorrection",
     "Problem",

@@ -31,8 +31,10 @@ class LaneQueue:
             lane_index (int):
             reach_station_m (float):
             back_beyond_reach (bool | Unset):  Default: False.
+            back_downstream_bound_m (float | None | Unset):
             back_speed_mps (float | None | Unset):
             back_station_m (float | None | Unset):
+            back_upstream_bound_m (float | None | Unset):
             head_station_m (float | None | Unset):
             length_m (float | Unset):  Default: 0.0.
             mean_speed_mps (float | None | Unset):
@@ -43,8 +45,10 @@ class LaneQueue:
     lane_index: int
     reach_station_m: float
     back_beyond_reach: bool | Unset = False
+    back_downstream_bound_m: float | None | Unset = UNSET
     back_speed_mps: float | None | Unset = UNSET
     back_station_m: float | None | Unset = UNSET
+    back_upstream_bound_m: float | None | Unset = UNSET
     head_station_m: float | None | Unset = UNSET
     length_m: float | Unset = 0.0
     mean_speed_mps: float | None | Unset = UNSET
@@ -59,6 +63,12 @@ class LaneQueue:
 
         back_beyond_reach = self.back_beyond_reach
 
+        back_downstream_bound_m: float | None | Unset
+        if isinstance(self.back_downstream_bound_m, Unset):
+            back_downstream_bound_m = UNSET
+        else:
+            back_downstream_bound_m = self.back_downstream_bound_m
+
         back_speed_mps: float | None | Unset
         if isinstance(self.back_speed_mps, Unset):
             back_speed_mps = UNSET
@@ -70,6 +80,12 @@ class LaneQueue:
             back_station_m = UNSET
         else:
             back_station_m = self.back_station_m
+
+        back_upstream_bound_m: float | None | Unset
+        if isinstance(self.back_upstream_bound_m, Unset):
+            back_upstream_bound_m = UNSET
+        else:
+            back_upstream_bound_m = self.back_upstream_bound_m
 
         head_station_m: float | None | Unset
         if isinstance(self.head_station_m, Unset):
@@ -98,10 +114,14 @@ class LaneQueue:
         )
         if back_beyond_reach is not UNSET:
             field_dict["back_beyond_reach"] = back_beyond_reach
+        if back_downstream_bound_m is not UNSET:
+            field_dict["back_downstream_bound_m"] = back_downstream_bound_m
         if back_speed_mps is not UNSET:
             field_dict["back_speed_mps"] = back_speed_mps
         if back_station_m is not UNSET:
             field_dict["back_station_m"] = back_station_m
+        if back_upstream_bound_m is not UNSET:
+            field_dict["back_upstream_bound_m"] = back_upstream_bound_m
         if head_station_m is not UNSET:
             field_dict["head_station_m"] = head_station_m
         if length_m is not UNSET:
@@ -124,6 +144,17 @@ class LaneQueue:
 
         back_beyond_reach = d.pop("back_beyond_reach", UNSET)
 
+        def _parse_back_downstream_bound_m(data: object) -> float | None | Unset:
+            if data is None:
+                return data
+            if isinstance(data, Unset):
+                return data
+            return cast(float | None | Unset, data)
+
+        back_downstream_bound_m = _parse_back_downstream_bound_m(
+            d.pop("back_downstream_bound_m", UNSET)
+        )
+
         def _parse_back_speed_mps(data: object) -> float | None | Unset:
             if data is None:
                 return data
@@ -141,6 +172,17 @@ class LaneQueue:
             return cast(float | None | Unset, data)
 
         back_station_m = _parse_back_station_m(d.pop("back_station_m", UNSET))
+
+        def _parse_back_upstream_bound_m(data: object) -> float | None | Unset:
+            if data is None:
+                return data
+            if isinstance(data, Unset):
+                return data
+            return cast(float | None | Unset, data)
+
+        back_upstream_bound_m = _parse_back_upstream_bound_m(
+            d.pop("back_upstream_bound_m", UNSET)
+        )
 
         def _parse_head_station_m(data: object) -> float | None | Unset:
             if data is None:
@@ -169,8 +211,10 @@ class LaneQueue:
             lane_index=lane_index,
             reach_station_m=reach_station_m,
             back_beyond_reach=back_beyond_reach,
+            back_downstream_bound_m=back_downstream_bound_m,
             back_speed_mps=back_speed_mps,
             back_station_m=back_station_m,
+            back_upstream_bound_m=back_upstream_bound_m,
             head_station_m=head_station_m,
             length_m=length_m,
             mean_speed_mps=mean_speed_mps,

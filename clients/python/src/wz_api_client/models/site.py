@@ -17,6 +17,7 @@ if TYPE_CHECKING:
     from ..models.alert_rules import AlertRules
     from ..models.geo_origin import GeoOrigin
     from ..models.lane import Lane
+    from ..models.point_sensor import PointSensor
     from ..models.schedule import Schedule
     from ..models.sensor_mount import SensorMount
     from ..models.speed_limit import SpeedLimit
@@ -44,6 +45,7 @@ class Site:
             The approach is the station window ``[activity end - approach_length_m, activity end)``:
             speeding, aggressive approach, hard braking, late merge, short TTC, queue and queue approach look only
             there. Each rule has its own :class:`EpisodeTiming` (hold, clear, cool-down).
+        point_sensors (list[PointSensor] | Unset):
         road_direction (SiteRoadDirection | Unset):  Default: SiteRoadDirection.UNKNOWN.
         road_names (list[str] | Unset):
         schedule (None | Schedule | Unset):
@@ -60,6 +62,7 @@ class Site:
     speed_limits: list[SpeedLimit]
     work_zone: list[WorkZoneArea]
     alerts: AlertRules | Unset = UNSET
+    point_sensors: list[PointSensor] | Unset = UNSET
     road_direction: SiteRoadDirection | Unset = SiteRoadDirection.UNKNOWN
     road_names: list[str] | Unset = UNSET
     schedule: None | Schedule | Unset = UNSET
@@ -70,6 +73,7 @@ class Site:
         from ..models.alert_rules import AlertRules  # noqa: PLC0415
         from ..models.geo_origin import GeoOrigin  # noqa: PLC0415
         from ..models.lane import Lane  # noqa: PLC0415
+        from ..models.point_sensor import PointSensor  # noqa: PLC0415
         from ..models.schedule import Schedule  # noqa: PLC0415
         from ..models.sensor_mount import SensorMount  # noqa: PLC0415
         from ..models.speed_limit import SpeedLimit  # noqa: PLC0415
@@ -112,6 +116,13 @@ class Site:
         if not isinstance(self.alerts, Unset):
             alerts = self.alerts.to_dict()
 
+        point_sensors: list[dict[str, Any]] | Unset = UNSET
+        if not isinstance(self.point_sensors, Unset):
+            point_sensors = []
+            for point_sensors_item_data in self.point_sensors:
+                point_sensors_item = point_sensors_item_data.to_dict()
+                point_sensors.append(point_sensors_item)
+
         road_direction: str | Unset = UNSET
         if not isinstance(self.road_direction, Unset):
             road_direction = self.road_direction.value
@@ -153,6 +164,8 @@ class Site:
         )
         if alerts is not UNSET:
             field_dict["alerts"] = alerts
+        if point_sensors is not UNSET:
+            field_dict["point_sensors"] = point_sensors
         if road_direction is not UNSET:
             field_dict["road_direction"] = road_direction
         if road_names is not UNSET:
@@ -171,6 +184,7 @@ class Site:
         from ..models.alert_rules import AlertRules  # noqa: PLC0415
         from ..models.geo_origin import GeoOrigin  # noqa: PLC0415
         from ..models.lane import Lane  # noqa: PLC0415
+        from ..models.point_sensor import PointSensor  # noqa: PLC0415
         from ..models.schedule import Schedule  # noqa: PLC0415
         from ..models.sensor_mount import SensorMount  # noqa: PLC0415
         from ..models.speed_limit import SpeedLimit  # noqa: PLC0415
@@ -231,6 +245,15 @@ class Site:
         else:
             alerts = AlertRules.from_dict(_alerts)
 
+        _point_sensors = d.pop("point_sensors", UNSET)
+        point_sensors: list[PointSensor] | Unset = UNSET
+        if _point_sensors is not UNSET:
+            point_sensors = []
+            for point_sensors_item_data in _point_sensors:
+                point_sensors_item = PointSensor.from_dict(point_sensors_item_data)
+
+                point_sensors.append(point_sensors_item)
+
         _road_direction = d.pop("road_direction", UNSET)
         road_direction: SiteRoadDirection | Unset
         if isinstance(_road_direction, Unset):
@@ -282,6 +305,7 @@ class Site:
             speed_limits=speed_limits,
             work_zone=work_zone,
             alerts=alerts,
+            point_sensors=point_sensors,
             road_direction=road_direction,
             road_names=road_names,
             schedule=schedule,

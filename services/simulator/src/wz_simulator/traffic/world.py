@@ -46,7 +46,7 @@ import libsumo
 import numpy as np
 
 from wz_shared.capacity import closure_capacity_vph, open_lanes
-from wz_shared.messages import DriverProfile, VehicleClass, VehicleTruth
+from wz_shared.messages import DriverProfile, PointSensorReading, VehicleClass, VehicleTruth
 from wz_shared.site import AreaKind, Site
 from wz_simulator.settings import SimulatorSettings
 from wz_simulator.traffic.demand import (
@@ -60,6 +60,7 @@ from wz_simulator.traffic.demand import (
     work_zone_tau_increase,
     write_routes,
 )
+from wz_simulator.traffic.loops import PointLoops, write_loops
 from wz_simulator.traffic.network import RoadNetwork, build_network
 
 logger = logging.getLogger(__name__)
@@ -297,6 +298,13 @@ class TrafficWorld:
             "--no-warnings",
             "true",
         ]
+        # The site's upstream point speed sensors: one SUMO induction loop per lane each.
+        self.point_loops: PointLoops | None = None
+        if site.point_sensors:
+            loops_file = run_dir / "point-loops.add.xml"
+            stations = write_loops(site, self.network, loops_file)
+            command += ["--additional-files", str(loops_file)]
+            self.point_loops = PointLoops(site.site_id, stations)
         libsumo.start(command)
         _active_world = self
         logger.info(
@@ -503,6 +511,13 @@ class TrafficWorld:
                 )
             )
         return truths
+
+    def point_readings(self) -> list[PointSensorReading]:
+        """The point sensors' readings whose intervals ended by the last step (none without
+        point sensors); call after each :meth:`step`."""
+        if self.point_loops is None:
+            return []
+        return self.point_loops.readings(self.sim_time_s)
 
     # --- life cycle ------------------------------------------------------------------------
 
