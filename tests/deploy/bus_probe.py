@@ -28,6 +28,7 @@ KINDS = {
     "tracks": "tracks",
     "devices": "devices/state",
     "raw": "raw/lidar/lidar-mast",
+    "points": "points/speed-1",
     "status": "status/alert-service",
     "config": "config/site",
 }

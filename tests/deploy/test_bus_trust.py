@@ -64,10 +64,11 @@ REGIONAL_PORT = 7448
 
 #: What each role's forged messages may get through the router: the issue's table (only the
 #: alert service alerts, only detectors detections, only the tracker tracks, the gateway only
-#: reads), plus raw data from the sensors' side, and each service its own status only.
+#: reads), plus raw data and the upstream point sensors' readings from the sensors' side, and
+#: each service its own status only.
 ALLOWED: dict[str, set[str]] = {
-    "simulator": {"raw", "config"},
-    "drivers": {"raw", "detection"},
+    "simulator": {"raw", "points", "config"},
+    "drivers": {"raw", "points", "detection"},
     "lidar-detector": {"detection"},
     "camera-detector": {"detection"},
     "fusion-tracker": {"tracks"},

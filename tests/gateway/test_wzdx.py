@@ -34,6 +34,8 @@ from wz_shared.messages import (
     AlertType,
     DeviceLink,
     Message,
+    PointLaneReading,
+    PointSensorReading,
     ServiceState,
     TrackBatch,
 )
@@ -60,7 +62,21 @@ def assert_valid(feed: dict[str, Any]) -> None:
 
 
 def features_by_type(feed: dict[str, Any]) -> dict[str, dict[str, Any]]:
-    return {f["properties"]["core_details"]["device_type"]: f for f in feed["features"]}
+    """The first feature of each device type (the mast's traffic sensor before the upstream
+    point sensors')."""
+    found: dict[str, dict[str, Any]] = {}
+    for feature in feed["features"]:
+        found.setdefault(feature["properties"]["core_details"]["device_type"], feature)
+    return found
+
+
+def mast_features(feed: dict[str, Any]) -> list[dict[str, Any]]:
+    """The features of the mast and its devices: all but the upstream point sensors'."""
+    return [
+        f
+        for f in feed["features"]
+        if not f["properties"]["core_details"]["name"].startswith("Point speed sensor")
+    ]
 
 
 @pytest.fixture
@@ -156,7 +172,7 @@ def test_feed_counts_traffic_per_lane_in_wzdx_units(storage: Storage) -> None:
     feed = feed_of(storage, now)
     assert_valid(feed)
     devices = features_by_type(feed)
-    for feature in feed["features"]:
+    for feature in mast_features(feed):  # the point sensors have sent nothing here
         core = feature["properties"]["core_details"]
         assert core["device_status"] == "ok", core
         assert core["road_names"] == ["US-75"] and core["road_direction"] == "northbound"
@@ -245,7 +261,7 @@ def test_stale_data_and_silent_services_are_errors(storage: Storage) -> None:
     # A minute later nothing has arrived: every device is in error and says for how long.
     feed = feed_of(storage, T0_UNIX + 360.0)
     assert_valid(feed)
-    for feature in feed["features"]:
+    for feature in mast_features(feed):
         core = feature["properties"]["core_details"]
         assert core["device_status"] == "error", core
         assert any("for 60 s" in m for m in core["status_messages"]), core
@@ -345,3 +361,62 @@ def test_the_beacon_relay_not_answering_its_driver_puts_the_beacon_alone_in_erro
     store(storage, [waiting], T0_UNIX + 301.0)
     beacon = features_by_type(feed_of(storage, T0_UNIX + 302.0))[BEACON_DEVICE]
     assert beacon["properties"]["core_details"]["device_status"] == "unknown"
+
+
+def point_reading(sensor_id: str, stamp: float) -> PointSensorReading:
+    """The default site's point sensor ``sensor_id`` over 30 s: 6 cars at 24 m/s in lane 0
+    (WZDx lane 2, the right), 3 at 20 m/s in lane 1."""
+    station = next(p.station_m for p in SITE.point_sensors if p.sensor_id == sensor_id)
+    return PointSensorReading(
+        site=SITE.site_id,
+        source_id=sensor_id,
+        stamp=stamp,
+        station_m=station,
+        interval_s=30.0,
+        lanes=[
+            PointLaneReading(
+                lane_index=0, vehicle_count=6, mean_speed_mps=24.0, occupancy_percent=4.0
+            ),
+            PointLaneReading(
+                lane_index=1, vehicle_count=3, mean_speed_mps=20.0, occupancy_percent=2.0
+            ),
+        ],
+    )
+
+
+def test_each_point_sensor_is_a_traffic_sensor_of_its_newest_reading(storage: Storage) -> None:
+    """The default site's two upstream point sensors: unknown before a reading, then its
+    figures per lane (volume per hour from the interval's count), the station's totals and a
+    count-weighted speed; an error once the newest is older than 2.5 intervals."""
+    feed = feed_of(storage, T0_UNIX)
+    assert_valid(feed)
+    points = [
+        f for f in feed["features"] if f["properties"]["core_details"]["name"].startswith("Point")
+    ]
+    assert [f["properties"]["core_details"]["device_status"] for f in points] == ["unknown"] * 2
+    store(storage, [point_reading("speed-1", 60.0)], T0_UNIX + 60.0)
+    store(storage, [point_reading("speed-2", 30.0)], T0_UNIX + 30.0)
+    feed = feed_of(storage, T0_UNIX + 61.0)
+    assert_valid(feed)
+    by_name = {
+        f["properties"]["core_details"]["name"]: f["properties"]
+        for f in feed["features"]
+        if f["properties"]["core_details"]["device_type"] == "traffic-sensor"
+    }
+    first = by_name["Point speed sensor speed-1"]
+    assert first["core_details"]["device_status"] == "ok"
+    assert first["lane_data"] == [
+        {"lane_order": 1, "volume_vph": 360.0, "occupancy_percent": 2.0, "average_speed_kph": 72.0},
+        {"lane_order": 2, "volume_vph": 720.0, "occupancy_percent": 4.0, "average_speed_kph": 86.4},
+    ]
+    assert (first["volume_vph"], first["occupancy_percent"]) == (1080.0, 3.0)
+    assert first["average_speed_kph"] == pytest.approx((6 * 86.4 + 3 * 72.0) / 9, abs=0.05)
+    second = by_name["Point speed sensor speed-2"]
+    assert second["core_details"]["device_status"] == "ok"  # 31 s old: one interval
+    stale = [
+        f["properties"]["core_details"]
+        for f in feed_of(storage, T0_UNIX + 30.0 + 76.0)["features"]
+        if f["properties"]["core_details"]["name"] == "Point speed sensor speed-2"
+    ]
+    assert stale[0]["device_status"] == "error"
+    assert stale[0]["status_messages"] == ["no reading for 76 s"]

@@ -35,6 +35,7 @@ from wz_shared.trust import (
         ("wz/s/devices/state", "alert-service"),
         ("wz/s/detections/lidar-mast", "lidar-mast"),
         ("wz/s/raw/camera/cam-1", "cam-1"),
+        ("wz/s/points/speed-1", "speed-1"),
         ("wz/s/status/gateway", "gateway"),
         ("wz/s/tracks/latest", None),
         ("wz/s/alerts/active", "alert-service"),

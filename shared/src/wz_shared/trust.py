@@ -11,8 +11,10 @@ bus.
 
 Roles (a certificate's common name is the role's name)::
 
-    simulator        raw sensor data, truth; serves the site description
-    drivers          raw sensor data, the radar-camera unit's object lists (detections)
+    simulator        raw sensor data, truth, the point sensors' readings; serves the site
+                     description
+    drivers          raw sensor data, the radar-camera unit's object lists (detections), the
+                     upstream point speed sensors' readings
     lidar-detector   detections
     camera-detector  detections
     fusion-tracker   tracks; serves the newest batch
@@ -108,8 +110,10 @@ RAW = ("raw/lidar/*", "raw/camera/*", "raw/radar/*")
 ROLES: Mapping[str, Role] = {
     role.name: role
     for role in (
-        Role("simulator", publishes=(*RAW, "truth/vehicles"), serves=("config/site",)),
-        Role("drivers", publishes=(*RAW, "detections/*")),
+        # upstream point speed sensors (points/*): SUMO's loops in simulation, a driver's
+        # side-fire radars on the road
+        Role("simulator", publishes=(*RAW, "truth/vehicles", "points/*"), serves=("config/site",)),
+        Role("drivers", publishes=(*RAW, "detections/*", "points/*")),
         # each detector publishes its sensors' self-calibration (pose correction, clock)
         Role("lidar-detector", publishes=("detections/*", "calibration/*")),
         Role("camera-detector", publishes=("detections/*", "calibration/*")),
@@ -327,14 +331,15 @@ def tls_config(folder: Path) -> dict[str, Any]:
 def expected_source(key: str) -> str | None:
     """The ``source_id`` a message on the concrete ``key`` must carry, or None when any may.
 
-    Raw data and detections carry their sensor's id, the key's last chunk; tracks the
-    tracker's name; alerts, the devices' state and the queue the alert service's; a status its service's.
+    Raw data, detections, calibrations and point readings carry their sensor's id, the key's
+    last chunk; tracks the tracker's name; alerts, the devices' state and the queue the alert
+    service's; a status its service's.
     """
     parts = str(key).split("/")
     if len(parts) < 3 or parts[0] != ROOT:
         return None
     rest = parts[2:]
-    if rest[0] in ("raw", "detections", "calibration", "status") and len(rest) >= 2:
+    if rest[0] in ("raw", "detections", "calibration", "points", "status") and len(rest) >= 2:
         return rest[-1]
     if rest == ["tracks"]:
         return TRACKER

@@ -7,7 +7,9 @@ Run it as ``python -m wz_gateway.node`` (settings ``WZ_GATEWAY_*``, bus ``WZ_BUS
   ``wz/<site>/queue`` (:class:`QueueState`, each lane's queue once a second) and
   ``wz/<site>/status/*`` (:class:`ServiceStatus`, for the WZDx devices' status) and
   ``wz/<site>/calibration/*`` (:class:`SensorCalibration`, each sensor's self-calibration:
-  its latest, each change of state, and the WZDx devices' status); a central
+  its latest, each change of state, and the WZDx devices' status) and ``wz/<site>/points/*``
+  (:class:`PointSensorReading`, the upstream point speed sensors: each one's latest, for the
+  WZDx feed's traffic sensors); a central
   gateway given several sites (``WZ_GATEWAY_SITE_FILES``, :mod:`wz_gateway.sites`) subscribes
   to ``wz/*/...`` and keeps the sites it was given. Alerts and device states are subscribed
   with recovery: what the alert service published while this gateway was away (its link
@@ -64,6 +66,7 @@ from wz_shared.keys import site_of_key
 from wz_shared.messages import (
     Alert,
     Message,
+    PointSensorReading,
     QueueState,
     RoadsideDeviceState,
     SensorCalibration,
@@ -267,6 +270,7 @@ class Writer:
             m.ingested.labels("queue_states").inc(result.queue_states)
             m.ingested.labels("service_status").inc(result.statuses)
             m.ingested.labels("sensor_calibration").inc(result.calibrations)
+            m.ingested.labels("point_reading").inc(result.point_readings)
             m.ingested_points.inc(result.points)
             m.duplicate_alerts.inc(result.duplicate_alerts)
             return True
@@ -397,6 +401,9 @@ def run(
     # A calibration's source must be the sensor its key names (the bus checks it, as for
     # detections: wz_shared.trust.expected_source).
     bus.on(sites.key("calibration/*"), SensorCalibration, writer.offer)
+    # The upstream point speed sensors' readings (the WZDx feed's traffic sensors); a reading's
+    # source must be the sensor its key names.
+    bus.on(sites.key("points/*"), PointSensorReading, writer.offer)
     metrics.watch_bus(bus.stats.snapshot)
     metrics.watch_queue(lambda: writer.queue.qsize() + tracks.pending)
     metrics.watch_webhooks(deliverer.store.pending_count)

@@ -84,6 +84,7 @@ from wz_shared.messages import (
     CalibrationState,
     LaneQueue,
     Message,
+    PointSensorReading,
     QueueState,
     RoadsideDeviceState,
     SensorCalibration,
@@ -98,6 +99,8 @@ log = logging.getLogger(__name__)
 _DIALECTS = ("sqlite", "postgresql")
 #: The ``latest`` rows of the sensors' self-calibration are named this and the sensor's id.
 CALIBRATION_PREFIX = "calibration/"
+#: ... and the upstream point speed sensors' newest readings this and the sensor's id.
+POINTS_PREFIX = "points/"
 #: A track batch this much older than the newest one starts a new run [s] (see ``run_start``).
 RESTART_TOLERANCE_S = NEW_RUN_STEP_BACK_S
 _DAY_S = 86400.0
@@ -272,7 +275,8 @@ class Storage:
         a :class:`ServiceStatus` becomes that service's latest status; a
         :class:`SensorCalibration` becomes that sensor's latest calibration, and is added to
         ``calibration_changes`` when its state differs from the one before (or was entered at
-        another stamp: knocked again). Other messages are refused with ``TypeError`` before
+        another stamp: knocked again); a :class:`PointSensorReading` becomes that point
+        sensor's latest reading (the WZDx feed's traffic sensor). Other messages are refused with ``TypeError`` before
         anything is written.
 
         Parameters
@@ -294,7 +298,8 @@ class Storage:
                 | RoadsideDeviceState
                 | QueueState
                 | ServiceStatus
-                | SensorCalibration,
+                | SensorCalibration
+                | PointSensorReading,
             ):
                 raise TypeError(f"cannot store a {type(message).__name__}")
         result = IngestResult()
@@ -349,6 +354,10 @@ class Storage:
                     if self._write_calibration(connection, message, received_at):
                         result.calibration_changes += 1
                     result.calibrations += 1
+                elif isinstance(message, PointSensorReading):
+                    name = POINTS_PREFIX + message.source_id
+                    self._upsert_latest(connection, message.site, name, message, received_at)
+                    result.point_readings += 1
         return result
 
     def _write_calibration(
@@ -466,20 +475,24 @@ class Storage:
             for row in rows
         }
 
-    def latest_calibrations(self, site: str) -> dict[str, LatestRow]:
-        """Every sensor's newest self-calibration at ``site``, by sensor id."""
+    def _latest_named(self, site: str, prefix: str) -> dict[str, LatestRow]:
+        """The ``latest`` rows of ``site`` whose name starts with ``prefix``, by the rest."""
         with self.engine.connect() as connection:
             rows = connection.execute(
-                select(latest).where(
-                    latest.c.site == site, latest.c.name.startswith(CALIBRATION_PREFIX)
-                )
+                select(latest).where(latest.c.site == site, latest.c.name.startswith(prefix))
             ).all()
         return {
-            row.name.removeprefix(CALIBRATION_PREFIX): LatestRow(
-                row.name, row.stamp, row.received_at, row.body
-            )
+            row.name.removeprefix(prefix): LatestRow(row.name, row.stamp, row.received_at, row.body)
             for row in rows
         }
+
+    def latest_calibrations(self, site: str) -> dict[str, LatestRow]:
+        """Every sensor's newest self-calibration at ``site``, by sensor id."""
+        return self._latest_named(site, CALIBRATION_PREFIX)
+
+    def latest_point_readings(self, site: str) -> dict[str, LatestRow]:
+        """Every upstream point speed sensor's newest reading at ``site``, by sensor id."""
+        return self._latest_named(site, POINTS_PREFIX)
 
     def calibration_changes(
         self, site: str, *, per_sensor: int, sensor_id: str | None = None

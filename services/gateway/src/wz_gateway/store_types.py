@@ -155,6 +155,8 @@ class IngestResult:
     #: Sensor calibrations stored, and those that changed a sensor's state.
     calibrations: int = 0
     calibration_changes: int = 0
+    #: Upstream point speed sensors' readings (each the sensor's latest).
+    point_readings: int = 0
     #: Webhook events queued (one per alert and subscription that wants it).
     webhook_events: int = 0
 

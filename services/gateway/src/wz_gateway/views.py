@@ -10,7 +10,7 @@ of that batch (:func:`stamp_offset_s`); stamps already in Unix time (after 2001)
 from __future__ import annotations
 
 import logging
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from pydantic import ValidationError
@@ -44,6 +44,8 @@ from wz_shared.keys import Keys
 from wz_shared.messages import (
     BEACON_DEVICE,
     SIGN_DEVICE,
+    Message,
+    PointSensorReading,
     RoadsideDeviceState,
     SensorCalibration,
     ServiceStatus,
@@ -52,6 +54,7 @@ from wz_shared.messages import (
 from wz_shared.site import Site
 
 log = logging.getLogger(__name__)
+M = TypeVar("M", bound=Message)
 
 #: Stamps at or above this are Unix time (2001-09-09), below it simulation time.
 UNIX_STAMP_MIN = 1e9
@@ -105,15 +108,25 @@ def _statuses(storage: Storage, site: Site) -> dict[str, tuple[ServiceStatus, fl
     return found
 
 
+def _by_sensor(rows: dict[str, LatestRow], model: type[M]) -> dict[str, tuple[M, float]]:
+    """Stored latest messages by sensor id, with when each arrived [Unix s]."""
+    found: dict[str, tuple[M, float]] = {}
+    for sensor_id, row in rows.items():
+        try:
+            found[sensor_id] = (model.model_validate_json(row.body), row.received_at)
+        except ValidationError:  # written by another version: not worth failing the answer
+            log.warning("stored %s of %s is unreadable; ignored", model.__name__, sensor_id)
+    return found
+
+
 def calibrations(storage: Storage, site: Site) -> dict[str, tuple[SensorCalibration, float]]:
     """Each sensor's newest self-calibration at ``site`` and when it arrived [Unix s]."""
-    found: dict[str, tuple[SensorCalibration, float]] = {}
-    for sensor_id, row in storage.latest_calibrations(site.site_id).items():
-        try:
-            found[sensor_id] = (SensorCalibration.model_validate_json(row.body), row.received_at)
-        except ValidationError:  # written by another version: not worth failing the answer
-            log.warning("stored calibration of %s is unreadable; ignored", sensor_id)
-    return found
+    return _by_sensor(storage.latest_calibrations(site.site_id), SensorCalibration)
+
+
+def point_readings(storage: Storage, site: Site) -> dict[str, tuple[PointSensorReading, float]]:
+    """Each upstream point speed sensor's newest reading at ``site`` and when it arrived."""
+    return _by_sensor(storage.latest_point_readings(site.site_id), PointSensorReading)
 
 
 def site_calibration(
@@ -280,6 +293,7 @@ def device_feed_of(
         traffic_interval_s=traffic_interval_s,
         contact_email=contact_email,
         calibrations=calibrations(storage, site),
+        point_readings=point_readings(storage, site),
         calibration_rules=calibration_rules or CalibrationRules(),
     )
     return device_feed(inputs)

@@ -38,6 +38,7 @@ from wz_shared.messages import (
     SIGN_DEVICE,
     AlertType,
     CalibrationState,
+    PointSensorReading,
     RoadsideDeviceState,
     SensorCalibration,
     ServiceState,
@@ -265,6 +266,8 @@ class FeedInputs:
     #: Each sensor's newest self-calibration and its arrival [Unix s], by sensor id.
     calibrations: dict[str, tuple[SensorCalibration, float]] = field(default_factory=dict)
     calibration_rules: CalibrationRules = field(default_factory=CalibrationRules)
+    #: Each upstream point speed sensor's newest reading and its arrival [Unix s], by id.
+    point_readings: dict[str, tuple[PointSensorReading, float]] = field(default_factory=dict)
 
     def calibration_health(self, sensor_id: str) -> DeviceHealth | None:
         """:func:`calibration_health` of one sensor."""
@@ -491,6 +494,86 @@ def traffic_sensor_feature(inputs: FeedInputs) -> dict[str, Any] | None:
     }
 
 
+#: A point sensor's reading is current for this many of its intervals after it ended.
+POINT_FRESH_INTERVALS = 2.5
+
+
+def point_sensor_features(inputs: FeedInputs) -> list[dict[str, Any]]:
+    """A WZDx traffic sensor for each upstream point speed sensor of the site file, from its
+    newest reading: per lane the volume (the interval's count per hour), the mean speed and
+    the occupancy; the station's the lanes' sum, their count-weighted speed and mean
+    occupancy. ``unknown`` before any reading; ``error`` once the newest is older than
+    :data:`POINT_FRESH_INTERVALS` intervals (the sensor or its link has failed)."""
+    site = inputs.site
+    features = []
+    for sensor in site.point_sensors:
+        heard = inputs.point_readings.get(sensor.sensor_id)
+        properties: dict[str, Any]
+        if heard is None:
+            health = DeviceHealth("unknown", ("no reading heard yet",), inputs.now)
+            start, end = inputs.now - sensor.interval_s, inputs.now
+        else:
+            reading, received_at = heard
+            age_s = inputs.now - received_at
+            health = DeviceHealth("ok", (), received_at)
+            if age_s > POINT_FRESH_INTERVALS * sensor.interval_s:
+                health = DeviceHealth("error", (f"no reading for {_duration(age_s)}",), received_at)
+            end = reading.stamp + inputs.stamp_offset_s
+            start = end - reading.interval_s
+        properties = {
+            "core_details": _core(
+                site,
+                "traffic-sensor",
+                f"Point speed sensor {sensor.sensor_id}",
+                health,
+                f"Upstream point speed sensor at station {sensor.station_m:.0f} m: per lane, "
+                f"the vehicles passing, their mean speed and the occupancy every "
+                f"{sensor.interval_s:.0f} s",
+            ),
+            "collection_interval_start_date": rfc3339(start),
+            "collection_interval_end_date": rfc3339(end),
+        }
+        if heard is not None:
+            properties.update(_point_lane_data(site, heard[0]))
+        x, y = site.road_frame.to_site(sensor.station_m, 0.0)
+        features.append(
+            {
+                "id": device_id(site, f"point-sensor/{sensor.sensor_id}"),
+                "type": "Feature",
+                "properties": properties,
+                "geometry": _point(site, float(x), float(y)),
+            }
+        )
+    return features
+
+
+def _point_lane_data(site: Site, reading: PointSensorReading) -> dict[str, Any]:
+    """A point sensor's reading as a WZDx traffic sensor's station and ``lane_data`` figures."""
+    per_hour = 3600.0 / reading.interval_s
+    lanes = sorted(reading.lanes, key=lambda lane: lane_order(site, lane.lane_index))
+    lane_data = []
+    for lane in lanes:
+        entry: dict[str, Any] = {
+            "lane_order": lane_order(site, lane.lane_index),
+            "volume_vph": _round(lane.vehicle_count * per_hour),
+            "occupancy_percent": _round(lane.occupancy_percent),
+        }
+        if lane.mean_speed_mps is not None:
+            entry["average_speed_kph"] = _round(lane.mean_speed_mps * MPS_TO_KPH)
+        lane_data.append(entry)
+    out: dict[str, Any] = {"lane_data": lane_data}
+    count = sum(lane.vehicle_count for lane in lanes)
+    if lanes:
+        out["volume_vph"] = _round(count * per_hour)
+        out["occupancy_percent"] = _round(
+            sum(lane.occupancy_percent for lane in lanes) / len(lanes)
+        )
+    if count:
+        speed = sum(lane.vehicle_count * (lane.mean_speed_mps or 0.0) for lane in lanes) / count
+        out["average_speed_kph"] = _round(speed * MPS_TO_KPH)
+    return out
+
+
 def _hidden_lanes_health(site: Site, lanes: list[LaneTraffic], now: float) -> DeviceHealth:
     """A warning for lanes whose loop spot other vehicles hid longer than
     :data:`~wz_gateway.traffic.HIDDEN_SHARE_LIMIT` of the interval: their volume and
@@ -606,6 +689,7 @@ def device_feed(inputs: FeedInputs) -> dict[str, Any]:
     traffic = traffic_sensor_feature(inputs)
     if traffic is not None:
         features.append(traffic)
+    features += point_sensor_features(inputs)
     features += camera_features(inputs)
     features += roadside_features(inputs)
     source: dict[str, Any] = {
