@@ -87,6 +87,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from wz_camera_detector.settings import camera_mount
 from wz_eval.alerts import observed_truth, run_alert_engine, score_alerts, track_follows
@@ -881,27 +882,60 @@ class _MotAccumulator:
         }
 
 
+def _nearest_within(
+    reference: npt.NDArray[np.float64], stamps: npt.NDArray[np.float64], tolerance_s: float
+) -> npt.NDArray[np.intp]:
+    """For each reference stamp, the index of the nearest of ``stamps`` (sorted) within
+    ``tolerance_s``; -1 where none is."""
+    if stamps.size == 0:
+        return np.full(reference.shape, -1, dtype=np.intp)
+    right = np.clip(np.searchsorted(stamps, reference), 0, stamps.size - 1)
+    left = np.clip(right - 1, 0, stamps.size - 1)
+    nearer = np.where(
+        np.abs(stamps[left] - reference) <= np.abs(stamps[right] - reference), left, right
+    )
+    return np.where(np.abs(stamps[nearer] - reference) <= tolerance_s, nearer, -1)
+
+
 def paper_table(
     site: Site, scores: Scores, centre: tuple[float, float], window_upstream_m: tuple[float, float]
 ) -> list[dict[str, Any]]:
-    """Per vehicle: cumulative |error| over the window's common times, per source (Tables 1-2)."""
+    """Per vehicle: cumulative |error| over the window's common times, per source (Tables 1-2).
+
+    The fused tracks, the paper's filter, the average and the camera are sampled at the camera's
+    frame times; the LiDAR at its own. A LiDAR sample counts for a camera frame when it is the
+    nearest within half a LiDAR period: the camera's clock, once its offset is learned (the
+    self-calibration), no longer ticks on the LiDAR's grid.
+    """
     mast_station = float(site.road_frame.to_road(*centre)[0])
     lo, hi = mast_station - window_upstream_m[1], mast_station - window_upstream_m[0]
     compared = ("camera", "lidar", "average", "paper_kf", "fused", "fused_smoothed", "fused_stored")
+    lidar_rates = [m.rate_hz for m in site.sensors if m.kind == "lidar"]
+    tolerance_s = 0.5 / max(lidar_rates) if lidar_rates else 1e-4
     rows = []
     for vehicle_id, by_source in sorted(scores.per_vehicle.items()):
-        common: set[float] | None = None
+        in_window = {
+            source: sorted(
+                (t, errors)
+                for t, errors in by_source.get(source, {}).items()
+                if lo <= errors[2] <= hi
+            )
+            for source in compared
+        }
+        reference = np.array([t for t, _ in in_window["fused"]], dtype=float)
+        picked: dict[str, npt.NDArray[np.intp]] = {}
         for source in compared:
-            stamps = {t for t, (_, _, s, _) in by_source.get(source, {}).items() if lo <= s <= hi}
-            common = stamps if common is None else common & stamps
-        if not common or len(common) < 5:
+            stamps = np.array([t for t, _ in in_window[source]], dtype=float)
+            picked[source] = _nearest_within(reference, stamps, tolerance_s)
+        common = np.all([index >= 0 for index in picked.values()], axis=0)
+        if reference.size == 0 or int(common.sum()) < 5:
             continue
-        row: dict[str, Any] = {"vehicle_id": vehicle_id, "samples": len(common)}
+        row: dict[str, Any] = {"vehicle_id": vehicle_id, "samples": int(common.sum())}
         for source in compared:
-            samples = by_source[source]
+            samples = [in_window[source][k][1] for k in picked[source][common]]
             row[source] = {
-                "longitudinal_m": float(sum(abs(samples[t][0]) for t in common)),
-                "lateral_m": float(sum(abs(samples[t][1]) for t in common)),
+                "longitudinal_m": float(sum(abs(e[0]) for e in samples)),
+                "lateral_m": float(sum(abs(e[1]) for e in samples)),
             }
         rows.append(row)
     return rows
