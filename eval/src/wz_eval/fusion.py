@@ -429,12 +429,25 @@ def evaluate(
             lidar_frames, truth, site, centre, options.max_range_m, ids
         ),
     }
-    estimates = run_paper_pipeline(observations, options.paper)
+    # The camera's learned clock offset takes its frames off the LiDAR's grid: a frame of the
+    # paper's method takes what lies within half a LiDAR period of its first stamp
+    # (wz_fusion_tracker.paper, "Frames"), and each camera sample is scored at the frame that
+    # holds it, at the frame's time.
+    half_period_s = frame_match_tolerance_s(site)
+    paper_settings = options.paper.model_copy(
+        update={"frame_tolerance_s": max(options.paper.frame_tolerance_s, half_period_s)}
+    )
+    estimates = run_paper_pipeline(observations, paper_settings)
     by_stamp: dict[float, list[FusedEstimate]] = defaultdict(list)
     for estimate in estimates:
         by_stamp[round(estimate.stamp_s, 4)].append(estimate)
-    for stamp in sample_times:
-        frame = by_stamp.get(round(stamp, 4), [])
+    frame_times = np.array(sorted(by_stamp), dtype=float)
+    nearest = _nearest_within(np.array(sample_times, dtype=float), frame_times, half_period_s)
+    for index in nearest:
+        if index < 0:
+            continue
+        stamp = float(frame_times[index])
+        frame = by_stamp[stamp]
         vehicles = vehicles_at(stamp)
         if vehicles is None or not frame:
             continue
@@ -882,6 +895,13 @@ class _MotAccumulator:
         }
 
 
+def frame_match_tolerance_s(site: Site) -> float:
+    """How far apart [s] a camera frame and a LiDAR sample may be and still be one frame: just
+    under half the fastest LiDAR's period (1 ms without a LiDAR)."""
+    rates = [m.rate_hz for m in site.sensors if m.kind == "lidar"]
+    return 0.999 * 0.5 / max(rates) if rates else 1e-3
+
+
 def _nearest_within(
     reference: npt.NDArray[np.float64], stamps: npt.NDArray[np.float64], tolerance_s: float
 ) -> npt.NDArray[np.intp]:
@@ -910,8 +930,7 @@ def paper_table(
     mast_station = float(site.road_frame.to_road(*centre)[0])
     lo, hi = mast_station - window_upstream_m[1], mast_station - window_upstream_m[0]
     compared = ("camera", "lidar", "average", "paper_kf", "fused", "fused_smoothed", "fused_stored")
-    lidar_rates = [m.rate_hz for m in site.sensors if m.kind == "lidar"]
-    tolerance_s = 0.5 / max(lidar_rates) if lidar_rates else 1e-4
+    tolerance_s = frame_match_tolerance_s(site)
     rows = []
     for vehicle_id, by_source in sorted(scores.per_vehicle.items()):
         in_window = {
