@@ -185,10 +185,12 @@ class QueueEstimator:
         self._memory = {index: _LaneMemory() for index in self._lanes}
         self._published_s: float | None = None
         self._changed = False
-        #: The site's point sensors upstream of every lane's reach, by id.
+        #: The site's point sensors, by id ...
         self._points = {
             point.sensor_id: _PointMemory(point.station_m) for point in zone.site.point_sensors
         }
+        #: ... and the same, the most downstream first (the walk's order).
+        self._points_upstream = sorted(self._points.values(), key=lambda m: -m.station_m)
         #: Every lane's queue as of the last :meth:`estimate`.
         self.lanes: list[LaneQueue] = [
             LaneQueue(
@@ -223,7 +225,7 @@ class QueueEstimator:
         None when no sensor reads the lane free before the walk ends."""
         downstream = reach_m
         upstream: float | None = None
-        for memory in sorted(self._points.values(), key=lambda m: -m.station_m):
+        for memory in self._points_upstream:
             if memory.station_m >= reach_m:
                 continue
             queued = memory.lane_queued(lane_index, stamp)

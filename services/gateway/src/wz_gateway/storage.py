@@ -276,8 +276,8 @@ class Storage:
         :class:`SensorCalibration` becomes that sensor's latest calibration, and is added to
         ``calibration_changes`` when its state differs from the one before (or was entered at
         another stamp: knocked again); a :class:`PointSensorReading` becomes that point
-        sensor's latest reading (the WZDx feed's traffic sensor). Other messages are refused with ``TypeError`` before
-        anything is written.
+        sensor's latest reading (the WZDx feed's traffic sensor). Other messages are refused
+        with ``TypeError`` before anything is written.
 
         Parameters
         ----------
