@@ -41,7 +41,7 @@ from wz_shared.bus import Bus
 from wz_shared.codec import encode_camera_frame
 from wz_shared.messages import CameraFrameMeta, DetectionBatch, RadarScan
 from wz_shared.settings import BusSettings
-from wz_shared.site import DEFAULT_SITE_PATH, load_site
+from wz_shared.site import DEFAULT_SITE_PATH, Site, load_site
 from wz_simulator.sensors.rig import CameraOutput, RadarOutput, SensorRig
 from wz_simulator.sensors.scene import WEATHER_PRESETS
 from wz_simulator.settings import SimulatorSettings
@@ -60,10 +60,12 @@ class Recorded:
         return [payload for _, kind, payload in self.events if kind == "camera"]
 
 
-def record(duration_s: float, warmup_s: float = 40.0, seed: int = 5) -> Recorded:
-    site = load_site(DEFAULT_SITE_PATH)
+def record(
+    duration_s: float, warmup_s: float = 40.0, seed: int = 5, site: Site | None = None
+) -> Recorded:
+    """The camera's frames and the radar's scans of ``site`` (default: the default site)."""
+    site = site if site is not None else load_site(DEFAULT_SITE_PATH)
     camera, radar = camera_mount(site, None), radar_mount(site, None)
-    assert radar is not None
     settings = SimulatorSettings.model_validate(
         {
             "seed": seed,
@@ -74,9 +76,8 @@ def record(duration_s: float, warmup_s: float = 40.0, seed: int = 5) -> Recorded
             "duration_s": warmup_s + duration_s + 0.5,
         }
     )
-    rig = SensorRig(
-        site, WEATHER_PRESETS["day"], seed, sensor_ids=[camera.sensor_id, radar.sensor_id]
-    )
+    sensor_ids = [camera.sensor_id] + ([radar.sensor_id] if radar is not None else [])
+    rig = SensorRig(site, WEATHER_PRESETS["day"], seed, sensor_ids=sensor_ids)
     events: list[tuple[float, str, Any]] = []
     with TrafficWorld(site, settings) as world:
         while not world.finished:

@@ -119,21 +119,34 @@ def _one_thread(path: Path, like: YoloOnnxDetector | None) -> YoloOnnxDetector:
     return detector
 
 
-def stack_cpu(model: Path, warmup_s: float, window_s: float) -> dict[str, float]:
-    """Each service's CPU [% of one core] under ``wz up`` in real time with ``model``."""
-    env = {k: v for k, v in os.environ.items() if not k.startswith("WZ_")}
+def stack_cpu(
+    model: Path | None,
+    warmup_s: float,
+    window_s: float,
+    *,
+    env: dict[str, str] | None = None,
+    cwd: Path = ROOT,
+    site_path: Path | None = None,
+) -> dict[str, float]:
+    """Each service's CPU [% of one core] under ``wz up`` in real time with ``model`` (None:
+    the detector's own choice), run in ``cwd`` with ``env`` (default: ours, less ``WZ_``
+    settings) on ``site_path`` (default: the default site)."""
+    env = dict(env) if env is not None else _without_wz_settings()
     with tempfile.TemporaryDirectory(prefix="wz-camera-bench-") as tmp:
+        if model is not None:
+            env["WZ_CAMERA_MODEL_PATH"] = str(model)
         env.update(
-            WZ_CAMERA_MODEL_PATH=str(model),
             WZ_SIM_WORK_DIR=str(Path(tmp) / "sim"),
             WZ_GATEWAY_DATA_DIR=str(Path(tmp) / "gateway"),
             WZ_GATEWAY_PORT=str(free_port()),
         )
         command = [sys.executable, "-m", "wz_cli.main", "up", "--seed", "3"]
+        if site_path is not None:
+            command += ["--site", str(site_path)]
         command += ["--listen", f"tcp/127.0.0.1:{free_port()}"]
         up = subprocess.Popen(
             command,
-            cwd=ROOT,
+            cwd=cwd,
             env=env,
             stdin=subprocess.DEVNULL,
             stdout=subprocess.DEVNULL,
@@ -143,12 +156,12 @@ def stack_cpu(model: Path, warmup_s: float, window_s: float) -> dict[str, float]
             time.sleep(warmup_s)
             supervisor = psutil.Process(up.pid)
             children = [*supervisor.children(recursive=True), supervisor]
-            before = {p.pid: _cpu_s(p) for p in children}
+            before = {p.pid: process_cpu_s(p) for p in children}
             time.sleep(window_s)
             usage: dict[str, float] = {}
             for process in children:
-                name = _service(process)
-                cpu = _cpu_s(process) - before[process.pid]
+                name = service_name(process)
+                cpu = process_cpu_s(process) - before[process.pid]
                 usage[name] = usage.get(name, 0.0) + 100.0 * cpu / window_s
             usage["all"] = sum(usage.values())
             return {name: round(value, 1) for name, value in sorted(usage.items())}
@@ -157,7 +170,11 @@ def stack_cpu(model: Path, warmup_s: float, window_s: float) -> dict[str, float]
             up.wait(timeout=60)
 
 
-def _cpu_s(process: psutil.Process) -> float:
+def _without_wz_settings() -> dict[str, str]:
+    return {k: v for k, v in os.environ.items() if not k.startswith("WZ_")}
+
+
+def process_cpu_s(process: psutil.Process) -> float:
     try:
         times = process.cpu_times()
     except psutil.NoSuchProcess:
@@ -165,7 +182,7 @@ def _cpu_s(process: psutil.Process) -> float:
     return float(times.user + times.system)
 
 
-def _service(process: psutil.Process) -> str:
+def service_name(process: psutil.Process) -> str:
     try:
         command = " ".join(process.cmdline())
     except psutil.NoSuchProcess:

@@ -31,6 +31,7 @@ from benchmarks.report_format import (
     median_of,
 )
 from benchmarks.report_sensors import (
+    camera_budget,
     camera_detection,
     camera_models,
     generated_sites,
@@ -189,6 +190,20 @@ def _summary(benchmarks: dict[str, Any]) -> list[str]:
             f"the whole stack at full sensor rates {stack[1]['all']:.0f} % vs "
             f"{stack[0]['all']:.0f} % of one core (2 cores: saturated)."
         )
+    budget = benchmarks.get("camera_budget", {}).get("result")
+    if budget:
+        case = next(iter(budget["cases"].values()))
+        now, before = case["per_frame"]["now"], case["per_frame"]["before"]
+        stack = budget["stack_cpu_percent"]
+        lines.append(
+            f"- The camera at {budget['camera_fps']:.0f} fps on one core (default site): "
+            f"**{fmt_ms(now['cpu']['p50_ms'])}** median CPU per frame "
+            f"({fmt_ms(before['cpu']['p50_ms'])} before), {case['node']['now']['frames_missing']} "
+            f"of {case['node']['now']['frames_sent']} frames dropped, end-to-end p99 "
+            f"{fmt_ms(case['node']['now']['end_to_end']['p99_ms'])}; the stack but the "
+            f"simulator **{stack['now']['all but the simulator']:.0f} %** of one core "
+            f"({stack['before']['all but the simulator']:.0f} % before)."
+        )
     tracker = benchmarks.get("tracker_cycle", {}).get("result")
     if tracker:
         lines.append(
@@ -319,6 +334,11 @@ SECTIONS: dict[str, tuple[str, Callable[[dict[str, Any]], list[str]]]] = {
     "camera_models": (
         "the camera detector's two models on one core, and the stack's CPU with each",
         camera_models,
+    ),
+    "camera_budget": (
+        "the edge box's budget: the camera node at 30 fps on one core, and the stack with a "
+        "30 fps camera, this code beside the code before it (issue 41)",
+        camera_budget,
     ),
     "tracker_cycle": (
         "the fusion tracker's cycle with 200 tracks and three sensors",

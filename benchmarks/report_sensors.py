@@ -636,6 +636,75 @@ def camera_models(result: dict[str, Any]) -> list[str]:
     return lines
 
 
+def camera_budget(result: dict[str, Any]) -> list[str]:
+    """Issue 41: the camera node at 30 fps, before and now, and the stack's CPU."""
+    fps = result["camera_fps"]
+    lines = [
+        f"Camera at {fps:.0f} fps, 1800 veh/h with 20 % trucks, day; **before** is commit "
+        f"`{result['baseline_commit']}` (the detector on every frame, ONNX Runtime on two "
+        "threads), checked out in a worktree and run in the same run on the same frames; "
+        "**now** is this code (the detector every 0.13 s, its far-field tile at every second "
+        "run, optical flow between, one ONNX thread). Method: `benchmarks/camera_budget.py`.",
+        "",
+        "Per frame, one process pinned to one core (`CameraDetector.handle`: decode, detect or "
+        "follow, track, range, fuse), CPU time; and the node as its own process pinned to one "
+        "core, fed the frames in real time over Zenoh:",
+        "",
+    ]
+    rows = []
+    for name, case in result["cases"].items():
+        for code in ("before", "now"):
+            frame, node = case["per_frame"][code], case["node"][code]
+            latency = node["end_to_end"]
+            rows.append(
+                [
+                    f"{name} ({case['camera']}, {case['frames']} frames)",
+                    f"**{code}**",
+                    f"{fmt_ms(frame['cpu']['p50_ms'])} / {fmt_ms(frame['cpu']['p99_ms'])} / "
+                    f"{fmt_ms(frame['cpu']['mean_ms'])}",
+                    f"{100 * frame['share_of_one_core']:.0f}",
+                    f"{node['batches_received']} of {node['frames_sent']} "
+                    f"({node['frames_missing']} missing)",
+                    "-"
+                    if latency is None
+                    else f"{fmt_ms(latency['p50_ms'])} / {fmt_ms(latency['p99_ms'])}",
+                    f"{100 * node['node_share_of_one_core']:.0f}",
+                ]
+            )
+    lines += md_table(
+        [
+            "camera",
+            "code",
+            "CPU per frame p50 / p99 / mean",
+            "% of one core (in process)",
+            "node on the bus: batches back",
+            "end to end p50 / p99",
+            "node's % of one core",
+        ],
+        rows,
+    )
+    stack = result["stack_cpu_percent"]
+    services = sorted(
+        {name for usage in stack.values() for name in usage} - {"all", "all but the simulator"}
+    )
+    lines += [
+        "",
+        f"The whole stack (`wz up`, real time, the default site with its camera at {fps:.0f} "
+        f"fps, LiDAR 20 Hz, radar 15 Hz), each process's CPU in % of one core over "
+        f"{result['stack_window_s']:.0f} s:",
+        "",
+    ]
+    rows = [[name] + [f"{stack[code].get(name, 0.0):.1f}" for code in stack] for name in services]
+    rows.append(
+        ["**all but the simulator**"]
+        + [f"**{stack[code]['all but the simulator']:.1f}**" for code in stack]
+    )
+    rows.append(["all"] + [f"{stack[code]['all']:.1f}" for code in stack])
+    lines += md_table(["process", *stack], rows)
+    lines.append("")
+    return lines
+
+
 def self_calibration(result: dict[str, Any]) -> list[str]:
     """Issue 39: each estimator's CPU at its sensor's full rate, and its time to learn."""
 

@@ -312,3 +312,120 @@ def test_ids_are_never_reused_under_random_clutter() -> None:
         assert live.isdisjoint(retired)
         retired |= live_before - live
         live_before = live
+
+
+# ------------------------------------------------------- frames the detector skips (flow)
+
+
+def moving(frame: int, speed_px_per_s: float = 300.0) -> float:
+    """The centre column of a vehicle crossing at ``speed_px_per_s``, at ``frame`` [px]."""
+    return 200.0 + speed_px_per_s * frame * FRAME_PERIOD_S
+
+
+def test_flow_carries_tracks_between_detections_and_they_are_reported_followed() -> None:
+    """The detector on every fourth frame of 30 fps, flow's boxes on the others: the track
+    follows the vehicle on every frame, marked followed where flow moved it."""
+    tracker = ImageTracker(ImageTrackerSettings())
+    for frame in range(40):
+        stamp = frame * FRAME_PERIOD_S
+        if frame % 4 == 0:
+            reported = tracker.update([detection(moving(frame), 300.0)], stamp)
+        else:
+            (previous,) = tracker.tracks()
+            reported = tracker.update(None, stamp, {previous.local_id: box(moving(frame), 300.0)})
+        (track,) = reported
+        assert track.followed == (frame % 4 != 0)
+        assert centre(track)[0] == pytest.approx(moving(frame), abs=2.0)
+    assert track.local_id == 1
+    assert track.hits == 10  # detections only
+    assert track.velocity_px_per_s[0] == pytest.approx(300.0, rel=0.05)
+
+
+def test_a_track_flow_loses_coasts_and_is_not_reported() -> None:
+    tracker = ImageTracker(ImageTrackerSettings())
+    tracker.update([detection(moving(0), 300.0)], 0.0)
+    assert tracker.update(None, FRAME_PERIOD_S, {}) == []
+    (coasting,) = tracker.tracks()
+    assert not coasting.followed
+
+
+def test_confirmed_at_two_detections_when_flow_followed_it_between() -> None:
+    settings = ImageTrackerSettings(min_hits=3, min_hits_followed=2)
+    followed = ImageTracker(settings)
+    followed.update([detection(moving(0), 300.0)], 0.0)
+    for frame in (1, 2, 3):
+        (previous,) = followed.tracks()
+        followed.update(
+            None, frame * FRAME_PERIOD_S, {previous.local_id: box(moving(frame), 300.0)}
+        )
+    (second,) = followed.update([detection(moving(4), 300.0)], 4 * FRAME_PERIOD_S)
+    assert second.hits == 2 and second.confirmed
+
+    # Detections on consecutive frames (nothing between for flow to check): three as before.
+    every_frame = ImageTracker(settings)
+    results = [
+        every_frame.update([detection(moving(f), 300.0)], f * FRAME_PERIOD_S) for f in range(3)
+    ]
+    assert [frame[0].confirmed for frame in results] == [False, False, True]
+
+    # Flow lost it on one frame between: the two detections alone do not confirm it.
+    lost = ImageTracker(settings)
+    lost.update([detection(moving(0), 300.0)], 0.0)
+    lost.update(None, FRAME_PERIOD_S, {})
+    (track,) = lost.update([detection(moving(2), 300.0)], 2 * FRAME_PERIOD_S)
+    assert track.hits == 2 and not track.confirmed
+
+
+def test_a_tentative_track_waits_for_the_detector_and_dies_when_it_misses() -> None:
+    """Frames the detector skips do not delete a tentative track; a run that misses it does,
+    unless it lies in a far-field tile that run skipped."""
+    tracker = ImageTracker(ImageTrackerSettings())
+    tracker.update([detection(500.0, 200.0)], 0.0)
+    tracker.update(None, FRAME_PERIOD_S)  # no flow either: it coasts, still there
+    assert len(tracker.tracks()) == 1
+    tile = (450.0, 150.0, 560.0, 260.0)
+    tracker.update([], 2 * FRAME_PERIOD_S, unsearched=[tile])
+    assert len(tracker.tracks()) == 1
+    tracker.update([], 3 * FRAME_PERIOD_S)
+    assert tracker.tracks() == []
+
+
+def test_misses_count_the_detector_runs_since_the_last_detection() -> None:
+    tracker = ImageTracker(ImageTrackerSettings(min_hits=1))
+    tracker.update([detection(moving(0), 300.0)], 0.0)
+    for frame in (1, 2):  # runs that do not find it
+        (previous,) = tracker.tracks()
+        (track,) = tracker.update(
+            [], frame * FRAME_PERIOD_S, {previous.local_id: box(moving(frame), 300.0)}
+        )
+        assert track.followed and track.misses == frame
+    (found,) = tracker.update([detection(moving(3), 300.0)], 3 * FRAME_PERIOD_S)
+    assert found.misses == 0 and not found.followed
+
+
+def test_flow_does_not_keep_a_track_alive_past_max_age() -> None:
+    """Flow follows a false box on the background as well as a vehicle: the track still dies
+    max_age_s after its last detection."""
+    tracker = ImageTracker(ImageTrackerSettings(min_hits=1, max_age_s=0.3))
+    tracker.update([detection(400.0, 300.0)], 0.0)
+    frame = 1
+    while frame * FRAME_PERIOD_S <= 0.3:
+        (previous,) = tracker.tracks()
+        tracker.update(None, frame * FRAME_PERIOD_S, {previous.local_id: box(400.0, 300.0)})
+        frame += 1
+    tracker.update(None, frame * FRAME_PERIOD_S, {1: box(400.0, 300.0)})
+    assert tracker.tracks() == []
+
+
+def test_after_flow_a_detection_takes_over() -> None:
+    """Flow measures motion from the previous box, so its error stays in every box after it:
+    a detection after some flow frames moves the track most of the way to itself (an
+    independent measurement of each flow box would hold the track halfway)."""
+    tracker = ImageTracker(ImageTrackerSettings(min_hits=1))
+    for frame in range(12):
+        tracker.update([detection(400.0, 300.0)], frame * FRAME_PERIOD_S)
+    for frame in range(12, 15):  # flow drifts 6 px to the left
+        (previous,) = tracker.tracks()
+        tracker.update(None, frame * FRAME_PERIOD_S, {previous.local_id: box(394.0, 300.0)})
+    (track,) = tracker.update([detection(400.0, 300.0)], 15 * FRAME_PERIOD_S)
+    assert centre(track)[0] > 394.0 + 0.75 * 6.0

@@ -4,12 +4,16 @@ Run it as ``python -m wz_camera_detector.node``. Settings come from the environm
 (``WZ_CAMERA_*`` for the detector, ``WZ_BUS_*`` for the bus; see
 :mod:`wz_camera_detector.settings`). It
 
-- takes frames from ``wz/<site>/raw/camera/<camera>`` through a ring of one (the newest frame
-  wins; frames a slow detector had no time for are counted as dropped by the bus), and keeps
-  the newest scan of ``wz/<site>/raw/radar/<radar>`` (a ring of one too);
+- takes frames from ``wz/<site>/raw/camera/<camera>`` through a ring of ``frame_queue`` frames
+  (the newest kept; frames a slow detector had no time for are counted as dropped by the
+  bus), and keeps the newest scan of ``wz/<site>/raw/radar/<radar>`` (a ring of one);
 - per frame: decodes the JPEG (``cv2.imdecode``), detects boxes with the backend
-  (background subtraction, or a local YOLOv8 ONNX model), tracks them in the image
-  (:class:`ImageTracker`), puts each box on the road (:func:`fit_box_to_ground`: the class's
+  (background subtraction, or a local YOLOv8 ONNX model) on the frames it is due on
+  (``detection_period_s``: each frame of a 10 fps camera, every fourth of a 30 fps one;
+  the others are decoded grey only), follows the boxes of the previous frame by optical flow
+  (:class:`~wz_camera_detector.flow.BoxFlow`), tracks them in the image
+  (:class:`ImageTracker`: detections where the detector ran, flow's boxes for the tracks
+  they did not update), puts each box on the road (:func:`fit_boxes_to_ground`: the class's
   typical shape, :data:`CLASS_SHAPES`, on the site road's heading at the box's ground point,
   placed so that its image box has the box's left, right and bottom edges),
   gives it the camera covariance (below), and fuses with the newest radar scan when its stamp
@@ -76,6 +80,7 @@ from wz_camera_detector.association import (
 )
 from wz_camera_detector.background import BACKEND, BackgroundSubtractionDetector
 from wz_camera_detector.calibration import CameraSelfCalibration
+from wz_camera_detector.flow import BoxFlow
 from wz_camera_detector.radar_calibration import RadarSelfCalibration
 from wz_camera_detector.regions import detector_regions
 from wz_camera_detector.settings import (
@@ -85,7 +90,7 @@ from wz_camera_detector.settings import (
     shipped_model,
 )
 from wz_camera_detector.tracker import ImageTrack, ImageTracker
-from wz_camera_detector.world import VehicleShape, box_to_ground, fit_box_to_ground
+from wz_camera_detector.world import VehicleShape, box_to_ground, fit_boxes_to_ground
 from wz_camera_detector.yolo import (
     Box,
     ImageDetection,
@@ -199,6 +204,7 @@ def make_backend(
         conf_threshold=settings.conf_threshold,
         roi_xyxy_px=settings.roi_xyxy_px,
         tiles_xyxy_px=settings.tiles_xyxy_px,
+        threads=settings.onnx_threads,
     )
     if site is not None and camera is not None:
         intrinsics = camera_intrinsics(camera)
@@ -354,6 +360,14 @@ class CameraDetector:
             SETUP_MARGIN_DEG,
         )
         self.tracker = ImageTracker(settings.tracker)
+        self.flow = BoxFlow(settings.flow)
+        #: Stamp of the latest frame the detector ran on [s]; None: none yet in this run.
+        self._detected_s: float | None = None
+        #: Detector runs so far (the tiles run at every ``tiles_every``-th).
+        self._detections_run = 0
+        #: The far-field tiles the detector skipped in this frame (none on a frame it did
+        #: not run on: no tentative track is deleted then anyway).
+        self._skipped_tiles: tuple[tuple[int, int, int, int], ...] = ()
         self._cameras: dict[tuple[int, int], PinholeCamera] = {}
         self._radar_heading = (
             road_heading_at(site, radar.pose.x_m, radar.pose.y_m) if radar is not None else None
@@ -460,7 +474,8 @@ class CameraDetector:
                 f"{self.site.site_id}/{self.camera_mount.sensor_id}",
             )
             return None
-        image = _decode_jpeg(jpeg)
+        detect = self._detection_due(meta.stamp)
+        image = _decode_jpeg(jpeg, gray=not detect)
         if image is None:
             self.report("bad_image", f"frame {meta.frame_index}: the JPEG does not decode")
             return None
@@ -499,7 +514,7 @@ class CameraDetector:
             return None
         self.last_stamp_s = meta.stamp
         self._frames_taken += 1
-        result = self.process_image(image, meta.stamp, meta.frame_index)
+        result = self.process_image(image, meta.stamp, meta.frame_index, detect=detect)
         if result is None:
             return None
         return DetectionBatch(
@@ -528,6 +543,8 @@ class CameraDetector:
         self._regions_drawn = None  # drawn again at its next frame, for the pose of then
         self._rendered = rendered
         self.tracker.restart()
+        self.flow.restart()
+        self._detected_s = None
 
     def _start_new_run(self, stamp_s: float) -> None:
         log.warning(
@@ -537,36 +554,123 @@ class CameraDetector:
             stamp_s,
         )
         self.tracker.restart()
+        self.flow.restart()
+        self._detected_s = None
         self._scan = None
         self.runs += 1
 
-    def process_image(self, image: U8, stamp_s: float, frame_index: int) -> FrameResult | None:
-        """Detect, track, range and fuse one decoded frame (no checks on the frame's order).
+    @property
+    def detections_run(self) -> int:
+        """How many frames the detector has run on (the others were followed by flow)."""
+        return self._detections_run
 
+    def _detection_due(self, stamp_s: float) -> bool:
+        """Whether the detector runs on the frame of ``stamp_s``: always for the background
+        backend (it learns from every frame) or a period of 0; else when
+        ``detection_period_s`` less half the frames' interval has passed since it last ran
+        (or it has not run in this run)."""
+        period = self.settings.detection_period_s
+        last = self._detected_s
+        if period <= 0.0 or isinstance(self.backend, BackgroundSubtractionDetector):
+            return True
+        if last is None or stamp_s <= last or not self._frames_taken:
+            return True
+        interval = max(0.0, stamp_s - self.last_stamp_s)
+        return stamp_s - last >= period - 0.5 * interval
+
+    def process_image(
+        self, image: U8, stamp_s: float, frame_index: int, detect: bool = True
+    ) -> FrameResult | None:
+        """Detect (``detect``), follow, track, range and fuse one decoded frame (no checks on
+        the frame's order).
+
+        ``image``: BGR (H, W, 3), or grey (H, W) on a frame the detector skips (``detect``
+        False: the tracks are followed by optical flow only).
         Returns None during the background warm-up or when the backend fails (reported).
         """
         warming_up = self.state == ServiceState.STARTING  # this frame still only teaches
-        try:
-            boxes = self.backend.detect(image)
-        except Exception as exc:  # a backend that fails on one frame must not stop the node
-            self.report("detector_error", repr(exc))
-            if "detector_error" not in self._logged:
-                self._logged.add("detector_error")
-                log.exception("the detector failed on frame %d; going on", frame_index)
-            return None
-        if warming_up:
-            return None
-        boxes = [box for box in boxes if box.class_name in CLASS_SHAPES]
-        tracks = self.tracker.update(boxes, stamp_s)
-        if self.settings.confirmed_only:
-            tracks = [track for track in tracks if track.confirmed]
+        boxes: list[ImageDetection] | None = None
+        self._skipped_tiles = ()
+        if detect:
+            try:
+                boxes = self._detect(image)
+            except Exception as exc:  # a backend that fails on one frame must not stop the node
+                self.report("detector_error", repr(exc))
+                if "detector_error" not in self._logged:
+                    self._logged.add("detector_error")
+                    log.exception("the detector failed on frame %d; going on", frame_index)
+                return None
+            if warming_up:
+                return None
+            boxes = [box for box in boxes if box.class_name in CLASS_SHAPES]
+            self._detected_s = stamp_s
+        tracks = self.tracker.update(
+            boxes, stamp_s, self._follow(image, stamp_s), self._skipped_tiles
+        )
         width, height = image.shape[1], image.shape[0]
-        self._calibrate(boxes, stamp_s, width, height)
+        if self.settings.confirmed_only:
+            tracks = [track for track in tracks if self.publishes(track, width, height)]
+        if boxes is not None:
+            self._calibrate(boxes, stamp_s, width, height)
         objects = self._camera_objects(tracks, width, height, frame_index)
         stamp_s = max(0.0, stamp_s - self.clock_offset_s)  # on the LiDAR's clock from here
         return FrameResult(
             tracks, objects, self._within_range(self._fuse(objects, stamp_s)), stamp_s
         )
+
+    def publishes(self, track: ImageTrack, width_px: int, height_px: int) -> bool:
+        """Whether a track updated this frame is published: confirmed, and found by the
+        detector's latest run over it, or cut by the edge of the view (a vehicle leaving
+        it, which the detector loses while flow still follows what is left of it)."""
+        return track.confirmed and (
+            track.misses == 0 or cut_by_view(track.box_xyxy_px, self.backend, width_px, height_px)
+        )
+
+    def _detect(self, image: U8) -> list[ImageDetection]:
+        """The backend's boxes; YOLO's far-field tiles at every ``tiles_every``-th run."""
+        backend = self.backend
+        runs, self._detections_run = self._detections_run, self._detections_run + 1
+        self._skipped_tiles = ()
+        if isinstance(backend, YoloOnnxDetector):
+            tiles = runs % self.settings.tiles_every == 0
+            if not tiles:
+                self._skipped_tiles = backend.tiles_xyxy_px
+            return backend.detect(image, tiles=tiles)
+        return backend.detect(image)
+
+    def _follow(self, image: U8, stamp_s: float) -> dict[int, tuple[float, float, float, float]]:
+        """Where optical flow followed each live track's box of the previous frame to in this
+        one, by ``local_id`` (tracks it lost are left out). Flow looks at the detector's
+        region of interest only (the whole frame without one): the tracks are there."""
+        if not self.settings.flow.enabled:
+            return {}
+        gray: U8 = (
+            image
+            if image.ndim == 2
+            else np.asarray(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY), dtype=np.uint8)
+        )
+        height, width = gray.shape[:2]
+        roi = getattr(self.backend, "roi_xyxy_px", None) or (0, 0, width, height)
+        x0, y0 = max(0, int(roi[0])), max(0, int(roi[1]))
+        x1, y1 = min(width, int(roi[2])), min(height, int(roi[3]))
+        crop = gray[y0:y1, x0:x1]  # a view: OpenCV takes its row stride
+        previous = self.tracker.tracks()
+        last_s = self.tracker.last_stamp_s
+        dt = stamp_s - last_s if last_s is not None and stamp_s > last_s else 0.0
+        followed = self.flow.follow(
+            crop,
+            [track.box_xyxy_px for track in previous],
+            [
+                (track.velocity_px_per_s[0] * dt, track.velocity_px_per_s[1] * dt)
+                for track in previous
+            ],
+            origin_px=(x0, y0),
+        )
+        return {
+            track.local_id: (float(box[0]), float(box[1]), float(box[2]), float(box[3]))
+            for track, box in zip(previous, followed, strict=True)
+            if np.isfinite(box).all()
+        }
 
     def _calibrate(
         self, boxes: list[ImageDetection], stamp_s: float, width: int, height: int
@@ -666,13 +770,12 @@ class CameraDetector:
     ) -> list[CameraObject]:
         camera = self.camera(width_px, height_px)
         camera_xy = (float(camera.position_m[0]), float(camera.position_m[1]))
-        objects: list[CameraObject] = []
+        ranged: list[tuple[ImageTrack, float, float]] = []
         for track in tracks:
             if cut_by_view(track.box_xyxy_px, self.backend, width_px, height_px):
                 # Its bottom is not where it meets the road, nor its middle column the
                 # vehicle's bearing. Not ranged (the LiDAR sees it).
                 continue
-            object_class, shape = CLASS_SHAPES[track.class_name]
             # Heading from where the box's contact point lies (the road's direction there).
             x0, y0 = box_to_ground(camera, track.box_xyxy_px, 0.0, 0.0, 0.0)
             if not (math.isfinite(x0) and math.isfinite(y0)):
@@ -681,8 +784,26 @@ class CameraDetector:
                     f"frame {frame_index}: box {track.box_xyxy_px} reaches above the horizon",
                 )
                 continue
-            heading = road_heading_at(self.site, x0, y0)
-            x_m, y_m = fit_box_to_ground(camera, track.box_xyxy_px, heading, shape)
+            ranged.append((track, x0, y0))
+        if not ranged:
+            return []
+        road = self.site.road_frame
+        stations, _ = road.to_road(
+            np.array([x for _, x, _ in ranged]), np.array([y for _, _, y in ranged])
+        )
+        headings = np.atleast_1d(road.heading_at(stations))
+        classes = [CLASS_SHAPES[track.class_name] for track, _, _ in ranged]
+        centres = fit_boxes_to_ground(
+            camera,
+            [track.box_xyxy_px for track, _, _ in ranged],
+            headings,
+            [shape for _, shape in classes],
+        )
+        objects: list[CameraObject] = []
+        for (track, _, _), heading_rad, (object_class, shape), (x, y) in zip(
+            ranged, headings, classes, centres, strict=True
+        ):
+            heading, x_m, y_m = float(heading_rad), float(x), float(y)
             covariance = camera_covariance(camera_xy, (x_m, y_m), self.settings)
             if self.settings.calibration.enabled:
                 covariance = covariance + self._angle_covariance(camera, (x_m, y_m))
@@ -742,16 +863,19 @@ class CameraDetector:
         return detections
 
 
-def _decode_jpeg(jpeg: bytes | memoryview) -> U8 | None:
-    """BGR uint8 (H, W, 3), or None when the bytes are not a decodable image."""
+def _decode_jpeg(jpeg: bytes | memoryview, gray: bool = False) -> U8 | None:
+    """BGR uint8 (H, W, 3), or with ``gray`` grey (H, W) (a JPEG's luma alone: a third of
+    the colour decode's time); None when the bytes are not a decodable image."""
     buffer = np.frombuffer(jpeg, dtype=np.uint8)
     if buffer.size == 0:
         return None
     try:
-        image = cv2.imdecode(buffer, cv2.IMREAD_COLOR)
+        image = cv2.imdecode(buffer, cv2.IMREAD_GRAYSCALE if gray else cv2.IMREAD_COLOR)
     except cv2.error:
         return None
-    if image is None or image.ndim != 3 or image.shape[2] != 3 or image.size == 0:
+    if image is None or image.size == 0:
+        return None
+    if (gray and image.ndim != 2) or (not gray and (image.ndim != 3 or image.shape[2] != 3)):
         return None
     return np.asarray(image, dtype=np.uint8)
 
@@ -791,7 +915,8 @@ def run(
         settings,
         report=lambda reason, detail: bus.stats.count_invalid(raw_key, reason, detail),
     )
-    frames = bus.subscribe_frames(raw_key, CameraFrameMeta)  # a ring of one: latest wins
+    # A ring of a few frames, the newest kept: they wait while the detector runs on one.
+    frames = bus.subscribe_frames(raw_key, CameraFrameMeta, capacity=settings.frame_queue)
     scans = (
         bus.subscribe(
             bus.keys.raw_radar(detector.radar_mount.sensor_id), RadarScan, mode="ring", capacity=1

@@ -16,6 +16,7 @@ from pydantic_settings import SettingsConfigDict
 from wz_camera_detector.association import AssociationSettings
 from wz_camera_detector.background import BackgroundSubtractionSettings
 from wz_camera_detector.calibration import SensorCalibrationSettings
+from wz_camera_detector.flow import FlowSettings
 from wz_camera_detector.tracker import ImageTrackerSettings
 from wz_shared.sensor_mounts import mount_of_kind
 from wz_shared.settings import ServiceSettings
@@ -101,6 +102,25 @@ class CameraDetectorSettings(ServiceSettings):
     range_std_m: Annotated[float, Field(gt=0.0)] = 1.0
     range_std_per_m: Annotated[float, Field(ge=0.0)] = 0.03
     background: BackgroundSubtractionSettings = Field(default_factory=BackgroundSubtractionSettings)
+    #: The detector runs on a frame when this long has passed since it last ran (less half a
+    #: frame's interval), and optical flow follows the boxes on the frames between [s]; 0: on
+    #: every frame. The default runs it on each frame of a 10 fps camera and on every fourth
+    #: of a 30 fps one (7.5 Hz): a vehicle's first detection waits at most this long, it is
+    #: confirmed at its second when flow followed it between (``tracker.min_hits_followed``).
+    #: The background backend runs on every frame (it learns the road from each).
+    detection_period_s: Annotated[float, Field(ge=0.0, le=2.0)] = 0.13
+    #: The YOLO backend's far-field tiles run at every this many detections (the ROI at each):
+    #: a far vehicle moves a few pixels a frame and flow follows it between.
+    tiles_every: Annotated[int, Field(ge=1, le=10)] = 2
+    #: Optical flow between detections (Median Flow, :mod:`wz_camera_detector.flow`).
+    flow: FlowSettings = Field(default_factory=FlowSettings)
+    #: ONNX Runtime's threads for the model (intra-op; its thread pool does not spin): one
+    #: core for the camera, the box's other core for the rest of the stack.
+    onnx_threads: Annotated[int, Field(ge=1, le=64)] = 1
+    #: Frames the node's queue holds while it works on one (the newest kept): a frame the
+    #: detector runs on takes longer than a 30 fps frame's interval, the frames after it wait
+    #: and are followed by flow in a few milliseconds each.
+    frame_queue: Annotated[int, Field(ge=1, le=64)] = 4
     tracker: ImageTrackerSettings = Field(default_factory=ImageTrackerSettings)
     association: AssociationSettings = Field(default_factory=AssociationSettings)
     #: The camera's and the radar's pose and clock learned against the LiDAR's vehicles

@@ -14,7 +14,16 @@ per track. Each :meth:`ImageTracker.update` is one cycle, in this order:
    track but never starts one (a partly occluded vehicle scores low; so does clutter);
 5. **update** the matched tracks; **spawn** a tentative track for each unmatched high-score
    detection; a tentative track that goes a frame without a match is deleted (ByteTrack's rule:
-   a one-frame false positive leaves no coasting ghost).
+   a one-frame false positive leaves no coasting ghost);
+6. **follow**: a track no detection updated takes the box optical flow followed it to in this
+   frame (:mod:`wz_camera_detector.flow`), as a measurement of its own noise
+   (``flow_noise_px``). That is all a frame the detector skips gives (``detections`` None):
+   the node detects at a few hertz and follows the boxes in between. A track is deleted
+   ``max_age_s`` after its last *detection* however long flow follows it (flow would follow a
+   false box on the background as faithfully as a vehicle), and a tentative track needs a
+   detection at each frame the detector ran. A tentative track is confirmed at
+   ``min_hits`` detections, or at ``min_hits_followed`` when flow followed it through every
+   frame between them: flow checks that the box moves as one thing.
 
 Pixel coordinates are those of :mod:`wz_camera_detector.yolo`: ``u`` right, ``v`` down, boxes
 ``(x1, y1, x2, y2)`` by their pixel edges [px of the original frame].
@@ -33,7 +42,7 @@ Nothing here does I/O: the node decodes frames, calls :meth:`ImageTracker.update
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -71,6 +80,9 @@ class ImageTrackerSettings(BaseModel):
     max_age_s: float = Field(default=1.0, gt=0.0)
     #: Updates (the first detection included) before a track is confirmed.
     min_hits: int = Field(default=3, ge=1)
+    #: ... when optical flow followed it through every frame between its detections (at least
+    #: one): a box that flow follows from one detection to the next is one moving thing.
+    min_hits_followed: int = Field(default=2, ge=1)
 
     # --- Kalman filter ---
     #: Standard deviation of the white acceleration of box centre and size [px/s^2].
@@ -79,6 +91,9 @@ class ImageTrackerSettings(BaseModel):
     measurement_noise_px: float = Field(default=2.0, gt=0.0)
     #: Standard deviation of the unknown velocity of a new track [px/s].
     initial_velocity_std_px_per_s: float = Field(default=300.0, gt=0.0)
+    #: Standard deviation of a box followed by optical flow, centre and size [px]: a little
+    #: above a detection's (the grid's points are not all on the vehicle).
+    flow_noise_px: float = Field(default=3.0, gt=0.0)
 
     @model_validator(mode="after")
     def _check_thresholds(self) -> ImageTrackerSettings:
@@ -113,7 +128,14 @@ class ImageTrack:
     time_since_update_s
         Time since the track's latest detection [s]; 0 for a track updated this cycle.
     confirmed
-        Whether ``hits`` has reached ``min_hits``.
+        Whether the track is confirmed (``min_hits`` detections, or ``min_hits_followed``
+        with flow between them).
+    followed
+        Whether this cycle's update was optical flow's (no detection this frame).
+    misses
+        Detector runs over the track's region since its latest detection: 0 when the latest
+        run found it. Flow follows a track the detector missed (a vehicle cut by the frame's
+        edge, or one the detector lost for a frame), and a false box as faithfully.
     """
 
     local_id: int
@@ -125,6 +147,8 @@ class ImageTrack:
     age_s: float
     time_since_update_s: float
     confirmed: bool
+    followed: bool = False
+    misses: int = 0
 
 
 def _xyxy_to_z(box_xyxy_px: Sequence[float]) -> F64:
@@ -138,6 +162,12 @@ def _z_to_xyxy(z: F64) -> F64:
     half_w = max(float(z[2]), _MIN_BOX_SIDE_PX) / 2.0
     half_h = max(float(z[3]), _MIN_BOX_SIDE_PX) / 2.0
     return np.array([z[0] - half_w, z[1] - half_h, z[0] + half_w, z[1] + half_h], dtype=np.float64)
+
+
+def _centre_in(box_xyxy_px: F64, regions: Sequence[Sequence[float]]) -> bool:
+    """Whether the box's centre lies in one of the regions ``(x1, y1, x2, y2)`` [px]."""
+    u, v = (box_xyxy_px[0] + box_xyxy_px[2]) / 2.0, (box_xyxy_px[1] + box_xyxy_px[3]) / 2.0
+    return any(x1 <= u <= x2 and y1 <= v <= y2 for x1, y1, x2, y2 in regions)
 
 
 def iou_matrix(boxes_a_xyxy_px: npt.ArrayLike, boxes_b_xyxy_px: npt.ArrayLike) -> F64:
@@ -205,6 +235,14 @@ class _Track:
     updated_s: float
     score: float
     hits: int = 1
+    #: Frames optical flow followed it through since its first detection.
+    followed_frames: int = 0
+    #: Whether flow followed it through every frame no detection updated it in (while tentative).
+    followed_throughout: bool = True
+    #: Confirmed once; stays so.
+    confirmed: bool = False
+    #: Detector runs over its region since its latest detection.
+    misses: int = 0
     class_counts: dict[str, int] = field(default_factory=dict)
     class_last_hit: dict[str, int] = field(default_factory=dict)
 
@@ -238,23 +276,34 @@ class ImageTracker:
         self._last_stamp_s: float | None = None
         self._H = np.hstack([np.eye(_MEAS_DIM), np.zeros((_MEAS_DIM, _MEAS_DIM))])
         self._R = np.eye(_MEAS_DIM) * settings.measurement_noise_px**2
+        self._R_flow = np.eye(_MEAS_DIM) * settings.flow_noise_px**2
+        self._FQ: tuple[float, F64, F64] | None = None
 
     # --- the filter ---
 
-    def _predict(self, track: _Track, dt: float) -> None:
+    def _transition(self, dt: float) -> tuple[F64, F64]:
+        """``F`` and ``Q`` for a step of ``dt`` [s] (one pair per frame, for every track)."""
+        if self._FQ is not None and self._FQ[0] == dt:
+            return self._FQ[1], self._FQ[2]
         eye = np.eye(_MEAS_DIM)
         F = np.block([[eye, dt * eye], [np.zeros_like(eye), eye]])
         sigma_a2 = self.settings.process_noise_accel_px_per_s2**2
         Q = sigma_a2 * np.block(
             [[dt**4 / 4.0 * eye, dt**3 / 2.0 * eye], [dt**3 / 2.0 * eye, dt**2 * eye]]
         )
+        self._FQ = (dt, F, Q)
+        return F, Q
+
+    def _predict(self, track: _Track, dt: float) -> None:
+        F, Q = self._transition(dt)
         # x = F x
         track.x = F @ track.x
         # P = F P F' + Q
         track.P = F @ track.P @ F.T + Q
 
-    def _update(self, track: _Track, z: F64) -> None:
-        H, R = self._H, self._R
+    def _update(self, track: _Track, z: F64, R: F64 | None = None) -> None:
+        H = self._H
+        R = self._R if R is None else R
         # y = z - H x
         y = z - H @ track.x
         # S = H P H' + R
@@ -295,22 +344,37 @@ class ImageTracker:
 
     # --- one cycle ---
 
-    def update(self, detections: Sequence[ImageDetection], stamp_s: float) -> list[ImageTrack]:
-        """Run one cycle on a frame's detections: prune, predict, associate, update, spawn.
+    def update(
+        self,
+        detections: Sequence[ImageDetection] | None,
+        stamp_s: float,
+        followed: Mapping[int, Sequence[float]] | None = None,
+        unsearched: Sequence[Sequence[float]] = (),
+    ) -> list[ImageTrack]:
+        """Run one cycle on a frame: prune, predict, associate, update, spawn, follow.
 
         Parameters
         ----------
         detections
-            The frame's detections (any order), boxes [px].
+            The frame's detections (any order), boxes [px]; None for a frame the detector
+            did not run on (only ``followed`` updates tracks then).
         stamp_s
             Capture time of the frame [s]; must increase from call to call.
+        followed
+            Boxes ``(x1, y1, x2, y2)`` [px] optical flow followed live tracks to in this frame,
+            by ``local_id`` (from their boxes of the previous frame, :meth:`tracks`); taken
+            for the tracks no detection updates.
+        unsearched
+            Regions ``(x1, y1, x2, y2)`` [px] the detector did not search this frame at their
+            own resolution (far-field tiles it skipped): a tentative track whose box centre is
+            in one is not deleted for missing a detection.
 
         Returns
         -------
         tracks
-            The tracks updated by this frame's detections (tentative ones included, with
-            ``confirmed=False``), by increasing ``local_id``; at most one per detection.
-            Tracks coasting without a detection are in :meth:`tracks`.
+            The tracks updated by this frame (by a detection, tentative ones included with
+            ``confirmed=False``, or by flow, ``followed=True``), by increasing ``local_id``.
+            Tracks coasting without either are in :meth:`tracks`.
 
         Raises
         ------
@@ -338,6 +402,67 @@ class ImageTracker:
             for track in self._tracks:
                 self._predict(track, dt)
 
+        updated: list[_Track] = []
+        unmatched_high: list[ImageDetection] = []
+        if detections is not None:
+            updated, unmatched_high = self._associate_detections(detections, stamp_s)
+        updated_ids = {track.local_id for track in updated}
+
+        # follow: flow's boxes for the tracks no detection updated
+        flowed: list[_Track] = []
+        for track in self._tracks:
+            if track.local_id in updated_ids:
+                continue
+            box = followed.get(track.local_id) if followed is not None else None
+            if box is not None and all(math.isfinite(float(edge)) for edge in box):
+                self._update(track, _xyxy_to_z(box), self._R_flow)
+                # Flow measures motion from the previous box: its error stays in every box
+                # after it (drift), so what it added is kept as uncertainty: a detection
+                # then takes over with the weight the drift calls for.
+                track.P[:_MEAS_DIM, :_MEAS_DIM] += self._R_flow
+                track.followed_frames += 1
+                flowed.append(track)
+            elif not track.confirmed:
+                track.followed_throughout = False
+        if detections is not None:
+            for track in self._tracks:
+                if track.local_id in updated_ids:
+                    track.misses = 0
+                elif not _centre_in(track.box_xyxy_px(), unsearched):
+                    track.misses += 1
+            # a tentative track missing a frame the detector ran on was probably a false positive
+            self._tracks = [
+                track
+                for track in self._tracks
+                if track.local_id in updated_ids
+                or track.confirmed
+                or _centre_in(track.box_xyxy_px(), unsearched)
+            ]
+            for detection in unmatched_high:
+                track = self._spawn(detection, stamp_s)
+                self._tracks.append(track)
+                updated.append(track)
+        for track in updated:
+            track.confirmed = track.confirmed or self._confirms(track)
+        reported = [self._report(track, stamp_s) for track in updated]
+        reported += [self._report(track, stamp_s, followed=True) for track in flowed]
+        return sorted(reported, key=lambda t: t.local_id)
+
+    def _confirms(self, track: _Track) -> bool:
+        settings = self.settings
+        if track.hits >= settings.min_hits:
+            return True
+        return (
+            track.followed_throughout
+            and track.followed_frames > 0
+            and track.hits >= settings.min_hits_followed
+        )
+
+    def _associate_detections(
+        self, detections: Sequence[ImageDetection], stamp_s: float
+    ) -> tuple[list[_Track], list[ImageDetection]]:
+        """Stages 1 and 2: the tracks updated, and the high-score detections left over."""
+        settings = self.settings
         high = [d for d in detections if d.score >= settings.high_score_threshold]
         low = [
             d
@@ -366,26 +491,17 @@ class ImageTracker:
             ]
 
         # stage 2: low-score detections only continue confirmed tracks
-        candidates = [t for t in unmatched_tracks if t.hits >= settings.min_hits]
+        candidates = [t for t in unmatched_tracks if t.confirmed]
         if candidates and low:
             for track_index, detection_index in self._associate(candidates, low):
                 self._correct(candidates[track_index], low[detection_index], stamp_s)
                 updated.append(candidates[track_index])
+        return updated, unmatched_high
 
-        # a tentative track missing a frame was probably a false positive
-        updated_ids = {track.local_id for track in updated}
-        self._tracks = [
-            track
-            for track in self._tracks
-            if track.local_id in updated_ids or track.hits >= settings.min_hits
-        ]
-        # spawn
-        for detection in unmatched_high:
-            track = self._spawn(detection, stamp_s)
-            self._tracks.append(track)
-            updated.append(track)
-
-        return sorted((self._report(track, stamp_s) for track in updated), key=lambda t: t.local_id)
+    @property
+    def last_stamp_s(self) -> float | None:
+        """The latest frame's stamp [s]; None before the first (or after :meth:`restart`)."""
+        return self._last_stamp_s
 
     def tracks(self) -> list[ImageTrack]:
         """All live tracks as of the latest frame, coasting ones included, by ``local_id``.
@@ -417,7 +533,7 @@ class ImageTracker:
         track.hits += 1
         track.vote(detection.class_name)
 
-    def _report(self, track: _Track, stamp_s: float) -> ImageTrack:
+    def _report(self, track: _Track, stamp_s: float, followed: bool = False) -> ImageTrack:
         box = track.box_xyxy_px()
         return ImageTrack(
             local_id=track.local_id,
@@ -428,5 +544,7 @@ class ImageTracker:
             hits=track.hits,
             age_s=stamp_s - track.born_s,
             time_since_update_s=stamp_s - track.updated_s,
-            confirmed=track.hits >= self.settings.min_hits,
+            confirmed=track.confirmed,
+            followed=followed,
+            misses=track.misses,
         )

@@ -267,34 +267,106 @@ def fit_box_to_ground(
         Estimated centre in the site frame [m]; NaN, NaN if the box's bottom is at or above the
         horizon.
     """
-    box = np.asarray(box_xyxy_px, dtype=np.float64)
-    start = np.array(box_to_ground(camera, box, heading_rad, shape.length_m, shape.width_m))
-    if not np.all(np.isfinite(start)):
-        return math.nan, math.nan
+    box = np.asarray(box_xyxy_px, dtype=np.float64).reshape(1, 4)
+    x_m, y_m = fit_boxes_to_ground(camera, box, [heading_rad], [shape])[0]
+    return float(x_m), float(y_m)
+
+
+def fit_boxes_to_ground(
+    camera: PinholeCamera,
+    boxes_xyxy_px: npt.ArrayLike,
+    headings_rad: npt.ArrayLike,
+    shapes: list[VehicleShape],
+) -> F64:
+    """:func:`fit_box_to_ground` for a frame's boxes at once (the Gauss-Newton steps of all
+    of them in one projection each), shape (K, 2) [m]; rows of NaN for boxes at or above the
+    horizon.
+
+    Parameters
+    ----------
+    camera
+        The camera that took the image.
+    boxes_xyxy_px
+        Boxes ``(x1, y1, x2, y2)`` [px], shape (K, 4).
+    headings_rad
+        Each vehicle's heading in the site frame [rad], shape (K,).
+    shapes
+        Each vehicle's shape, K of them.
+    """
+    boxes = np.asarray(boxes_xyxy_px, dtype=np.float64).reshape(-1, 4)
+    headings = np.asarray(headings_rad, dtype=np.float64).reshape(-1)
+    if not (len(boxes) == len(headings) == len(shapes)):
+        raise ValueError(f"{len(boxes)} boxes, {len(headings)} headings, {len(shapes)} shapes")
+    starts = np.array(
+        [
+            box_to_ground(camera, box, heading, shape.length_m, shape.width_m)
+            for box, heading, shape in zip(boxes, headings, shapes, strict=True)
+        ],
+        dtype=np.float64,
+    ).reshape(-1, 2)
+    fitted = starts.copy()
+    todo = np.flatnonzero(np.all(np.isfinite(starts), axis=1))
+    if len(todo) == 0:
+        return fitted
+    # Each vehicle's outline on its heading, centred on the origin: (K, 12, 3) [m].
+    local = np.stack([shapes[i].outline_points() for i in todo])
+    cos_h, sin_h = np.cos(headings[todo])[:, None], np.sin(headings[todo])[:, None]
+    offsets = np.stack(
+        [
+            local[..., 0] * cos_h - local[..., 1] * sin_h,
+            local[..., 0] * sin_h + local[..., 1] * cos_h,
+            local[..., 2],
+        ],
+        axis=2,
+    )
     edges = [0, 2, 3]  # left, right, bottom
     inset = np.array([PIXEL_EDGE_INSET_PX, -PIXEL_EDGE_INSET_PX, -PIXEL_EDGE_INSET_PX])
-    target = box[edges] + inset
+    target = boxes[todo][:, edges] + inset
+    start = starts[todo]
     centre = start.copy()
-    residual = np.full(3, np.inf)
+    residual = np.full((len(todo), 3), np.inf)
+    failed = np.zeros(len(todo), dtype=bool)
+    active = np.ones(len(todo), dtype=bool)
+    probe_steps = np.array([[0.0, 0.0], [_FIT_STEP_M, 0.0], [0.0, _FIT_STEP_M]])
     for _ in range(FIT_MAX_ITERATIONS):
-        probes = centre + np.array([[0.0, 0.0], [_FIT_STEP_M, 0.0], [0.0, _FIT_STEP_M]])
-        boxes = vehicle_image_boxes(camera, probes, heading_rad, shape)[:, edges]
-        if not np.all(np.isfinite(boxes)):
-            return float(start[0]), float(start[1])
-        residual = boxes[0] - target
-        jacobian = (boxes[1:] - boxes[0]).T / _FIT_STEP_M  # (3, 2) [px/m]
-        step, *_ = np.linalg.lstsq(jacobian, -residual, rcond=None)
-        centre = centre + step
-        if float(np.hypot(*step)) < _FIT_TOLERANCE_M:
-            residual = vehicle_image_boxes(camera, centre, heading_rad, shape)[0, edges] - target
+        now = np.flatnonzero(active)
+        if len(now) == 0:
             break
-    if (
-        not np.all(np.isfinite(residual))
-        or float(np.abs(residual).max()) > _FIT_MAX_RESIDUAL_PX
-        or float(np.hypot(*(centre - start))) > _FIT_MAX_MOVE_M
-    ):
-        return float(start[0]), float(start[1])
-    return float(centre[0]), float(centre[1])
+        probes = centre[now][:, None, :] + probe_steps[None, :, :]  # (k, 3, 2)
+        image = _outline_boxes(camera, probes, offsets[now])[..., edges]  # (k, 3, 3)
+        lost = ~np.all(np.isfinite(image), axis=(1, 2))
+        failed[now[lost]] = True
+        active[now[lost]] = False
+        now, image = now[~lost], image[~lost]
+        residual[now] = image[:, 0] - target[now]
+        jacobian = np.transpose(image[:, 1:] - image[:, :1], (0, 2, 1)) / _FIT_STEP_M  # (k,3,2)
+        step = -(np.linalg.pinv(jacobian) @ residual[now][:, :, None])[:, :, 0]
+        centre[now] += step
+        done = np.hypot(step[:, 0], step[:, 1]) < _FIT_TOLERANCE_M
+        if done.any():
+            final = now[done]
+            image = _outline_boxes(camera, centre[final][:, None, :], offsets[final])
+            residual[final] = image[:, 0][:, edges] - target[final]
+            active[final] = False
+    trusted = (
+        ~failed
+        & np.all(np.isfinite(residual), axis=1)
+        & (np.abs(residual).max(axis=1) <= _FIT_MAX_RESIDUAL_PX)
+        & (np.hypot(*(centre - start).T) <= _FIT_MAX_MOVE_M)
+    )
+    fitted[todo] = np.where(trusted[:, None], centre, start)
+    return fitted
+
+
+def _outline_boxes(camera: PinholeCamera, centres_m: F64, offsets_m: F64) -> F64:
+    """Image boxes [px] of vehicles (outline ``offsets_m``, shape (K, 12, 3)) standing with
+    their centres at ``centres_m`` (shape (K, P, 2): P places each), shape (K, P, 4)."""
+    count, places = centres_m.shape[:2]
+    ground = np.concatenate([centres_m, np.zeros((count, places, 1))], axis=2)
+    points = ground[:, :, None, :] + offsets_m[:, None, :, :]  # (K, P, 12, 3)
+    uv, _ = camera.project(points.reshape(-1, 3))
+    uv = uv.reshape(count, places, -1, 2)
+    return np.concatenate([uv.min(axis=2), uv.max(axis=2)], axis=2)
 
 
 def paper_box_to_ground(mount: SensorMount, box_xyxy_px: npt.ArrayLike) -> tuple[float, float]:

@@ -596,6 +596,9 @@ class YoloOnnxDetector:
         options = ort.SessionOptions()
         options.intra_op_num_threads = threads
         options.inter_op_num_threads = 1
+        # Threads waiting for work sleep instead of spinning: a spinning pool burns a core
+        # between frames that the rest of the edge box's stack needs.
+        options.add_session_config_entry("session.intra_op.allow_spinning", "0")
         options.log_severity_level = 3  # errors only: the reason is in our exception
         try:
             return ort.InferenceSession(
@@ -744,29 +747,35 @@ class YoloOnnxDetector:
             level /= 2.0
         return [*sizes, fit]
 
-    def detect(self, image_bgr: U8) -> list[ImageDetection]:
+    def detect(self, image_bgr: U8, tiles: bool = True) -> list[ImageDetection]:
         """Detect objects in one frame.
 
         Parameters
         ----------
         image_bgr
             Frame, shape (H, W, 3), uint8, BGR.
+        tiles
+            Run the far-field tiles too (False: the ROI, or the whole frame, alone).
 
         Returns
         -------
         detections
             By decreasing score, boxes in the frame's pixels.
         """
-        detections, _ = self.detect_with_timings(image_bgr)
+        detections, _ = self.detect_with_timings(image_bgr, tiles)
         return detections
 
-    def detect_with_timings(self, image_bgr: U8) -> tuple[list[ImageDetection], DetectionTimings]:
+    def detect_with_timings(
+        self, image_bgr: U8, tiles: bool = True
+    ) -> tuple[list[ImageDetection], DetectionTimings]:
         """:meth:`detect`, plus how long each step took.
 
         Parameters
         ----------
         image_bgr
             Frame, shape (H, W, 3), uint8, BGR.
+        tiles
+            Run the far-field tiles too.
 
         Returns
         -------
@@ -808,7 +817,7 @@ class YoloOnnxDetector:
                 self.region_input_size(ty1 - ty0, tx1 - tx0),
                 0.0,
             )
-            for tx0, ty0, tx1, ty1 in self.tiles_xyxy_px
+            for tx0, ty0, tx1, ty1 in (self.tiles_xyxy_px if tiles else ())
         ]
         preprocess_s = inference_s = postprocess_s = 0.0
         all_boxes, all_scores, all_classes = [], [], []
