@@ -60,8 +60,14 @@ def test_images_give_one_line_per_frame_with_boxes_and_world_positions(
         assert 0.0 < detection["range"] < 60.0
     # E reaches the ROI's right edge: cut by the view, so not ranged (as in the node).
     assert first[2]["cut"] and first[2]["x"] is None
-    # The tracker confirms nothing on its own but gives ids; the same boxes keep their ids.
+    # The tracker gives ids; the same boxes keep their ids. A 10 Hz camera: the detector runs
+    # on every frame, and a track is published (what the node would publish) at its third.
     assert [d["track_id"] for d in lines[2]["detections"]] == [d["track_id"] for d in first]
+    assert [[d["published"] for d in line["detections"]] for line in lines] == [
+        [False, False, False],
+        [False, False, False],
+        [True, True, True],
+    ]
 
 
 def test_a_bad_file_is_a_line_with_the_error_and_exit_code_1(

@@ -173,5 +173,39 @@ def test_the_summary_and_its_table_give_the_bins_lowest_first() -> None:
         "detections": 1,
         "precision": 1.0,
     }
-    rows = [line.split(" | ")[0] for line in markdown(summary, "t").splitlines()[6:]]
+    lines = markdown(summary, "t").splitlines()
+    rows = [line.split(" | ")[0] for line in lines[lines.index("|---|---|---|---|---|") + 1 :]]
     assert rows == ["| <20", "| 20-40", "| 40-80", "| 80-160", "| 160+"]
+
+
+def test_recall_is_split_between_vehicles_inside_the_frame_and_those_its_edge_cuts() -> None:
+    frame = FrameScore(
+        found=[
+            (np.array([0.0, 50.0, 40.0, 90.0]), np.array([1.0, 50.0, 40.0, 90.0])),  # left edge
+            (np.array([100.0, 50.0, 140.0, 90.0]), np.array([100.0, 50.0, 140.0, 90.0])),
+        ],
+        missed=[np.array([280.0, 200.0, 319.0, 240.0]), np.array([150.0, 60.0, 190.0, 100.0])],
+        size=(320, 240),
+    )
+    summary = summarise([frame])
+    assert summary["vehicles_inside_frame"] == 2 and summary["recall_inside_frame"] == 0.5
+    assert summary["vehicles_cut_by_edge"] == 2 and summary["recall_cut_by_edge"] == 0.5
+    assert "cut by the frame's edge: 2, recall 0.5" in markdown(summary, "t")
+
+
+def test_tracked_scores_what_the_node_publishes(tmp_path: Path, model: Path) -> None:
+    """``--tracked``: every frame through the node's steps at the clip's rate (10 fps: the
+    detector on each frame); a track is published from its third detection, so A, found on
+    each of five frames by the detector alone, is published on the last three."""
+    truth = tmp_path / "gt.txt"
+    truth.write_text("\n".join(_mot(A, frame) for frame in range(1, 6)) + "\n", encoding="utf-8")
+    out = tmp_path / "out"
+    video = _video(tmp_path / "clip.avi", 5)
+    argv = ["--model", str(model), "--video", str(video), "--truth", str(truth), "--tracked"]
+    assert main([*argv, "--out", str(out), "--pictures", "0"]) == 0
+    summary = json.loads((out / "video-eval.json").read_text(encoding="utf-8"))
+    assert (summary["found"], summary["missed"]) == (5, 0)
+    published = summary["published"]
+    assert published["tracked"] == {"fps": 10.0, "detector_runs": 5}
+    assert (published["found"], published["missed"]) == (3, 2)
+    assert "What the node publishes" in (out / "video-eval.md").read_text(encoding="utf-8")

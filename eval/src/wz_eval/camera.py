@@ -1,7 +1,8 @@
 """``wz eval-camera``: camera ranging against truth by distance, Eq. 1-2 vs calibrated vs radar.
 
 Runs the simulated work zone (SUMO, the camera and the radar of the site, one weather) and the
-camera-radar detector's own per-frame code (:meth:`CameraDetector.process_image`: YOLO, image
+camera-radar detector's own per-frame code (:meth:`CameraDetector.process_frame`: YOLO where
+due, optical flow between, image
 tracker, ranging, radar fusion) in one process, on simulation time, with no bus. Each published
 image track is matched to the vehicle it shows by image box (IoU >= 0.5 with the vehicle's
 visible truth box), and three position estimates of that vehicle at the frame's time are
@@ -33,7 +34,6 @@ from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from wz_camera_detector.node import CameraDetector
@@ -184,11 +184,8 @@ def evaluate(site: Site, options: CameraEvalOptions) -> dict[str, object]:
                 if not isinstance(output, CameraOutput) or output.meta.stamp < start_detecting_s:
                     continue
                 stamp_s = output.meta.stamp
-                image = cv2.imdecode(np.frombuffer(output.jpeg, np.uint8), cv2.IMREAD_COLOR)
                 started = time.perf_counter()
-                result = detector.process_image(
-                    np.asarray(image, np.uint8), stamp_s, output.meta.frame_index
-                )
+                result = detector.process_frame(output.jpeg, stamp_s, output.meta.frame_index)
                 detect_s.append(time.perf_counter() - started)
                 if result is None or stamp_s < options.warmup_s:
                     continue

@@ -25,6 +25,14 @@ false. Recall by true box height, precision by detected box height (bins of
 :data:`HEIGHT_BINS_PX`: ``<20``, ``20-40``, ``40-80``, ``80-160``, ``160+`` px, lowest first), and
 pictures of the frames with the most misses and false boxes (truth green, found blue, missed
 orange, false red).
+Recall is also split between vehicles wholly inside the frame and those its edge cuts (a true
+box within :data:`EDGE_MARGIN_PX` of it: entering or leaving).
+
+``--tracked`` scores, beside the detector on every frame, what the node publishes
+(:class:`~wz_camera_detector.following.DetectAndFollow`: the detector where it is due at the
+clip's frame rate, optical flow between, the image tracker's published tracks, clipped to the
+frame): every frame of the clip goes through it in order, and the frames with truth are scored
+(under ``published`` in the JSON).
 Writes ``video-eval.json`` and ``video-eval.md`` in ``--out``.
 """
 
@@ -46,7 +54,8 @@ import cv2
 import numpy as np
 
 from wz_camera_detector.cli import IMAGE_SUFFIXES
-from wz_camera_detector.node import CLASS_SHAPES, ImageBackend, make_backend
+from wz_camera_detector.following import DetectAndFollow, ImageBackend
+from wz_camera_detector.node import CLASS_SHAPES, make_backend
 from wz_camera_detector.settings import CameraDetectorSettings
 from wz_camera_detector.yolo import ModelLoadError, box_iou
 from wz_shared.arrays import F64, U8
@@ -73,6 +82,10 @@ IGNORED_SHARE = 0.5
 #: A detection lying this much inside a motion blob it does not match by IoU is one of the
 #: touching vehicles the blob holds (a mask cannot part them).
 IN_BLOB_SHARE = 0.7
+#: A true box this close to the frame's edge [px] is a vehicle cut by it (entering or leaving).
+EDGE_MARGIN_PX = 2.0
+#: The frame rate of an image folder when ``--fps`` does not say [Hz].
+DEFAULT_FOLDER_FPS = 30.0
 
 
 class TruthError(ValueError):
@@ -237,6 +250,8 @@ class FrameScore:
     false: list[F64] = field(default_factory=list)
     #: Detections of one vehicle of a blob holding several (motion-mask truth only).
     in_blob: list[F64] = field(default_factory=list)
+    #: The frame's (width, height) [px]: which true boxes the frame's edge cuts.
+    size: tuple[int, int] = (0, 0)
 
 
 def score_frame(
@@ -272,6 +287,19 @@ def score_frame(
         outcome.false.append(box)
     outcome.missed = [truth.boxes[i] for i in np.flatnonzero(counted & ~taken)]
     return outcome
+
+
+def cut_by_frame(box: F64, size: tuple[int, int]) -> bool:
+    """Whether a true box touches the frame's edge (within :data:`EDGE_MARGIN_PX`): a vehicle
+    entering or leaving, only part of it in view."""
+    width, height = size
+    margin = EDGE_MARGIN_PX
+    return bool(
+        box[0] <= margin
+        or box[1] <= margin
+        or box[2] >= width - margin
+        or box[3] >= height - margin
+    )
 
 
 def _share_inside(box: F64, boxes: F64) -> F64:
@@ -320,6 +348,8 @@ def summarise(scores: list[FrameScore]) -> dict[str, Any]:
             count(box, "fp")
     tp = sum(len(f.found) for f in scores)
     fn = sum(len(f.missed) for f in scores)
+    cut_tp = sum(cut_by_frame(truth, f.size) for f in scores for truth, _ in f.found)
+    cut_fn = sum(cut_by_frame(box, f.size) for f in scores for box in f.missed)
     fp = sum(len(f.false) for f in scores)
     in_blob = sum(len(f.in_blob) for f in scores)
     bins = {
@@ -340,6 +370,10 @@ def summarise(scores: list[FrameScore]) -> dict[str, Any]:
         "in_blob": in_blob,
         "recall": _ratio(tp, tp + fn),
         "precision": _ratio(tp + in_blob, tp + in_blob + fp),
+        "vehicles_inside_frame": tp + fn - cut_tp - cut_fn,
+        "recall_inside_frame": _ratio(tp - cut_tp, tp + fn - cut_tp - cut_fn),
+        "vehicles_cut_by_edge": cut_tp + cut_fn,
+        "recall_cut_by_edge": _ratio(cut_tp, cut_tp + cut_fn),
         "by_height_px": bins,
     }
 
@@ -380,20 +414,37 @@ def evaluate(
     min_height_px: float = 20.0,
     pictures: int = 0,
     out: Path | None = None,
+    follow: DetectAndFollow | None = None,
+    fps: float | None = None,
 ) -> dict[str, Any]:
-    """Score ``backend`` on every frame of ``video`` that has truth (module docstring)."""
+    """Score ``backend`` on every frame of ``video`` that has truth (module docstring).
+
+    With ``follow``, what the node publishes is scored instead: every frame goes through
+    ``follow`` in order (the detector where it is due at ``fps``, optical flow between, the
+    image tracker), and the published tracks' boxes, clipped to the frame, are matched on the
+    frames that have truth (by the track's latest detection score).
+    """
     truth = read_truth(truth_path)
     scores: list[FrameScore] = []
     worst: list[tuple[int, int, U8]] = []
+    rate = fps if fps is not None else _frame_rate(video)
+    first: int | None = None
     for number, image in read_frames(video):
         if isinstance(truth, YoloTruth):
             frame_truth = truth.for_image(number, image.shape[1], image.shape[0])
         else:
             frame_truth = truth.get(number)
+        if follow is not None:
+            first = number if first is None else first
+            boxes, box_scores = _followed(follow, image, (number - first) / rate)
+        elif frame_truth is None:
+            continue
+        else:
+            boxes, box_scores = _detect(backend, image)
         if frame_truth is None:
             continue
-        boxes, box_scores = _detect(backend, image)
         outcome = score_frame(boxes, box_scores, frame_truth, iou_min, min_height_px)
+        outcome.size = (image.shape[1], image.shape[0])
         scores.append(outcome)
         errors = len(outcome.missed) + len(outcome.false)
         if pictures and errors:
@@ -402,11 +453,35 @@ def evaluate(
     if not scores:
         raise TruthError(f"no frame of {video} has truth in {truth_path}")
     summary = summarise(scores)
+    if follow is not None:
+        summary["tracked"] = {"fps": rate, "detector_runs": follow.detections_run}
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
+        prefix = "tracked-" if follow is not None else ""
         for errors, number, picture in worst:
-            cv2.imwrite(str(out / f"frame-{number:06d}-{errors}-errors.jpg"), picture)
+            cv2.imwrite(str(out / f"{prefix}frame-{number:06d}-{errors}-errors.jpg"), picture)
     return summary
+
+
+def _frame_rate(video: Path) -> float:
+    """A video file's frame rate (its container's), or :data:`DEFAULT_FOLDER_FPS`."""
+    if video.is_dir():
+        return DEFAULT_FOLDER_FPS
+    capture = cv2.VideoCapture(str(video))
+    try:
+        rate = float(capture.get(cv2.CAP_PROP_FPS))
+    finally:
+        capture.release()
+    return rate if rate > 0.0 else DEFAULT_FOLDER_FPS
+
+
+def _followed(follow: DetectAndFollow, image: U8, stamp_s: float) -> tuple[F64, F64]:
+    """The boxes the node would publish for this frame, clipped to it, and their scores."""
+    step = follow.step(image, stamp_s, follow.due(stamp_s))
+    height, width = image.shape[:2]
+    boxes = np.array([t.box_xyxy_px for t in step.published], dtype=np.float64).reshape(-1, 4)
+    boxes = np.clip(boxes, 0.0, [width, height, width, height])
+    return boxes, np.array([t.score for t in step.published], dtype=np.float64)
 
 
 def markdown(summary: dict[str, Any], title: str) -> str:
@@ -417,6 +492,10 @@ def markdown(summary: dict[str, Any], title: str) -> str:
         f"{summary['recall']}, precision {summary['precision']} ({summary['found']} found, "
         f"{summary['missed']} missed, {summary['false']} false, {summary['in_blob']} more "
         "vehicles of merged motion blobs)",
+        "",
+        f"Vehicles wholly inside the frame: {summary['vehicles_inside_frame']}, recall "
+        f"{summary['recall_inside_frame']}; cut by the frame's edge: "
+        f"{summary['vehicles_cut_by_edge']}, recall {summary['recall_cut_by_edge']}.",
         "",
         "| box height [px] | vehicles | recall | detections | precision |",
         "|---|---|---|---|---|",
@@ -439,14 +518,33 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--iou", type=float, default=0.5, help="IoU of a match (default 0.5)")
     parser.add_argument("--min-height", type=float, default=20.0, help="[px] (default 20)")
     parser.add_argument("--pictures", type=int, default=12, help="frames drawn (default 12)")
+    parser.add_argument(
+        "--tracked",
+        action="store_true",
+        help="also score what the node publishes: the detector where it is due, optical flow "
+        "between, the image tracker's published tracks (every frame, in order)",
+    )
+    parser.add_argument(
+        "--fps",
+        type=float,
+        default=None,
+        help=f"the clip's frame rate for --tracked [Hz] (default: the video's own; an image "
+        f"folder {DEFAULT_FOLDER_FPS:g})",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     """``wz eval-camera --video ... --truth ...``: 0, or 2 with the reason on stderr."""
     configure_logging(service="eval-camera", site="-", level="INFO")
-    if args.truth is None or not 0.0 < args.iou <= 1.0 or args.min_height < 0:
+    if (
+        args.truth is None
+        or not 0.0 < args.iou <= 1.0
+        or args.min_height < 0
+        or (args.fps is not None and not 0.0 < args.fps <= 1000.0)
+    ):
         sys.stderr.write(
-            "wz eval-camera: --video needs --truth; --iou in (0, 1]; --min-height >= 0\n"
+            "wz eval-camera: --video needs --truth; --iou in (0, 1]; --min-height >= 0; "
+            "--fps in (0, 1000]\n"
         )
         return 2
     overrides: dict[str, Any] = {}
@@ -457,18 +555,38 @@ def run(args: argparse.Namespace) -> int:
     if args.conf is not None:
         overrides["conf_threshold"] = args.conf
     try:
-        backend = make_backend(CameraDetectorSettings(**overrides))
+        settings = CameraDetectorSettings(**overrides)
+        backend = make_backend(settings)
         out = Path(args.out)
         summary = evaluate(
             args.video, args.truth, backend, args.iou, args.min_height, args.pictures, out
         )
+        if args.tracked:
+            follow = DetectAndFollow(make_backend(settings), settings, frozenset(CLASS_SHAPES))
+            summary["published"] = evaluate(
+                args.video,
+                args.truth,
+                follow.backend,
+                args.iou,
+                args.min_height,
+                args.pictures,
+                out,
+                follow=follow,
+                fps=args.fps,
+            )
     except (TruthError, ModelLoadError, ValueError, OSError) as exc:
         sys.stderr.write(f"wz eval-camera: {exc}\n")
         return 2
     summary["video"] = str(args.video)
     summary["truth"] = str(args.truth)
     (out / "video-eval.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
-    text = markdown(summary, f"Camera detector on {args.video.name}")
+    text = markdown(summary, f"Camera detector on {args.video.name}, every frame")
+    if "published" in summary:
+        text += "\n" + markdown(
+            summary["published"],
+            f"What the node publishes on {args.video.name} (detector where due at "
+            f"{summary['published']['tracked']['fps']:g} fps, flow between, tracked)",
+        )
     (out / "video-eval.md").write_text(text, encoding="utf-8")
     sys.stdout.write(text)
     return 0

@@ -3,7 +3,7 @@
 :func:`run_pipeline` steps SUMO (:class:`TrafficWorld`), fires the site's sensors at their own
 rates (:class:`SensorRig`: LiDAR 20 Hz, camera 10 Hz, radar 15 Hz on the default site) and runs
 the detectors' own per-frame code on every frame: :class:`LidarDetector.handle` (fast path,
-learning its background during the warm-up) and :class:`CameraDetector.process_image` (YOLO,
+learning its background during the warm-up) and :meth:`CameraDetector.process_frame` (YOLO where due, flow between,
 image tracking, ranging, radar fusion). It records, in time order:
 
 - the truth of every step (20 Hz);
@@ -29,9 +29,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
-
-import cv2
-import numpy as np
 
 from wz_camera_detector.association import (
     AssociationSettings,
@@ -268,9 +265,8 @@ def run_pipeline(
                 elif isinstance(output, CameraOutput):
                     if output.meta.stamp < detect_from_s:
                         continue
-                    image = cv2.imdecode(np.frombuffer(output.jpeg, np.uint8), cv2.IMREAD_COLOR)
-                    result = camera_detector.process_image(
-                        np.asarray(image, np.uint8), output.meta.stamp, output.meta.frame_index
+                    result = camera_detector.process_frame(
+                        output.jpeg, output.meta.stamp, output.meta.frame_index
                     )
                     if result is None or result.stamp_s < options.warmup_s:
                         continue

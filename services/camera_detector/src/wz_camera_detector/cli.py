@@ -20,6 +20,7 @@ its frames in order. Each frame gives one line on stdout::
 
     {"file": "clip.mp4", "frame": 12, "stamp": 1.2, "width": 1200, "height": 1200,
      "detections": [{"box": [x1, y1, x2, y2], "class": "car", "score": 0.91, "track_id": 3,
+                     "published": true,
                      "x": 3.94, "y": 902.31, "station": 902.3, "offset": -1.8, "range": 78.1,
                      "paper_x": 4.01, "paper_y": 904.7}, ...],
      "timings_ms": {"detect": 21.3}}
@@ -33,7 +34,15 @@ Eq. 1-2 ground point of the box's bottom centre;
 Positions are null for a box reaching above the horizon, and for a box cut by the edge of the
 detector's view (``"cut": true``: its bottom is not its ground contact), as in the node. ``stamp`` is the video's frame time
 [s] (``CAP_PROP_POS_MSEC``), for images the position in the sequence divided by the camera's
-rate (``--rate`` without a site). ``track_id`` is the image tracker's id (``--no-track``: null, each frame on its own).
+rate (``--rate`` without a site). ``track_id`` is the image tracker's id. With tracking (the
+default) each line is what the node publishes: the detector runs where it is due by the
+frames' stamps (``WZ_CAMERA_DETECTION_PERIOD_S``: every frame of a 10 fps clip, every fourth of
+a 30 fps one), optical flow follows the boxes between, and a track appears once confirmed
+(:mod:`wz_camera_detector.following`); each line holds the tracks the frame updated, tentative
+ones too, ``published`` true for those the node would publish (confirmed, and found by the
+detector's latest run or cut by the frame's edge); a box is cut to the frame. ``--no-track``:
+the detector on every frame on its own, ``track_id`` and ``published`` null. ``timings_ms.detect`` is that frame's
+whole image step (the detector's, or flow's).
 
 A file that cannot be read gives ``{"file": ..., "error": "..."}`` (a video that breaks off
 gives that after the frames it had); the other files are still processed and the exit code is
@@ -57,15 +66,9 @@ import cv2
 import numpy as np
 from pydantic import ValidationError
 
-from wz_camera_detector.node import (
-    CLASS_SHAPES,
-    ImageBackend,
-    cut_by_view,
-    make_backend,
-    road_heading_at,
-)
+from wz_camera_detector.following import DetectAndFollow, ImageBackend, cut_by_view
+from wz_camera_detector.node import CLASS_SHAPES, make_backend, road_heading_at
 from wz_camera_detector.settings import CameraDetectorSettings, camera_mount
-from wz_camera_detector.tracker import ImageTracker
 from wz_camera_detector.world import box_to_ground, fit_box_to_ground, paper_box_to_ground
 from wz_camera_detector.yolo import ImageDetection, ModelLoadError
 from wz_shared.arrays import U8
@@ -207,7 +210,8 @@ class FrameProcessor:
         self.site = site
         self.mount = mount
         self.backend = backend
-        self.tracker = ImageTracker(settings.tracker) if track else None
+        #: With tracking: the node's steps (the detector where due, flow between, tracks).
+        self.follow = DetectAndFollow(backend, settings, frozenset(CLASS_SHAPES)) if track else None
         self._cameras: dict[tuple[int, int], PinholeCamera] = {}
 
     def camera(self, width_px: int, height_px: int) -> PinholeCamera | None:
@@ -229,27 +233,34 @@ class FrameProcessor:
 
     def process(self, image: U8, stamp_s: float) -> tuple[list[dict[str, Any]], float]:
         """Detections of one frame as JSON-ready dicts, and the detector's time [s]."""
-        started = time.perf_counter()
-        found = self.backend.detect(image)
-        detect_s = time.perf_counter() - started
-        found = [d for d in found if d.class_name in CLASS_SHAPES]
         height, width = image.shape[:2]
         camera = self.camera(width, height)
-        rows: list[tuple[ImageDetection, int | None]]
-        if self.tracker is not None:
-            tracks = self.tracker.update(found, stamp_s)
+        rows: list[tuple[ImageDetection, int | None, bool | None]]
+        started = time.perf_counter()
+        if self.follow is not None:
+            step = self.follow.step(image, stamp_s, self.follow.due(stamp_s))
+            detect_s = time.perf_counter() - started
+            published = {t.local_id for t in step.published}
             rows = [
-                (ImageDetection(t.box_xyxy_px, t.score, t.class_name), t.local_id) for t in tracks
+                (
+                    ImageDetection(_clipped(t.box_xyxy_px, width, height), t.score, t.class_name),
+                    t.local_id,
+                    t.local_id in published,
+                )
+                for t in step.updated
             ]
         else:
-            rows = [(d, None) for d in found]
-        return [self._record(camera, d, track_id) for d, track_id in rows], detect_s
+            found = self.backend.detect(image)
+            detect_s = time.perf_counter() - started
+            rows = [(d, None, None) for d in found if d.class_name in CLASS_SHAPES]
+        return [self._record(camera, *row) for row in rows], detect_s
 
     def _record(
         self,
         camera: PinholeCamera | None,
         detection: ImageDetection,
         track_id: int | None,
+        published: bool | None,
     ) -> dict[str, Any]:
         _, shape = CLASS_SHAPES[detection.class_name]
         record: dict[str, Any] = {
@@ -257,6 +268,7 @@ class FrameProcessor:
             "class": detection.class_name,
             "score": round(detection.score, 4),
             "track_id": track_id,
+            "published": published,
         }
         keys = ("x", "y", "station", "offset", "range", "paper_x", "paper_y")
         if camera is None or self.site is None:
@@ -285,6 +297,19 @@ class FrameProcessor:
             k: (round(v, 3) if math.isfinite(v) else None)
             for k, v in zip(keys, values, strict=True)
         }
+
+
+def _clipped(
+    box_xyxy_px: tuple[float, float, float, float], width_px: int, height_px: int
+) -> tuple[float, float, float, float]:
+    """A track's box cut to the frame (a vehicle leaving it is followed past the edge)."""
+    x1, y1, x2, y2 = box_xyxy_px
+    return (
+        min(max(x1, 0.0), width_px),
+        min(max(y1, 0.0), height_px),
+        min(max(x2, 0.0), width_px),
+        min(max(y2, 0.0), height_px),
+    )
 
 
 def run(files: Sequence[Path], processor: FrameProcessor, rate_hz: float) -> int:

@@ -65,7 +65,6 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol
 
 import cv2
 import numpy as np
@@ -80,7 +79,11 @@ from wz_camera_detector.association import (
 )
 from wz_camera_detector.background import BACKEND, BackgroundSubtractionDetector
 from wz_camera_detector.calibration import CameraSelfCalibration
-from wz_camera_detector.flow import BoxFlow
+from wz_camera_detector.following import (
+    DetectAndFollow,
+    ImageBackend,
+    cut_by_view,
+)
 from wz_camera_detector.radar_calibration import RadarSelfCalibration
 from wz_camera_detector.regions import detector_regions
 from wz_camera_detector.settings import (
@@ -89,7 +92,7 @@ from wz_camera_detector.settings import (
     radar_mount,
     shipped_model,
 )
-from wz_camera_detector.tracker import ImageTrack, ImageTracker
+from wz_camera_detector.tracker import ImageTrack
 from wz_camera_detector.world import VehicleShape, box_to_ground, fit_boxes_to_ground
 from wz_camera_detector.yolo import (
     Box,
@@ -129,9 +132,6 @@ CALIBRATION_PERIOD_S = 5.0
 #: with a LiDAR object now and then).
 CALIBRATION_MIN_SCORE = 0.5
 
-#: A box this close to the edge of the detector's view is cut by it: not ranged [px].
-TRUNCATION_MARGIN_PX = 3.0
-
 #: (yaw, pitch) [deg] the detector's regions allow for while the camera's pose is not known:
 #: what a technician's compass and level leave at most (issue 39), or a knocked camera.
 SETUP_MARGIN_DEG = (3.0, 1.5)
@@ -168,10 +168,6 @@ class FrameResult:
     #: The frame's capture time on the LiDAR's clock: its stamp less the camera's learned
     #: clock offset [s].
     stamp_s: float = 0.0
-
-
-class ImageBackend(Protocol):
-    def detect(self, image_bgr: U8) -> list[ImageDetection]: ...
 
 
 def make_backend(
@@ -254,28 +250,6 @@ def _geometry_regions(
     return regions_for
 
 
-def cut_by_view(
-    box_xyxy_px: tuple[float, float, float, float],
-    backend: ImageBackend,
-    width_px: int,
-    height_px: int,
-) -> bool:
-    """Whether a box touches the left, right or bottom edge of every region the detector
-    looks at (its ROI, else the frame, and its far-field tiles), within
-    :data:`TRUNCATION_MARGIN_PX`: a vehicle cut by the view. A far car at the ROI's edge that
-    a tile holds whole was seen whole."""
-    roi = getattr(backend, "roi_xyxy_px", None) or (0, 0, width_px, height_px)
-    regions = [roi, *getattr(backend, "tiles_xyxy_px", ())]
-    x1, _, x2, y2 = box_xyxy_px
-    margin = TRUNCATION_MARGIN_PX
-    return not any(
-        x1 > left + margin
-        and x2 < min(right, width_px) - margin
-        and y2 < min(bottom, height_px) - margin
-        for left, _, right, bottom in regions
-    )
-
-
 def road_heading_at(site: Site, x_m: float, y_m: float) -> float:
     """The site road's heading at the point's station [rad], CCW from east."""
     return site.road_frame.heading_at_point(x_m, y_m)
@@ -346,8 +320,11 @@ class CameraDetector:
         #: Whether the backend follows the frames' source (the shipped models, by default).
         self._follows_source = backend is None and settings.model_path is None
         self._rendered = rendered
-        self.backend = (
-            backend if backend is not None else make_backend(settings, site, camera, rendered)
+        #: Detect where due, follow between, track (:mod:`wz_camera_detector.following`).
+        self.images = DetectAndFollow(
+            backend if backend is not None else make_backend(settings, site, camera, rendered),
+            settings,
+            frozenset(CLASS_SHAPES),
         )
         #: The shipped models loaded so far, by ``rendered`` (each is loaded once).
         self._shipped: dict[bool, ImageBackend] = {rendered: self.backend}
@@ -359,15 +336,6 @@ class CameraDetector:
             camera.pose.pitch_deg,
             SETUP_MARGIN_DEG,
         )
-        self.tracker = ImageTracker(settings.tracker)
-        self.flow = BoxFlow(settings.flow)
-        #: Stamp of the latest frame the detector ran on [s]; None: none yet in this run.
-        self._detected_s: float | None = None
-        #: Detector runs so far (the tiles run at every ``tiles_every``-th).
-        self._detections_run = 0
-        #: The far-field tiles the detector skipped in this frame (none on a frame it did
-        #: not run on: no tentative track is deleted then anyway).
-        self._skipped_tiles: tuple[tuple[int, int, int, int], ...] = ()
         self._cameras: dict[tuple[int, int], PinholeCamera] = {}
         self._radar_heading = (
             road_heading_at(site, radar.pose.x_m, radar.pose.y_m) if radar is not None else None
@@ -395,6 +363,16 @@ class CameraDetector:
         self._run = RunWatch()
         #: Runs seen: 1, then one more each time the frames' stamps start again.
         self.runs = 1
+
+    @property
+    def backend(self) -> ImageBackend:
+        """The image detector in use."""
+        return self.images.backend
+
+    @property
+    def detections_run(self) -> int:
+        """How many frames the detector has run on (the others were followed by flow)."""
+        return self.images.detections_run
 
     @property
     def state(self) -> ServiceState:
@@ -474,7 +452,7 @@ class CameraDetector:
                 f"{self.site.site_id}/{self.camera_mount.sensor_id}",
             )
             return None
-        detect = self._detection_due(meta.stamp)
+        detect = self.images.due(meta.stamp)
         image = _decode_jpeg(jpeg, gray=not detect)
         if image is None:
             self.report("bad_image", f"frame {meta.frame_index}: the JPEG does not decode")
@@ -539,12 +517,10 @@ class CameraDetector:
             self._shipped[rendered] = make_backend(
                 self.settings, self.site, self.camera_mount, rendered, self._regions_margin_deg()
             )
-        self.backend = self._shipped[rendered]
+        self.images.backend = self._shipped[rendered]
         self._regions_drawn = None  # drawn again at its next frame, for the pose of then
         self._rendered = rendered
-        self.tracker.restart()
-        self.flow.restart()
-        self._detected_s = None
+        self.images.restart()
 
     def _start_new_run(self, stamp_s: float) -> None:
         log.warning(
@@ -553,30 +529,25 @@ class CameraDetector:
             self.last_stamp_s,
             stamp_s,
         )
-        self.tracker.restart()
-        self.flow.restart()
-        self._detected_s = None
+        self.images.restart()
         self._scan = None
         self.runs += 1
 
-    @property
-    def detections_run(self) -> int:
-        """How many frames the detector has run on (the others were followed by flow)."""
-        return self._detections_run
-
-    def _detection_due(self, stamp_s: float) -> bool:
-        """Whether the detector runs on the frame of ``stamp_s``: always for the background
-        backend (it learns from every frame) or a period of 0; else when
-        ``detection_period_s`` less half the frames' interval has passed since it last ran
-        (or it has not run in this run)."""
-        period = self.settings.detection_period_s
-        last = self._detected_s
-        if period <= 0.0 or isinstance(self.backend, BackgroundSubtractionDetector):
-            return True
-        if last is None or stamp_s <= last or not self._frames_taken:
-            return True
-        interval = max(0.0, stamp_s - self.last_stamp_s)
-        return stamp_s - last >= period - 0.5 * interval
+    def process_frame(
+        self, jpeg: bytes | memoryview, stamp_s: float, frame_index: int
+    ) -> FrameResult | None:
+        """What :meth:`handle` does with a frame whose metadata holds (in stamp order): the
+        JPEG decoded in colour where the detector is due and grey elsewhere, then
+        :meth:`process_image`. For evaluations that run the node's per-frame work in process.
+        """
+        detect = self.images.due(stamp_s)
+        image = _decode_jpeg(jpeg, gray=not detect)
+        if image is None:
+            self.report("bad_image", f"frame {frame_index}: the JPEG does not decode")
+            return None
+        self.last_stamp_s = stamp_s
+        self._frames_taken += 1
+        return self.process_image(image, stamp_s, frame_index, detect=detect)
 
     def process_image(
         self, image: U8, stamp_s: float, frame_index: int, detect: bool = True
@@ -589,27 +560,20 @@ class CameraDetector:
         Returns None during the background warm-up or when the backend fails (reported).
         """
         warming_up = self.state == ServiceState.STARTING  # this frame still only teaches
-        boxes: list[ImageDetection] | None = None
-        self._skipped_tiles = ()
-        if detect:
-            try:
-                boxes = self._detect(image)
-            except Exception as exc:  # a backend that fails on one frame must not stop the node
-                self.report("detector_error", repr(exc))
-                if "detector_error" not in self._logged:
-                    self._logged.add("detector_error")
-                    log.exception("the detector failed on frame %d; going on", frame_index)
-                return None
+        try:
             if warming_up:
+                self.images.detect(image)
                 return None
-            boxes = [box for box in boxes if box.class_name in CLASS_SHAPES]
-            self._detected_s = stamp_s
-        tracks = self.tracker.update(
-            boxes, stamp_s, self._follow(image, stamp_s), self._skipped_tiles
-        )
+            step = self.images.step(image, stamp_s, detect)
+        except Exception as exc:  # a backend that fails on one frame must not stop the node
+            self.report("detector_error", repr(exc))
+            if "detector_error" not in self._logged:
+                self._logged.add("detector_error")
+                log.exception("the detector failed on frame %d; going on", frame_index)
+            return None
+        boxes = step.detections
+        tracks = step.published if self.settings.confirmed_only else step.updated
         width, height = image.shape[1], image.shape[0]
-        if self.settings.confirmed_only:
-            tracks = [track for track in tracks if self.publishes(track, width, height)]
         if boxes is not None:
             self._calibrate(boxes, stamp_s, width, height)
         objects = self._camera_objects(tracks, width, height, frame_index)
@@ -617,60 +581,6 @@ class CameraDetector:
         return FrameResult(
             tracks, objects, self._within_range(self._fuse(objects, stamp_s)), stamp_s
         )
-
-    def publishes(self, track: ImageTrack, width_px: int, height_px: int) -> bool:
-        """Whether a track updated this frame is published: confirmed, and found by the
-        detector's latest run over it, or cut by the edge of the view (a vehicle leaving
-        it, which the detector loses while flow still follows what is left of it)."""
-        return track.confirmed and (
-            track.misses == 0 or cut_by_view(track.box_xyxy_px, self.backend, width_px, height_px)
-        )
-
-    def _detect(self, image: U8) -> list[ImageDetection]:
-        """The backend's boxes; YOLO's far-field tiles at every ``tiles_every``-th run."""
-        backend = self.backend
-        runs, self._detections_run = self._detections_run, self._detections_run + 1
-        self._skipped_tiles = ()
-        if isinstance(backend, YoloOnnxDetector):
-            tiles = runs % self.settings.tiles_every == 0
-            if not tiles:
-                self._skipped_tiles = backend.tiles_xyxy_px
-            return backend.detect(image, tiles=tiles)
-        return backend.detect(image)
-
-    def _follow(self, image: U8, stamp_s: float) -> dict[int, tuple[float, float, float, float]]:
-        """Where optical flow followed each live track's box of the previous frame to in this
-        one, by ``local_id`` (tracks it lost are left out). Flow looks at the detector's
-        region of interest only (the whole frame without one): the tracks are there."""
-        if not self.settings.flow.enabled:
-            return {}
-        gray: U8 = (
-            image
-            if image.ndim == 2
-            else np.asarray(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY), dtype=np.uint8)
-        )
-        height, width = gray.shape[:2]
-        roi = getattr(self.backend, "roi_xyxy_px", None) or (0, 0, width, height)
-        x0, y0 = max(0, int(roi[0])), max(0, int(roi[1]))
-        x1, y1 = min(width, int(roi[2])), min(height, int(roi[3]))
-        crop = gray[y0:y1, x0:x1]  # a view: OpenCV takes its row stride
-        previous = self.tracker.tracks()
-        last_s = self.tracker.last_stamp_s
-        dt = stamp_s - last_s if last_s is not None and stamp_s > last_s else 0.0
-        followed = self.flow.follow(
-            crop,
-            [track.box_xyxy_px for track in previous],
-            [
-                (track.velocity_px_per_s[0] * dt, track.velocity_px_per_s[1] * dt)
-                for track in previous
-            ],
-            origin_px=(x0, y0),
-        )
-        return {
-            track.local_id: (float(box[0]), float(box[1]), float(box[2]), float(box[3]))
-            for track, box in zip(previous, followed, strict=True)
-            if np.isfinite(box).all()
-        }
 
     def _calibrate(
         self, boxes: list[ImageDetection], stamp_s: float, width: int, height: int
