@@ -429,3 +429,54 @@ def test_after_flow_a_detection_takes_over() -> None:
         tracker.update(None, frame * FRAME_PERIOD_S, {previous.local_id: box(394.0, 300.0)})
     (track,) = tracker.update([detection(400.0, 300.0)], 15 * FRAME_PERIOD_S)
     assert centre(track)[0] > 394.0 + 0.75 * 6.0
+
+
+# -------------------------------------------------------- vehicles entering through the edge
+
+VIEW = (0.0, 0.0, 640.0, 480.0)
+
+
+def entering(width: float, score: float = 0.9) -> ImageDetection:
+    """A car coming in through the view's right edge: ``width`` px of it in view."""
+    return ImageDetection(
+        box_xyxy_px=(640.0 - width, 200.0, 640.0, 240.0), score=score, class_name="car"
+    )
+
+
+def test_a_vehicle_growing_out_of_the_edge_is_confirmed_at_its_second_detection() -> None:
+    tracker = ImageTracker(ImageTrackerSettings(min_hits=3))
+    tracker.update([entering(20.0)], 0.0, view_xyxy_px=VIEW)
+    (track,) = tracker.update([entering(32.0)], 0.1, view_xyxy_px=VIEW)
+    assert track.hits == 2 and track.confirmed
+    # The same two detections away from the edge: three are needed.
+    inside = ImageTracker(ImageTrackerSettings(min_hits=3))
+    inside.update([detection(300.0, 220.0, w=20.0)], 0.0, view_xyxy_px=VIEW)
+    (track,) = inside.update([detection(300.0, 220.0, w=32.0)], 0.1, view_xyxy_px=VIEW)
+    assert track.hits == 2 and not track.confirmed
+
+
+def test_an_entering_vehicle_flow_follows_out_of_the_edge_is_confirmed_before_a_second_detection() -> (
+    None
+):
+    tracker = ImageTracker(ImageTrackerSettings(min_frames_entering=2))
+    tracker.update([entering(20.0)], 0.0, view_xyxy_px=VIEW)
+    (first,) = tracker.update(
+        None, FRAME_PERIOD_S, {1: entering(26.0).box_xyxy_px}, view_xyxy_px=VIEW
+    )
+    assert not first.confirmed  # one frame of flow
+    (second,) = tracker.update(
+        None, 2 * FRAME_PERIOD_S, {1: entering(32.0).box_xyxy_px}, view_xyxy_px=VIEW
+    )
+    assert second.followed and second.confirmed
+
+
+def test_a_box_at_the_edge_that_does_not_grow_out_of_it_is_not_confirmed_early() -> None:
+    """A vehicle leaving (its box shrinking into the edge), or something that stays put at it."""
+    for widths in ((30.0, 24.0, 18.0), (30.0, 30.0, 30.0)):
+        tracker = ImageTracker(ImageTrackerSettings(min_hits=3))
+        tracker.update([entering(widths[0])], 0.0, view_xyxy_px=VIEW)
+        for frame, width in enumerate(widths[1:], start=1):
+            (track,) = tracker.update(
+                None, frame * FRAME_PERIOD_S, {1: entering(width).box_xyxy_px}, view_xyxy_px=VIEW
+            )
+        assert not track.confirmed  # (a second detection confirms it: flow followed it)

@@ -175,9 +175,11 @@ class DetectAndFollow:
             self._detected_s = stamp_s
             detections = [box for box in found if box.class_name in self.vehicle_classes]
         followed = self._follow(image, stamp_s)
-        updated = self.tracker.update(detections, stamp_s, followed, skipped_tiles)
-        self._previous_s = stamp_s
         height, width = image.shape[:2]
+        roi = getattr(self.backend, "roi_xyxy_px", None) or (0, 0, width, height)
+        view = (max(0, roi[0]), max(0, roi[1]), min(width, roi[2]), min(height, roi[3]))
+        updated = self.tracker.update(detections, stamp_s, followed, skipped_tiles, view)
+        self._previous_s = stamp_s
         published = [track for track in updated if self.publishes(track, width, height)]
         return FollowStep(detections, updated, published)
 

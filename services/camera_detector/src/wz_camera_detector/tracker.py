@@ -83,6 +83,15 @@ class ImageTrackerSettings(BaseModel):
     #: ... when optical flow followed it through every frame between its detections (at least
     #: one): a box that flow follows from one detection to the next is one moving thing.
     min_hits_followed: int = Field(default=2, ge=1)
+    #: A track born cut by the edge of the view that has grown out of it by this much (its
+    #: extent across that edge) [px] is a vehicle entering: confirmed at two detections, or
+    #: at one that flow then followed through ``min_frames_entering`` frames. The detector
+    #: finds a vehicle cut by the edge less often than a whole one; its growth from the edge
+    #: is what a false box does not do.
+    entering_growth_px: float = Field(default=4.0, gt=0.0)
+    min_frames_entering: int = Field(default=2, ge=1)
+    #: A box this close to the view's edge is cut by it [px].
+    edge_margin_px: float = Field(default=3.0, ge=0.0)
 
     # --- Kalman filter ---
     #: Standard deviation of the white acceleration of box centre and size [px/s^2].
@@ -243,6 +252,10 @@ class _Track:
     confirmed: bool = False
     #: Detector runs over its region since its latest detection.
     misses: int = 0
+    #: Which edges of the view (left, top, right, bottom) its first box touched, and that
+    #: box's width and height [px]: a vehicle entering the view.
+    born_at_edges: tuple[bool, bool, bool, bool] = (False, False, False, False)
+    born_size_px: tuple[float, float] = (0.0, 0.0)
     class_counts: dict[str, int] = field(default_factory=dict)
     class_last_hit: dict[str, int] = field(default_factory=dict)
 
@@ -318,7 +331,12 @@ class ImageTracker:
         P = I_KH @ track.P @ I_KH.T + K @ R @ K.T
         track.P = (P + P.T) / 2.0
 
-    def _spawn(self, detection: ImageDetection, stamp_s: float) -> _Track:
+    def _spawn(
+        self,
+        detection: ImageDetection,
+        stamp_s: float,
+        view_xyxy_px: Sequence[float] | None = None,
+    ) -> _Track:
         x = np.zeros(_STATE_DIM, dtype=np.float64)
         x[:_MEAS_DIM] = _xyxy_to_z(detection.box_xyxy_px)
         variances = [self.settings.measurement_noise_px**2] * _MEAS_DIM + [
@@ -333,6 +351,17 @@ class ImageTracker:
             score=detection.score,
         )
         track.vote(detection.class_name)
+        if view_xyxy_px is not None:
+            x1, y1, x2, y2 = detection.box_xyxy_px
+            vx1, vy1, vx2, vy2 = (float(edge) for edge in view_xyxy_px)
+            margin = self.settings.edge_margin_px
+            track.born_at_edges = (
+                x1 <= vx1 + margin,
+                y1 <= vy1 + margin,
+                x2 >= vx2 - margin,
+                y2 >= vy2 - margin,
+            )
+            track.born_size_px = (x2 - x1, y2 - y1)
         self._next_id += 1
         return track
 
@@ -350,6 +379,7 @@ class ImageTracker:
         stamp_s: float,
         followed: Mapping[int, Sequence[float]] | None = None,
         unsearched: Sequence[Sequence[float]] = (),
+        view_xyxy_px: Sequence[float] | None = None,
     ) -> list[ImageTrack]:
         """Run one cycle on a frame: prune, predict, associate, update, spawn, follow.
 
@@ -368,6 +398,10 @@ class ImageTracker:
             Regions ``(x1, y1, x2, y2)`` [px] the detector did not search this frame at their
             own resolution (far-field tiles it skipped): a tentative track whose box centre is
             in one is not deleted for missing a detection.
+        view_xyxy_px
+            The region ``(x1, y1, x2, y2)`` [px] the detector sees (its ROI, or the frame): a
+            track born cut by its edge and growing out of it is a vehicle entering
+            (``entering_growth_px``); None: no such rule.
 
         Returns
         -------
@@ -439,10 +473,10 @@ class ImageTracker:
                 or _centre_in(track.box_xyxy_px(), unsearched)
             ]
             for detection in unmatched_high:
-                track = self._spawn(detection, stamp_s)
+                track = self._spawn(detection, stamp_s, view_xyxy_px)
                 self._tracks.append(track)
                 updated.append(track)
-        for track in updated:
+        for track in [*updated, *flowed]:
             track.confirmed = track.confirmed or self._confirms(track)
         reported = [self._report(track, stamp_s) for track in updated]
         reported += [self._report(track, stamp_s, followed=True) for track in flowed]
@@ -452,10 +486,24 @@ class ImageTracker:
         settings = self.settings
         if track.hits >= settings.min_hits:
             return True
-        return (
-            track.followed_throughout
-            and track.followed_frames > 0
-            and track.hits >= settings.min_hits_followed
+        followed = track.followed_throughout and track.followed_frames > 0
+        if followed and track.hits >= settings.min_hits_followed:
+            return True
+        return self._entering(track) and (
+            track.hits >= 2
+            or (track.followed_throughout and track.followed_frames >= settings.min_frames_entering)
+        )
+
+    def _entering(self, track: _Track) -> bool:
+        """Whether the track was born cut by the view's edge and has grown out of it since."""
+        left, top, right, bottom = track.born_at_edges
+        if not (left or top or right or bottom):
+            return False
+        x1, y1, x2, y2 = track.box_xyxy_px()
+        born_w, born_h = track.born_size_px
+        growth = self.settings.entering_growth_px
+        return ((left or right) and x2 - x1 >= born_w + growth) or (
+            (top or bottom) and y2 - y1 >= born_h + growth
         )
 
     def _associate_detections(
