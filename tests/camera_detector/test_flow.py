@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+import pytest
 
 from wz_camera_detector.flow import BoxFlow, FlowSettings
 
@@ -129,3 +130,17 @@ def test_another_picture_is_not_followed_from_the_last() -> None:
     assert np.isnan(flow.follow(scene(patch, 152.0, 120.0, (240, 330)), box)).all()
     followed = flow.follow(scene(patch, 154.0, 120.0, (240, 330)), [box_at(152.0, 120.0, patch)])
     np.testing.assert_allclose(followed[0], box_at(154.0, 120.0, patch), atol=0.5)
+
+
+def test_a_small_box_is_moved_but_keeps_its_size() -> None:
+    """A far car's box 16 px tall: flow moves it, the detector's size stays (a few points a few
+    pixels apart do not measure a scale)."""
+    patch = textured_patch(16, 24, seed=6)
+    bigger = cv2.resize(patch, (26, 17), interpolation=cv2.INTER_LINEAR)
+    flow = BoxFlow(FlowSettings())
+    flow.follow(scene(patch, 100.0, 100.0), [])
+    followed = flow.follow(scene(bigger, 102.0, 100.5), [box_at(100.0, 100.0, patch)])[0]
+    assert followed[2] - followed[0] == pytest.approx(24.0) and followed[3] - followed[
+        1
+    ] == pytest.approx(16.0)
+    assert (followed[0] + followed[2]) / 2.0 == pytest.approx(102.0 + 13.0, abs=1.0)

@@ -11,6 +11,7 @@ import time
 import numpy as np
 import pytest
 
+from wz_camera_detector.following import FollowStep
 from wz_camera_detector.node import CameraDetector
 from wz_camera_detector.settings import CameraDetectorSettings, camera_mount
 from wz_shared.messages import CameraFrameMeta, DetectionBatch, VehicleTruth
@@ -58,10 +59,25 @@ def camera() -> CameraModel:
 
 
 def run(
-    camera: CameraModel, fps: float, frames: int, settings: CameraDetectorSettings = SETTINGS
+    camera: CameraModel,
+    fps: float,
+    frames: int,
+    settings: CameraDetectorSettings = SETTINGS,
+    tiles: list[bool] | None = None,
 ) -> tuple[CameraDetector, list[DetectionBatch | None]]:
+    """The frames through the node's handler; ``tiles`` gets, for each frame the detector ran
+    on, whether its far-field tile ran."""
     mount = camera_mount(SITE, None)
     detector = CameraDetector(SITE, mount, None, settings, report=lambda r, d: None, rendered=True)
+    step = detector.images.step
+
+    def watched(image: np.ndarray, stamp_s: float, detect: bool) -> FollowStep:
+        result = step(image, stamp_s, detect)
+        if tiles is not None and detect:
+            tiles.append(result.tiles)
+        return result
+
+    detector.images.step = watched  # type: ignore[method-assign]
     batches = []
     for index in range(frames):
         stamp = index / fps
@@ -96,8 +112,10 @@ def errors(batch: DetectionBatch) -> list[float]:
 def test_at_30_fps_the_detector_runs_on_every_fourth_frame_and_flow_fills_the_rest(
     camera: CameraModel,
 ) -> None:
-    detector, batches = run(camera, 30.0, 24)
+    tiles: list[bool] = []
+    detector, batches = run(camera, 30.0, 24, tiles=tiles)
     assert detector.detections_run == 6  # frames 0, 4, ..., 20
+    assert tiles == [True, False, True, False, True, False]  # the far tile at every second
     assert all(batch is not None for batch in batches)
     # Confirmed at the second detection (frame 4, flow between): from then on each frame,
     # the detector's or flow's, puts both vehicles on the road near where they are: within
@@ -112,8 +130,10 @@ def test_at_30_fps_the_detector_runs_on_every_fourth_frame_and_flow_fills_the_re
 
 
 def test_at_10_fps_the_detector_runs_on_every_frame(camera: CameraModel) -> None:
-    detector, batches = run(camera, 10.0, 6)
+    tiles: list[bool] = []
+    detector, batches = run(camera, 10.0, 6, tiles=tiles)
     assert detector.detections_run == 6
+    assert tiles == [True] * 6  # nothing between for flow to carry a far car: the tile each
     last = batches[-1]
     assert last is not None and max(errors(last)) < 4.0
 

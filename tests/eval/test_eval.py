@@ -225,6 +225,35 @@ def test_wz_eval_camera_gives_errors_by_distance_for_the_three_methods(tmp_path:
     # downstream of their centre (towards the camera).
     assert table["paper_eq12"]["all"]["bias_longitudinal_m"] > 0.5
     assert "| all |" in (tmp_path / "camera-eval.md").read_text()
+    # The published image tracks against the rendered vehicles: the 10 fps camera has its
+    # detector on every frame.
+    images = report["image_tracks"]
+    assert report["camera_fps"] == 10.0 and not report["every_frame"]
+    assert images["vehicles"] > 50 and images["recall"] > 0.85 and images["precision"] > 0.75
+
+
+def test_wz_eval_camera_at_30_fps_runs_the_detector_on_every_fourth_frame(tmp_path: Path) -> None:
+    result = wz(
+        "eval-camera",
+        "--duration-s",
+        "6",
+        "--warmup-s",
+        "45",
+        "--seed",
+        "4",
+        "--camera-fps",
+        "30",
+        "--out",
+        str(tmp_path),
+    )
+    assert result.returncode == 0, result.stderr[-3000:]
+    report = json.loads((tmp_path / "camera-eval.json").read_text())
+    # From 3 s before the scored 6 s, the detector on one frame in four.
+    assert report["camera_fps"] == 30.0 and report["frames_processed"] > 250
+    assert report["detector_runs"] / report["frames_processed"] == pytest.approx(0.25, abs=0.03)
+    images = report["image_tracks"]
+    assert images["vehicles"] > 100 and images["recall"] > 0.85 and images["precision"] > 0.75
+    assert "Published image tracks (30 fps" in (tmp_path / "camera-eval.md").read_text()
 
 
 def test_the_approach_is_upstream_of_the_mast_and_a_track_goes_where_its_vehicle_is() -> None:

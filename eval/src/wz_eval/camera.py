@@ -43,9 +43,11 @@ from wz_camera_detector.settings import (
     camera_mount,
     radar_mount,
 )
+from wz_camera_detector.tracker import ImageTrack
 from wz_camera_detector.world import paper_box_to_ground
 from wz_camera_detector.yolo import box_iou
 from wz_eval import camera_video
+from wz_shared.camera_geometry import camera_intrinsics
 from wz_shared.logs import configure_logging
 from wz_shared.messages import VehicleTruth
 from wz_shared.site import Site, load_site
@@ -69,6 +71,13 @@ RANGE_BINS_M: tuple[tuple[float, float], ...] = (
 )
 #: Least IoU between a track's box and a vehicle's visible truth box to score the track.
 MATCH_IOU = 0.5
+#: The published image tracks are scored against the vehicles at least this tall [px] and at
+#: least :data:`MIN_VISIBLE` visible, whose box centre lies in the detector's region of interest;
+#: an unmatched track box smaller than that, or overlapping (IoU >= :data:`IGNORED_IOU`) a
+#: vehicle not scored, is neither true nor false.
+MIN_HEIGHT_PX = 20.0
+MIN_VISIBLE = 0.5
+IGNORED_IOU = 0.3
 
 
 @dataclass(frozen=True)
@@ -81,6 +90,10 @@ class CameraEvalOptions:
     weather: str = "day"
     vehicles_per_hour: float = 1400.0
     work_dir: Path | None = None
+    #: The camera's frame rate [Hz]; None: the site file's.
+    camera_fps: float | None = None
+    #: The detector on every frame, no optical flow (the node before issue 41).
+    every_frame: bool = False
 
 
 @dataclass
@@ -142,6 +155,17 @@ def evaluate(site: Site, options: CameraEvalOptions) -> dict[str, object]:
     if radar is None:
         raise ValueError(f"site {site.site_id} has no radar: camera+radar cannot be evaluated")
     settings_kwargs: dict[str, object] = {"backend": "yolo", "radar_id": radar.sensor_id}
+    if options.every_frame:
+        settings_kwargs |= {"detection_period_s": 0.0, "flow": {"enabled": False}}
+    if options.camera_fps is not None:
+        sensors = [
+            m.model_copy(update={"rate_hz": options.camera_fps})
+            if m.sensor_id == camera.sensor_id
+            else m
+            for m in site.sensors
+        ]
+        site = site.model_copy(update={"sensors": sensors})
+        camera = camera_mount(site, camera.sensor_id)
     if options.model_path is not None:
         settings_kwargs["model_path"] = options.model_path
     settings = CameraDetectorSettings.model_validate(settings_kwargs)
@@ -168,6 +192,7 @@ def evaluate(site: Site, options: CameraEvalOptions) -> dict[str, object]:
     )
     errors: dict[str, dict[str, Errors]] = {m: defaultdict(lambda: Errors([], [])) for m in METHODS}
     paired = tracked = matched = 0
+    images = {"vehicles": 0, "found": 0, "tracks": 0, "false": 0}
     frames = 0
     detect_s: list[float] = []
     start_detecting_s = max(0.0, options.warmup_s - 3.0)  # let image tracks confirm first
@@ -192,6 +217,7 @@ def evaluate(site: Site, options: CameraEvalOptions) -> dict[str, object]:
                 frames += 1
                 truth = {v.vehicle_id: v for v in moved(vehicles, stamp_s - now_s)}
                 ids = match_tracks([t.box_xyxy_px for t in result.tracks], output.frame.labels)
+                _score_images(result.tracks, ids, output.frame.labels, detector, images)
                 objects = {o.local_id: o for o in result.camera_objects}
                 fused = {
                     f.camera_local_id: f for f in result.fused if f.camera_local_id is not None
@@ -247,15 +273,82 @@ def evaluate(site: Site, options: CameraEvalOptions) -> dict[str, object]:
         "radar_paired": paired / matched if matched else math.nan,
         "detector_problems": dict(problems),
         "process_image_ms_median": float(np.median(detect_s)) * 1e3 if detect_s else math.nan,
+        "camera_fps": camera.rate_hz,
+        "every_frame": options.every_frame,
+        "frames_processed": len(detect_s),
+        "detector_runs": detector.detections_run,
+        "image_tracks": {
+            **images,
+            "recall": images["found"] / images["vehicles"] if images["vehicles"] else math.nan,
+            "precision": (
+                (images["tracks"] - images["false"]) / images["tracks"]
+                if images["tracks"]
+                else math.nan
+            ),
+        },
         "errors_by_range_m": table,
     }
+
+
+def _score_images(
+    tracks: list[ImageTrack],
+    ids: list[str | None],
+    labels: tuple[CameraTruthLabel, ...],
+    detector: CameraDetector,
+    counts: dict[str, int],
+) -> None:
+    """Count one frame's published image tracks against the vehicles in view (recall and
+    precision of the boxes, :data:`MIN_HEIGHT_PX`, :data:`MIN_VISIBLE`)."""
+    intrinsics = camera_intrinsics(detector.camera_mount)
+    width, height = intrinsics.width_px, intrinsics.height_px
+    roi = getattr(detector.backend, "roi_xyxy_px", None) or (0, 0, width, height)
+    scored: set[str] = set()
+    ignored: list[tuple[float, float, float, float]] = []
+    for label in labels:
+        box = label.box_xyxy_px
+        if box is None:
+            continue
+        u, v = (box[0] + box[2]) / 2.0, (box[1] + box[3]) / 2.0
+        visible = label.visible_pixels / max(1, label.silhouette_pixels)
+        if (
+            box[3] - box[1] >= MIN_HEIGHT_PX
+            and visible >= MIN_VISIBLE
+            and roi[0] <= u <= roi[2]
+            and roi[1] <= v <= roi[3]
+        ):
+            scored.add(label.vehicle_id)
+        else:
+            ignored.append(box)
+    found = {vehicle_id for vehicle_id in ids if vehicle_id in scored}
+    counts["vehicles"] += len(scored)
+    counts["found"] += len(found)
+    for track, vehicle_id in zip(tracks, ids, strict=True):
+        if vehicle_id in scored:
+            counts["tracks"] += 1
+            continue
+        box = np.clip(np.array(track.box_xyxy_px), 0.0, [width, height, width, height])
+        small = box[3] - box[1] < MIN_HEIGHT_PX
+        if vehicle_id is not None or small:
+            continue  # a vehicle not scored (far, hidden), or too small to judge
+        if ignored and float(box_iou(box, np.array(ignored)).max()) >= IGNORED_IOU:
+            continue
+        counts["tracks"] += 1
+        counts["false"] += 1
 
 
 def markdown(report: dict[str, object]) -> str:
     """The report's error table in Markdown."""
     table = report["errors_by_range_m"]
     assert isinstance(table, dict)
+    images = report["image_tracks"]
+    assert isinstance(images, dict)
     lines = [
+        f"Published image tracks ({report['camera_fps']:g} fps, detector on "
+        f"{report['detector_runs']} frames{', every frame' if report['every_frame'] else ''}): "
+        f"recall {images['recall']:.3f} of {images['vehicles']} vehicle-frames in view (at "
+        f"least {MIN_HEIGHT_PX:g} px tall, {MIN_VISIBLE:.0%} visible), precision "
+        f"{images['precision']:.3f} ({images['false']} false of {images['tracks']}).",
+        "",
         f"Camera ranging on `{report['site']}` ({report['weather']}, seed {report['seed']}, "
         f"{report['duration_s']:g} s, {report['frames']} frames, {report['tracks_scored']} scored "
         f"track positions, radar paired {100 * float(report['radar_paired']):.0f} %).",  # type: ignore[arg-type]
@@ -302,6 +395,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--weather", default="day", choices=sorted(WEATHER_PRESETS))
     parser.add_argument("--vehicles-per-hour", type=float, default=1400.0)
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    parser.add_argument(
+        "--camera-fps",
+        type=float,
+        default=None,
+        help="the camera's rate [Hz] (default: the site's)",
+    )
+    parser.add_argument(
+        "--every-frame",
+        action="store_true",
+        help="the detector on every frame, no optical flow (the node before issue 41)",
+    )
     args = parser.parse_args(argv)
     if args.video is not None:
         if args.out == DEFAULT_OUT:
@@ -317,7 +421,12 @@ def main(argv: list[str] | None = None) -> int:
         warmup_s=args.warmup_s,
         weather=args.weather,
         vehicles_per_hour=args.vehicles_per_hour,
+        camera_fps=args.camera_fps,
+        every_frame=args.every_frame,
     )
+    if args.camera_fps is not None and not 0.0 < args.camera_fps <= 60.0:
+        sys.stderr.write("wz eval-camera: --camera-fps in (0, 60]\n")
+        return 2
     report = evaluate(site, options)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "camera-eval.json").write_text(json.dumps(report, indent=2) + "\n")

@@ -86,6 +86,10 @@ class FlowSettings(BaseModel):
     min_points_kept: float = Field(default=0.5, gt=0.0, le=1.0)
     #: A box is followed at the pyramid level where it is about this tall [px] (or smaller).
     box_height_px: float = Field(default=24.0, gt=8.0)
+    #: A box smaller than this at its level [px] keeps its size (flow moves it only): the
+    #: distances between a few points a few pixels apart do not measure its scale (a far
+    #: car's box 15 px tall would be ranged metres off by a 5 % error in its size).
+    min_scaled_height_px: float = Field(default=24.0, ge=0.0)
     #: A box scaling by more than this factor (or less than its inverse) in one frame is
     #: lost: a vehicle at 30 fps does not, a point cloud split between two vehicles does.
     max_scale_step: float = Field(default=1.25, gt=1.0)
@@ -294,7 +298,7 @@ class BoxFlow:
         usable = distance_before > 1.0
         scale = (
             float(np.median(distance_after[usable] / distance_before[usable]))
-            if usable.any()
+            if usable.any() and box[3] - box[1] >= settings.min_scaled_height_px
             else 1.0
         )
         if not (1.0 / settings.max_scale_step <= scale <= settings.max_scale_step):

@@ -3,7 +3,8 @@
 A roadside camera streams 15-30 frames a second, and consecutive frames differ by a few
 pixels; the detector's model costs tens of milliseconds a region on one core. So the model runs
 on a frame only when ``detection_period_s`` (less half a frame's interval) has passed since it
-last ran, its far-field tiles at every ``tiles_every``-th run, and on the frames between each
+last ran (its far-field tiles at every ``tiles_every``-th run when it skips frames, at each
+while it runs on every frame), and on the frames between each
 track's box is followed by optical flow (:class:`~wz_camera_detector.flow.BoxFlow`):
 
 =========== =================================== ===================
@@ -83,11 +84,14 @@ class FollowStep:
         The tracks this frame updated (by a detection or by flow), tentative ones included.
     published
         Those of them to publish (:meth:`DetectAndFollow.publishes`).
+    tiles
+        Whether the YOLO backend's far-field tiles ran (False on a frame it skipped).
     """
 
     detections: list[ImageDetection] | None
     updated: list[ImageTrack]
     published: list[ImageTrack]
+    tiles: bool = False
 
 
 class DetectAndFollow:
@@ -120,6 +124,8 @@ class DetectAndFollow:
         self._detections_run = 0
         #: Stamp of the previous frame [s] (for its interval).
         self._previous_s: float | None = None
+        #: Whether a frame was skipped since the detector last ran (flow followed it).
+        self._skipped_since_run = False
 
     @property
     def detections_run(self) -> int:
@@ -133,6 +139,7 @@ class DetectAndFollow:
         self.flow.restart()
         self._detected_s = None
         self._previous_s = None
+        self._skipped_since_run = False
 
     def due(self, stamp_s: float) -> bool:
         """Whether the detector runs on the frame of ``stamp_s``: always for a backend other
@@ -161,11 +168,15 @@ class DetectAndFollow:
         """
         detections: list[ImageDetection] | None = None
         skipped_tiles: tuple[tuple[int, int, int, int], ...] = ()
+        tiles = False
         if detect:
             backend = self.backend
             runs = self._detections_run
             if isinstance(backend, YoloOnnxDetector):
-                tiles = runs % self.settings.tiles_every == 0
+                # The tiles at every run while the detector runs on every frame (nothing
+                # between for flow to carry a far track over); at every tiles_every-th when
+                # flow follows the frames between.
+                tiles = not self._skipped_since_run or runs % self.settings.tiles_every == 0
                 if not tiles:
                     skipped_tiles = backend.tiles_xyxy_px
                 found = backend.detect(image, tiles=tiles)
@@ -173,7 +184,10 @@ class DetectAndFollow:
                 found = backend.detect(image)
             self._detections_run += 1
             self._detected_s = stamp_s
+            self._skipped_since_run = False
             detections = [box for box in found if box.class_name in self.vehicle_classes]
+        else:
+            self._skipped_since_run = True
         followed = self._follow(image, stamp_s)
         height, width = image.shape[:2]
         roi = getattr(self.backend, "roi_xyxy_px", None) or (0, 0, width, height)
@@ -181,7 +195,7 @@ class DetectAndFollow:
         updated = self.tracker.update(detections, stamp_s, followed, skipped_tiles, view)
         self._previous_s = stamp_s
         published = [track for track in updated if self.publishes(track, width, height)]
-        return FollowStep(detections, updated, published)
+        return FollowStep(detections, updated, published, tiles)
 
     def publishes(self, track: ImageTrack, width_px: int, height_px: int) -> bool:
         """Whether a track updated this frame is published: confirmed, and found by the
