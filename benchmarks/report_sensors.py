@@ -644,7 +644,9 @@ def camera_budget(result: dict[str, Any]) -> list[str]:
         f"`{result['baseline_commit']}` (the detector on every frame, ONNX Runtime on two "
         "threads), checked out in a worktree and run in the same run on the same frames; "
         "**now** is this code (the detector every 0.13 s, its far-field tile at every second "
-        "run, optical flow between, one ONNX thread). Method: `benchmarks/camera_budget.py`.",
+        "run when it skips frames, optical flow between, one ONNX thread; the LiDAR node's "
+        "point checks by column). Before's per-frame figure is its two spinning ONNX threads "
+        "on one core. Method: `benchmarks/camera_budget.py`.",
         "",
         "Per frame, one process pinned to one core (`CameraDetector.handle`: decode, detect or "
         "follow, track, range, fuse), CPU time; and the node as its own process pinned to one "
