@@ -236,7 +236,7 @@ def test_wz_eval_camera_at_30_fps_runs_the_detector_on_every_fourth_frame(tmp_pa
     result = wz(
         "eval-camera",
         "--duration-s",
-        "6",
+        "4",
         "--warmup-s",
         "45",
         "--seed",
@@ -248,11 +248,11 @@ def test_wz_eval_camera_at_30_fps_runs_the_detector_on_every_fourth_frame(tmp_pa
     )
     assert result.returncode == 0, result.stderr[-3000:]
     report = json.loads((tmp_path / "camera-eval.json").read_text())
-    # From 3 s before the scored 6 s, the detector on one frame in four.
-    assert report["camera_fps"] == 30.0 and report["frames_processed"] > 250
+    # From 3 s before the scored 4 s, the detector on one frame in four.
+    assert report["camera_fps"] == 30.0 and report["frames_processed"] > 190
     assert report["detector_runs"] / report["frames_processed"] == pytest.approx(0.25, abs=0.03)
     images = report["image_tracks"]
-    assert images["vehicles"] > 100 and images["recall"] > 0.85 and images["precision"] > 0.75
+    assert images["vehicles"] > 60 and images["recall"] > 0.85 and images["precision"] > 0.75
     assert "Published image tracks (30 fps" in (tmp_path / "camera-eval.md").read_text()
 
 
