@@ -45,7 +45,7 @@ import psutil
 import yaml
 
 from benchmarks import camera_models
-from benchmarks.camera_detection import record
+from benchmarks.camera_detection import record, stats_ms
 from benchmarks.camera_models import process_cpu_s
 from benchmarks.common import ROOT, free_port
 
@@ -120,13 +120,8 @@ def _pinned_cpus() -> tuple[int, int]:
 
 
 def _stats_ms(values_s: list[float]) -> dict[str, float]:
-    ordered = sorted(values_s)
-    return {
-        "p50_ms": 1e3 * statistics.median(ordered),
-        "p99_ms": 1e3 * ordered[int(0.99 * (len(ordered) - 1))],
-        "max_ms": 1e3 * ordered[-1],
-        "mean_ms": 1e3 * statistics.fmean(ordered),
-    }
+    """:func:`~benchmarks.camera_detection.stats_ms` and the mean [ms]."""
+    return {**stats_ms(values_s), "mean_ms": 1e3 * statistics.fmean(values_s)}
 
 
 def per_frame_worker(events_path: Path, site_path: Path) -> dict[str, Any]:

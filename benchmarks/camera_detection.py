@@ -90,7 +90,7 @@ def record(
     return Recorded(events)
 
 
-def _stats_ms(values_s: list[float]) -> dict[str, float]:
+def stats_ms(values_s: list[float]) -> dict[str, float]:
     ordered = sorted(values_s)
     return {
         "p50_ms": 1e3 * statistics.median(ordered),
@@ -131,7 +131,7 @@ def _inference(recorded: Recorded) -> dict[str, Any]:
         "roi_xyxy_px": list(detector.roi_xyxy_px) if detector.roi_xyxy_px else None,
         "tiles_xyxy_px": [list(tile) for tile in detector.tiles_xyxy_px],
         "frames": len(images),
-        "steps": {name: _stats_ms(values) for name, values in steps.items()},
+        "steps": {name: stats_ms(values) for name, values in steps.items()},
     }
 
 
@@ -156,7 +156,7 @@ def _per_frame(recorded: Recorded) -> dict[str, Any]:
     return {
         "frames": len(times),
         "detections_per_frame": detections / max(1, len(times)),
-        **_stats_ms(times),
+        **stats_ms(times),
     }
 
 
@@ -219,8 +219,8 @@ def _service(recorded: Recorded) -> dict[str, Any]:
         "batches_received": len(received),
         "frames_missing": len(sent_at) - len(received),
         "output_rate_hz": len(received) / span_s if span_s > 0 else 0.0,
-        "node_latency": _stats_ms(node_latency),
-        "end_to_end_latency": _stats_ms(end_to_end),
+        "node_latency": stats_ms(node_latency),
+        "end_to_end_latency": stats_ms(end_to_end),
         "fused_share": (
             sum(1 for _, b in received.values() for d in b.detections if d.speed_mps is not None)
             / max(1, sum(len(b.detections) for _, b in received.values()))

@@ -188,10 +188,10 @@ class DetectAndFollow:
             detections = [box for box in found if box.class_name in self.vehicle_classes]
         else:
             self._skipped_since_run = True
-        followed = self._follow(image, stamp_s)
         height, width = image.shape[:2]
         roi = getattr(self.backend, "roi_xyxy_px", None) or (0, 0, width, height)
         view = (max(0, roi[0]), max(0, roi[1]), min(width, roi[2]), min(height, roi[3]))
+        followed = self._follow(image, stamp_s, view)
         updated = self.tracker.update(detections, stamp_s, followed, skipped_tiles, view)
         self._previous_s = stamp_s
         published = [track for track in updated if self.publishes(track, width, height)]
@@ -205,10 +205,13 @@ class DetectAndFollow:
             track.misses == 0 or cut_by_view(track.box_xyxy_px, self.backend, width_px, height_px)
         )
 
-    def _follow(self, image: U8, stamp_s: float) -> dict[int, tuple[float, float, float, float]]:
+    def _follow(
+        self, image: U8, stamp_s: float, view: tuple[int, int, int, int]
+    ) -> dict[int, tuple[float, float, float, float]]:
         """Where optical flow followed each live track's box of the previous frame to in this
-        one, by ``local_id`` (tracks it lost are left out). Flow looks at the detector's
-        region of interest only (the whole frame without one): the tracks are there."""
+        one, by ``local_id`` (tracks it lost are left out). Flow looks at ``view``, the
+        detector's region of interest in the frame (the whole frame without one): the tracks
+        are there."""
         if not self.settings.flow.enabled:
             return {}
         gray: U8 = (
@@ -216,10 +219,7 @@ class DetectAndFollow:
             if image.ndim == 2
             else np.asarray(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY), dtype=np.uint8)
         )
-        height, width = gray.shape[:2]
-        roi = getattr(self.backend, "roi_xyxy_px", None) or (0, 0, width, height)
-        x0, y0 = max(0, int(roi[0])), max(0, int(roi[1]))
-        x1, y1 = min(width, int(roi[2])), min(height, int(roi[3]))
+        x0, y0, x1, y1 = (int(edge) for edge in view)
         crop = gray[y0:y1, x0:x1]  # a view: OpenCV takes its row stride
         previous = self.tracker.tracks()
         last_s = self.tracker.last_stamp_s
