@@ -8,6 +8,9 @@ import numpy as np
 import pytest
 
 from wz_camera_detector.flow import BoxFlow, FlowSettings
+from wz_camera_detector.following import DetectAndFollow
+from wz_camera_detector.settings import CameraDetectorSettings
+from wz_camera_detector.yolo import ImageDetection
 
 HEIGHT, WIDTH = 240, 320
 
@@ -144,3 +147,51 @@ def test_a_small_box_is_moved_but_keeps_its_size() -> None:
         1
     ] == pytest.approx(16.0)
     assert (followed[0] + followed[2]) / 2.0 == pytest.approx(102.0 + 13.0, abs=1.0)
+
+
+class ScriptedDetector:
+    """Stands in for the model where the test needs it to miss: the boxes it is given for
+    each frame, in order (the frames themselves are real moving pictures for flow)."""
+
+    def __init__(self, boxes_per_frame: list[list[tuple[float, float, float, float]]]) -> None:
+        self.boxes_per_frame = boxes_per_frame
+        self.frame = 0
+
+    def detect(self, image: np.ndarray) -> list[ImageDetection]:
+        boxes = self.boxes_per_frame[self.frame]
+        self.frame += 1
+        return [ImageDetection(box, 0.9, "car") for box in boxes]
+
+
+def test_on_a_frame_the_detector_ran_on_flow_carries_only_the_misses_the_edge_explains() -> None:
+    """A whole box the detector missed (mostly a vehicle hidden by another: flow would follow
+    what hides it) coasts on its motion; a box the frame's edge cuts (a vehicle leaving, which
+    the detector loses) is carried by flow, and published."""
+    whole, leaving = textured_patch(30, 50, seed=1), textured_patch(30, 50, seed=2)
+    step_px = 6.0
+
+    def frame(index: int) -> tuple[np.ndarray, list[tuple[float, float, float, float]]]:
+        x_whole, x_leaving = 100.0 + step_px * index, 262.0 + step_px * index
+        image = scene(leaving, x_leaving, 150.0)
+        image = np.where(scene(whole, x_whole, 60.0) != 90, scene(whole, x_whole, 60.0), image)
+        boxes = [box_at(x_whole, 60.0, whole), box_at(x_leaving, 150.0, leaving)]
+        return image.astype(np.uint8), [(x1, y1, min(x2, WIDTH), y2) for x1, y1, x2, y2 in boxes]
+
+    frames = [frame(index) for index in range(5)]
+    # found on frames 0-3 (confirmed at the third), missed both on frame 4
+    detector = ScriptedDetector([boxes for _, boxes in frames[:4]] + [[]])
+    images = DetectAndFollow(detector, CameraDetectorSettings(), frozenset({"car"}))
+    for index, (image, _) in enumerate(frames):
+        step = images.step(cv2.cvtColor(image, cv2.COLOR_GRAY2BGR), index / 10.0, detect=True)
+    assert step.detections == []
+    by_box = {round(track.box_xyxy_px[0]): track for track in images.tracker.tracks()}
+    assert len(by_box) == 2
+    whole_track = min(by_box.items())[1]
+    leaving_track = max(by_box.items())[1]
+    # the cut one: flow's box, published
+    assert [track.local_id for track in step.updated] == [leaving_track.local_id]
+    assert step.updated[0].followed and step.published == step.updated
+    assert abs(leaving_track.box_xyxy_px[0] - (262.0 + 4 * step_px)) < 1.0
+    # the whole one: not carried by flow, coasting where its motion puts it
+    assert whole_track.misses == 1
+    assert abs(whole_track.box_xyxy_px[0] - (100.0 + 4 * step_px)) < 2.0
