@@ -35,13 +35,6 @@ range [m]::
     sigma_los = range_std_m + range_std_per_m * r          (1.0 m + 0.03 r)
     P = sigma_los^2 u u^T + sigma_lat^2 n n^T              [m^2]
 
-A box optical flow carried since the track's latest detection adds its drift ``d`` [px]
-(:attr:`ImageTrack.drift_std_px`): its bottom row moved by ``d`` ranges it
-``(r^2 + h^2) / (f_y h) d`` further or nearer (``h`` the camera's height over the road: a ray
-meets the road at a grazing angle far out), its column ``r d / f_x`` across
-(:func:`drift_covariance`). A far box that flow carried a few frames is then weighed as
-what it is, metres of range a pixel, and a near one hardly changes.
-
 Bad input never stops it. Each problem is counted in the status message's ``invalid_counts``
 under ``<raw camera key>|<reason>`` (the bus's own decode reasons such as ``bad_magic`` or
 ``bad_jpeg`` come first):
@@ -177,6 +170,14 @@ class FrameResult:
     stamp_s: float = 0.0
 
 
+def fog_contrast(settings: CameraDetectorSettings, rendered: bool) -> bool:
+    """Whether flat frames (fog, haze) get local contrast before the model
+    (``settings.fog_contrast``: ``auto`` for the shipped real-camera model only)."""
+    if settings.fog_contrast == "auto":
+        return settings.model_path is None and not rendered
+    return settings.fog_contrast == "on"
+
+
 def make_backend(
     settings: CameraDetectorSettings,
     site: Site | None = None,
@@ -208,6 +209,7 @@ def make_backend(
         roi_xyxy_px=settings.roi_xyxy_px,
         tiles_xyxy_px=settings.tiles_xyxy_px,
         threads=settings.onnx_threads,
+        flat_below=settings.flat_below if fog_contrast(settings, rendered) else None,
     )
     if site is not None and camera is not None:
         intrinsics = camera_intrinsics(camera)
@@ -260,23 +262,6 @@ def _geometry_regions(
 def road_heading_at(site: Site, x_m: float, y_m: float) -> float:
     """The site road's heading at the point's station [rad], CCW from east."""
     return site.road_frame.heading_at_point(x_m, y_m)
-
-
-def drift_covariance(camera: PinholeCamera, xy_m: tuple[float, float], drift_std_px: float) -> F64:
-    """What a box's flow drift of ``drift_std_px`` [px] adds at ``xy_m`` [m^2], shape (2, 2):
-    along the line of sight ``(r^2 + h^2) / (f_y h)`` metres a pixel of its bottom row (at
-    most half the range), across it ``r / f_x`` (module docstring)."""
-    dx, dy = xy_m[0] - float(camera.position_m[0]), xy_m[1] - float(camera.position_m[1])
-    range_m = max(math.hypot(dx, dy), 1.0)
-    u = np.array([dx, dy]) / range_m
-    n = np.array([-u[1], u[0]])
-    height = max(float(camera.position_m[2]), 1.0)
-    along = min(
-        (range_m**2 + height**2) / (camera.focal_y_px * height) * drift_std_px, 0.5 * range_m
-    )
-    across = range_m / camera.focal_px * drift_std_px
-    covariance: F64 = along**2 * np.outer(u, u) + across**2 * np.outer(n, n)
-    return covariance
 
 
 def camera_covariance(
@@ -741,8 +726,6 @@ class CameraDetector:
             covariance = camera_covariance(camera_xy, (x_m, y_m), self.settings)
             if self.settings.calibration.enabled:
                 covariance = covariance + self._angle_covariance(camera, (x_m, y_m))
-            if track.drift_std_px > 0.0:
-                covariance = covariance + drift_covariance(camera, (x_m, y_m), track.drift_std_px)
             objects.append(
                 CameraObject(
                     local_id=track.local_id,

@@ -16,6 +16,7 @@ from pydantic_settings import SettingsConfigDict
 from wz_camera_detector.association import AssociationSettings
 from wz_camera_detector.background import BackgroundSubtractionSettings
 from wz_camera_detector.calibration import SensorCalibrationSettings
+from wz_camera_detector.contrast import FLAT_BELOW
 from wz_camera_detector.flow import FlowSettings
 from wz_camera_detector.tracker import ImageTrackerSettings
 from wz_shared.sensor_mounts import mount_of_kind
@@ -78,6 +79,13 @@ class CameraDetectorSettings(ServiceSettings):
     #: Minimum class score of a detection [0-1]; default: the model's own operating point
     #: (its metadata's ``wz_conf_threshold``: 0.35 for the COCO model), else 0.25.
     conf_threshold: Annotated[float, Field(ge=0.0, lt=1.0)] | None = None
+    #: Fog and haze (yolo, ``contrast.py``): a frame whose flatness is below ``flat_below``
+    #: gets local contrast (CLAHE on its lightness) before the model. ``auto``: for the
+    #: shipped real-camera model (trained on COCO's clear photographs), not for the
+    #: simulator's (trained on the renders' own fog) nor a model of the settings; ``on``: for
+    #: any model; ``off``: never.
+    fog_contrast: Literal["auto", "on", "off"] = "auto"
+    flat_below: Annotated[float, Field(gt=0.0)] = FLAT_BELOW
     #: A radar scan is fused with a frame when their stamps differ by at most this [s].
     radar_max_age_s: Annotated[float, Field(ge=0.0)] = 0.1
     #: Publish only confirmed image tracks (``tracker.min_hits`` detections); False: every

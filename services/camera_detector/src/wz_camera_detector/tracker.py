@@ -145,13 +145,6 @@ class ImageTrack:
         Detector runs over the track's region since its latest detection: 0 when the latest
         run found it. Flow follows a track the detector missed (a vehicle cut by the frame's
         edge, or one the detector lost for a frame), and a false box as faithfully.
-    flow_frames
-        Frames optical flow has carried the box since the track's latest detection: each
-        step's error stays in the box (``drift_std_px``).
-    drift_std_px
-        Standard deviation of what flow has moved the box since the latest detection [px]:
-        ``flow_noise_px * sqrt(flow_frames)`` (each frame's flow measures the motion from
-        the previous box, so the steps' errors add as a random walk); 0 on a detection.
     """
 
     local_id: int
@@ -165,8 +158,6 @@ class ImageTrack:
     confirmed: bool
     followed: bool = False
     misses: int = 0
-    flow_frames: int = 0
-    drift_std_px: float = 0.0
 
 
 def _xyxy_to_z(box_xyxy_px: Sequence[float]) -> F64:
@@ -261,8 +252,6 @@ class _Track:
     confirmed: bool = False
     #: Detector runs over its region since its latest detection.
     misses: int = 0
-    #: Frames flow carried it since its latest detection.
-    flow_frames: int = 0
     #: Which edges of the view (left, top, right, bottom) its first box touched, and that
     #: box's width and height [px]: a vehicle entering the view.
     born_at_edges: tuple[bool, bool, bool, bool] = (False, False, False, False)
@@ -466,7 +455,6 @@ class ImageTracker:
                 # then takes over with the weight the drift calls for.
                 track.P[:_MEAS_DIM, :_MEAS_DIM] += self._R_flow
                 track.followed_frames += 1
-                track.flow_frames += 1
                 flowed.append(track)
             elif not track.confirmed:
                 track.followed_throughout = False
@@ -591,7 +579,6 @@ class ImageTracker:
         track.updated_s = stamp_s
         track.score = detection.score
         track.hits += 1
-        track.flow_frames = 0
         track.vote(detection.class_name)
 
     def _report(self, track: _Track, stamp_s: float, followed: bool = False) -> ImageTrack:
@@ -608,6 +595,4 @@ class ImageTracker:
             confirmed=track.confirmed,
             followed=followed,
             misses=track.misses,
-            flow_frames=track.flow_frames,
-            drift_std_px=self.settings.flow_noise_px * math.sqrt(track.flow_frames),
         )

@@ -39,6 +39,7 @@ import numpy.typing as npt
 import onnxruntime as ort
 
 from wz_camera_detector import nanodet
+from wz_camera_detector.contrast import flatness, local_contrast
 from wz_shared.arrays import F32, F64, U8, IntP
 
 #: A far-field tile's box closer than this to the tile's edge is a cut vehicle [px].
@@ -397,6 +398,10 @@ class YoloOnnxDetector:
         letterbox, so distant vehicles reach the sizes the model finds reliably. A tile's box
         touching the tile's edge is dropped (a cut vehicle, seen whole in the ROI). Default:
         the model's ``wz_tiles_xyxy_px`` metadata (``x0,y0,x1,y1;...``), else none.
+    flat_below
+        A frame whose flatness (:func:`~wz_camera_detector.contrast.flatness`) is below this
+        (fog, haze) gets local contrast (CLAHE on its lightness) before the model; None
+        (the default): never.
 
     Raises
     ------
@@ -416,6 +421,7 @@ class YoloOnnxDetector:
         max_detections: int = 300,
         roi_xyxy_px: tuple[int, int, int, int] | None = None,
         tiles_xyxy_px: Sequence[tuple[int, int, int, int]] | None = None,
+        flat_below: float | None = None,
     ) -> None:
         if class_names is not None and not class_names:
             raise ValueError("class_names is empty: give the model's class names in its order")
@@ -429,6 +435,13 @@ class YoloOnnxDetector:
             )
         self.model_path = Path(model_path)
         self.iou_threshold = iou_threshold
+        #: A frame whose :func:`~wz_camera_detector.contrast.flatness` is below this (fog,
+        #: haze) gets local contrast before the model; None: never.
+        self.flat_below = flat_below
+        #: Whether the latest frame was flat (and so given local contrast).
+        self.last_flat = False
+        #: Frames given local contrast so far.
+        self.flat_frames = 0
         self.max_detections = max_detections
 
         self._session = self._open_session(threads)
@@ -791,6 +804,16 @@ class YoloOnnxDetector:
         """
         if image_bgr.ndim == 3:
             self._fit_regions(image_bgr.shape[1], image_bgr.shape[0])
+        started = time.perf_counter()
+        contrast_s = 0.0
+        self.last_flat = False
+        if self.flat_below is not None and image_bgr.ndim == 3 and image_bgr.shape[2] == 3:
+            # Fog or haze: the frame's lightness given local contrast (contrast.py).
+            self.last_flat = flatness(image_bgr) < self.flat_below
+            if self.last_flat:
+                self.flat_frames += 1
+                image_bgr = local_contrast(image_bgr)
+            contrast_s = time.perf_counter() - started
         region, origin = self.crop(image_bgr)  # checks the frame's shape
         height, width = image_bgr.shape[:2]
         for tile in self.tiles_xyxy_px:
@@ -819,7 +842,7 @@ class YoloOnnxDetector:
             )
             for tx0, ty0, tx1, ty1 in (self.tiles_xyxy_px if tiles else ())
         ]
-        preprocess_s = inference_s = postprocess_s = 0.0
+        preprocess_s, inference_s, postprocess_s = contrast_s, 0.0, 0.0
         all_boxes, all_scores, all_classes = [], [], []
         for pixels, (x0, y0), is_tile, input_hw, min_box_px in passes:
             started = time.perf_counter()
