@@ -15,6 +15,7 @@ import numpy.typing as npt
 import onnx
 import pytest
 
+from tests.camera_detector.test_contrast import clear_scene, fogged
 from tests.camera_detector.test_yolo import _fixed_output_model, _hand_made_output
 from wz_eval.camera import main
 from wz_eval.camera_video import FrameScore, _bin_of, markdown, summarise
@@ -209,3 +210,27 @@ def test_tracked_scores_what_the_node_publishes(tmp_path: Path, model: Path) -> 
     assert published["tracked"] == {"fps": 10.0, "detector_runs": 5}
     assert (published["found"], published["missed"]) == (3, 2)
     assert "What the node publishes" in (out / "video-eval.md").read_text(encoding="utf-8")
+
+
+def test_the_real_camera_models_fog_step_is_counted_in_the_report(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The shipped real-camera model (no ``--model``) on fogged frames: each is flat and gets
+    local contrast, and the report says how many; ``WZ_CAMERA_FOG_CONTRAST=off`` turns it off."""
+    frames, labels = tmp_path / "frames", tmp_path / "labels"
+    frames.mkdir()
+    labels.mkdir()
+    for index in range(3):
+        cv2.imwrite(str(frames / f"{index:04d}.png"), fogged(clear_scene(seed=index), 0.25))
+        (labels / f"{index:04d}.txt").write_text("", encoding="utf-8")
+    argv = ["--video", str(frames), "--truth", str(labels), "--pictures", "0"]
+    assert main([*argv, "--out", str(tmp_path / "on")]) == 0
+    summary = json.loads((tmp_path / "on" / "video-eval.json").read_text(encoding="utf-8"))
+    assert summary["frames"] == 3
+    assert summary["fog_step"] == {"flat_below": 0.06, "flat_frames": 3}
+    report = (tmp_path / "on" / "video-eval.md").read_text(encoding="utf-8")
+    assert "Fog step: 3 of 3 frames flat" in report
+    monkeypatch.setenv("WZ_CAMERA_FOG_CONTRAST", "off")
+    assert main([*argv, "--out", str(tmp_path / "off")]) == 0
+    summary = json.loads((tmp_path / "off" / "video-eval.json").read_text(encoding="utf-8"))
+    assert "fog_step" not in summary

@@ -57,7 +57,7 @@ from wz_camera_detector.cli import IMAGE_SUFFIXES
 from wz_camera_detector.following import DetectAndFollow, ImageBackend
 from wz_camera_detector.node import CLASS_SHAPES, make_backend
 from wz_camera_detector.settings import CameraDetectorSettings
-from wz_camera_detector.yolo import ModelLoadError, box_iou
+from wz_camera_detector.yolo import ModelLoadError, YoloOnnxDetector, box_iou
 from wz_shared.arrays import F64, U8
 from wz_shared.logs import configure_logging
 
@@ -500,6 +500,13 @@ def markdown(summary: dict[str, Any], title: str) -> str:
         "| box height [px] | vehicles | recall | detections | precision |",
         "|---|---|---|---|---|",
     ]
+    if "fog_step" in summary:
+        fog = summary["fog_step"]
+        lines[6:6] = [
+            f"Fog step: {fog['flat_frames']} of {summary['frames']} frames flat (flatness "
+            f"below {fog['flat_below']:g}), given local contrast before the model.",
+            "",
+        ]
     for name, row in summary["by_height_px"].items():
         lines.append(
             f"| {name} | {row['vehicles']} | {row['recall']} | {row['detections']} | "
@@ -561,6 +568,12 @@ def run(args: argparse.Namespace) -> int:
         summary = evaluate(
             args.video, args.truth, backend, args.iou, args.min_height, args.pictures, out
         )
+        if isinstance(backend, YoloOnnxDetector) and backend.flat_below is not None:
+            # the fog step (contrast.py): how many frames were flat and got local contrast
+            summary["fog_step"] = {
+                "flat_below": backend.flat_below,
+                "flat_frames": backend.flat_frames,
+            }
         if args.tracked:
             follow = DetectAndFollow(make_backend(settings), settings, frozenset(CLASS_SHAPES))
             summary["published"] = evaluate(
