@@ -15,6 +15,8 @@ compared with its true centre, in the road frame (longitudinal = station, latera
 - ``camera_radar``: what the detector publishes: the radar's range (carried to the frame's time,
   moved from the echo on the near face to the centre) along the camera's bearing; a track the
   radar did not pair stays at its calibrated position. ``radar_paired`` gives the share paired.
+  On a frame the model skipped the node publishes nothing (``publish_followed``): no
+  ``camera_radar`` position is scored there.
 
 Errors are reported by true ground range from the camera (bins of 25 m to 150 m): count, RMSE
 and median absolute error per axis, plus the signed mean (the bias: Eq. 1-2 puts vehicles about
@@ -191,7 +193,7 @@ def evaluate(site: Site, options: CameraEvalOptions) -> dict[str, object]:
         sensor_ids=[camera.sensor_id, radar.sensor_id],
     )
     errors: dict[str, dict[str, Errors]] = {m: defaultdict(lambda: Errors([], [])) for m in METHODS}
-    paired = tracked = matched = 0
+    paired = tracked = matched = on_bus = 0
     images = {"vehicles": 0, "found": 0, "tracks": 0, "false": 0}
     frames = 0
     detect_s: list[float] = []
@@ -234,13 +236,15 @@ def evaluate(site: Site, options: CameraEvalOptions) -> dict[str, object]:
                         continue
                     matched += 1
                     obj = objects[track.local_id]
-                    out = fused[track.local_id]
-                    paired += out.source == "camera+radar"
                     estimates = {
                         "paper_eq12": paper_box_to_ground(camera, track.box_xyxy_px),
                         "calibrated": (obj.x_m, obj.y_m),
-                        "camera_radar": (out.x_m, out.y_m),
                     }
+                    out = fused.get(track.local_id)  # none on a flow frame (not published)
+                    if out is not None:
+                        on_bus += 1
+                        paired += out.source == "camera+radar"
+                        estimates["camera_radar"] = (out.x_m, out.y_m)
                     true_s, true_d = road.to_road(vehicle.x_m, vehicle.y_m)
                     for method, (x_m, y_m) in estimates.items():
                         if not (math.isfinite(x_m) and math.isfinite(y_m)):
@@ -270,7 +274,7 @@ def evaluate(site: Site, options: CameraEvalOptions) -> dict[str, object]:
         "frames": frames,
         "tracks_published": tracked,
         "tracks_scored": matched,
-        "radar_paired": paired / matched if matched else math.nan,
+        "radar_paired": paired / on_bus if on_bus else math.nan,
         "detector_problems": dict(problems),
         "process_image_ms_median": float(np.median(detect_s)) * 1e3 if detect_s else math.nan,
         "camera_fps": camera.rate_hz,

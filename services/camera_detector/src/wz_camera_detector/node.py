@@ -587,6 +587,11 @@ class CameraDetector:
             self._calibrate(boxes, stamp_s, width, height)
         objects = self._camera_objects(tracks, width, height, frame_index)
         stamp_s = max(0.0, stamp_s - self.clock_offset_s)  # on the LiDAR's clock from here
+        if not detect and not self.settings.publish_followed:
+            # A box flow carried holds its last detection's ranging error: given to the
+            # fusion tracker as a measurement of its own at each frame between, the same
+            # error would be counted three times over at 30 fps (settings.publish_followed).
+            return FrameResult(tracks, objects, [], stamp_s)
         return FrameResult(
             tracks, objects, self._within_range(self._fuse(objects, stamp_s)), stamp_s
         )
