@@ -160,6 +160,55 @@ def test_conversion_inverts_the_simulated_echo() -> None:
     np.testing.assert_allclose([point.x_m, point.y_m], echoes.reflection_xyz_m[0, :2], atol=1e-9)
 
 
+@pytest.mark.parametrize("distance_m", [12.0, 20.0, 40.0, 120.0])
+def test_speed_from_the_simulated_echo_near_and_far_from_a_high_mast(distance_m: float) -> None:
+    """The along-road speed from the simulator's radial speed is the vehicle's, near the mast too.
+
+    The radial speed lies along the slant line of sight; a level car 12 m out from a radar 5 m up
+    has ``cos e`` = 0.94 (0.90 for the echo at 0.75 m). Leaving it out read 23.2 m/s for 25."""
+    x_m = 5.5
+    y_m = RADAR.pose.y_m - distance_m
+    truth = VehicleTruth(
+        vehicle_id="car-1",
+        vehicle_class=VehicleClass.CAR,
+        x_m=x_m,
+        y_m=y_m,
+        z_m=0.75,
+        heading_rad=ROAD_HEADING_RAD,
+        speed_mps=VEHICLE_SPEED_MPS,
+        accel_mps2=0.0,
+        length_m=4.5,
+        width_m=1.8,
+        height_m=1.5,
+        lane_index=1,
+        station_m=0.0,
+        offset_m=0.0,
+        driver_profile="normal",
+    )
+    echoes = RadarModel(RADAR, WEATHER_PRESETS["day"], seed=0, site_id="us75").echoes([truth])
+    target = RadarTarget(
+        range_m=float(echoes.range_m[0]),
+        azimuth_rad=float(echoes.azimuth_rad[0]),
+        radial_speed_mps=float(echoes.radial_speed_mps[0]),
+        rcs_dbsm=10.0,
+    )
+    settings = AssociationSettings(
+        target_height_m=float(echoes.reflection_xyz_m[0, 2]), min_radar_only_speed_mps=0.0
+    )
+    echo_x, echo_y = echoes.reflection_xyz_m[0, :2]
+    (obj,) = fuse_camera_radar(
+        [camera_object(0, float(echo_x), float(echo_y))],
+        scan_of(target),
+        RADAR,
+        settings,
+        ROAD_HEADING_RAD,
+    )
+    assert obj.source == "camera+radar"
+    assert obj.speed_mps == pytest.approx(VEHICLE_SPEED_MPS, rel=2e-3)
+    (radar_only,) = fuse_camera_radar([], scan_of(target), RADAR, settings, ROAD_HEADING_RAD)
+    assert radar_only.speed_mps == pytest.approx(VEHICLE_SPEED_MPS, rel=2e-3)
+
+
 def test_radar_covariance_matches_hand_computation() -> None:
     """Level radar looking east, target dead ahead: R = diag((sr r/rho)^2, (rho sa)^2)."""
     mount = SensorMount(
@@ -271,8 +320,9 @@ def test_fused_covariance_takes_radar_range_and_camera_bearing() -> None:
     range_std = math.hypot(RANGE_STD_M * slant / rho, SETTINGS.centre_std_m)
     expected = polar_covariance(bearing, range_std, CAMERA_LATERAL_STD_M)
     np.testing.assert_allclose(obj.covariance_m2, expected, rtol=1e-9, atol=1e-12)
-    # Without a road heading, the speed is the radial speed's magnitude.
-    assert obj.speed_mps == pytest.approx(VEHICLE_SPEED_MPS * rho / slant, rel=1e-3)
+    # Without a road heading, the speed is the radial speed's horizontal magnitude: |v_r| / cos e.
+    expected_speed = VEHICLE_SPEED_MPS * abs(math.sin(bearing))
+    assert obj.speed_mps == pytest.approx(expected_speed, rel=1e-3)
 
 
 # ----------------------------------------------------------------------------- leftovers
@@ -445,5 +495,6 @@ def test_radar_range_is_carried_to_the_frame_time_with_the_radial_speed() -> Non
     rho = horizontal_range(x_m, y_m)
     slant = math.hypot(rho, RADAR.pose.z_m - TARGET_HEIGHT_M)
     moved_m = horizontal_range(now.x_m, now.y_m) - horizontal_range(later.x_m, later.y_m)
-    # Approaching at 20 m/s along the slant line: 1 m in 50 ms, rho / slant of it horizontal.
-    assert moved_m == pytest.approx(20.0 * 0.05 * rho / slant, rel=1e-6)
+    # The slant range shrinks 1 m in 50 ms at 20 m/s; the echo moves level, so the horizontal
+    # range shrinks by slant / rho of that (rho^2 = slant^2 - h^2).
+    assert moved_m == pytest.approx(20.0 * 0.05 * slant / rho, rel=1e-6)
