@@ -129,16 +129,18 @@ def test_core_imports_no_io_library() -> None:
 # ----------------------------------------------------------------------------- conversion
 
 
-def test_conversion_inverts_the_simulated_echo() -> None:
-    """The simulator's noise-free echo converts back onto its reflection point."""
+def simulated_echo(
+    x_m: float, y_m: float, speed_mps: float, heading_rad: float
+) -> tuple[RadarTarget, np.ndarray]:
+    """The simulator's noise-free target of a car at ``(x_m, y_m)``, and its reflection point."""
     truth = VehicleTruth(
         vehicle_id="car-1",
         vehicle_class=VehicleClass.CAR,
-        x_m=6.0,
-        y_m=910.0,
+        x_m=x_m,
+        y_m=y_m,
         z_m=0.75,
-        heading_rad=math.pi / 2.0,
-        speed_mps=20.0,
+        heading_rad=heading_rad,
+        speed_mps=speed_mps,
         accel_mps2=0.0,
         length_m=4.5,
         width_m=1.8,
@@ -155,9 +157,15 @@ def test_conversion_inverts_the_simulated_echo() -> None:
         radial_speed_mps=float(echoes.radial_speed_mps[0]),
         rcs_dbsm=10.0,
     )
-    settings = AssociationSettings(target_height_m=float(echoes.reflection_xyz_m[0, 2]))
+    return target, echoes.reflection_xyz_m[0]
+
+
+def test_conversion_inverts_the_simulated_echo() -> None:
+    """The simulator's noise-free echo converts back onto its reflection point."""
+    target, reflection = simulated_echo(6.0, 910.0, 20.0, math.pi / 2.0)
+    settings = AssociationSettings(target_height_m=float(reflection[2]))
     (point,) = radar_targets_to_site([target], RADAR, settings)
-    np.testing.assert_allclose([point.x_m, point.y_m], echoes.reflection_xyz_m[0, :2], atol=1e-9)
+    np.testing.assert_allclose([point.x_m, point.y_m], reflection[:2], atol=1e-9)
 
 
 @pytest.mark.parametrize("distance_m", [12.0, 20.0, 40.0, 120.0])
@@ -166,38 +174,14 @@ def test_speed_from_the_simulated_echo_near_and_far_from_a_high_mast(distance_m:
 
     The radial speed lies along the slant line of sight; a level car 12 m out from a radar 5 m up
     has ``cos e`` = 0.94 (0.90 for the echo at 0.75 m). Leaving it out read 23.2 m/s for 25."""
-    x_m = 5.5
-    y_m = RADAR.pose.y_m - distance_m
-    truth = VehicleTruth(
-        vehicle_id="car-1",
-        vehicle_class=VehicleClass.CAR,
-        x_m=x_m,
-        y_m=y_m,
-        z_m=0.75,
-        heading_rad=ROAD_HEADING_RAD,
-        speed_mps=VEHICLE_SPEED_MPS,
-        accel_mps2=0.0,
-        length_m=4.5,
-        width_m=1.8,
-        height_m=1.5,
-        lane_index=1,
-        station_m=0.0,
-        offset_m=0.0,
-        driver_profile="normal",
-    )
-    echoes = RadarModel(RADAR, WEATHER_PRESETS["day"], seed=0, site_id="us75").echoes([truth])
-    target = RadarTarget(
-        range_m=float(echoes.range_m[0]),
-        azimuth_rad=float(echoes.azimuth_rad[0]),
-        radial_speed_mps=float(echoes.radial_speed_mps[0]),
-        rcs_dbsm=10.0,
+    target, reflection = simulated_echo(
+        5.5, RADAR.pose.y_m - distance_m, VEHICLE_SPEED_MPS, ROAD_HEADING_RAD
     )
     settings = AssociationSettings(
-        target_height_m=float(echoes.reflection_xyz_m[0, 2]), min_radar_only_speed_mps=0.0
+        target_height_m=float(reflection[2]), min_radar_only_speed_mps=0.0
     )
-    echo_x, echo_y = echoes.reflection_xyz_m[0, :2]
     (obj,) = fuse_camera_radar(
-        [camera_object(0, float(echo_x), float(echo_y))],
+        [camera_object(0, float(reflection[0]), float(reflection[1]))],
         scan_of(target),
         RADAR,
         settings,
