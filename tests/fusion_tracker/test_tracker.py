@@ -654,6 +654,57 @@ def test_class_ties_go_to_the_latest_vote_sizes_keep_a_window_and_a_new_track_st
     assert new.sources == (CAMERA,) and new.status == "tentative"
 
 
+@pytest.mark.parametrize("from_far_end", [True, False])
+def test_a_box_completed_from_its_far_end_is_re_centred_towards_the_sensor(
+    from_far_end: bool,
+) -> None:
+    """A 10 m box truck drives away from a LiDAR at the origin, seen whole for 2 s; then its
+    near end goes into the blind cone under the mast and the LiDAR completes what it sees from
+    the far end (its front, a face) as a 16 m heavy vehicle: the box's centre is 3 m behind
+    the truck's. Knowing its own length, the track moves such a box 3 m *towards* the sensor
+    (``completed_from_far_end``): the track stays on the truck. Moved away from the sensor, as
+    a box completed from its near face is, it would be 6 m behind."""
+    speed, length, x0 = 20.0, 10.0, 20.0
+    along_std = 2.0  # a heavy vehicle's length completed from one end: (4 m / 2)
+    cov_whole = np.eye(2) * 0.05**2
+    cov_cut = np.diag([along_std**2, 0.05**2])
+    tracker = MultiTargetTracker(
+        TrackerSettings(reorder_window_s=0.0),
+        heading_at=lambda x, y: 0.0,
+        sensor_positions={LIDAR: (0.0, 0.0)},
+    )
+    for k in range(60):
+        t = 0.05 * k
+        centre = x0 + speed * t
+        if t < 2.0:
+            box = Measurement(
+                x_m=centre,
+                y_m=0.0,
+                covariance_m2=cov_whole,
+                object_class="truck",
+                length_m=length,
+                width_m=2.5,
+            )
+        else:
+            front = centre + 0.5 * length
+            box = Measurement(
+                x_m=front - 8.0,
+                y_m=0.0,
+                covariance_m2=cov_cut,
+                object_class="truck",
+                length_m=16.0,
+                width_m=2.5,
+                completed_from_far_end=from_far_end,
+            )
+        tracker.add(LIDAR, t, [box])
+    (track,) = tracker.tracks()
+    error = track.x_m - (x0 + speed * track.stamp_s)
+    if from_far_end:
+        assert abs(error) < 0.3
+    else:
+        assert error < -2.0
+
+
 def test_snapshots_predicted_to_a_time_leave_the_tracker_unchanged() -> None:
     vehicles = [Vehicle(0.0, 0.0, 25.0, local_id=1)]
     tracker = MultiTargetTracker(SETTINGS)

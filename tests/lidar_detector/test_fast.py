@@ -517,26 +517,42 @@ def test_heavy_vehicle_length_is_completed_only_when_seen_end_on() -> None:
     assert math.hypot(fit.center_xyz_m[0] - 3.0, fit.center_xyz_m[1] - 8.0) < 0.05
 
 
-def test_a_vehicle_cut_by_the_lowest_beam_gets_an_unknown_length(
+def test_a_vehicle_cut_by_the_lowest_beam_is_placed_from_its_far_end(
     range_background: RangeImageBackground,
 ) -> None:
     # A car coming out of the blind cone under the sensor: the lowest beam (-30 degrees, 5 m
-    # up) reaches its roof 2.6 m out and the road 8.7 m out, so a car 6-10.5 m out is cut by
-    # the field of view's lower edge. Its box stands on that edge while the car drives out:
-    # the centre gets fov_cut_std_m along the car (a track may take it; none starts from it).
-    cut_car = Box(8.25, 3.0, 0.0, 4.5, 1.8, -4.8, -3.5)
+    # up) reaches its roof (3.5 m below the sensor) 6.1 m out and the road 8.7 m out, so of a
+    # car 3.5-8 m ahead and 3 m aside, only the 2.7 m beyond 5.3 m ahead are seen. Its far end
+    # (8 m) is a face seen whole: the box is completed from it towards the sensor, and its
+    # centre is the car's.
+    cut_car = Box(5.75, 3.0, 0.0, 4.5, 1.8, -4.8, -3.5)
     frame, _ = _cast([cut_car, CAR], np.random.default_rng(3))
     settings = FastSettings(heading_prior_rad=0.0, update_background=False)
     detections = FastPipeline(settings, range_background).detect(frame).detections
     assert len(detections) == 2
     near = min(detections, key=lambda d: d.center_xyz_m[0])
     far = max(detections, key=lambda d: d.center_xyz_m[0])
+    assert near.completed_from_far_end and not far.completed_from_far_end
+    assert near.center_xyz_m[0] == pytest.approx(5.75, abs=0.2)
     along = np.array([math.cos(near.heading_rad), math.sin(near.heading_rad)])
-    assert along @ np.array(near.covariance_xy_m2) @ along >= settings.fov_cut_std_m**2
+    assert along @ np.array(near.covariance_xy_m2) @ along < 1.0
     # The car 17 m out, clear of the lowest beam, keeps its box's own covariance.
     assert np.array(far.covariance_xy_m2).max() < 1.0
-    # Turned off, the cut car's covariance is its box's.
-    plain = FastPipeline(settings.model_copy(update={"fov_cut_std_m": 0.0}), range_background)
+    # Completed from the cut edge instead (the setting off), the box stands on that edge, a
+    # metre and more ahead of the car, and its centre gets fov_cut_std_m along the car (a
+    # track may take it; none starts from it).
+    edge = FastPipeline(
+        settings.model_copy(update={"fov_cut_from_far_end": False}), range_background
+    )
+    near_edge = min(edge.detect(frame).detections, key=lambda d: d.center_xyz_m[0])
+    assert not near_edge.completed_from_far_end
+    assert near_edge.center_xyz_m[0] > 5.75 + 1.0
+    assert along @ np.array(near_edge.covariance_xy_m2) @ along >= settings.fov_cut_std_m**2
+    # Neither: the cut car's covariance is its box's.
+    plain = FastPipeline(
+        settings.model_copy(update={"fov_cut_std_m": 0.0, "fov_cut_from_far_end": False}),
+        range_background,
+    )
     near_plain = min(plain.detect(frame).detections, key=lambda d: d.center_xyz_m[0])
     assert np.array(near_plain.covariance_xy_m2).max() < 4.0
 

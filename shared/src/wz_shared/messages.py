@@ -319,6 +319,11 @@ class Detection(BaseModel):
     # fire across its sweep (50 ms at 20 Hz), so a vehicle's points are up to a sweep later
     # than the frame's stamp (1.5 m at 30 m/s). None: at the stamp.
     time_offset_s: Annotated[float, Field(ge=-1.0, le=1.0, allow_inf_nan=False)] | None = None
+    # The box's length was completed from its end away from the sensor, towards it: the near
+    # end was not seen (a LiDAR's field of view cuts a vehicle going into or out of the blind
+    # cone under its mast). A tracker that knows the vehicle's length moves the centre towards
+    # the sensor, not away. False: completed away from the sensor, or not at all.
+    completed_from_far_end: bool = False
 
 
 class DetectionBatch(Message):

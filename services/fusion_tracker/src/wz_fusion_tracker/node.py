@@ -126,6 +126,7 @@ def to_measurements(
                 speed_mps=detection.speed_mps,
                 local_track_id=detection.local_track_id,
                 time_offset_s=detection.time_offset_s or 0.0,
+                completed_from_far_end=detection.completed_from_far_end,
             )
         )
     return out if bias is None else bias.correct(batch.source_id, out)

@@ -765,8 +765,15 @@ class MultiTargetTracker:
             table.sensor_column(sensor_id),
             table.class_columns([m.object_class for m in matched]),
             np.fromiter([m.score for m in matched], np.float64, k),
+            # a length completed from the far end is the class's guess grown from a part (the
+            # near end unseen), not a measure of this vehicle: it does not enter the track's
             np.fromiter(
-                [math.nan if m.length_m is None else m.length_m for m in matched], np.float64, k
+                [
+                    math.nan if m.length_m is None or m.completed_from_far_end else m.length_m
+                    for m in matched
+                ],
+                np.float64,
+                k,
             ),
             np.fromiter(
                 [math.nan if m.width_m is None else m.width_m for m in matched], np.float64, k

@@ -55,6 +55,9 @@ class Measurement:
     time_offset_s
         When it was captured after its batch's stamp [s] (a spinning LiDAR's column time);
         the update uses ``H = [I  delta I]``.
+    completed_from_far_end
+        The sensor completed the box's length from its end away from it (its near end unseen):
+        re-centring with the track's length moves it towards the sensor, not away.
     """
 
     x_m: float
@@ -68,6 +71,7 @@ class Measurement:
     speed_mps: float | None = None
     local_track_id: int | None = None
     time_offset_s: float = 0.0
+    completed_from_far_end: bool = False
 
 
 @dataclass(frozen=True, slots=True, eq=False)

@@ -132,7 +132,9 @@ def reference_points(
     a car's height: completed as a 4.5 m car, its centre 6 m short). The track knows better:
     its length ``L_t`` (the upper quartile of the measured lengths, since a partial view only
     shortens) against the box's ``L_d`` moves the centre by ``(L_t - L_d) / 2`` along the
-    track's direction, away from the sensor. Differences below ``threshold_m``
+    track's direction, away from the sensor; towards it for a box completed from its far end
+    (``Measurement.completed_from_far_end``: the near end cut by the field of view, the far
+    face seen). Differences below ``threshold_m``
     (``reference_point_min_m``) are left alone (a car's own spread); ``sensor_xy`` None (the
     sensor's place unknown) or a threshold of 0 leaves every position.
     """
@@ -155,6 +157,10 @@ def reference_points(
     axis = np.stack([np.cos(heading[moved]), np.sin(heading[moved])], axis=1)
     at = columns[moved]
     away = np.where(np.einsum("ki,ki->k", z[at] - np.asarray(sensor_xy), axis) >= 0.0, 1.0, -1.0)
+    from_far_end = np.fromiter(
+        (measurements[c].completed_from_far_end for c in at.tolist()), bool, len(at)
+    )
+    away = np.where(from_far_end, -away, away)
     z_used = z.copy()
     z_used[at] = z[at] + (0.5 * difference[moved] * away)[:, None] * axis
     return z_used

@@ -45,7 +45,11 @@ than the vehicle's centre. This module fits the box instead:
    at least ``side_view_min_deg`` off its length axis: a box's side face is in view whole or
    not at all), and completed to ``heavy_length_m`` (16 m, a tractor-semitrailer, the usual
    heavy vehicle on a freeway) only when it is seen end-on.
-   The centre is the completed box's centre.
+   The centre is the completed box's centre. Where the near end is cut by the field of view's
+   lower edge instead (a vehicle going into or coming out of the blind cone under a high
+   mast; the caller's test), the end *away* from the sensor is the face: the length is
+   completed from it *towards* the sensor (``near_end_cut``), and ``completed_from_far_end``
+   says so (a consumer that knows the vehicle's length moves the centre towards the sensor).
 4. **Height**: from the top of the points down to the ground (the background's ground height
    under the vehicle when known, else the lowest point).
 5. **Class**: :func:`wz_lidar_detector.reference.class_from_size` of the completed box, the same
@@ -171,6 +175,9 @@ class BoxFit:
         1 (a single face, or a blob) or 2 (an L).
     completed_lw
         Whether the length / width was grown beyond the visible extent.
+    completed_from_far_end
+        The length was completed from the end away from the sensor, towards it (the near end
+        cut by the field of view: ``fit_box(near_end_cut=True)``).
     """
 
     center_xyz_m: tuple[float, float, float]
@@ -181,6 +188,7 @@ class BoxFit:
     visible_lw_m: tuple[float, float]
     faces_seen: int
     completed_lw: tuple[bool, bool]
+    completed_from_far_end: bool = False
 
 
 def closeness_scores(xy_m: F64, headings_rad: F64, floor_m: float) -> F64:
@@ -398,6 +406,7 @@ def fit_box(
     ground_z_m: float | None = None,
     settings: BoxFitSettings | None = None,
     near_end_hidden: bool = False,
+    near_end_cut: bool = False,
 ) -> BoxFit:
     """Fit a vehicle's box to the points of its visible faces (see the module docstring).
 
@@ -418,6 +427,12 @@ def fit_box(
         what lies beyond it (:func:`hidden_near_end`). The vehicle may go on either way, so a
         length completed from one end is grown evenly at both, with that spread in its
         variance, instead of away from the sensor.
+    near_end_cut
+        The end of the visible points nearer the sensor is where the field of view's lower
+        edge cuts the vehicle, and the far end is a face: the length is grown from the far
+        end towards the sensor, with the variance of a length completed from one end, also
+        when the visible length already reaches the class's (it is a lower bound). A vehicle
+        abeam of the sensor is grown at both ends as before.
 
     Returns
     -------
@@ -506,7 +521,20 @@ def fit_box(
     along_edge = half_step_m * abs(math.sin(sight_rad - heading))
     across_edge = half_step_m * abs(math.cos(sight_rad - heading))
     low_l, high_l, how_l = _complete(along_min - along_edge, along_max + along_edge, shape.length_m)
-    if near_end_hidden and how_l == "one_end":
+    from_far_end = near_end_cut and how_l in ("one_end", "seen")
+    if from_far_end:
+        # The near end is the cut one, the far end the face: keep the far end and grow the
+        # near one. What is visible is a lower bound of the length even when it reaches the
+        # class's: the vehicle may go on into the cone, so the length's spread stays.
+        length_m = max(shape.length_m, high_l - low_l)
+        if along_min - along_edge >= 0.0:  # the sensor before the near end, as in _complete
+            high_l = along_max + along_edge
+            low_l = high_l - length_m
+        else:
+            low_l = along_min - along_edge
+            high_l = low_l + length_m
+        how_l = "one_end"
+    elif near_end_hidden and how_l == "one_end":
         middle = 0.5 * (along_min + along_max)
         low_l, high_l, how_l = (
             middle - 0.5 * shape.length_m,
@@ -564,4 +592,5 @@ def fit_box(
         visible_lw_m=(visible_length, visible_width),
         faces_seen=faces_seen,
         completed_lw=(how_l != "seen", how_w != "seen"),
+        completed_from_far_end=from_far_end,
     )

@@ -37,6 +37,9 @@ class BoxDetection:
         2x2 covariance of the centre's x, y [m^2] in the sensor frame.
     score
         Confidence 0..1.
+    completed_from_far_end
+        The length was completed from the end away from the sensor, towards it: the near end
+        is cut by the field of view (:func:`wz_lidar_detector.boxfit.fit_box`).
     """
 
     center_xyz_m: tuple[float, float, float]
@@ -46,6 +49,7 @@ class BoxDetection:
     num_points: int
     covariance_xy_m2: tuple[tuple[float, float], tuple[float, float]]
     score: float = 1.0
+    completed_from_far_end: bool = False
 
 
 @dataclass

@@ -121,6 +121,11 @@ class FastSettings(BaseModel):
     #: truck's 16.5 m over two), more than a new track accepts (the tracker's
     #: ``spawn_max_std_m``): it may update a vehicle's track, not start one. 0: not checked.
     fov_cut_std_m: float = Field(default=5.0, ge=0.0)
+    #: Such a cut box is completed from its far end instead, the face the sensor sees whole,
+    #: towards the sensor (``fit_box(near_end_cut=True)``): its centre then moves with the
+    #: vehicle, and only the length's own spread is in its covariance, not
+    #: ``fov_cut_std_m``. False: completed from the cut edge, with ``fov_cut_std_m``.
+    fov_cut_from_far_end: bool = True
 
     # --- update ---
     update_background: bool = True
@@ -346,7 +351,10 @@ class FastPipeline:
                 continue
 
             def fitted_box(
-                near_end_hidden: bool, cluster: F64 = cluster, ground: float | None = ground
+                near_end_hidden: bool = False,
+                near_end_cut: bool = False,
+                cluster: F64 = cluster,
+                ground: float | None = ground,
             ) -> BoxFit:
                 return fit_box(
                     cluster,
@@ -355,19 +363,25 @@ class FastPipeline:
                     ground_z_m=ground,
                     settings=settings.box,
                     near_end_hidden=near_end_hidden,
+                    near_end_cut=near_end_cut,
                 )
 
-            fit = fitted_box(near_end_hidden=False)
-            # Completed from the end nearer the sensor: is that end a face, or where a nearer
-            # vehicle hides the rest (a truck behind a car in the near lane)?
-            if fit.completed_lw[0] and hidden_near_end(
-                cluster,
-                fit.heading_rad,
-                xyz[labels != label],
-                angle_tolerance_rad=math.radians(2.0 * settings.box.angular_resolution_deg),
-            ):
-                fit = fitted_box(near_end_hidden=True)
             cut = floor is not None and _reaches_floor(cluster, floor)
+            if cut and settings.fov_cut_from_far_end:
+                # The near end is where the field of view cuts the vehicle: the far end is
+                # the face (whatever hides the near end, the far end places the box).
+                fit = fitted_box(near_end_cut=True)
+            else:
+                fit = fitted_box()
+                # Completed from the end nearer the sensor: is that end a face, or where a
+                # nearer vehicle hides the rest (a truck behind a car in the near lane)?
+                if fit.completed_lw[0] and hidden_near_end(
+                    cluster,
+                    fit.heading_rad,
+                    xyz[labels != label],
+                    angle_tolerance_rad=math.radians(2.0 * settings.box.angular_resolution_deg),
+                ):
+                    fit = fitted_box(near_end_hidden=True)
             fitted.append(_Fitted(fit, len(cluster), cut))
         return [self._detection(box) for box in fitted]
 
@@ -402,7 +416,7 @@ class FastPipeline:
 
     def _detection(self, box: _Fitted) -> BoxDetection:
         fit, covariance = box.fit, box.fit.covariance_xy_m2
-        if box.fov_cut:
+        if box.fov_cut and not fit.completed_from_far_end:
             along = np.array([math.cos(fit.heading_rad), math.sin(fit.heading_rad)])
             covariance = covariance + self.settings.fov_cut_std_m**2 * np.outer(along, along)
         return BoxDetection(
@@ -416,4 +430,5 @@ class FastPipeline:
                 (float(covariance[1, 0]), float(covariance[1, 1])),
             ),
             score=min(1.0, box.num_points / self.settings.full_score_points),
+            completed_from_far_end=fit.completed_from_far_end,
         )

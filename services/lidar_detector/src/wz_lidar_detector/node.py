@@ -502,7 +502,11 @@ class LidarDetector:
         reach plus the box's half length, the std along the length grows to
         ``settings.near_field_std_m``, and across it to ``settings.near_field_across_std_m``
         (which side is seen changes as the vehicle passes under: measured, 0.5 m lateral RMSE
-        with errors to 2.5 m).
+        with errors to 2.5 m). A box completed from its far end (cut by the field of view) is
+        widened too: its centre no longer stands on the cut edge, but deep in the cone what is
+        seen of the far end is a slice as well (errors of a metre measured at 3-4 m from the
+        mast), and without the widening the fused speed just past the mast was worse (default
+        site, seed 10400: RMSE 5-10 m past the mast 2.1 m/s against 0.42 m/s with it).
         """
         intrinsics = self.mount.intrinsics
         if not isinstance(intrinsics, LidarIntrinsics) or intrinsics.vertical_min_deg >= 0:

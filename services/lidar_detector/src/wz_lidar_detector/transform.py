@@ -75,6 +75,7 @@ def to_detection(box: BoxDetection) -> Detection:
         width_m=width,
         height_m=height,
         heading_rad=wrap_angle(box.heading_rad),
+        completed_from_far_end=box.completed_from_far_end,
     )
 
 
