@@ -173,7 +173,9 @@ def test_speed_from_the_simulated_echo_near_and_far_from_a_high_mast(distance_m:
     """The along-road speed from the simulator's radial speed is the vehicle's, near the mast too.
 
     The radial speed lies along the slant line of sight; a level car 12 m out from a radar 5 m up
-    has ``cos e`` = 0.94 (0.90 for the echo at 0.75 m). Leaving it out read 23.2 m/s for 25."""
+    has ``cos e`` = 0.94 (0.90 for the echo at 0.75 m). Leaving it out read 23.2 m/s for 25.
+    The line is the radar's own bearing of the echo: near the mast a camera box seen from above
+    is off across, and a camera object 1 m aside of it does not move the speed."""
     target, reflection = simulated_echo(
         5.5, RADAR.pose.y_m - distance_m, VEHICLE_SPEED_MPS, ROAD_HEADING_RAD
     )
@@ -181,7 +183,7 @@ def test_speed_from_the_simulated_echo_near_and_far_from_a_high_mast(distance_m:
         target_height_m=float(reflection[2]), min_radar_only_speed_mps=0.0
     )
     (obj,) = fuse_camera_radar(
-        [camera_object(0, float(reflection[0]), float(reflection[1]))],
+        [camera_object(0, float(reflection[0]) + 1.0, float(reflection[1]))],
         scan_of(target),
         RADAR,
         settings,
