@@ -147,6 +147,13 @@ def test_pairs_that_never_conflict_give_nothing() -> None:
     )
     assert find_conflicts(as_trajectories(rows)) == []
     assert find_conflicts(trajectories([], [], [], [], [], [], [])) == []
+    # One vehicle alone: no pair to examine (this raised an IndexError).
+    assert find_conflicts(as_trajectories(_straight("alone", 0.0, 0.0, 20.0, 0.0, 0))) == []
+    # Vehicles never near each other at the same time: no pair either.
+    far_apart = _straight("here", 0.0, 0.0, 20.0, 0.0, 0) + _straight(
+        "there", 5000.0, 0.0, 20.0, 0.0, 0
+    )
+    assert find_conflicts(as_trajectories(far_apart)) == []
 
 
 def test_near_pairs_match_brute_force() -> None:

@@ -458,6 +458,8 @@ def find_conflicts(data: Trajectories, settings: ConflictSettings | None = None)
     s = _sorted(data, settings)
     _, step = np.unique(np.round(s.stamp, 6), return_inverse=True)
     i, j = near_pairs(step.astype(np.int64), s.x, s.y, s.vehicle, settings.search_radius_m)
+    if len(i) == 0:  # one vehicle, or none ever near another
+        return []
     ttc = time_to_collision(s.state(i), s.state(j))
     close = ttc <= settings.max_ttc_s
     pair = s.vehicle[i] * len(s.names) + s.vehicle[j]
