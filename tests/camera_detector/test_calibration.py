@@ -159,6 +159,22 @@ def test_reference_objects_give_positions_and_velocities() -> None:
     assert reference.at(50.0) is None
 
 
+def test_a_lidar_box_completed_from_its_far_end_is_no_reference() -> None:
+    """A box cut by the LiDAR's field of view under the mast is placed from a slice of the
+    vehicle: the self-calibrations do not take it as where the vehicle is."""
+    traffic = Traffic(1)
+    whole, cut = ReferenceObjects(), ReferenceObjects()
+    rng = np.random.default_rng(0)
+    for step in range(40):
+        batch = _lidar_batch(traffic, 100.0 + step / 20.0, rng)
+        whole.add(batch)
+        flagged = [d.model_copy(update={"completed_from_far_end": True}) for d in batch.detections]
+        cut.add(batch.model_copy(update={"detections": flagged}))
+    seen, unseen = whole.at(101.95), cut.at(101.95)
+    assert seen is not None and len(seen.xy_m) >= 3
+    assert unseen is not None and len(unseen.xy_m) == 0
+
+
 def test_the_camera_learns_its_rotation_and_its_late_clock() -> None:
     true_camera = _moved(CAMERA, yaw=1.3, pitch=-0.6, roll=0.25, dz=0.05)
     calibration = CameraSelfCalibration(SITE.site_id, CAMERA, SHAPES, SensorCalibrationSettings())
