@@ -466,50 +466,44 @@ def associate(
     return clear
 
 
-def along_road_speed(
-    radial_speed_mps: float,
-    bearing_rad: float,
-    road_heading_rad: float | None,
-    min_speed_cosine: float,
-    elevation_cosine: float = 1.0,
-) -> float | None:
-    """Speed from a radial speed (module step 5).
-
-    Parameters
-    ----------
-    radial_speed_mps : float
-        Radial speed [m/s], positive away from the radar.
-    bearing_rad : float
-        Site bearing of the line of sight [rad].
-    road_heading_rad : float or None
-        Direction of travel [rad], site frame; None when unknown.
-    min_speed_cosine : float
-        Smallest ``|cos e cos(bearing - road_heading)|`` at which the conversion is made.
-    elevation_cosine : float
-        ``cos e = rho / r`` of the line of sight's dip from the radar to the echo (1: level).
-
-    Returns
-    -------
-    float or None
-        ``v_r / (cos e cos(bearing - road_heading))`` [m/s], positive in the direction of
-        travel; ``|v_r| / cos e`` without a road heading; None when the line of sight is nearly
-        across the vehicle's motion (or, without a road heading, nearly vertical).
-    """
-    if road_heading_rad is None:
-        if elevation_cosine < min_speed_cosine:
-            return None
-        return abs(radial_speed_mps) / elevation_cosine
-    cosine = elevation_cosine * math.cos(bearing_rad - road_heading_rad)
-    if abs(cosine) < min_speed_cosine:
-        return None
-    return radial_speed_mps / cosine
-
-
 def elevation_cosine(radar: RadarPoint) -> float:
     """``cos e = rho / r`` of a radar point's line of sight (1 for a zero slant range)."""
     if radar.slant_range_m <= 0.0:
         return 1.0
     return min(1.0, radar.horizontal_range_m / radar.slant_range_m)
+
+
+def along_road_speed(
+    radar: RadarPoint, road_heading_rad: float | None, min_speed_cosine: float
+) -> float | None:
+    """Speed from a radar point's radial speed (module step 5), along its own line of sight.
+
+    Parameters
+    ----------
+    radar : RadarPoint
+        Its radial speed ``v_r`` [m/s] (positive away from the radar), site bearing ``theta``
+        and ``cos e`` (:func:`elevation_cosine`: the line's dip from the radar to the echo).
+    road_heading_rad : float or None
+        Direction of travel [rad], site frame; None when unknown.
+    min_speed_cosine : float
+        Smallest ``|cos e cos(theta - road_heading)|`` at which the conversion is made.
+
+    Returns
+    -------
+    float or None
+        ``v_r / (cos e cos(theta - road_heading))`` [m/s], positive in the direction of
+        travel; ``|v_r| / cos e`` without a road heading; None when the line of sight is nearly
+        across the vehicle's motion (or, without a road heading, nearly vertical).
+    """
+    cos_elevation = elevation_cosine(radar)
+    if road_heading_rad is None:
+        if cos_elevation < min_speed_cosine:
+            return None
+        return abs(radar.radial_speed_mps) / cos_elevation
+    cosine = cos_elevation * math.cos(radar.bearing_rad - road_heading_rad)
+    if abs(cosine) < min_speed_cosine:
+        return None
+    return radar.radial_speed_mps / cosine
 
 
 def fuse_pair(
@@ -550,8 +544,7 @@ def fuse_pair(
     camera_bearing = math.atan2(dy, dx)
     camera_rho_m = max(math.hypot(dx, dy), settings.min_horizontal_range_m)
     # The echo moves level: its horizontal range changes by v_r / cos e (rho^2 = r^2 - h^2).
-    cos_elevation = elevation_cosine(radar)
-    rho_rate_mps = radar.radial_speed_mps / max(cos_elevation, settings.min_speed_cosine)
+    rho_rate_mps = radar.radial_speed_mps / max(elevation_cosine(radar), settings.min_speed_cosine)
     radar_rho_m = max(0.0, radar.horizontal_range_m + rho_rate_mps * dt_s)
     radar_rho_jacobian_m = max(radar_rho_m, settings.min_horizontal_range_m)
     _, normal = _unit(camera_bearing)
@@ -574,13 +567,7 @@ def fuse_pair(
         covariance_m2=covariance,
         object_class=camera.object_class,
         score=camera.score,
-        speed_mps=along_road_speed(
-            radar.radial_speed_mps,
-            radar.bearing_rad,
-            road_heading_rad,
-            settings.min_speed_cosine,
-            cos_elevation,
-        ),
+        speed_mps=along_road_speed(radar, road_heading_rad, settings.min_speed_cosine),
         camera_local_id=camera.local_id,
         radar_target_index=radar.target_index,
     )
@@ -641,13 +628,7 @@ def _radar_only(
         covariance_m2=covariance,
         object_class=VehicleClass.UNKNOWN,
         score=settings.radar_only_score,
-        speed_mps=along_road_speed(
-            radar.radial_speed_mps,
-            radar.bearing_rad,
-            road_heading_rad,
-            settings.min_speed_cosine,
-            elevation_cosine(radar),
-        ),
+        speed_mps=along_road_speed(radar, road_heading_rad, settings.min_speed_cosine),
         camera_local_id=None,
         radar_target_index=radar.target_index,
     )

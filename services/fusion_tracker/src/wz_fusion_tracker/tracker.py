@@ -766,7 +766,7 @@ class MultiTargetTracker:
             table.class_columns([m.object_class for m in matched]),
             np.fromiter([m.score for m in matched], np.float64, k),
             # a length completed from the far end is the class's guess grown from a part (the
-            # near end unseen), not a measure of this vehicle: it does not enter the track's
+            # near end unseen), not a measure of this vehicle: it does not enter the track's size
             np.fromiter(
                 [
                     math.nan if m.length_m is None or m.completed_from_far_end else m.length_m
