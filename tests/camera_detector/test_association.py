@@ -130,7 +130,7 @@ def test_core_imports_no_io_library() -> None:
 
 
 def simulated_echo(
-    x_m: float, y_m: float, speed_mps: float, heading_rad: float
+    x_m: float, y_m: float, speed_mps: float, heading_rad: float, mount: SensorMount = RADAR
 ) -> tuple[RadarTarget, np.ndarray]:
     """The simulator's noise-free target of a car at ``(x_m, y_m)``, and its reflection point."""
     truth = VehicleTruth(
@@ -150,7 +150,7 @@ def simulated_echo(
         offset_m=0.0,
         driver_profile="normal",
     )
-    echoes = RadarModel(RADAR, WEATHER_PRESETS["day"], seed=0, site_id="us75").echoes([truth])
+    echoes = RadarModel(mount, WEATHER_PRESETS["day"], seed=0, site_id="us75").echoes([truth])
     target = RadarTarget(
         range_m=float(echoes.range_m[0]),
         azimuth_rad=float(echoes.azimuth_rad[0]),
@@ -323,17 +323,10 @@ def test_moving_radar_target_far_from_cameras_becomes_radar_only() -> None:
     assert radar_only.camera_local_id is None
     assert radar_only.radar_target_index == 0
     assert radar_only.score == SETTINGS.radar_only_score
-    # The echo (8, 850) is a near face: the centre of a car-sized vehicle heading north is
-    # about half a length further from the radar along its line of sight.
+    # The echo (8, 850) is the centre of the face nearest the radar (north, up the road): the
+    # front of a car-sized vehicle heading north, whose centre is half a length behind it.
+    assert (radar_only.x_m, radar_only.y_m) == pytest.approx((8.0, 850.0 - 2.3), abs=1e-6)
     bearing = bearing_from_radar(8.0, 850.0)
-    setback = max(
-        2.3 * abs(math.cos(bearing - ROAD_HEADING_RAD)),
-        0.9 * abs(math.sin(bearing - ROAD_HEADING_RAD)),
-    )
-    assert setback == pytest.approx(2.3, abs=0.01)
-    assert (radar_only.x_m, radar_only.y_m) == pytest.approx(
-        (8.0 + setback * math.cos(bearing), 850.0 + setback * math.sin(bearing)), abs=1e-6
-    )
     assert radar_only.speed_mps is not None and radar_only.speed_mps > 19.0
     assert_spd(radar_only.covariance_m2)
     along = np.array([math.cos(bearing), math.sin(bearing)])
@@ -449,7 +442,11 @@ def test_the_echo_is_on_the_near_face_and_the_fused_point_at_the_centre() -> Non
         length_m=length_m,
         width_m=width_m,
     )
-    assert association.reflection_setback_m(truck, bearing) == pytest.approx(0.5 * length_m)
+    radar_xy = (RADAR.pose.x_m, RADAR.pose.y_m)
+    assert association.face_offset((x_m, y_m), radar_xy, heading, length_m, width_m) == (
+        pytest.approx(face_x - x_m, abs=1e-9),
+        pytest.approx(face_y - y_m, abs=1e-9),
+    )
     scan = scan_of(radar_target(face_x, face_y))
 
     (fused,) = by_source(fuse_camera_radar([truck], scan, RADAR, SETTINGS), "camera+radar")
@@ -463,13 +460,84 @@ def test_the_echo_is_on_the_near_face_and_the_fused_point_at_the_centre() -> Non
     )
 
 
-def test_setback_seen_side_on_is_half_the_width() -> None:
-    car = CameraObject(
-        0, 0.0, 0.0, np.eye(2), VehicleClass.CAR, 0.9, heading_rad=0.0, length_m=4.6, width_m=1.8
+def test_the_nearer_face_is_the_end_or_the_side() -> None:
+    """A 4.6 x 1.8 m car heading east at the origin: seen from far to the north, its side; from
+    far at 45 degrees, its end (its centre, 2.3 m along, is nearer than the side's at 0.9 m
+    across); from 5 m north and 1 m ahead, alongside, its side again."""
+
+    def offset(sensor_xy: tuple[float, float]) -> tuple[float, float]:
+        return association.face_offset((0.0, 0.0), sensor_xy, 0.0, 4.6, 1.8)
+
+    assert offset((0.0, 100.0)) == pytest.approx((0.0, 0.9))
+    assert offset((100.0, 100.0)) == pytest.approx((2.3, 0.0))
+    assert offset((-100.0, -90.0)) == pytest.approx((-2.3, 0.0))
+    assert offset((1.0, 5.0)) == pytest.approx((0.0, 0.9))
+
+
+def test_the_centre_from_an_echo_inverts_the_face_model() -> None:
+    """From every side and distance, the centre found from a vehicle's nearest-face echo is the
+    vehicle's centre (the inverse of :func:`face_offsets`), or, seen broadside where a side's
+    centre and an end's a half-length on both fit, one of the two it names."""
+    rng = np.random.default_rng(3)
+    unambiguous = 0
+    for _ in range(500):
+        heading = float(rng.uniform(-math.pi, math.pi))
+        length, width = float(rng.uniform(3.5, 17.0)), float(rng.uniform(1.6, 2.6))
+        angle, distance = float(rng.uniform(-math.pi, math.pi)), float(rng.uniform(2.0, 200.0))
+        sensor = (distance * math.cos(angle), distance * math.sin(angle))
+        centre = (float(rng.uniform(-5.0, 5.0)), float(rng.uniform(-5.0, 5.0)))
+        dx, dy = association.face_offset(centre, sensor, heading, length, width)
+        found, (gx, gy) = association.centre_from_echo(
+            (centre[0] + dx, centre[1] + dy), sensor, heading, length, width
+        )
+        if math.hypot(sensor[0] - centre[0], sensor[1] - centre[1]) <= 0.5 * length + 1.0:
+            continue  # beside or under the sensor: no face is "nearest" the same way
+        if (gx, gy) == (0.0, 0.0):
+            assert found == pytest.approx(centre, abs=1e-6)
+            unambiguous += 1
+        else:  # two centres fit: the truth is one of them, the midpoint -+ the half-gap
+            assert centre in (
+                pytest.approx((found[0] + gx, found[1] + gy), abs=1e-6),
+                pytest.approx((found[0] - gx, found[1] - gy), abs=1e-6),
+            )
+    assert unambiguous > 400
+
+
+# A traffic radar on its own pole beside the road, 8 m up and 9 m aside of the near lane
+# (generated site 10602): near it, the line of sight crosses the road at a steep angle.
+SIDE_RADAR = SensorMount(
+    sensor_id="radar-pole",
+    pose=Pose(x_m=-3.3, y_m=980.2, z_m=8.0, yaw_deg=-60.0),
+    intrinsics=RADAR_INTRINSICS,
+    rate_hz=15.0,
+)
+
+
+@pytest.mark.parametrize("mount", [RADAR, SIDE_RADAR], ids=["mast", "pole"])
+@pytest.mark.parametrize("distance_m", [12.0, 20.0, 40.0, 120.0])
+def test_position_from_the_simulated_echo_near_and_far(
+    mount: SensorMount, distance_m: float
+) -> None:
+    """The simulator's echo of a car is the centre of its face nearest the radar; the centre
+    found from it, alone or paired with a camera object at the car's centre, is the car's.
+
+    Moving the echo along the line of sight by the face's half-length (as before 2026-11-30)
+    put radar-only objects 0.9 m across the road and 0.4 m along it 15-20 m before a pole
+    radar 9 m aside (generated site 10602): a car's front face is not on that line."""
+    x_m, y_m = 5.5, mount.pose.y_m - distance_m
+    target, reflection = simulated_echo(x_m, y_m, VEHICLE_SPEED_MPS, ROAD_HEADING_RAD, mount)
+    settings = AssociationSettings(
+        target_height_m=float(reflection[2]), min_radar_only_speed_mps=0.0
     )
-    assert association.reflection_setback_m(car, math.pi / 2) == pytest.approx(0.9)
-    # At 45 degrees the end face's centre (2.3 cos 45) is nearer than the side's (0.9 sin 45).
-    assert association.reflection_setback_m(car, math.pi / 4) == pytest.approx(2.3 / math.sqrt(2))
+    (radar_only,) = fuse_camera_radar([], scan_of(target), mount, settings, ROAD_HEADING_RAD)
+    # the car is 4.5 m long, a radar-only object is taken for a 4.6 m one
+    assert (radar_only.x_m, radar_only.y_m) == pytest.approx((x_m, y_m), abs=0.06)
+    camera = CameraObject(
+        0, x_m, y_m, np.diag([4.0, 0.04]), VehicleClass.CAR, 0.9, ROAD_HEADING_RAD, 4.5, 1.8
+    )
+    (fused,) = fuse_camera_radar([camera], scan_of(target), mount, settings, ROAD_HEADING_RAD)
+    assert fused.source == "camera+radar"
+    assert (fused.x_m, fused.y_m) == pytest.approx((x_m, y_m), abs=1e-6)
 
 
 def test_radar_range_is_carried_to_the_frame_time_with_the_radial_speed() -> None:

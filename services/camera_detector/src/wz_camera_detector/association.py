@@ -20,17 +20,15 @@ Inputs: camera objects already ranged onto the road (site-frame ground positions
          = (sigma_r r / rho)^2 u u^T + (rho sigma_a)^2 n n^T           [m^2]
 
 2. **Gate** (:func:`gate_distances`). The radar echoes from the centre of a vehicle's nearest
-   visible face, the camera object is the vehicle's centre: with the camera's heading ``psi``
-   and class size ``L x W``, the face centre is nearer the radar along its line of sight ``u``
-   by the setback (:func:`reflection_setback_m`)::
-
-       s = max((L / 2) |u . e_psi|, (W / 2) |u . n_psi|)     (end face or side face)
-
-   about half a length for an approaching vehicle (2.3 m for a car, 8 m for a truck). Each
-   camera object is compared at its expected echo point ``c - s u``. Then the squared
-   Mahalanobis distance between that point ``c`` and radar point ``p``, with both covariances
-   and an extra variance along the radar's line of sight for what the setback misses (size and
-   heading guesses, the echo wandering over the face)::
+   visible face (:func:`face_offsets`, the simulator's echo model), the camera object is the
+   vehicle's centre ``c``: with the camera's heading ``e`` (its left normal ``n``) and class
+   size ``L x W``, the echo is at ``c + f``, ``f`` the end face's ``+-(L/2) e`` or the side
+   face's ``+-(W/2) n``, whichever centre is nearer the radar (about half a length towards the
+   radar for an approaching vehicle: 2.3 m for a car, 8 m for a truck). Each camera object is
+   compared at that expected echo point. Then the squared Mahalanobis distance between that
+   point ``c`` and radar point ``p``, with both covariances and an extra variance along the
+   radar's line of sight ``u`` for what the face model misses (size and heading guesses, the
+   echo wandering over the face)::
 
        S = P_c + R + sigma_extent^2 u u^T,    d^2 = (c - p)^T S^-1 (c - p)
 
@@ -52,14 +50,18 @@ Inputs: camera objects already ranged onto the road (site-frame ground positions
    its own, honest uncertainty.
 
 4. **Fuse** each pair (:func:`fuse_pair`): range and radial speed from the radar, bearing and
-   class from the camera. The fused point is built in the radar's polar frame: the radar's
-   horizontal range ``rho_r`` plus the setback ``s`` (the echo is on the near face; the
-   position is the centre) along the camera's bearing ``theta_c`` seen from the radar,
-   ``p_f = p_s + (rho_r + s) u_c``. Its covariance models range and bearing as independent, the
-   range error being the radar's and the bearing error the camera's::
+   class from the camera. The fused point is built in the radar's polar frame: on the
+   camera's bearing ``u_c`` seen from the radar, at the distance ``t`` whose echo
+   ``t u_c + f`` (``f`` the face offset of step 2) is at the radar's horizontal range
+   ``rho_r`` (:func:`centre_range_m`): ``p_f = p_s + t u_c``. Head-on, ``t = rho_r + L/2``.
+   Moving the echo along the line of sight instead (as before 2026-11-30) put a car's centre
+   up to 0.9 m across the road where the line of sight crosses it steeply: 15-20 m before a
+   radar on a pole 9 m aside of the lanes (generated site 10602). Its covariance models range
+   and bearing as independent, the range error being the radar's and the bearing error the
+   camera's::
 
        sigma_rho^2   = (sigma_r r / rho_r)^2 + sigma_extent^2      (radar range, horizontal,
-                                                                    and the echo's setback)
+                                                                    and the face model's error)
        sigma_theta^2 = n_c^T P_c n_c / rho_c^2                      (camera bearing, rad^2)
        P_f = sigma_rho^2 u_c u_c^T + (rho_r^2 sigma_theta^2) n_c n_c^T
 
@@ -87,9 +89,10 @@ Inputs: camera objects already ranged onto the road (site-frame ground positions
    unmatched radar target becomes ``"radar"`` (class unknown, score ``radar_only_score``) when it
    moves (``|v_r| > min_radar_only_speed_mps``) and is strong enough
    (``rcs_dbsm >= min_radar_only_rcs_dbsm``): a vehicle the camera misses at night or in fog.
-   Its echo is moved to the centre of a car-sized vehicle on the road's heading, and its
-   variance along the road widened by ``radar_only_size_std_m^2`` (it could be a truck: a
-   vehicle's unknown length lies along its heading, whatever the line of sight).
+   Its echo is taken for the nearest face of a car-sized vehicle on the road's heading and
+   moved to that vehicle's centre (:func:`centre_from_echo`), and its variance along the road
+   widened by ``radar_only_size_std_m^2`` (it could be a truck: a vehicle's unknown length lies
+   along its heading, whatever the line of sight).
    An unmatched echo on the footprint of a camera object (its class's typical length and width
    on its heading, plus ``echo_on_body_margin_m``) is another echo of that vehicle, not a
    vehicle of its own, and dropped: a 16.5 m truck seen from the side near the mast returns
@@ -110,6 +113,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
+import numpy.typing as npt
 from pydantic import BaseModel, ConfigDict, Field
 from scipy.optimize import linear_sum_assignment
 
@@ -142,7 +146,7 @@ class AssociationSettings(BaseModel):
     #: 1.8 m wide), while the camera's bearing is the box's middle.
     reflection_width_std_m: float = Field(default=0.5, ge=0.0)
     #: Std of the fused centre along the line of sight once the echo is set back by the
-    #: class's half-length [m]: the setback's error (length, heading, which face echoed).
+    #: class's half-length [m]: the face model's error (length, heading, which face echoed).
     #: Measured in simulation against truth: 0.26-0.42 m RMSE within 125 m.
     centre_std_m: float = Field(default=0.35, ge=0.0)
     #: Height of the radar reflection above the road [m] (box centre height of a car).
@@ -154,7 +158,7 @@ class AssociationSettings(BaseModel):
     #: ... and its RCS is at least this [dBsm] (simulated clutter sits around -10 dBsm).
     min_radar_only_rcs_dbsm: float = Field(default=0.0, allow_inf_nan=False)
     #: Std of a radar-only object's centre along the road, for not knowing its length (the
-    #: echo is moved by a car's setback; a truck's centre is 6 m further) [m].
+    #: echo is taken for a car's nearest face; a truck's centre is 6 m further) [m].
     radar_only_size_std_m: float = Field(default=3.0, ge=0.0)
     #: An unmatched echo within this of a camera object's footprint (its class's typical size
     #: on its heading) is taken for another echo of that vehicle and dropped [m]: the radar's
@@ -166,7 +170,7 @@ class AssociationSettings(BaseModel):
     min_speed_cosine: float = Field(default=0.2, gt=0.0, le=1.0)
 
 
-#: Size assumed for a radar-only object (a car), for its echo's setback [m].
+#: Size assumed for a radar-only object (a car), for its echo's face [m].
 RADAR_ONLY_LENGTH_M = 4.6
 RADAR_ONLY_WIDTH_M = 1.8
 
@@ -188,9 +192,10 @@ class CameraObject:
     score
         Detector score in [0, 1].
     heading_rad
-        Assumed heading [rad], CCW from east (the road's); None: no reflection setback.
+        Assumed heading [rad], CCW from east (the road's); None: the echo is taken at the
+        centre.
     length_m, width_m
-        Assumed size [m] (the class's typical one), for the radar's reflection setback.
+        Assumed size [m] (the class's typical one), for the radar's echo (its nearest face).
     """
 
     local_id: int
@@ -237,6 +242,14 @@ class RadarPoint:
     bearing_rad: float
     radial_speed_mps: float
     rcs_dbsm: float
+
+    @property
+    def sensor_xy_m(self) -> tuple[float, float]:
+        """The radar's ground position [m]: the point ``rho`` back along the line of sight."""
+        return (
+            self.x_m - self.horizontal_range_m * math.cos(self.bearing_rad),
+            self.y_m - self.horizontal_range_m * math.sin(self.bearing_rad),
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -346,34 +359,123 @@ def radar_targets_to_site(
     return points
 
 
-def reflection_setback_m(camera: CameraObject, bearing_rad: float) -> float:
-    """How much nearer the radar the echo (nearest face centre) is than the centre [m] (step 2).
+def face_offsets(
+    to_sensor_xy_m: npt.ArrayLike,
+    heading_rad: npt.ArrayLike,
+    length_m: npt.ArrayLike,
+    width_m: npt.ArrayLike,
+) -> F64:
+    """From vehicles' centres to the centres of their faces nearest a sensor [m], shape (K, 2).
 
-    ``max((L / 2) |u . e_psi|, (W / 2) |u . n_psi|)`` with ``u`` the radar's line of sight at
-    ``bearing_rad``; 0 without a heading.
+    A vehicle's footprint turns two faces to a sensor: an end face (``+-L/2`` along its heading
+    ``e``) and a side face (``+-W/2`` across it, ``n``); the echo comes from the one whose centre
+    is nearer (the echo model of :mod:`wz_simulator.sensors.radar`). With ``t`` the sensor seen
+    from the centre, ``t_e = t . e`` and ``t_n = t . n``, the end face's centre is the nearer when
+    ``(|t_e| - L/2)^2 + t_n^2 <= t_e^2 + (|t_n| - W/2)^2``, that is
+    ``L |t_e| - W |t_n| >= (L^2 - W^2) / 4``.
+
+    Parameters
+    ----------
+    to_sensor_xy_m
+        The sensor's position minus each vehicle's centre [m], shape (K, 2) or (2,).
+    heading_rad, length_m, width_m
+        Each vehicle's heading [rad] and size [m], scalars or shape (K,).
     """
-    if camera.heading_rad is None:
-        return 0.0
-    return setback_m(bearing_rad, camera.heading_rad, camera.length_m, camera.width_m)
+    t = np.atleast_2d(np.asarray(to_sensor_xy_m, dtype=np.float64))
+    heading = np.asarray(heading_rad, dtype=np.float64)
+    half_l = 0.5 * np.asarray(length_m, dtype=np.float64)
+    half_w = 0.5 * np.asarray(width_m, dtype=np.float64)
+    e = np.stack([np.cos(heading), np.sin(heading)], axis=-1).reshape(-1, 2)
+    n = np.stack([-e[:, 1], e[:, 0]], axis=1)
+    t_e = np.einsum("ki,ki->k", t, e)
+    t_n = np.einsum("ki,ki->k", t, n)
+    end = half_l * np.abs(t_e) - half_w * np.abs(t_n) >= half_l**2 - half_w**2
+    sign_e = np.where(t_e >= 0.0, 1.0, -1.0)
+    sign_n = np.where(t_n >= 0.0, 1.0, -1.0)
+    offsets: F64 = np.where(
+        end[:, None], (sign_e * half_l)[:, None] * e, (sign_n * half_w)[:, None] * n
+    )
+    return offsets
 
 
-def setback_m(bearing_rad: float, heading_rad: float, length_m: float, width_m: float) -> float:
-    """``max((L / 2) |u . e_psi|, (W / 2) |u . n_psi|)`` for a line of sight at ``bearing_rad``."""
-    along = abs(math.cos(bearing_rad - heading_rad))
-    across = abs(math.sin(bearing_rad - heading_rad))
-    return max(0.5 * length_m * along, 0.5 * width_m * across)
+def face_offset(
+    centre_xy_m: tuple[float, float],
+    sensor_xy_m: tuple[float, float],
+    heading_rad: float,
+    length_m: float,
+    width_m: float,
+) -> tuple[float, float]:
+    """:func:`face_offsets` of one vehicle centred at ``centre_xy_m`` [m]."""
+    to_sensor = (sensor_xy_m[0] - centre_xy_m[0], sensor_xy_m[1] - centre_xy_m[1])
+    dx, dy = face_offsets(to_sensor, heading_rad, length_m, width_m)[0].tolist()
+    return dx, dy
+
+
+def centre_from_echo(
+    echo_xy_m: tuple[float, float],
+    sensor_xy_m: tuple[float, float],
+    heading_rad: float,
+    length_m: float,
+    width_m: float,
+) -> tuple[tuple[float, float], tuple[float, float]]:
+    """The centre of a vehicle whose nearest face's centre (:func:`face_offsets`) is at
+    ``echo_xy_m`` [m], and half the gap to the other possible centre.
+
+    The centre is the echo moved back by half a length along the heading (end face) or by
+    half a width across it (side face), on the side away from the sensor: whichever of the
+    two is consistent (its nearest face is the one assumed). Seen from a broad angle both can
+    be (a long vehicle's side centre, or the end of one standing a half-length further on):
+    then the centre is their midpoint and the half-gap ``g`` says how far either lies from it
+    (the caller adds ``g g^T`` to the variance). Where neither is (a sensor within the
+    footprint's reach: under the mast) the end face is taken, with ``g = 0``.
+
+    Returns
+    -------
+    centre, half_gap
+        ``(x, y)`` [m] and ``(gx, gy)`` [m] (zeros when only one centre fits).
+    """
+    ex, ey = echo_xy_m
+    e = (math.cos(heading_rad), math.sin(heading_rad))
+    n = (-e[1], e[0])
+    to_sensor = (sensor_xy_m[0] - ex, sensor_xy_m[1] - ey)
+    sign_e = 1.0 if to_sensor[0] * e[0] + to_sensor[1] * e[1] >= 0.0 else -1.0
+    sign_n = 1.0 if to_sensor[0] * n[0] + to_sensor[1] * n[1] >= 0.0 else -1.0
+    end = (ex - sign_e * 0.5 * length_m * e[0], ey - sign_e * 0.5 * length_m * e[1])
+    side = (ex - sign_n * 0.5 * width_m * n[0], ey - sign_n * 0.5 * width_m * n[1])
+    fits = []
+    for centre in (end, side):
+        dx, dy = face_offset(centre, sensor_xy_m, heading_rad, length_m, width_m)
+        fits.append(math.hypot(centre[0] + dx - ex, centre[1] + dy - ey) < 1e-6)
+    if fits[0] and fits[1]:
+        middle = (0.5 * (end[0] + side[0]), 0.5 * (end[1] + side[1]))
+        return middle, (end[0] - middle[0], end[1] - middle[1])
+    return (side if fits[1] and not fits[0] else end), (0.0, 0.0)
 
 
 def expected_echo(camera: CameraObject, radar_xy_m: tuple[float, float]) -> CameraObject:
-    """The camera object moved to where the radar should see it: ``c - s u`` (step 2)."""
-    dx, dy = camera.x_m - radar_xy_m[0], camera.y_m - radar_xy_m[1]
-    distance = math.hypot(dx, dy)
-    if distance <= 0.0:
+    """The camera object moved to where the radar should see it: the centre of its face
+    nearest the radar (step 2, :func:`face_offsets`); unmoved without a heading."""
+    if camera.heading_rad is None:
         return camera
-    setback = min(reflection_setback_m(camera, math.atan2(dy, dx)), distance)
-    return dataclasses.replace(
-        camera, x_m=camera.x_m - setback * dx / distance, y_m=camera.y_m - setback * dy / distance
+    dx, dy = face_offset(
+        (camera.x_m, camera.y_m), radar_xy_m, camera.heading_rad, camera.length_m, camera.width_m
     )
+    return dataclasses.replace(camera, x_m=camera.x_m + dx, y_m=camera.y_m + dy)
+
+
+def centre_range_m(radar_rho_m: float, bearing_rad: float, face_xy_m: tuple[float, float]) -> float:
+    """How far from the radar, along ``bearing_rad``, a vehicle's centre lies whose echo
+    (its centre plus ``face_xy_m``, :func:`face_offsets`) is ``radar_rho_m`` away: ``t`` with
+    ``|t u + f| = rho``, ``t = -(u . f) + sqrt(rho^2 - |f|^2 + (u . f)^2)``. Where no ``t``
+    solves it (an echo nearer than the face's reach across the bearing: under the mast), the
+    echo's range plus the offset's part along the bearing."""
+    u = (math.cos(bearing_rad), math.sin(bearing_rad))
+    along = u[0] * face_xy_m[0] + u[1] * face_xy_m[1]
+    across_sq = face_xy_m[0] ** 2 + face_xy_m[1] ** 2 - along * along
+    discriminant = radar_rho_m * radar_rho_m - across_sq
+    if discriminant < 0.0:
+        return radar_rho_m - along
+    return -along + math.sqrt(discriminant)
 
 
 def gate_distances(
@@ -535,7 +637,8 @@ def fuse_pair(
     Returns
     -------
     FusedObject
-        ``source == "camera+radar"``, position ``p_s + (rho_r + s) u_c`` and covariance
+        ``source == "camera+radar"``, position ``p_s + t u_c`` (:func:`centre_range_m`) and
+        covariance
         ``sigma_rho^2 u_c u_c^T + rho_r^2 sigma_theta^2 n_c n_c^T`` [m^2].
     """
     settings = settings or AssociationSettings()
@@ -554,12 +657,22 @@ def fuse_pair(
         intrinsics.range_noise_std_m
         * max(radar.slant_range_m, radar_rho_jacobian_m)
         / radar_rho_jacobian_m
-    ) ** 2 + settings.centre_std_m**2  # where on the near face it echoed, the setback's
+    ) ** 2 + settings.centre_std_m**2  # where on the near face it echoed, the face model's
     # guess of length and heading: the centre is that uncertain along the range
     covariance = polar_covariance(
         camera_bearing, range_variance_m2, radar_rho_jacobian_m**2 * bearing_variance_rad2
     )
-    centre_rho_m = radar_rho_m + reflection_setback_m(camera, camera_bearing)
+    if camera.heading_rad is None:
+        face = (0.0, 0.0)
+    else:
+        face = face_offset(
+            (camera.x_m, camera.y_m),
+            (mount.pose.x_m, mount.pose.y_m),
+            camera.heading_rad,
+            camera.length_m,
+            camera.width_m,
+        )
+    centre_rho_m = centre_range_m(radar_rho_m, camera_bearing, face)
     return FusedObject(
         source="camera+radar",
         x_m=mount.pose.x_m + centre_rho_m * math.cos(camera_bearing),
@@ -614,13 +727,19 @@ def _radar_only(
     # truck's centre is 8 m behind its face, a car's 2.3 m).
     x_m, y_m, covariance = radar.x_m, radar.y_m, radar.covariance_m2
     if road_heading_rad is not None:
-        setback = setback_m(
-            radar.bearing_rad, road_heading_rad, RADAR_ONLY_LENGTH_M, RADAR_ONLY_WIDTH_M
+        (x_m, y_m), half_gap = centre_from_echo(
+            (x_m, y_m),
+            radar.sensor_xy_m,
+            road_heading_rad,
+            RADAR_ONLY_LENGTH_M,
+            RADAR_ONLY_WIDTH_M,
         )
-        along, _ = _unit(radar.bearing_rad)
-        x_m, y_m = x_m + setback * along[0], y_m + setback * along[1]
         road, _ = _unit(road_heading_rad)
-        covariance = covariance + settings.radar_only_size_std_m**2 * np.outer(road, road)
+        covariance = (
+            covariance
+            + settings.radar_only_size_std_m**2 * np.outer(road, road)
+            + np.outer(half_gap, half_gap)
+        )
     return FusedObject(
         source="radar",
         x_m=x_m,

@@ -36,8 +36,8 @@ unobservable (the road is straight), and the camera inherits it.
 Radar (:class:`~wz_camera_detector.radar_calibration.RadarSelfCalibration`)
 --------------------------------------------------------------------------
 A radar target is a range, an azimuth and a radial speed. Paired with the LiDAR's objects at
-``stamp - dt`` (each object's echo: the face nearest the radar,
-:func:`~wz_camera_detector.association.setback_m`), the bearing residual is the yaw
+``stamp - dt`` (each object's echo: the centre of its face nearest the radar,
+:func:`~wz_camera_detector.association.face_offsets`), the bearing residual is the yaw
 correction and the horizontal range residual is ``c + (u . v) dt`` for the object's velocity
 ``v`` along the line of sight ``u``: a linear fit of the yaw, the clock offset and a range
 offset ``c`` (the echo model's and the radar's position's), the pairs matched again between
@@ -143,7 +143,7 @@ class SensorCalibrationSettings(BaseModel):
     #: Radar: prior std of the range offset between its echoes and the LiDAR's objects [m].
     #: At one speed a late clock and a range offset look alike (``c + v dt``); only traffic of
     #: mixed speeds tells them apart. The fusion ranges with the same echo model
-    #: (:func:`~wz_camera_detector.association.setback_m`) and a radar's range is calibrated
+    #: (:func:`~wz_camera_detector.association.face_offsets`) and a radar's range is calibrated
     #: at the factory, so the offset is held near zero and the clock takes the rest.
     prior_range_m: float = Field(default=0.1, gt=0.0)
     #: Radar: pairs of one vehicle in successive scans are not independent (formal std

@@ -2,8 +2,8 @@
 
 A radar target is a range, an azimuth and a radial speed. Paired with the LiDAR's objects at
 ``stamp - dt`` (each object's echo: the centre of its face nearest the radar, the simulator's
-and a corner reflector's model), the bearing residual is the yaw correction and the horizontal
-range residual is ``c + (u . v) dt`` for the object's velocity ``v`` along the line of sight
+model, :func:`~wz_camera_detector.association.face_offsets`), the bearing residual is the yaw
+correction and the horizontal range residual is ``c + (u . v) dt`` for the object's velocity ``v`` along the line of sight
 ``u``; a late clock moves the bearing too, by the bearing's rate times ``dt`` (fast near the
 radar). The yaw, the clock and ``c`` are fitted on both residuals together (Gauss-Newton, the
 pairs matched again between steps). At one speed a late clock and a range offset look alike
@@ -24,6 +24,7 @@ from collections import deque
 
 import numpy as np
 
+from wz_camera_detector.association import face_offsets
 from wz_camera_detector.calibration import ReferenceObjects, SensorCalibrationSettings
 from wz_shared.arrays import F64, Bool
 from wz_shared.messages import CalibrationState, PoseCorrection, RadarScan, SensorCalibration
@@ -120,26 +121,14 @@ class RadarSelfCalibration:
     def _predicted(self, rows: F64, clock_s: float) -> tuple[F64, F64, F64]:
         """Bearing [rad] and horizontal range [m] of each row's echo, and its range rate
         [m/s]: the echo is the centre of the object's face nearest the radar (the simulator's
-        and a corner reflector's model; :func:`~wz_camera_detector.association.setback_m`)."""
+        model; :func:`~wz_camera_detector.association.face_offsets`)."""
         pose = self.nominal
         normal = self._boresight_normal()
         dt = rows[:, 9] - clock_s
         x = rows[:, 2] + rows[:, 4] * dt - (pose.x_m + self.shift_m * normal[0])
         y = rows[:, 3] + rows[:, 5] * dt - (pose.y_m + self.shift_m * normal[1])
-        heading = rows[:, 6]
-        along = np.stack([np.cos(heading), np.sin(heading)], 1)
-        across = np.stack([-along[:, 1], along[:, 0]], 1)
-        to_radar = -np.stack([x, y], 1)
         distance = np.hypot(x, y)
-        u = to_radar / np.maximum(distance, 1e-6)[:, None]
-        u_along = np.einsum("ij,ij->i", u, along)
-        u_across = np.einsum("ij,ij->i", u, across)
-        end_face = 0.5 * rows[:, 7] * np.abs(u_along) >= 0.5 * rows[:, 8] * np.abs(u_across)
-        face = np.where(
-            end_face[:, None],
-            0.5 * rows[:, 7:8] * np.sign(u_along)[:, None] * along,
-            0.5 * rows[:, 8:9] * np.sign(u_across)[:, None] * across,
-        )
+        face = face_offsets(-np.stack([x, y], 1), rows[:, 6], rows[:, 7], rows[:, 8])
         ex, ey = x + face[:, 0], y + face[:, 1]
         bearing = np.arctan2(ey, ex)
         rate = (x * rows[:, 4] + y * rows[:, 5]) / np.maximum(distance, 1e-6)
