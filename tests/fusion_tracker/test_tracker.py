@@ -493,6 +493,40 @@ def test_a_measurement_far_outside_the_gate_starts_a_tentative_track_and_leaves_
     assert (tracks[1].x_m, tracks[1].y_m) == (car[0] + 2.0, car[1] + 8.0)
 
 
+def test_the_sideways_acceleration_is_capped_for_long_predictions_only() -> None:
+    dt = np.array([0.05, 0.1, 1.0 / 3.0, 0.5, 1.2])
+    capped = tracker_module.capped_across(3.0, dt, 1.0)
+    np.testing.assert_allclose(capped, [3.0, 3.0, 3.0, 2.0, 1.0 / 1.2])
+    # the velocity change it allows across: sigma dt, at most the cap
+    np.testing.assert_allclose(capped * dt, [0.15, 0.3, 1.0, 1.0, 1.0])
+    np.testing.assert_allclose(tracker_module.capped_across(3.0, dt, 0.0), 3.0)
+
+
+@pytest.mark.parametrize("cap_mps", [0.0, SETTINGS.max_across_speed_change_mps])
+def test_a_track_unseen_for_a_second_does_not_take_a_car_one_lane_over(cap_mps: float) -> None:
+    """A car unseen for 1.2 s (the LiDAR's blind cone under a high mast) whose track's last
+    updates bent it 0.5 m/s sideways; a car in the next lane comes into view 3.6 m across and
+    4 m ahead of the prediction. With the sideways velocity change capped at a lane change's
+    (1 m/s), it is outside the track's gate and starts its own track; uncapped (1.5 m across
+    at 1 sigma) the track took it."""
+    settings = TrackerSettings(max_across_speed_change_mps=cap_mps, reorder_window_s=0.0)
+    tracker = MultiTargetTracker(settings, heading_at=lambda x, y: 0.0)
+    cov = np.eye(2) * LIDAR_STD_M**2
+    for k in range(20):  # 1 s at 20 Hz, drifting 0.5 m/s to the left
+        t = 0.05 * k
+        tracker.add(LIDAR, t, [Measurement(x_m=17.0 * t, y_m=0.5 * t, covariance_m2=cov)])
+    (track,) = tracker.tracks()
+    assert track.status == "confirmed"
+    last_s = 0.95
+    stamp = last_s + 1.2
+    predicted = tracker.tracks(stamp)[0]
+    other = Measurement(x_m=predicted.x_m + 4.0, y_m=predicted.y_m + 3.6, covariance_m2=cov)
+    tracker.add(LIDAR, stamp, [other])
+    tracks = tracker.tracks()
+    took_it = any(t.track_id == track.track_id and t.stamp_s == stamp for t in tracks)
+    assert took_it == (cap_mps == 0.0)
+
+
 def test_life_cycle_confirmation_coasting_and_deletion_times() -> None:
     # The sensor sends nothing after its last detection; that an outage does not end a
     # track sooner than max_outage_coast_s is the test of the silent sensors above.

@@ -31,6 +31,13 @@ class TrackerSettings(BaseModel):
     sigma_along_mps2: float = Field(default=_NOISE.sigma_along_mps2, gt=0.0)
     #: Acceleration std across travel [m/s^2]: lets a track follow a late, sharp merge.
     sigma_across_mps2: float = Field(default=_NOISE.sigma_across_mps2, gt=0.0)
+    #: Largest change of velocity across the road the process noise allows over one
+    #: prediction, however long [m/s]: about a lane change's peak sideways speed. The
+    #: acceleration across is held for a whole prediction step, so over a track's second of
+    #: coasting ``sigma_across`` alone let it move 1.5 m across (1 sigma) and take a car one
+    #: lane over; with this, ``sigma_across`` is ``min(sigma_across, this / dt)`` (unchanged
+    #: up to a third of a second). 0 turns it off.
+    max_across_speed_change_mps: float = Field(default=1.0, ge=0.0)
     #: "cv" (one model) or "imm" (steady + manoeuvre, :mod:`wz_fusion_tracker.imm`); the IMM
     #: cut the speed error but cost identity switches, so "cv".
     motion_model: Literal["cv", "imm"] = "cv"

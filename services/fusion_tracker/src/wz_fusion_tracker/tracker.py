@@ -53,7 +53,11 @@ processed by sensor id, so that too does not depend on arrival order.
 travel, ``sigma_across`` across it. The direction is the road's heading at the track's position
 when the tracker is given a ``heading_at(x, y)`` hook, otherwise the track's own velocity
 heading once it moves faster than ``heading_min_speed_mps``, otherwise isotropic with
-``sigma_along``.
+``sigma_along``. The acceleration is held over each prediction step (from a track's last
+update), so across the road it is ``min(sigma_across, max_across_speed_change_mps / dt)``
+(:func:`capped_across`): a vehicle's sideways velocity changes by about a lane change's peak
+sideways speed at most, however long it goes unseen. Uncapped, a track coasting for a second
+moved 1.5 m across (1 sigma) and its gate took a car one lane over.
 
 **Radar speed.** A detection's ``speed_mps`` (the radar's speed along the road) is used, when a
 ``heading_at`` hook gives the road heading ``h``, as a second measurement of the matched track:
@@ -79,6 +83,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+import numpy.typing as npt
 
 from wz_fusion_tracker.association import (
     association_cost,
@@ -134,6 +139,20 @@ _log = logging.getLogger(__name__)
 #: The gated pairs of a batch: track rows, measurement columns, squared Mahalanobis
 #: distances (inf where the radar speed forbids the pair) and ``ln det S``, (K,) each.
 _Gated = tuple[IntP, IntP, F64, F64]
+
+
+def capped_across(sigma_across_mps2: npt.ArrayLike, dt_s: npt.ArrayLike, cap_mps: float) -> F64:
+    """The acceleration std across the road for a prediction of ``dt_s`` [s]:
+    ``min(sigma_across, cap / dt)``, so that the velocity change across it allows
+    (``sigma dt``: the acceleration is held over the step) is at most ``cap_mps`` [m/s], about
+    a lane change's peak sideways speed, however long a track goes unseen; ``cap_mps`` 0:
+    ``sigma_across`` unchanged. Shape: ``sigma_across_mps2`` and ``dt_s`` broadcast."""
+    sigma = np.asarray(sigma_across_mps2, dtype=np.float64)
+    dt = np.asarray(dt_s, dtype=np.float64)
+    if cap_mps <= 0.0:
+        return np.broadcast_to(sigma, np.broadcast_shapes(sigma.shape, dt.shape)).copy()
+    capped: F64 = np.minimum(sigma, cap_mps / dt)
+    return capped
 
 
 @dataclass(order=True, slots=True)
@@ -700,8 +719,12 @@ class MultiTargetTracker:
             known = np.isfinite(road)
             heading = np.where(known, road, heading)
             oriented = oriented | known
+        # the sideways velocity change a step allows is capped (max_across_speed_change_mps)
+        dt = np.maximum(stamp_s - self._store.bank.stamps_s(slots), 1e-9)
+        cap = settings.max_across_speed_change_mps
         if settings.motion_model == "cv":
-            sigma_across = np.where(oriented, settings.sigma_across_mps2, settings.sigma_along_mps2)
+            sigma_across = capped_across(settings.sigma_across_mps2, dt, cap)
+            sigma_across = np.where(oriented, sigma_across, settings.sigma_along_mps2)
             return self._store.bank.predicted(
                 slots, stamp_s, settings.sigma_along_mps2, sigma_across, heading
             )
@@ -709,7 +732,11 @@ class MultiTargetTracker:
         along = np.array([settings.imm_steady_sigma_along_mps2, settings.sigma_along_mps2])
         across = np.where(
             oriented[:, None],
-            np.array([settings.imm_steady_sigma_across_mps2, settings.sigma_across_mps2]),
+            capped_across(
+                np.array([settings.imm_steady_sigma_across_mps2, settings.sigma_across_mps2]),
+                dt[:, None],
+                cap,
+            ),
             along,
         )
         return self._store.bank.predicted(slots, stamp_s, along, across, heading)
