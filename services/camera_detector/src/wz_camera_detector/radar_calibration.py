@@ -3,16 +3,16 @@
 A radar target is a range, an azimuth and a radial speed. Paired with the LiDAR's objects at
 ``stamp - dt`` (each object's echo: the centre of its face nearest the radar, the simulator's
 model, :func:`~wz_camera_detector.association.face_offsets`), the bearing residual is the yaw
-correction and the horizontal range residual is ``c + (u . v) dt`` for the object's velocity ``v`` along the line of sight
-``u``; a late clock moves the bearing too, by the bearing's rate times ``dt`` (fast near the
-radar). The yaw, the clock and ``c`` are fitted on both residuals together (Gauss-Newton, the
-pairs matched again between steps). At one speed a late clock and a range offset look alike
-in range, so ``c`` is held near zero (the fusion ranges with the same echo model); the near
-bearings tell the clock apart. Fitted on the ranges alone, the clock traded against ``c``
-and left its error in the near bearings, which the yaw took: 0.08 deg on a surveyed radar
-and 0.2 deg off on real masts (replays of seeds 3 and 5); now 0.00 and 0.09. A vote over
-the bearing residuals starts it; a knock shows as the recent bearings standing off. The
-camera's module (:mod:`wz_camera_detector.calibration`) holds the shared settings and the
+correction and the horizontal range residual is ``c + (u . v) dt`` for the object's velocity
+``v`` along the line of sight ``u``; a late clock moves the bearing too, by the bearing's rate
+times ``dt`` (fast near the radar). The yaw, the clock and ``c`` are fitted on both residuals
+together (Gauss-Newton, the pairs matched again between steps). At one speed a late clock and a
+range offset look alike in range, so ``c`` is held near zero (the fusion ranges with the same
+echo model); the near bearings tell the clock apart. Fitted on the ranges alone, the clock
+traded against ``c`` and left its error in the near bearings, which the yaw took: 0.08 deg on a
+surveyed radar and 0.2 deg off on real masts (replays of seeds 3 and 5); now 0.00 and 0.09. A
+vote over the bearing residuals starts it; a knock shows as the recent bearings standing off.
+The camera's module (:mod:`wz_camera_detector.calibration`) holds the shared settings and the
 LiDAR's reference objects.
 """
 
