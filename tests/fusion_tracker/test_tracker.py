@@ -1380,3 +1380,45 @@ def test_a_reacquired_box_off_its_car_does_not_throw_the_speed() -> None:
     assert unheld > 28.0
     assert peak_speed() < 22.0  # held to 8 m/s^2 over the gap
     assert peak_speed(reacquire_max_accel_mps2=4.0) < 12.5
+
+
+def test_the_hand_over_keeps_the_old_tracks_speed_by_its_variance() -> None:
+    """A car at 17 m/s, tracked with radar speeds before a 30 m stretch no sensor sees
+    (x in [100, 130) m), comes out on the LiDAR's boxes, which place it to 1.5 m along the
+    road (completed from a part): its young track, started on the speed prior (0 m/s, std
+    15 m/s), has a third of the speed when it hands the car back (5.7 m/s; site 10604: 1-9 m/s
+    for cars at 15-19 m/s). Fused with the old track's speed predicted over the 1.8 s gap
+    (its variance grown by the process noise), the prior taken out, the car keeps its speed
+    through the hand-over; without the fusion the old track takes the young one's speed."""
+    speed = 17.0
+    seen_before = np.diag([0.3**2, 0.1**2])
+    seen_after = np.diag([1.5**2, 0.1**2])
+
+    def speeds_after_gap(**settings: bool | str) -> list[float]:
+        tracker = MultiTargetTracker(
+            TrackerSettings(reorder_window_s=0.0, **settings),  # type: ignore[arg-type]
+            heading_at=lambda x, y: 0.0,
+            in_sensor_gap=lambda x, y: 100.0 <= x < 130.0,
+        )
+        speeds = []
+        for k in range(int(12.0 / 0.05)):
+            t = 0.05 * k
+            x = speed * t
+            measured = []
+            if x < 100.0:
+                measured = [Measurement(x_m=x, y_m=0.0, covariance_m2=seen_before, speed_mps=speed)]
+            elif x >= 130.0:
+                measured = [Measurement(x_m=x, y_m=0.0, covariance_m2=seen_after)]
+            tracker.add(LIDAR, t, measured)
+            states = [s for s in tracker.tracks() if s.status != "tentative"]
+            if x >= 130.0 and x < 150.0:
+                assert {s.track_id for s in states} <= {1}
+                speeds += [s.speed_mps for s in states]
+        return speeds
+
+    taken = speeds_after_gap(hand_over_fuses_speed=False)
+    assert len(taken) >= 15 and min(taken) < 0.5 * speed
+    for model in ("cv", "imm"):
+        fused = speeds_after_gap(motion_model=model)
+        assert len(fused) >= 15
+        assert max(abs(v - speed) for v in fused) < 1.5

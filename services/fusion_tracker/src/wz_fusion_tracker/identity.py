@@ -18,7 +18,8 @@ A confirmed track past its coast is deleted by the tracker's prune but kept *los
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import math
+from collections.abc import Callable, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -34,6 +35,10 @@ IDENTITY_PERIOD_S = 0.1
 #: A track confirmed this long ago [s] has been in a published snapshot (the node publishes
 #: at 10 Hz): see :func:`hand_over`.
 _PUBLISHED_AFTER_S = 0.1
+
+#: The states of some slots predicted to a stamp with each track's process noise, ``(x (K, 4),
+#: P (K, 4, 4))``: the tracker's own prediction.
+Predicted = Callable[[IntP, float], tuple[F64, F64]]
 
 
 def reacquisitions(
@@ -131,6 +136,7 @@ def hand_over(
     settings: TrackerSettings,
     stamp_s: float,
     in_sensor_gap: InSensorGap | None = None,
+    predicted: Predicted | None = None,
 ) -> None:
     """Hand-over: a young track that took up a coasting track's vehicle hands its state to it.
 
@@ -142,7 +148,9 @@ def hand_over(
     speed and place that braking or speeding up while unseen explains:
     :func:`_speed_change_explains`), and the new one was updated after the old one last
     was, they are one vehicle: the old track takes the new one's state and the new one
-    goes, so the vehicle keeps its identity.
+    goes, so the vehicle keeps its identity. With ``predicted`` (the tracker's prediction)
+    and ``hand_over_fuses_speed``, the speed along the road the old track predicts over its
+    gap is fused into that state by the variances (:func:`_fuse_old_speed`).
     The old track is predicted along the road at its speed there, its offset across the
     road held, so the lane test measures from where the vehicle was last seen.
     The old track may also be a lost one (past its coast, within ``lost_memory_s``): it
@@ -240,7 +248,14 @@ def hand_over(
             resumed = True
         elif old.track_id not in store.tracks:
             continue
+        old_speed: tuple[float, float] | None = None
+        if predicted is not None and settings.hand_over_fuses_speed:
+            young_s = float(store.bank.stamps_s(np.array([new.slot]))[0])
+            _, P_old = predicted(np.array([old.slot], dtype=np.intp), young_s)
+            old_speed = (float(along_speed[row]), float(u[row] @ P_old[0, 2:, 2:] @ u[row]))
         store.bank.copy_slot(new.slot, old.slot)
+        if old_speed is not None:
+            _fuse_old_speed(store, settings, old.slot, u[row], *old_speed, new.speed_from_prior)
         table.absorb(old.slot, new.slot)
         old.history.extend(new.history)
         del store.tracks[new.track_id]
@@ -254,6 +269,46 @@ def hand_over(
     if resumed:  # back in id order
         store.tracks = dict(sorted(store.tracks.items()))
         store.changed()
+
+
+def _fuse_old_speed(
+    store: TrackStore,
+    settings: TrackerSettings,
+    slot: int,
+    u: F64,
+    speed_mps: float,
+    variance: float,
+    from_prior: bool,
+) -> None:
+    """Fuse an old track's speed along the road ``u`` (2,), ``speed_mps`` with ``variance``
+    [m^2/s^2] (its prediction over the gap), into the state at ``slot`` (the young track's, just
+    handed over): one scalar Kalman update of the speed along ``u``, position and velocity
+    moved by their correlation.
+
+    Two estimates of one vehicle from disjoint data (the sensors before the gap, those after
+    it) combine by their information. The young track's speed also holds its birth prior
+    (``initial_speed_mps`` with ``initial_velocity_std_mps``, where it was started without a
+    measured speed): that prior is taken out (``from_prior``), or it would be counted beside
+    the old track's speed, and the vehicle would slow down on the hand-over. The update is
+    then the old speed's information less the prior's, ``1/R = 1/var - 1/std0^2`` and
+    ``z = R (v/var - v0/std0^2)``.
+    """
+    if not (math.isfinite(speed_mps) and math.isfinite(variance)) or variance <= 0.0:
+        return
+    information, weighted = 1.0 / variance, speed_mps / variance
+    if from_prior:
+        prior_information = 1.0 / settings.initial_velocity_std_mps**2
+        information -= prior_information
+        weighted -= settings.initial_speed_mps * prior_information
+    if information <= 1e-9:
+        return
+    H = np.array([[0.0, 0.0, float(u[0]), float(u[1])]])
+    store.bank.update(
+        np.array([slot], dtype=np.intp),
+        np.array([[weighted / information]]),
+        np.array([[[1.0 / information]]]),
+        H,
+    )
 
 
 def retire(store: TrackStore, track: Track, successor_id: int) -> bool:

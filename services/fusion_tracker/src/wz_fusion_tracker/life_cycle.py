@@ -41,6 +41,7 @@ def start_track(
     x = np.array([measurement.x_m, measurement.y_m, 0.0, 0.0])
     P = np.zeros((STATE_DIM, STATE_DIM))
     P[:2, :2] = R
+    speed_from_prior = False
     if heading is None:
         P[2, 2] = P[3, 3] = settings.initial_velocity_std_mps**2
     else:
@@ -48,6 +49,7 @@ def start_track(
             speed, speed_std = measurement.speed_mps, settings.speed_std_mps
         else:
             speed, speed_std = settings.initial_speed_mps, settings.initial_velocity_std_mps
+            speed_from_prior = True
         along = np.array([math.cos(heading), math.sin(heading)])
         across = np.array([-along[1], along[0]])
         x[2:] = speed * along
@@ -65,6 +67,7 @@ def start_track(
         track_id=track_id,
         slot=store.bank.add(x, P, stamp_s),
         max_history=settings.max_history,
+        speed_from_prior=speed_from_prior,
     )
     table = store.table
     table.reset(track.slot, stamp_s, heading)

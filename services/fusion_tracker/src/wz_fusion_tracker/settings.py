@@ -149,6 +149,12 @@ class TrackerSettings(BaseModel):
     #: its blind cone places the part it sees, growing, and the young track starts at half
     #: the speed, with a std of 5-6 m/s that says so. 0: the tolerance alone.
     hand_over_velocity_sigmas: float = Field(default=2.0, ge=0.0)
+    #: At a hand-over, the old track's speed along the road, predicted over its gap with the
+    #: process noise, is fused with the young track's by their variances, the young track's
+    #: birth prior (``initial_speed_mps``) taken out: a LiDAR's first boxes of a vehicle
+    #: coming out of its blind cone tell little of its speed, and the young track's is mostly
+    #: that prior. False: the old track takes the young one's state as it is.
+    hand_over_fuses_speed: bool = True
     #: An old track sliding across the road faster than this follows no vehicle and is not
     #: handed one [m/s]: a lane change peaks at 1-1.5 m/s.
     hand_over_max_lateral_speed_mps: float = Field(default=2.5, gt=0.0)

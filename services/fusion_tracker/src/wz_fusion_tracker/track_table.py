@@ -44,6 +44,9 @@ class Track:
     history: deque[HistoryEntry] = field(init=False)
     #: When it was lost (``TrackerSettings.lost_memory_s``) [s].
     lost_s: float = math.nan
+    #: Started on the speed prior along the road (``initial_speed_mps``), not a measured
+    #: speed: what the hand-over takes out when it fuses an old track's speed with this one's.
+    speed_from_prior: bool = False
 
     def __post_init__(self) -> None:
         self.history = deque(maxlen=self.max_history)

@@ -700,7 +700,7 @@ class MultiTargetTracker:
         if len(store.tracks) + len(store.lost) < 2 or stamp_s < self._next_identity_s:
             return
         self._next_identity_s = stamp_s + IDENTITY_PERIOD_S
-        hand_over(store, self.settings, stamp_s, self._sight.in_sensor_gap)
+        hand_over(store, self.settings, stamp_s, self._sight.in_sensor_gap, self._predicted)
         merge_duplicates(store, self.settings, stamp_s)
         merge_into_trucks(store, self.settings, stamp_s)
 
