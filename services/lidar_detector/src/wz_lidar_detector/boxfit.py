@@ -129,6 +129,18 @@ class BoxFitSettings(BaseModel):
     #: A heavy vehicle seen at least this far off its length axis shows its side whole: its
     #: visible length is its length, not completed [deg].
     side_view_min_deg: float = Field(default=20.0, ge=0.0, le=90.0)
+    #: How far a vehicle's front may run on ahead of its roof line, below it [m]: a car's
+    #: bonnet and windscreen (the roof's front edge is 1.5-2.2 m behind the bumper on a
+    #: sedan), a tractor's cab and the gap before a trailer that stands above it. Where a box
+    #: is completed from its far end and that end is its front seen only high up, the front
+    #: lies up to this much further on, less where a beam above would have met it
+    #: (:func:`hidden_front_m`); 0 turns it off.
+    hidden_front_car_m: float = Field(default=2.0, ge=0.0)
+    hidden_front_heavy_m: float = Field(default=3.5, ge=0.0)
+    #: A front hidden below a vehicle's roof line (a bonnet, a cab below a trailer) stands no
+    #: lower than this below the roof [m]: a sedan's bonnet top is 0.55-0.7 m below its roof.
+    #: A beam that comes down this far below the roof beyond the far end would have met it.
+    hidden_front_drop_m: float = Field(default=0.75, gt=0.0)
 
 
 @dataclass(frozen=True)
@@ -178,6 +190,8 @@ class BoxFit:
     completed_from_far_end
         The length was completed from the end away from the sensor, towards it (the near end
         cut by the field of view: ``fit_box(near_end_cut=True)``).
+    completion_class
+        The class whose typical dimensions completed the box (:data:`CLASS_SHAPES`).
     """
 
     center_xyz_m: tuple[float, float, float]
@@ -189,6 +203,7 @@ class BoxFit:
     faces_seen: int
     completed_lw: tuple[bool, bool]
     completed_from_far_end: bool = False
+    completion_class: VehicleClass = VehicleClass.CAR
 
 
 def closeness_scores(xy_m: F64, headings_rad: F64, floor_m: float) -> F64:
@@ -335,6 +350,63 @@ def _complete(low: float, high: float, dimension: float) -> tuple[float, float, 
     return middle - 0.5 * dimension, middle + 0.5 * dimension, "both_ends"
 
 
+def hidden_front_m(
+    points_xyz_m: F64,
+    along_m: F64,
+    beams_rad: tuple[float, float] | None,
+    longest_m: float,
+    drop_m: float,
+    slab_m: float = 0.3,
+    top_band_m: float = 0.25,
+    min_visible_m: float = 1.0,
+) -> float:
+    """How much further on a vehicle's front may lie than the far end of its points [m].
+
+    Sensor at the origin, the vehicle moving away from it, its points ``points_xyz_m`` (N, 3)
+    at ``along_m`` (N,) along its heading. From a mast the lowest beam first meets a vehicle
+    coming out from under it on its roof, and the roof hides what lies just beyond: a car's
+    bonnet and windscreen, a tractor's cab below its trailer. So where the points of the far
+    end (the last ``slab_m``) all lie within ``top_band_m`` of the vehicle's top (its roof
+    line, seen over at least ``min_visible_m``: a front face runs down from the top to the
+    bumper, and the tip of a bonnet seen alone is no roof), the front may run on up to
+    ``longest_m``, unless a beam would have met it: the steepest beam that passes above those
+    points comes down ``drop_m`` below the top some distance further on, and a front running
+    on past there (a bonnet, a cab: no lower than that below the roof) would have returned
+    it. That distance bounds the answer. Heights are read against the vehicle's own top, not
+    the ground: the background's ground under the blind cone's edge can be half a metre off
+    (site 10604's exit side).
+
+    ``beams_rad``: the lowest beam's elevation and the beam spacing [rad]; None: only the
+    height test, the bound ``longest_m``. Returns 0 where the front is seen low, or ruled
+    out.
+    """
+    if longest_m <= 0.0 or len(points_xyz_m) == 0:
+        return 0.0
+    along_max = float(along_m.max())
+    if along_max - float(along_m.min()) < min_visible_m:
+        return 0.0
+    top = float(points_xyz_m[:, 2].max())
+    far = points_xyz_m[along_m >= along_max - slab_m]
+    if float(far[:, 2].min()) < top - top_band_m:
+        return 0.0
+    if beams_rad is None:
+        return longest_m
+    lowest, spacing = beams_rad
+    reach = float(np.median(np.hypot(far[:, 0], far[:, 1])))
+    far_top = float(far[:, 2].max())
+    if reach <= 0.0 or spacing <= 0.0:
+        return longest_m
+    # the steepest beam that passes above the far end's points: z = reach * tan(elevation)
+    needed = math.atan2(far_top, reach)
+    steps = max(0, math.ceil((needed - lowest) / spacing))
+    elevation = lowest + steps * spacing
+    below_top_z = top - drop_m
+    if elevation >= 0.0 or below_top_z >= 0.0:
+        return longest_m  # it never comes down that far
+    down_at = below_top_z / math.tan(elevation)  # horizontal range where it does
+    return float(min(longest_m, max(0.0, down_at - reach)))
+
+
 def hidden_near_end(
     cluster_xyz_m: F64,
     heading_rad: float,
@@ -384,6 +456,52 @@ def hidden_near_end(
     return bool(blocking.any())
 
 
+def shadowed(
+    cluster_xyz_m: F64,
+    others_xyz_m: F64,
+    margin_rad: float = math.radians(0.6),
+    clearance_m: float = 0.5,
+    min_points: int = 3,
+) -> bool:
+    """Whether a nearer object stands in the line of sight to part of a cluster, or just
+    beside it: then what is seen of the cluster is only part of it.
+
+    Sensor at the origin. Points of ``others_xyz_m`` (at least ``min_points``) within the
+    cluster's azimuth span grown by ``margin_rad``, ``clearance_m`` or more nearer than the
+    cluster's nearest point, and at or above the sight line to the cluster's median height
+    there. A car in the far lane beside a truck in the near one shows a mast a sliver of its
+    roof over the truck: that sliver is no motorcycle (default site, seed 10710: a car taken
+    for one, its box 1.25 m behind it for 0.2 s, then a false hard-braking alert).
+    """
+    if len(others_xyz_m) < min_points or len(cluster_xyz_m) == 0:
+        return False
+    mean_azimuth = math.atan2(
+        float(np.mean(cluster_xyz_m[:, 1])), float(np.mean(cluster_xyz_m[:, 0]))
+    )
+
+    def gap(xyz: F64) -> F64:
+        wrapped: F64 = np.angle(np.exp(1j * (np.arctan2(xyz[:, 1], xyz[:, 0]) - mean_azimuth)))
+        return wrapped
+
+    own = gap(cluster_xyz_m)
+    low, high = float(own.min()) - margin_rad, float(own.max()) + margin_rad
+    ranges = np.hypot(cluster_xyz_m[:, 0], cluster_xyz_m[:, 1])
+    nearest = float(ranges.min())
+    if nearest <= clearance_m:
+        return False
+    median_z = float(np.median(cluster_xyz_m[:, 2]))
+    other_ranges = np.hypot(others_xyz_m[:, 0], others_xyz_m[:, 1])
+    other_gap = gap(others_xyz_m)
+    sight_z = median_z * other_ranges / float(np.median(ranges))
+    blocking = (
+        (other_gap >= low)
+        & (other_gap <= high)
+        & (other_ranges <= nearest - clearance_m)
+        & (others_xyz_m[:, 2] >= sight_z - clearance_m)
+    )
+    return int(np.count_nonzero(blocking)) >= min_points
+
+
 def _rotated_covariance(variance_a: float, variance_b: float, angle_rad: float) -> F64:
     """``R diag(a, b) R^T``, R the rotation by ``angle_rad``: a 2x2 covariance [m^2] with
     variance ``a`` along ``angle_rad`` and ``b`` across it."""
@@ -407,6 +525,7 @@ def fit_box(
     settings: BoxFitSettings | None = None,
     near_end_hidden: bool = False,
     near_end_cut: bool = False,
+    beams_rad: tuple[float, float] | None = None,
 ) -> BoxFit:
     """Fit a vehicle's box to the points of its visible faces (see the module docstring).
 
@@ -424,15 +543,21 @@ def fit_box(
         Search and noise parameters; defaults if None.
     near_end_hidden
         The end of the visible points nearer the sensor is not a face: a nearer object hides
-        what lies beyond it (:func:`hidden_near_end`). The vehicle may go on either way, so a
-        length completed from one end is grown evenly at both, with that spread in its
-        variance, instead of away from the sensor.
+        what lies beyond it (:func:`hidden_near_end`, :func:`shadowed`). The vehicle may go on
+        either way, so a length completed from one end is grown evenly at both, with that
+        spread in its variance, instead of away from the sensor; and a small L is no
+        motorcycle (what is seen of it is a lower bound).
     near_end_cut
         The end of the visible points nearer the sensor is where the field of view's lower
         edge cuts the vehicle, and the far end is a face: the length is grown from the far
         end towards the sensor, with the variance of a length completed from one end, also
         when the visible length already reaches the class's (it is a lower bound). A vehicle
-        abeam of the sensor is grown at both ends as before.
+        abeam of the sensor is grown at both ends as before. When that far end is the front
+        (``heading_prior_rad`` the direction of travel, the vehicle moving away) and only its
+        upper part is seen, the front may lie further on (:func:`hidden_front_m`).
+    beams_rad
+        The sensor's lowest beam elevation and its beam spacing [rad], for
+        :func:`hidden_front_m`; None: that test is not made.
 
     Returns
     -------
@@ -496,7 +621,8 @@ def fit_box(
         visible_width,
         height,
         faces_seen,
-        length_axis_known=heading_prior_rad is not None or max(extent) > settings.end_face_max_m,
+        length_axis_known=(heading_prior_rad is not None or max(extent) > settings.end_face_max_m)
+        and not near_end_hidden,
     )
     shape = CLASS_SHAPES[completion]
     # A side face is either wholly in view or not (boxes are convex): seen from well off the
@@ -522,6 +648,7 @@ def fit_box(
     across_edge = half_step_m * abs(math.cos(sight_rad - heading))
     low_l, high_l, how_l = _complete(along_min - along_edge, along_max + along_edge, shape.length_m)
     from_far_end = near_end_cut and how_l in ("one_end", "seen")
+    hidden_variance = 0.0
     if from_far_end:
         # The near end is the cut one, the far end the face: keep the far end and grow the
         # near one. What is visible is a lower bound of the length even when it reaches the
@@ -534,6 +661,21 @@ def fit_box(
             low_l = along_min - along_edge
             high_l = low_l + length_m
         how_l = "one_end"
+        if heading_prior_rad is not None and along_min - along_edge >= 0.0:
+            # Moving away: the far end is the front. Seen only at the top, it may be the
+            # roof's front edge, the bonnet or cab below the beams: the front lies anywhere up
+            # to ``hidden`` further on, uniformly, and the box and its variance say so.
+            heavy = completion is VehicleClass.TRUCK
+            hidden = hidden_front_m(
+                points,
+                along,
+                beams_rad,
+                settings.hidden_front_heavy_m if heavy else settings.hidden_front_car_m,
+                settings.hidden_front_drop_m,
+            )
+            low_l += 0.5 * hidden
+            high_l += 0.5 * hidden
+            hidden_variance = hidden**2 / 12.0
     elif near_end_hidden and how_l == "one_end":
         middle = 0.5 * (along_min + along_max)
         low_l, high_l, how_l = (
@@ -561,6 +703,7 @@ def fit_box(
     variance_length = shape_variance(how_l, shape.length_std_m, visible_length, shape.length_m)
     if length_open:
         variance_length = max(variance_length, (0.5 * shape.length_std_m) ** 2)
+    variance_length += hidden_variance
     range_m = math.hypot(centre_x, centre_y)
     # Completed as a car from its near face, but too far for the beams to rule out a heavy
     # vehicle's height: the centre lies anywhere from a car's half-length to a heavy
@@ -593,4 +736,5 @@ def fit_box(
         faces_seen=faces_seen,
         completed_lw=(how_l != "seen", how_w != "seen"),
         completed_from_far_end=from_far_end,
+        completion_class=completion,
     )

@@ -59,9 +59,10 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from wz_lidar_detector.background import BackgroundModel, pack_keys, voxel_indices
-from wz_lidar_detector.boxfit import BoxFit, BoxFitSettings, fit_box, hidden_near_end
+from wz_lidar_detector.boxfit import BoxFit, BoxFitSettings, fit_box, hidden_near_end, shadowed
 from wz_lidar_detector.detection import BoxDetection, DetectionResult, PointFrame
 from wz_shared.arrays import F64, I64, Bool
+from wz_shared.messages import VehicleClass
 
 #: Names of the timed steps, in the order they run.
 STEP_NAMES = ("foreground", "cluster", "boxes", "update")
@@ -364,6 +365,7 @@ class FastPipeline:
                     settings=settings.box,
                     near_end_hidden=near_end_hidden,
                     near_end_cut=near_end_cut,
+                    beams_rad=None if floor is None else (floor[0], 2.0 * floor[1]),
                 )
 
             cut = floor is not None and _reaches_floor(cluster, floor)
@@ -374,12 +376,18 @@ class FastPipeline:
             else:
                 fit = fitted_box()
                 # Completed from the end nearer the sensor: is that end a face, or where a
-                # nearer vehicle hides the rest (a truck behind a car in the near lane)?
-                if fit.completed_lw[0] and hidden_near_end(
-                    cluster,
-                    fit.heading_rad,
-                    xyz[labels != label],
-                    angle_tolerance_rad=math.radians(2.0 * settings.box.angular_resolution_deg),
+                # nearer vehicle hides the rest (a truck behind a car in the near lane)? And
+                # is a small L a motorcycle, or a sliver of a vehicle a nearer one hides?
+                others = xyz[labels != label]
+                tolerance = math.radians(2.0 * settings.box.angular_resolution_deg)
+                if (
+                    fit.completed_lw[0]
+                    and hidden_near_end(
+                        cluster, fit.heading_rad, others, angle_tolerance_rad=tolerance
+                    )
+                ) or (
+                    fit.completion_class is VehicleClass.MOTORCYCLE
+                    and shadowed(cluster, others, margin_rad=tolerance)
                 ):
                     fit = fitted_box(near_end_hidden=True)
             fitted.append(_Fitted(fit, len(cluster), cut))
