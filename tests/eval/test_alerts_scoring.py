@@ -253,3 +253,56 @@ def test_observed_truth_keeps_the_vehicles_a_sensor_saw_recently() -> None:
         ("A", 0.0),
         ("B", 12.0),
     ]
+
+
+def _braking_twice_at(t: float) -> VehicleTruth:
+    """``D``: 25 m/s from 300 m, braking at 5 m/s^2 over 2-3 s and again over 6-7 s (down to
+    20, then 15 m/s): the second within the hard-braking rule's 5 s cooldown of the first."""
+
+    def speed(u: float) -> float:
+        return 25.0 - 5.0 * (min(max(u - 2.0, 0.0), 1.0) + min(max(u - 6.0, 0.0), 1.0))
+
+    steps = max(1, round(t / 0.01))
+    station_m = 300.0 + sum(speed((k + 0.5) * t / steps) for k in range(steps)) * t / steps
+    braking = 2.0 <= t < 3.0 or 6.0 <= t < 7.0
+    return VehicleTruth(
+        vehicle_id="D",
+        vehicle_class=VehicleClass.CAR,
+        x_m=-OFFSET_M,
+        y_m=station_m,
+        heading_rad=math.pi / 2,
+        speed_mps=speed(t),
+        accel_mps2=-5.0 if braking else 0.0,
+        length_m=4.5,
+        width_m=1.8,
+        height_m=1.5,
+        lane_index=0,
+        station_m=station_m,
+        offset_m=OFFSET_M,
+        driver_profile=DriverProfile.NORMAL,
+    )
+
+
+def test_an_alert_on_a_braking_the_truths_cooldown_hid_is_not_false() -> None:
+    """A car brakes hard twice, 4 s apart. On the truth the rule raises the first and its
+    5 s cooldown hides the second; an engine that missed the first and alerted on the second
+    was right: the alert counts apart (``true_within_truth_cooldown``), in the precision
+    and not as a found episode. An alert on the same car while it drives steadily is false."""
+    frames = [(k / 20.0, [_braking_twice_at(k / 20.0)]) for k in range(12 * 20 + 1)]
+    truths = [e for e in truth_episodes(SITE, frames) if e.alert_type is AlertType.HARD_BRAKING]
+    assert [e.vehicle_id for e in truths] == ["D"] and truths[0].start_s < 3.5
+
+    def at(s: float) -> float:
+        return _braking_twice_at(s).station_m
+
+    second = [
+        alert("ep-d", 6.6, at(6.6), alert_type=AlertType.HARD_BRAKING),
+        alert("ep-d", 7.8, at(7.8), phase="clear", alert_type=AlertType.HARD_BRAKING),
+    ]
+    braking = score_alerts(SITE, frames, second)["hard_braking"]
+    assert (braking["true_positives"], braking["false_positives"]) == (0, 0)
+    assert braking["true_within_truth_cooldown"] == 1 and braking["alerts"] == 1
+    assert braking["precision"] == 1.0 and braking["recall"] == 0.0
+    steady = [alert("ep-x", 11.5, at(11.5), alert_type=AlertType.HARD_BRAKING)]
+    braking = score_alerts(SITE, frames, steady)["hard_braking"]
+    assert braking["false_positives"] == 1 and braking["true_within_truth_cooldown"] == 0

@@ -526,6 +526,7 @@ def fit_box(
     near_end_hidden: bool = False,
     near_end_cut: bool = False,
     beams_rad: tuple[float, float] | None = None,
+    partly_hidden: bool = False,
 ) -> BoxFit:
     """Fit a vehicle's box to the points of its visible faces (see the module docstring).
 
@@ -555,6 +556,11 @@ def fit_box(
         abeam of the sensor is grown at both ends as before. When that far end is the front
         (``heading_prior_rad`` the direction of travel, the vehicle moving away) and only its
         upper part is seen, the front may lie further on (:func:`hidden_front_m`).
+    partly_hidden
+        A nearer object stands in the line of sight to part of the vehicle (:func:`shadowed`):
+        what is seen of it is a lower bound both ways, so as ``near_end_hidden`` along the
+        length, and across it too (grown evenly at both sides, with that spread in its
+        variance, instead of away from the sensor: the hidden part may be the near side).
     beams_rad
         The sensor's lowest beam elevation and its beam spacing [rad], for
         :func:`hidden_front_m`; None: that test is not made.
@@ -565,6 +571,7 @@ def fit_box(
         The completed box, its class and the covariance of its centre.
     """
     settings = settings or BoxFitSettings()
+    near_end_hidden = near_end_hidden or partly_hidden
     points = np.asarray(points_xyz_m, dtype=np.float64).reshape(-1, 3)
     if len(points) == 0:
         raise ValueError("fit_box needs at least one point")
@@ -686,6 +693,13 @@ def fit_box(
     low_w, high_w, how_w = _complete(
         across_min - across_edge, across_max + across_edge, shape.width_m
     )
+    if partly_hidden and how_w == "one_end":
+        middle = 0.5 * (across_min + across_max)
+        low_w, high_w, how_w = (
+            middle - 0.5 * shape.width_m,
+            middle + 0.5 * shape.width_m,
+            "both_ends",
+        )
     length, width = high_l - low_l, high_w - low_w
     mid_l, mid_w = 0.5 * (low_l + high_l), 0.5 * (low_w + high_w)
     centre_x = mid_l * cos_h - mid_w * sin_h

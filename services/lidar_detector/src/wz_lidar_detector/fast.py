@@ -354,6 +354,7 @@ class FastPipeline:
             def fitted_box(
                 near_end_hidden: bool = False,
                 near_end_cut: bool = False,
+                partly_hidden: bool = False,
                 cluster: F64 = cluster,
                 ground: float | None = ground,
             ) -> BoxFit:
@@ -364,6 +365,7 @@ class FastPipeline:
                     ground_z_m=ground,
                     settings=settings.box,
                     near_end_hidden=near_end_hidden,
+                    partly_hidden=partly_hidden,
                     near_end_cut=near_end_cut,
                     beams_rad=None if floor is None else (floor[0], 2.0 * floor[1]),
                 )
@@ -380,14 +382,12 @@ class FastPipeline:
                 # is a small L a motorcycle, or a sliver of a vehicle a nearer one hides?
                 others = xyz[labels != label]
                 tolerance = math.radians(2.0 * settings.box.angular_resolution_deg)
-                if (
-                    fit.completed_lw[0]
-                    and hidden_near_end(
-                        cluster, fit.heading_rad, others, angle_tolerance_rad=tolerance
-                    )
-                ) or (
-                    fit.completion_class is VehicleClass.MOTORCYCLE
-                    and shadowed(cluster, others, margin_rad=tolerance)
+                if fit.completion_class is VehicleClass.MOTORCYCLE and shadowed(
+                    cluster, others, margin_rad=tolerance
+                ):
+                    fit = fitted_box(partly_hidden=True)
+                elif fit.completed_lw[0] and hidden_near_end(
+                    cluster, fit.heading_rad, others, angle_tolerance_rad=tolerance
                 ):
                     fit = fitted_box(near_end_hidden=True)
             fitted.append(_Fitted(fit, len(cluster), cut))
