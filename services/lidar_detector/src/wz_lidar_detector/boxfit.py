@@ -558,9 +558,10 @@ def fit_box(
         upper part is seen, the front may lie further on (:func:`hidden_front_m`).
     partly_hidden
         A nearer object stands in the line of sight to part of the vehicle (:func:`shadowed`):
-        what is seen of it is a lower bound both ways, so as ``near_end_hidden`` along the
-        length, and across it too (grown evenly at both sides, with that spread in its
-        variance, instead of away from the sensor: the hidden part may be the near side).
+        what is seen of its width is a lower bound, grown evenly at both sides, with that
+        spread in its variance, instead of away from the sensor (the hidden part may be the
+        near side), and a small L is no motorcycle. Along the length it changes nothing
+        (``near_end_hidden`` does that).
     beams_rad
         The sensor's lowest beam elevation and its beam spacing [rad], for
         :func:`hidden_front_m`; None: that test is not made.
@@ -571,7 +572,6 @@ def fit_box(
         The completed box, its class and the covariance of its centre.
     """
     settings = settings or BoxFitSettings()
-    near_end_hidden = near_end_hidden or partly_hidden
     points = np.asarray(points_xyz_m, dtype=np.float64).reshape(-1, 3)
     if len(points) == 0:
         raise ValueError("fit_box needs at least one point")
@@ -629,7 +629,7 @@ def fit_box(
         height,
         faces_seen,
         length_axis_known=(heading_prior_rad is not None or max(extent) > settings.end_face_max_m)
-        and not near_end_hidden,
+        and not (near_end_hidden or partly_hidden),
     )
     shape = CLASS_SHAPES[completion]
     # A side face is either wholly in view or not (boxes are convex): seen from well off the

@@ -382,14 +382,18 @@ class FastPipeline:
                 # is a small L a motorcycle, or a sliver of a vehicle a nearer one hides?
                 others = xyz[labels != label]
                 tolerance = math.radians(2.0 * settings.box.angular_resolution_deg)
-                if fit.completion_class is VehicleClass.MOTORCYCLE and shadowed(
+                small = fit.completion_class is VehicleClass.MOTORCYCLE
+                partly = (small or fit.completed_lw[1]) and shadowed(
                     cluster, others, margin_rad=tolerance
-                ):
-                    fit = fitted_box(partly_hidden=True)
-                elif fit.completed_lw[0] and hidden_near_end(
-                    cluster, fit.heading_rad, others, angle_tolerance_rad=tolerance
-                ):
-                    fit = fitted_box(near_end_hidden=True)
+                )
+                end_hidden = (partly and small) or (
+                    fit.completed_lw[0]
+                    and hidden_near_end(
+                        cluster, fit.heading_rad, others, angle_tolerance_rad=tolerance
+                    )
+                )
+                if partly or end_hidden:
+                    fit = fitted_box(near_end_hidden=end_hidden, partly_hidden=partly)
             fitted.append(_Fitted(fit, len(cluster), cut))
         return [self._detection(box) for box in fitted]
 
