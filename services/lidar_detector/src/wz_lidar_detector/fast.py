@@ -382,11 +382,13 @@ class FastPipeline:
                 # is a small L a motorcycle, or a sliver of a vehicle a nearer one hides?
                 others = xyz[labels != label]
                 tolerance = math.radians(2.0 * settings.box.angular_resolution_deg)
-                small = fit.completion_class is VehicleClass.MOTORCYCLE
-                partly = (small or fit.completed_lw[1]) and shadowed(
+                # (Every shadowed cluster whose width is completed, grown at both sides: the
+                # approach's speed better on site 10604, identity switches worse on 10602,
+                # 10604 and the default site's seed 11: held to the small L's.)
+                partly = fit.completion_class is VehicleClass.MOTORCYCLE and shadowed(
                     cluster, others, margin_rad=tolerance
                 )
-                end_hidden = (partly and small) or (
+                end_hidden = partly or (
                     fit.completed_lw[0]
                     and hidden_near_end(
                         cluster, fit.heading_rad, others, angle_tolerance_rad=tolerance
