@@ -24,7 +24,7 @@ from wz_lidar_detector.background import (
     learn_background_from_frames,
     load_background,
 )
-from wz_lidar_detector.boxfit import BoxFitSettings, fit_box, hidden_front_m, shadowed
+from wz_lidar_detector.boxfit import BoxFitSettings, fit_box, hidden_front_m
 from wz_lidar_detector.detection import PointFrame
 from wz_lidar_detector.fast import FastPipeline, FastSettings, euclidean_clusters
 from wz_lidar_detector.node import fitted_to_mount
@@ -791,36 +791,3 @@ def test_a_cut_car_whose_bonnet_is_seen_stays_on_its_front(
         assert detection.completed_from_far_end
         errors.append(detection.center_xyz_m[0] - centre)
     assert max(abs(e) for e in errors) < 0.2
-
-
-def test_a_sliver_of_a_car_seen_over_a_truck_is_no_motorcycle(
-    range_background: RangeImageBackground,
-) -> None:
-    """A car in the far lane beside a 2.4 m box truck in the near one: the sensor (5 m up)
-    sees a sliver of its roof over the truck, an L no bigger than a motorcycle. Completed as
-    one (2.2 m long, its L's small covariance), the box stood 1.2 m behind the car with a
-    0.11 m std along it, 11 sigma off, and 0.29 m aside with 0.05 m (default site, seed
-    10710: a car beside a semitrailer under the mast, 1.25 m behind for 0.2 s, then a false
-    hard-braking alert). With the truck in its line of sight (``shadowed``), the sliver is a
-    part of a vehicle: completed as a car at both ends and both sides, with that spread in
-    its variance."""
-    truck = Box(15.0, 4.5, 0.0, 16.5, 2.5, -4.6, -2.6)
-    car = Box(15.0, 8.1, 0.0, 4.5, 1.8, -4.8, -3.5)
-    frame, _ = _cast([truck, car], np.random.default_rng(3))
-    settings = FastSettings(heading_prior_rad=0.0, update_background=False)
-    boxes = [
-        d
-        for d in FastPipeline(settings, range_background).detect(frame).detections
-        if abs(d.center_xyz_m[1] - 8.1) < 1.5
-    ]
-    assert boxes
-    sliver = min(boxes, key=lambda d: d.center_xyz_m[0])  # the nearer of the car's two
-    assert abs(sliver.center_xyz_m[0] - 15.0) < 3.0 * math.sqrt(sliver.covariance_xy_m2[0][0])
-    assert abs(sliver.center_xyz_m[1] - 8.1) < 3.0 * math.sqrt(sliver.covariance_xy_m2[1][1])
-    assert sliver.size_lwh_m[0] >= 4.5 - 1e-9
-    points = frame.points[:, :3].astype(np.float64)
-    truck_side = points[np.isfinite(points[:, 0]) & (np.abs(points[:, 1] - 4.5) < 1.3)]
-    car_side = points[np.isfinite(points[:, 0]) & (np.abs(points[:, 1] - 8.1) < 1.0)]
-    car_side = car_side[np.abs(car_side[:, 0] - sliver.center_xyz_m[0]) < 2.5]
-    assert shadowed(car_side, truck_side[truck_side[:, 2] > -4.9])
-    assert not shadowed(car_side, np.empty((0, 3)))

@@ -190,8 +190,6 @@ class BoxFit:
     completed_from_far_end
         The length was completed from the end away from the sensor, towards it (the near end
         cut by the field of view: ``fit_box(near_end_cut=True)``).
-    completion_class
-        The class whose typical dimensions completed the box (:data:`CLASS_SHAPES`).
     """
 
     center_xyz_m: tuple[float, float, float]
@@ -203,7 +201,6 @@ class BoxFit:
     faces_seen: int
     completed_lw: tuple[bool, bool]
     completed_from_far_end: bool = False
-    completion_class: VehicleClass = VehicleClass.CAR
 
 
 def closeness_scores(xy_m: F64, headings_rad: F64, floor_m: float) -> F64:
@@ -456,52 +453,6 @@ def hidden_near_end(
     return bool(blocking.any())
 
 
-def shadowed(
-    cluster_xyz_m: F64,
-    others_xyz_m: F64,
-    margin_rad: float = math.radians(0.6),
-    clearance_m: float = 0.5,
-    min_points: int = 3,
-) -> bool:
-    """Whether a nearer object stands in the line of sight to part of a cluster, or just
-    beside it: then what is seen of the cluster is only part of it.
-
-    Sensor at the origin. Points of ``others_xyz_m`` (at least ``min_points``) within the
-    cluster's azimuth span grown by ``margin_rad``, ``clearance_m`` or more nearer than the
-    cluster's nearest point, and at or above the sight line to the cluster's median height
-    there. A car in the far lane beside a truck in the near one shows a mast a sliver of its
-    roof over the truck: that sliver is no motorcycle (default site, seed 10710: a car taken
-    for one, its box 1.25 m behind it for 0.2 s, then a false hard-braking alert).
-    """
-    if len(others_xyz_m) < min_points or len(cluster_xyz_m) == 0:
-        return False
-    mean_azimuth = math.atan2(
-        float(np.mean(cluster_xyz_m[:, 1])), float(np.mean(cluster_xyz_m[:, 0]))
-    )
-
-    def gap(xyz: F64) -> F64:
-        wrapped: F64 = np.angle(np.exp(1j * (np.arctan2(xyz[:, 1], xyz[:, 0]) - mean_azimuth)))
-        return wrapped
-
-    own = gap(cluster_xyz_m)
-    low, high = float(own.min()) - margin_rad, float(own.max()) + margin_rad
-    ranges = np.hypot(cluster_xyz_m[:, 0], cluster_xyz_m[:, 1])
-    nearest = float(ranges.min())
-    if nearest <= clearance_m:
-        return False
-    median_z = float(np.median(cluster_xyz_m[:, 2]))
-    other_ranges = np.hypot(others_xyz_m[:, 0], others_xyz_m[:, 1])
-    other_gap = gap(others_xyz_m)
-    sight_z = median_z * other_ranges / float(np.median(ranges))
-    blocking = (
-        (other_gap >= low)
-        & (other_gap <= high)
-        & (other_ranges <= nearest - clearance_m)
-        & (others_xyz_m[:, 2] >= sight_z - clearance_m)
-    )
-    return int(np.count_nonzero(blocking)) >= min_points
-
-
 def _rotated_covariance(variance_a: float, variance_b: float, angle_rad: float) -> F64:
     """``R diag(a, b) R^T``, R the rotation by ``angle_rad``: a 2x2 covariance [m^2] with
     variance ``a`` along ``angle_rad`` and ``b`` across it."""
@@ -526,7 +477,6 @@ def fit_box(
     near_end_hidden: bool = False,
     near_end_cut: bool = False,
     beams_rad: tuple[float, float] | None = None,
-    partly_hidden: bool = False,
 ) -> BoxFit:
     """Fit a vehicle's box to the points of its visible faces (see the module docstring).
 
@@ -544,10 +494,9 @@ def fit_box(
         Search and noise parameters; defaults if None.
     near_end_hidden
         The end of the visible points nearer the sensor is not a face: a nearer object hides
-        what lies beyond it (:func:`hidden_near_end`, :func:`shadowed`). The vehicle may go on
-        either way, so a length completed from one end is grown evenly at both, with that
-        spread in its variance, instead of away from the sensor; and a small L is no
-        motorcycle (what is seen of it is a lower bound).
+        what lies beyond it (:func:`hidden_near_end`). The vehicle may go on either way, so a
+        length completed from one end is grown evenly at both, with that spread in its
+        variance, instead of away from the sensor.
     near_end_cut
         The end of the visible points nearer the sensor is where the field of view's lower
         edge cuts the vehicle, and the far end is a face: the length is grown from the far
@@ -556,12 +505,6 @@ def fit_box(
         abeam of the sensor is grown at both ends as before. When that far end is the front
         (``heading_prior_rad`` the direction of travel, the vehicle moving away) and only its
         upper part is seen, the front may lie further on (:func:`hidden_front_m`).
-    partly_hidden
-        A nearer object stands in the line of sight to part of the vehicle (:func:`shadowed`):
-        what is seen of its width is a lower bound, grown evenly at both sides, with that
-        spread in its variance, instead of away from the sensor (the hidden part may be the
-        near side), and a small L is no motorcycle. Along the length it changes nothing
-        (``near_end_hidden`` does that).
     beams_rad
         The sensor's lowest beam elevation and its beam spacing [rad], for
         :func:`hidden_front_m`; None: that test is not made.
@@ -628,8 +571,7 @@ def fit_box(
         visible_width,
         height,
         faces_seen,
-        length_axis_known=(heading_prior_rad is not None or max(extent) > settings.end_face_max_m)
-        and not (near_end_hidden or partly_hidden),
+        length_axis_known=heading_prior_rad is not None or max(extent) > settings.end_face_max_m,
     )
     shape = CLASS_SHAPES[completion]
     # A side face is either wholly in view or not (boxes are convex): seen from well off the
@@ -693,13 +635,6 @@ def fit_box(
     low_w, high_w, how_w = _complete(
         across_min - across_edge, across_max + across_edge, shape.width_m
     )
-    if partly_hidden and how_w == "one_end":
-        middle = 0.5 * (across_min + across_max)
-        low_w, high_w, how_w = (
-            middle - 0.5 * shape.width_m,
-            middle + 0.5 * shape.width_m,
-            "both_ends",
-        )
     length, width = high_l - low_l, high_w - low_w
     mid_l, mid_w = 0.5 * (low_l + high_l), 0.5 * (low_w + high_w)
     centre_x = mid_l * cos_h - mid_w * sin_h
@@ -750,5 +685,4 @@ def fit_box(
         faces_seen=faces_seen,
         completed_lw=(how_l != "seen", how_w != "seen"),
         completed_from_far_end=from_far_end,
-        completion_class=completion,
     )

@@ -59,10 +59,9 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from wz_lidar_detector.background import BackgroundModel, pack_keys, voxel_indices
-from wz_lidar_detector.boxfit import BoxFit, BoxFitSettings, fit_box, hidden_near_end, shadowed
+from wz_lidar_detector.boxfit import BoxFit, BoxFitSettings, fit_box, hidden_near_end
 from wz_lidar_detector.detection import BoxDetection, DetectionResult, PointFrame
 from wz_shared.arrays import F64, I64, Bool
-from wz_shared.messages import VehicleClass
 
 #: Names of the timed steps, in the order they run.
 STEP_NAMES = ("foreground", "cluster", "boxes", "update")
@@ -354,7 +353,6 @@ class FastPipeline:
             def fitted_box(
                 near_end_hidden: bool = False,
                 near_end_cut: bool = False,
-                partly_hidden: bool = False,
                 cluster: F64 = cluster,
                 ground: float | None = ground,
             ) -> BoxFit:
@@ -365,7 +363,6 @@ class FastPipeline:
                     ground_z_m=ground,
                     settings=settings.box,
                     near_end_hidden=near_end_hidden,
-                    partly_hidden=partly_hidden,
                     near_end_cut=near_end_cut,
                     beams_rad=None if floor is None else (floor[0], 2.0 * floor[1]),
                 )
@@ -378,24 +375,14 @@ class FastPipeline:
             else:
                 fit = fitted_box()
                 # Completed from the end nearer the sensor: is that end a face, or where a
-                # nearer vehicle hides the rest (a truck behind a car in the near lane)? And
-                # is a small L a motorcycle, or a sliver of a vehicle a nearer one hides?
-                others = xyz[labels != label]
-                tolerance = math.radians(2.0 * settings.box.angular_resolution_deg)
-                # (Every shadowed cluster whose width is completed, grown at both sides: the
-                # approach's speed better on site 10604, identity switches worse on 10602,
-                # 10604 and the default site's seed 11: held to the small L's.)
-                partly = fit.completion_class is VehicleClass.MOTORCYCLE and shadowed(
-                    cluster, others, margin_rad=tolerance
-                )
-                end_hidden = partly or (
-                    fit.completed_lw[0]
-                    and hidden_near_end(
-                        cluster, fit.heading_rad, others, angle_tolerance_rad=tolerance
-                    )
-                )
-                if partly or end_hidden:
-                    fit = fitted_box(near_end_hidden=end_hidden, partly_hidden=partly)
+                # nearer vehicle hides the rest (a truck behind a car in the near lane)?
+                if fit.completed_lw[0] and hidden_near_end(
+                    cluster,
+                    fit.heading_rad,
+                    xyz[labels != label],
+                    angle_tolerance_rad=math.radians(2.0 * settings.box.angular_resolution_deg),
+                ):
+                    fit = fitted_box(near_end_hidden=True)
             fitted.append(_Fitted(fit, len(cluster), cut))
         return [self._detection(box) for box in fitted]
 
