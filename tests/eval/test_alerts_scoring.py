@@ -51,24 +51,35 @@ OFFSET_M = -1.83
 A_AT_TAPER_S = (1000.0 - 400.0) / 29.0
 
 
+def car_at(
+    vehicle_id: str,
+    station_m: float,
+    speed_mps: float,
+    profile: DriverProfile = DriverProfile.NORMAL,
+    accel_mps2: float = 0.0,
+) -> VehicleTruth:
+    """A car in lane 0 at ``station_m`` (the road runs north along x = -OFFSET_M)."""
+    return VehicleTruth(
+        vehicle_id=vehicle_id,
+        vehicle_class=VehicleClass.CAR,
+        x_m=-OFFSET_M,
+        y_m=station_m,
+        heading_rad=math.pi / 2,
+        speed_mps=speed_mps,
+        accel_mps2=accel_mps2,
+        length_m=4.5,
+        width_m=1.8,
+        height_m=1.5,
+        lane_index=0,
+        station_m=station_m,
+        offset_m=OFFSET_M,
+        driver_profile=profile,
+    )
+
+
 def truth_at(t: float) -> list[VehicleTruth]:
     return [
-        VehicleTruth(
-            vehicle_id=vehicle_id,
-            vehicle_class=VehicleClass.CAR,
-            x_m=-OFFSET_M,
-            y_m=s0 + v * t,
-            heading_rad=math.pi / 2,
-            speed_mps=v,
-            accel_mps2=0.0,
-            length_m=4.5,
-            width_m=1.8,
-            height_m=1.5,
-            lane_index=0,
-            station_m=s0 + v * t,
-            offset_m=OFFSET_M,
-            driver_profile=profile,
-        )
+        car_at(vehicle_id, s0 + v * t, v, profile)
         for vehicle_id, (s0, v, profile) in VEHICLES.items()
     ]
 
@@ -265,22 +276,7 @@ def _braking_twice_at(t: float) -> VehicleTruth:
     steps = max(1, round(t / 0.01))
     station_m = 300.0 + sum(speed((k + 0.5) * t / steps) for k in range(steps)) * t / steps
     braking = 2.0 <= t < 3.0 or 6.0 <= t < 7.0
-    return VehicleTruth(
-        vehicle_id="D",
-        vehicle_class=VehicleClass.CAR,
-        x_m=-OFFSET_M,
-        y_m=station_m,
-        heading_rad=math.pi / 2,
-        speed_mps=speed(t),
-        accel_mps2=-5.0 if braking else 0.0,
-        length_m=4.5,
-        width_m=1.8,
-        height_m=1.5,
-        lane_index=0,
-        station_m=station_m,
-        offset_m=OFFSET_M,
-        driver_profile=DriverProfile.NORMAL,
-    )
+    return car_at("D", station_m, speed(t), accel_mps2=-5.0 if braking else 0.0)
 
 
 def test_an_alert_on_a_braking_the_truths_cooldown_hid_is_not_false() -> None:

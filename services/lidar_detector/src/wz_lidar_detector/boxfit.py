@@ -507,7 +507,8 @@ def fit_box(
         upper part is seen, the front may lie further on (:func:`hidden_front_m`).
     beams_rad
         The sensor's lowest beam elevation and its beam spacing [rad], for
-        :func:`hidden_front_m`; None: that test is not made.
+        :func:`hidden_front_m`'s bound; None (an unorganized frame): the height test alone,
+        the front allowed the class's whole reach.
 
     Returns
     -------
